@@ -1,0 +1,109 @@
+// organfit: prepare a radiotherapy session by fitting a particle-system organ model to
+// sparse ultrasound points. Subcommands in the style of git / plastimatch.
+//
+// Exit codes: 0 success, 1 internal error, 2 bad input (usage, scene, data),
+// 3 ran but did not meet its target. Errors are one line on stderr.
+#include <CLI/CLI.hpp>
+#include <iostream>
+
+#include "organfit/evaluation/cohesion_benchmark.h"
+#include "organfit/pipeline/runner.h"
+#include "organfit/pipeline/scene_schema.h"
+#include "organfit/support/error.h"
+#include "organfit/support/log.h"
+#include "organfit/support/progress.h"
+
+namespace {
+
+using organfit::ExitCode;
+
+int run_main(int argc, char** argv) {
+  CLI::App app{"organfit: fit a particle-system organ model to sparse ultrasound points"};
+  app.require_subcommand(1);
+  app.fallthrough();
+  bool quiet = false, verbose = false;
+  app.add_flag("-q,--quiet", quiet, "Only warnings and errors; no progress");
+  app.add_flag("-v,--verbose", verbose, "More detail in logs and errors");
+
+  std::string scene_file, out_dir;
+  auto* run = app.add_subcommand("run", "Run a scene: the stages it names, outputs into --out");
+  run->add_option("scene", scene_file, "Scene file (YAML)")->required();
+  run->add_option("-o,--out", out_dir, "Output folder (created; not the scene's folder)")->required();
+
+  auto* validate = app.add_subcommand("validate", "Check a scene without running it");
+  validate->add_option("scene", scene_file, "Scene file (YAML)")->required();
+
+  bool schema_json = false;
+  auto* schema = app.add_subcommand("schema", "Print every scene key: type, default, unit, range, doc");
+  schema->add_flag("--json", schema_json, "As JSON");
+
+  auto* version = app.add_subcommand("version", "Print the organfit version");
+
+  auto* bench = app.add_subcommand("bench", "Benchmarks; print machine-readable JSON on stdout");
+  bench->require_subcommand(1);
+  organfit::evaluation::CohesionBenchOptions cb;
+  bool scaling = false, no_lammps = false;
+  auto* bench_cohesion = bench->add_subcommand(
+      "cohesion", "LJ cohesion on the LAMMPS in.lj system, side by side with LAMMPS");
+  bench_cohesion->add_option("--particles", cb.particles, "Particle count (whole fcc cells)")
+      ->check(CLI::Range(4LL, 50000000LL));
+  bench_cohesion->add_option("--steps", cb.steps, "Steps")->check(CLI::Range(1LL, 1000000LL));
+  bench_cohesion->add_option("--threads", cb.threads, "OpenMP threads")->check(CLI::Range(1, 256));
+  bench_cohesion->add_flag("--scaling", scaling, "Cost per particle-step from 1e3 to 1e6 particles");
+  bench_cohesion->add_flag("--no-lammps", no_lammps, "Do not run LAMMPS alongside");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "organfit: usage: " << e.what() << " (see organfit --help)\n";
+    return static_cast<int>(ExitCode::kBadInput);
+  }
+
+  organfit::setup_logging(quiet     ? organfit::Verbosity::kQuiet
+                          : verbose ? organfit::Verbosity::kVerbose
+                                    : organfit::Verbosity::kNormal);
+  organfit::Progress::set_enabled(!quiet);
+
+  if (*version) {
+    std::cout << "organfit " << organfit::pipeline::version() << "\n";
+  } else if (*schema) {
+    const auto& s = organfit::pipeline::scene_schema();
+    std::cout << (schema_json ? s.to_json().dump(2) + "\n" : s.to_text());
+  } else if (*validate) {
+    const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
+    std::cout << scene_file << ": valid (" << scene.sections().size() << " sections)\n";
+  } else if (*run) {
+    const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
+    organfit::pipeline::run_scene(scene, out_dir);
+    spdlog::info("done: {}/run.json", out_dir);
+  } else if (*bench_cohesion) {
+    if (scaling) {
+      std::cout << organfit::evaluation::run_cohesion_scaling(cb.threads).dump() << "\n";
+    } else {
+      cb.run_lammps = !no_lammps;
+      std::cout << organfit::evaluation::run_cohesion_benchmark(cb).dump() << "\n";
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run_main(argc, argv);
+  } catch (const organfit::Error& e) {
+    std::cerr << "organfit: error: " << e.what() << "\n";
+    return static_cast<int>(e.code());
+  } catch (const std::invalid_argument& e) {  // a force term or integrator refused its input
+    std::cerr << "organfit: error: " << e.what() << "\n";
+    return static_cast<int>(ExitCode::kBadInput);
+  } catch (const std::exception& e) {
+    std::cerr << "organfit: internal error: " << e.what() << "\n";
+    return static_cast<int>(ExitCode::kInternal);
+  }
+}

@@ -1,0 +1,74 @@
+#pragma once
+// A loaded, validated scene: every key of each present section has a value (given or
+// default), checked against the schema, with the line it came from for later errors.
+#include <Eigen/Core>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <set>
+#include <string>
+
+#include "organfit/config/schema.h"
+
+namespace organfit::config {
+
+class Scene {
+ public:
+  /// The scene file (for messages and for resolving relative paths).
+  const std::filesystem::path& file() const { return file_; }
+  const Schema& schema() const { return *schema_; }
+
+  bool has_section(const std::string& section) const { return sections_.count(section) > 0; }
+  const std::set<std::string>& sections() const { return sections_; }
+  /// True when the key was written in the scene (not defaulted).
+  bool is_given(const std::string& section, const std::string& name) const;
+
+  // Typed access; the key must be declared with that type (else std::logic_error).
+  double number(const std::string& section, const std::string& name) const;
+  long long integer(const std::string& section, const std::string& name) const;
+  bool flag(const std::string& section, const std::string& name) const;
+  const std::string& text(const std::string& section, const std::string& name) const;
+  /// Input path, already resolved against the scene's folder.
+  std::filesystem::path path(const std::string& section, const std::string& name) const;
+  Eigen::Vector3d vec3(const std::string& section, const std::string& name) const;
+
+  /// Line (1-based) where the key was given, or where its section starts when defaulted.
+  int line_of(const std::string& section, const std::string& name) const;
+  /// Throws InputError "file:line: section.name: reason" (for cross-key rules).
+  [[noreturn]] void fail(const std::string& section, const std::string& name,
+                         const std::string& reason) const;
+
+  /// The fully resolved scene as YAML: every key of each present section, with
+  /// defaults filled in and the unit and doc as comments.
+  std::string resolved_yaml() const;
+  /// The same values as JSON {section: {key: value}}.
+  nlohmann::json to_json() const;
+
+ private:
+  friend Scene parse_scene(const std::string&, const std::filesystem::path&, const Schema&);
+  struct Entry {
+    Value value;
+    int line = 0;
+    bool given = false;
+  };
+  const Entry& entry(const std::string& section, const std::string& name, ParamType type) const;
+
+  std::filesystem::path file_;
+  const Schema* schema_ = nullptr;
+  std::set<std::string> sections_;
+  std::map<std::string, int> section_lines_;
+  std::map<std::string, Entry> entries_;  // by "section.name"
+};
+
+/// Parses scene text against the schema. `file` names the scene in messages and
+/// anchors relative paths. Throws InputError "file:line: key: reason" on the first
+/// problem: YAML syntax, an unknown section or key (with the nearest declared name),
+/// a duplicate key, a wrong type, a value out of range, a missing required key or
+/// a missing input file. The schema must outlive the scene.
+Scene parse_scene(const std::string& text, const std::filesystem::path& file,
+                  const Schema& schema);
+
+/// Reads and parses a scene file (InputError when it cannot be read).
+Scene load_scene(const std::filesystem::path& file, const Schema& schema);
+
+}  // namespace organfit::config

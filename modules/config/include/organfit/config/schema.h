@@ -1,0 +1,96 @@
+#pragma once
+// The scene schema: every scene key declared once, with its type, default, unit,
+// allowed range and a one-line doc. `organfit schema` prints it; loading enforces it.
+//
+// A scene is YAML with two levels, `section: {key: value}`. A section names a stage
+// or a part of the model; scenes name only the sections they use (SOFA-like).
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace organfit::config {
+
+enum class ParamType {
+  kNumber,     ///< real number (finite)
+  kInteger,    ///< whole number
+  kBool,       ///< true/false
+  kString,     ///< free text
+  kEnum,       ///< one of `choices`
+  kInputPath,  ///< existing file or folder, relative to the scene file's folder
+  kVec3        ///< three numbers [x, y, z]
+};
+
+const char* to_string(ParamType type);
+
+/// A parameter value. std::monostate means "no value" (a required key's default).
+using Value = std::variant<std::monostate, double, long long, bool, std::string, Eigen::Vector3d>;
+
+/// One declared scene key.
+struct ParamSpec {
+  std::string section;  ///< e.g. "model"
+  std::string name;     ///< e.g. "radius_mm"
+  ParamType type = ParamType::kNumber;
+  Value default_value;  ///< monostate: the key is required when its section is present
+  std::string unit;     ///< "mm", "s", "HU", "" when dimensionless
+  std::optional<double> min, max;  ///< allowed range (numbers, integers, each vec3 component)
+  bool min_exclusive = false;      ///< true: value must be > min (e.g. a radius)
+  std::vector<std::string> choices;  ///< allowed values of an enum
+  std::string doc;                   ///< one line
+
+  std::string key() const { return section + "." + name; }
+  bool required() const { return std::holds_alternative<std::monostate>(default_value); }
+  /// "(0, inf)", "[0, 1]", "{paper, spread}" or "" for the schema listing.
+  std::string range_text() const;
+};
+
+struct SectionSpec {
+  std::string name;
+  std::string doc;
+};
+
+/// The declared keys, grouped by section, in declaration order.
+class Schema {
+ public:
+  /// Declares a section; keys added after it belong to it.
+  Schema& section(const std::string& name, const std::string& doc);
+  /// Declares a key of the current section. Throws std::logic_error on a duplicate
+  /// or a default outside the key's own range (a bug in the declaration).
+  Schema& add(ParamSpec spec);
+
+  // Shorthands for the common kinds of key.
+  Schema& number(const std::string& name, std::optional<double> def, const std::string& unit,
+                 std::optional<double> min, std::optional<double> max, const std::string& doc,
+                 bool min_exclusive = false);
+  Schema& integer(const std::string& name, std::optional<long long> def, std::optional<double> min,
+                  std::optional<double> max, const std::string& doc);
+  Schema& flag(const std::string& name, bool def, const std::string& doc);
+  Schema& text(const std::string& name, std::optional<std::string> def, const std::string& doc);
+  Schema& choice(const std::string& name, const std::string& def,
+                 std::vector<std::string> choices, const std::string& doc);
+  Schema& input_path(const std::string& name, const std::string& doc);
+  Schema& vec3(const std::string& name, std::optional<Eigen::Vector3d> def, const std::string& unit,
+               std::optional<double> min, const std::string& doc, bool min_exclusive = false);
+
+  const std::vector<SectionSpec>& sections() const { return sections_; }
+  const std::vector<ParamSpec>& params() const { return params_; }
+  const SectionSpec* find_section(const std::string& name) const;
+  const ParamSpec* find(const std::string& section, const std::string& name) const;
+  std::vector<const ParamSpec*> params_of(const std::string& section) const;
+
+  /// Human-readable listing: one line per key with type, default, unit, range and doc.
+  std::string to_text() const;
+  /// The same as JSON (for tools).
+  nlohmann::json to_json() const;
+
+ private:
+  std::vector<SectionSpec> sections_;
+  std::vector<ParamSpec> params_;
+};
+
+/// A value as it is written in YAML ("2.5", "[1, 2, 3]", "true", "paper").
+std::string value_to_text(const Value& value);
+
+}  // namespace organfit::config

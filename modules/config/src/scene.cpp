@@ -1,0 +1,292 @@
+#include "organfit/config/scene.h"
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "organfit/support/error.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::config {
+namespace {
+
+/// Levenshtein distance, for "did you mean" on misspelled keys.
+size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<size_t> prev(b.size() + 1), cur(b.size() + 1);
+  for (size_t j = 0; j <= b.size(); ++j) prev[j] = j;
+  for (size_t i = 1; i <= a.size(); ++i) {
+    cur[0] = i;
+    for (size_t j = 1; j <= b.size(); ++j) {
+      cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (a[i - 1] != b[j - 1])});
+    }
+    std::swap(prev, cur);
+  }
+  return prev[b.size()];
+}
+
+std::string suggestion(const std::string& given, const std::vector<std::string>& known) {
+  std::string best;
+  size_t best_d = std::max<size_t>(2, given.size() / 3) + 1;
+  for (const auto& k : known) {
+    const size_t d = edit_distance(given, k);
+    if (d < best_d) best_d = d, best = k;
+  }
+  return best.empty() ? "" : fmt::format(" (did you mean '{}'?)", best);
+}
+
+class Parser {
+ public:
+  Parser(fs::path file, const Schema& schema) : file_(std::move(file)), schema_(schema) {}
+
+  [[noreturn]] void fail(int line0, const std::string& key, const std::string& reason) const {
+    throw InputError(fmt::format("{}:{}: {}{}{}", file_.string(), line0 + 1, key,
+                                 key.empty() ? "" : ": ", reason));
+  }
+
+  Value convert(const ParamSpec& spec, const YAML::Node& node) const {
+    const int line = node.Mark().line;
+    const std::string key = spec.key();
+    auto scalar_text = [&]() -> std::string {
+      if (!node.IsScalar()) fail(line, key, fmt::format("expected a {}, got a {}", to_string(spec.type),
+                                                         node.IsSequence() ? "list" : "mapping"));
+      return node.Scalar();
+    };
+    auto as_number = [&](const YAML::Node& n, const std::string& what) -> double {
+      double v = 0;
+      if (!n.IsScalar() || !YAML::convert<double>::decode(n, v)) {
+        fail(n.Mark().line, key, fmt::format("expected {}, got '{}'", what,
+                                             n.IsScalar() ? n.Scalar() : std::string("a list")));
+      }
+      if (!std::isfinite(v)) fail(n.Mark().line, key, fmt::format("must be finite, got '{}'", n.Scalar()));
+      return v;
+    };
+    auto check_range = [&](double v, int at) {
+      if ((spec.min && (spec.min_exclusive ? !(v > *spec.min) : !(v >= *spec.min))) ||
+          (spec.max && !(v <= *spec.max))) {
+        fail(at, key, fmt::format("{} is out of range {}{}", value_to_text(Value(v)),
+                                  spec.range_text(), spec.unit.empty() ? "" : " " + spec.unit));
+      }
+    };
+    switch (spec.type) {
+      case ParamType::kNumber: {
+        const double v = as_number(node, "a number");
+        check_range(v, line);
+        return v;
+      }
+      case ParamType::kInteger: {
+        const std::string s = scalar_text();
+        long long v = 0;
+        if (!YAML::convert<long long>::decode(node, v)) {
+          fail(line, key, fmt::format("expected an integer, got '{}'", s));
+        }
+        check_range(static_cast<double>(v), line);
+        return v;
+      }
+      case ParamType::kBool: {
+        const std::string s = scalar_text();
+        bool v = false;
+        if (!YAML::convert<bool>::decode(node, v)) {
+          fail(line, key, fmt::format("expected true or false, got '{}'", s));
+        }
+        return v;
+      }
+      case ParamType::kString: return scalar_text();
+      case ParamType::kEnum: {
+        const std::string s = scalar_text();
+        if (std::find(spec.choices.begin(), spec.choices.end(), s) == spec.choices.end()) {
+          fail(line, key, fmt::format("'{}' is not one of {}{}", s, spec.range_text(),
+                                      suggestion(s, spec.choices)));
+        }
+        return s;
+      }
+      case ParamType::kInputPath: {
+        const std::string s = scalar_text();
+        if (s.empty()) fail(line, key, "empty path");
+        fs::path p(s);
+        if (p.is_relative()) p = file_.parent_path() / p;
+        if (!fs::exists(p)) fail(line, key, fmt::format("no such file or folder: {}", p.string()));
+        return fs::absolute(p).lexically_normal().string();
+      }
+      case ParamType::kVec3: {
+        if (!node.IsSequence() || node.size() != 3) {
+          fail(line, key, "expected three numbers [x, y, z]");
+        }
+        Eigen::Vector3d v;
+        for (int i = 0; i < 3; ++i) {
+          v[i] = as_number(node[i], "a number");
+          check_range(v[i], node[i].Mark().line);
+        }
+        return v;
+      }
+    }
+    fail(line, key, "unsupported type");
+  }
+
+  fs::path file_;
+  const Schema& schema_;
+};
+
+std::vector<std::string> section_names(const Schema& schema) {
+  std::vector<std::string> out;
+  for (const auto& s : schema.sections()) out.push_back(s.name);
+  return out;
+}
+
+}  // namespace
+
+Scene parse_scene(const std::string& text, const fs::path& file, const Schema& schema) {
+  Parser parser(file, schema);
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    parser.fail(std::max(0, e.mark.line), "", "YAML syntax error: " + e.msg);
+  }
+  if (!root || root.IsNull()) parser.fail(0, "", "the scene is empty");
+  if (!root.IsMap()) parser.fail(root.Mark().line, "", "a scene is a mapping of sections");
+
+  Scene scene;
+  scene.file_ = file;
+  scene.schema_ = &schema;
+  for (const auto& kv : root) {
+    const std::string sec = kv.first.Scalar();
+    const int sec_line = kv.first.Mark().line;
+    if (!schema.find_section(sec)) {
+      parser.fail(sec_line, sec, "unknown section" + suggestion(sec, section_names(schema)));
+    }
+    if (scene.sections_.count(sec)) parser.fail(sec_line, sec, "section given twice");
+    scene.sections_.insert(sec);
+    scene.section_lines_[sec] = sec_line + 1;
+    const YAML::Node& body = kv.second;
+    if (!body.IsNull() && !body.IsMap()) {
+      parser.fail(body.Mark().line, sec, "a section is a mapping of keys");
+    }
+    std::vector<std::string> known;
+    for (const auto* p : schema.params_of(sec)) known.push_back(p->name);
+    if (body.IsMap()) {
+      for (const auto& item : body) {
+        const std::string name = item.first.Scalar();
+        const int line = item.first.Mark().line;
+        const ParamSpec* spec = schema.find(sec, name);
+        if (!spec) {
+          parser.fail(line, sec + "." + name, "unknown key" + suggestion(name, known));
+        }
+        if (scene.entries_.count(spec->key())) parser.fail(line, spec->key(), "key given twice");
+        scene.entries_[spec->key()] = {parser.convert(*spec, item.second), line + 1, true};
+      }
+    }
+    for (const auto* p : schema.params_of(sec)) {
+      if (scene.entries_.count(p->key())) continue;
+      if (p->required()) parser.fail(sec_line, p->key(), "required key is missing");
+      scene.entries_[p->key()] = {p->default_value, sec_line + 1, false};
+    }
+  }
+  return scene;
+}
+
+Scene load_scene(const fs::path& file, const Schema& schema) {
+  std::error_code ec;
+  if (fs::is_directory(file, ec)) throw InputError(file.string() + ": is a folder, not a scene file");
+  std::ifstream in(file);
+  if (!in) throw InputError(file.string() + ": cannot read the scene file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return parse_scene(ss.str(), file, schema);
+}
+
+bool Scene::is_given(const std::string& section, const std::string& name) const {
+  auto it = entries_.find(section + "." + name);
+  return it != entries_.end() && it->second.given;
+}
+
+const Scene::Entry& Scene::entry(const std::string& section, const std::string& name,
+                                 ParamType type) const {
+  const ParamSpec* spec = schema_->find(section, name);
+  if (!spec || spec->type != type) {
+    throw std::logic_error(fmt::format("scene key {}.{} is not declared as {}", section, name,
+                                       to_string(type)));
+  }
+  auto it = entries_.find(spec->key());
+  if (it == entries_.end()) {
+    throw std::logic_error(fmt::format("scene key {}.{} read but section absent", section, name));
+  }
+  return it->second;
+}
+
+double Scene::number(const std::string& s, const std::string& n) const {
+  return std::get<double>(entry(s, n, ParamType::kNumber).value);
+}
+long long Scene::integer(const std::string& s, const std::string& n) const {
+  return std::get<long long>(entry(s, n, ParamType::kInteger).value);
+}
+bool Scene::flag(const std::string& s, const std::string& n) const {
+  return std::get<bool>(entry(s, n, ParamType::kBool).value);
+}
+const std::string& Scene::text(const std::string& s, const std::string& n) const {
+  const ParamSpec* spec = schema_->find(s, n);
+  const ParamType t = spec && spec->type == ParamType::kEnum ? ParamType::kEnum : ParamType::kString;
+  return std::get<std::string>(entry(s, n, t).value);
+}
+fs::path Scene::path(const std::string& s, const std::string& n) const {
+  return std::get<std::string>(entry(s, n, ParamType::kInputPath).value);
+}
+Eigen::Vector3d Scene::vec3(const std::string& s, const std::string& n) const {
+  return std::get<Eigen::Vector3d>(entry(s, n, ParamType::kVec3).value);
+}
+
+int Scene::line_of(const std::string& s, const std::string& n) const {
+  auto it = entries_.find(s + "." + n);
+  if (it != entries_.end()) return it->second.line;
+  auto sl = section_lines_.find(s);
+  return sl == section_lines_.end() ? 1 : sl->second;
+}
+
+void Scene::fail(const std::string& s, const std::string& n, const std::string& reason) const {
+  throw InputError(fmt::format("{}:{}: {}.{}: {}", file_.string(), line_of(s, n), s, n, reason));
+}
+
+std::string Scene::resolved_yaml() const {
+  std::ostringstream out;
+  out << "# Fully resolved scene: every key of each section used, defaults filled in.\n";
+  out << "# Source: " << file_.string() << "\n";
+  for (const auto& sec : schema_->sections()) {
+    if (!has_section(sec.name)) continue;
+    out << sec.name << ":\n";
+    for (const auto* p : schema_->params_of(sec.name)) {
+      const auto& e = entries_.at(p->key());
+      std::string v = value_to_text(e.value);
+      if (p->type == ParamType::kString || p->type == ParamType::kInputPath) {
+        YAML::Emitter em;
+        em << YAML::DoubleQuoted << v;
+        v = em.c_str();
+      }
+      out << fmt::format("  {}: {}  # {}{}{}\n", p->name, v, p->unit.empty() ? "" : p->unit + "; ",
+                         e.given ? "" : "default; ", p->doc);
+    }
+  }
+  return out.str();
+}
+
+nlohmann::json Scene::to_json() const {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& sec : schema_->sections()) {
+    if (!has_section(sec.name)) continue;
+    nlohmann::json s = nlohmann::json::object();
+    for (const auto* p : schema_->params_of(sec.name)) {
+      const auto& v = entries_.at(p->key()).value;
+      if (auto* d = std::get_if<double>(&v)) s[p->name] = *d;
+      else if (auto* i = std::get_if<long long>(&v)) s[p->name] = *i;
+      else if (auto* b = std::get_if<bool>(&v)) s[p->name] = *b;
+      else if (auto* str = std::get_if<std::string>(&v)) s[p->name] = *str;
+      else if (auto* vec = std::get_if<Eigen::Vector3d>(&v)) s[p->name] = {vec->x(), vec->y(), vec->z()};
+    }
+    j[sec.name] = s;
+  }
+  return j;
+}
+
+}  // namespace organfit::config

@@ -1,0 +1,221 @@
+#include "organfit/config/schema.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace organfit::config {
+
+const char* to_string(ParamType type) {
+  switch (type) {
+    case ParamType::kNumber: return "number";
+    case ParamType::kInteger: return "integer";
+    case ParamType::kBool: return "bool";
+    case ParamType::kString: return "string";
+    case ParamType::kEnum: return "enum";
+    case ParamType::kInputPath: return "path";
+    case ParamType::kVec3: return "vec3";
+  }
+  return "?";
+}
+
+namespace {
+std::string format_number(double v) {
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  return fmt::format("{:g}", v);
+}
+}  // namespace
+
+std::string value_to_text(const Value& value) {
+  struct Visitor {
+    std::string operator()(std::monostate) const { return "(required)"; }
+    std::string operator()(double v) const { return format_number(v); }
+    std::string operator()(long long v) const { return std::to_string(v); }
+    std::string operator()(bool v) const { return v ? "true" : "false"; }
+    std::string operator()(const std::string& v) const { return v; }
+    std::string operator()(const Eigen::Vector3d& v) const {
+      return fmt::format("[{}, {}, {}]", format_number(v.x()), format_number(v.y()),
+                         format_number(v.z()));
+    }
+  };
+  return std::visit(Visitor{}, value);
+}
+
+std::string ParamSpec::range_text() const {
+  if (type == ParamType::kEnum) {
+    std::string s = "{";
+    for (size_t i = 0; i < choices.size(); ++i) s += (i ? ", " : "") + choices[i];
+    return s + "}";
+  }
+  if (!min && !max) return "";
+  return fmt::format("{}{}, {}]", min_exclusive ? "(" : "[", min ? format_number(*min) : "-inf",
+                     max ? format_number(*max) : "inf");
+}
+
+Schema& Schema::section(const std::string& name, const std::string& doc) {
+  if (find_section(name)) throw std::logic_error("schema: section declared twice: " + name);
+  sections_.push_back({name, doc});
+  return *this;
+}
+
+namespace {
+bool number_in_range(const ParamSpec& s, double v) {
+  if (s.min && (s.min_exclusive ? !(v > *s.min) : !(v >= *s.min))) return false;
+  if (s.max && !(v <= *s.max)) return false;
+  return true;
+}
+}  // namespace
+
+Schema& Schema::add(ParamSpec spec) {
+  if (sections_.empty()) throw std::logic_error("schema: key declared before any section");
+  spec.section = sections_.back().name;
+  if (find(spec.section, spec.name)) {
+    throw std::logic_error("schema: key declared twice: " + spec.key());
+  }
+  // A default outside its own range is a declaration bug: catch it at start-up.
+  bool ok = true;
+  if (auto* d = std::get_if<double>(&spec.default_value)) ok = number_in_range(spec, *d);
+  if (auto* i = std::get_if<long long>(&spec.default_value))
+    ok = number_in_range(spec, static_cast<double>(*i));
+  if (auto* s = std::get_if<std::string>(&spec.default_value); s && spec.type == ParamType::kEnum) {
+    ok = std::find(spec.choices.begin(), spec.choices.end(), *s) != spec.choices.end();
+  }
+  if (!ok) throw std::logic_error("schema: default out of range for " + spec.key());
+  params_.push_back(std::move(spec));
+  return *this;
+}
+
+Schema& Schema::number(const std::string& name, std::optional<double> def, const std::string& unit,
+                       std::optional<double> min, std::optional<double> max,
+                       const std::string& doc, bool min_exclusive) {
+  ParamSpec s;
+  s.name = name;
+  s.type = ParamType::kNumber;
+  if (def) s.default_value = *def;
+  s.unit = unit;
+  s.min = min;
+  s.max = max;
+  s.min_exclusive = min_exclusive;
+  s.doc = doc;
+  return add(std::move(s));
+}
+
+Schema& Schema::integer(const std::string& name, std::optional<long long> def,
+                        std::optional<double> min, std::optional<double> max,
+                        const std::string& doc) {
+  ParamSpec s;
+  s.name = name;
+  s.type = ParamType::kInteger;
+  if (def) s.default_value = *def;
+  s.min = min;
+  s.max = max;
+  s.doc = doc;
+  return add(std::move(s));
+}
+
+Schema& Schema::flag(const std::string& name, bool def, const std::string& doc) {
+  ParamSpec s;
+  s.name = name;
+  s.type = ParamType::kBool;
+  s.default_value = def;
+  s.doc = doc;
+  return add(std::move(s));
+}
+
+Schema& Schema::text(const std::string& name, std::optional<std::string> def,
+                     const std::string& doc) {
+  ParamSpec s;
+  s.name = name;
+  s.type = ParamType::kString;
+  if (def) s.default_value = *def;
+  s.doc = doc;
+  return add(std::move(s));
+}
+
+Schema& Schema::choice(const std::string& name, const std::string& def,
+                       std::vector<std::string> choices, const std::string& doc) {
+  ParamSpec s;
+  s.name = name;
+  s.type = ParamType::kEnum;
+  s.default_value = def;
+  s.choices = std::move(choices);
+  s.doc = doc;
+  return add(std::move(s));
+}
+
+Schema& Schema::input_path(const std::string& name, const std::string& doc) {
+  ParamSpec s;
+  s.name = name;
+  s.type = ParamType::kInputPath;
+  s.doc = doc;
+  return add(std::move(s));
+}
+
+Schema& Schema::vec3(const std::string& name, std::optional<Eigen::Vector3d> def,
+                     const std::string& unit, std::optional<double> min, const std::string& doc,
+                     bool min_exclusive) {
+  ParamSpec s;
+  s.name = name;
+  s.type = ParamType::kVec3;
+  if (def) s.default_value = *def;
+  s.unit = unit;
+  s.min = min;
+  s.min_exclusive = min_exclusive;
+  s.doc = doc;
+  return add(std::move(s));
+}
+
+const SectionSpec* Schema::find_section(const std::string& name) const {
+  for (const auto& s : sections_)
+    if (s.name == name) return &s;
+  return nullptr;
+}
+
+const ParamSpec* Schema::find(const std::string& section, const std::string& name) const {
+  for (const auto& p : params_)
+    if (p.section == section && p.name == name) return &p;
+  return nullptr;
+}
+
+std::vector<const ParamSpec*> Schema::params_of(const std::string& section) const {
+  std::vector<const ParamSpec*> out;
+  for (const auto& p : params_)
+    if (p.section == section) out.push_back(&p);
+  return out;
+}
+
+std::string Schema::to_text() const {
+  std::ostringstream out;
+  for (const auto& sec : sections_) {
+    out << sec.name << ":  # " << sec.doc << "\n";
+    for (const auto* p : params_of(sec.name)) {
+      out << fmt::format("  {:<22} {:<8} default {:<16} {:<6} {:<14} {}\n", p->name,
+                         to_string(p->type), value_to_text(p->default_value),
+                         p->unit.empty() ? "-" : p->unit, p->range_text(), p->doc);
+    }
+  }
+  return out.str();
+}
+
+nlohmann::json Schema::to_json() const {
+  nlohmann::json sections = nlohmann::json::array();
+  for (const auto& sec : sections_) {
+    nlohmann::json keys = nlohmann::json::array();
+    for (const auto* p : params_of(sec.name)) {
+      nlohmann::json k = {{"name", p->name},
+                          {"type", to_string(p->type)},
+                          {"required", p->required()},
+                          {"default", p->required() ? "" : value_to_text(p->default_value)},
+                          {"unit", p->unit},
+                          {"range", p->range_text()},
+                          {"doc", p->doc}};
+      keys.push_back(k);
+    }
+    sections.push_back({{"section", sec.name}, {"doc", sec.doc}, {"keys", keys}});
+  }
+  return sections;
+}
+
+}  // namespace organfit::config

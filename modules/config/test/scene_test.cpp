@@ -1,0 +1,143 @@
+// Scene loading: every kind of config error names file:line and the key.
+#include "organfit/config/scene.h"
+
+#include <gtest/gtest.h>
+
+#include "organfit/support/error.h"
+
+namespace organfit::config {
+namespace {
+
+Schema test_schema() {
+  Schema s;
+  s.section("model", "the particle model")
+      .number("radius_mm", 1.5, "mm", 0.0, std::nullopt, "particle radius", true)
+      .integer("exponent_m", 6, 1, 60, "LJ attractive exponent")
+      .flag("skeleton", true, "attach a skeleton")
+      .choice("method", "spread", {"paper", "spread"}, "fit variant")
+      .vec3("size_mm", Eigen::Vector3d(10, 20, 30), "mm", 0.0, "box size", true);
+  s.section("points", "attractive points").input_path("file", "points CSV").text("label", "x", "a label");
+  return s;
+}
+
+std::string error_of(const std::string& text) {
+  const Schema schema = test_schema();
+  try {
+    parse_scene(text, "/scenes/s.yaml", schema);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+TEST(SceneParse, DefaultsFillTheKeysOfAPresentSection) {
+  const Schema schema = test_schema();
+  const Scene scene = parse_scene("model:\n  radius_mm: 2\n", "/s.yaml", schema);
+  EXPECT_DOUBLE_EQ(scene.number("model", "radius_mm"), 2.0);
+  EXPECT_EQ(scene.integer("model", "exponent_m"), 6);
+  EXPECT_TRUE(scene.flag("model", "skeleton"));
+  EXPECT_EQ(scene.text("model", "method"), "spread");
+  EXPECT_EQ(scene.vec3("model", "size_mm"), Eigen::Vector3d(10, 20, 30));
+  EXPECT_TRUE(scene.is_given("model", "radius_mm"));
+  EXPECT_FALSE(scene.is_given("model", "exponent_m"));
+  EXPECT_FALSE(scene.has_section("points"));
+  EXPECT_EQ(scene.line_of("model", "radius_mm"), 2);
+}
+
+TEST(SceneParse, MisspelledKeyNamesFileLineKeyAndSuggestion) {
+  EXPECT_EQ(error_of("model:\n  radius_mm: 2\n  raduis_mm: 3\n"),
+            "/scenes/s.yaml:3: model.raduis_mm: unknown key (did you mean 'radius_mm'?)");
+}
+
+TEST(SceneParse, UnknownSectionIsAnError) {
+  EXPECT_EQ(error_of("modle:\n  radius_mm: 2\n"),
+            "/scenes/s.yaml:1: modle: unknown section (did you mean 'model'?)");
+}
+
+TEST(SceneParse, StringWhereANumberBelongs) {
+  EXPECT_EQ(error_of("model:\n  radius_mm: big\n"),
+            "/scenes/s.yaml:2: model.radius_mm: expected a number, got 'big'");
+}
+
+TEST(SceneParse, NegativeRadiusIsOutOfRange) {
+  EXPECT_EQ(error_of("model:\n\n  radius_mm: -1.5\n"),
+            "/scenes/s.yaml:3: model.radius_mm: -1.5 is out of range (0, inf] mm");
+}
+
+TEST(SceneParse, IntegerKeyRejectsAFraction) {
+  EXPECT_EQ(error_of("model:\n  exponent_m: 2.5\n"),
+            "/scenes/s.yaml:2: model.exponent_m: expected an integer, got '2.5'");
+}
+
+TEST(SceneParse, NonFiniteNumbersAreRejected) {
+  EXPECT_EQ(error_of("model:\n  radius_mm: .nan\n"),
+            "/scenes/s.yaml:2: model.radius_mm: must be finite, got '.nan'");
+}
+
+TEST(SceneParse, BadBoolAndEnum) {
+  EXPECT_EQ(error_of("model:\n  skeleton: maybe\n"),
+            "/scenes/s.yaml:2: model.skeleton: expected true or false, got 'maybe'");
+  EXPECT_EQ(error_of("model:\n  method: papr\n"),
+            "/scenes/s.yaml:2: model.method: 'papr' is not one of {paper, spread} (did you mean "
+            "'paper'?)");
+}
+
+TEST(SceneParse, Vec3NeedsThreeNumbersEachInRange) {
+  EXPECT_EQ(error_of("model:\n  size_mm: [1, 2]\n"),
+            "/scenes/s.yaml:2: model.size_mm: expected three numbers [x, y, z]");
+  EXPECT_EQ(error_of("model:\n  size_mm: [1, 0, 2]\n"),
+            "/scenes/s.yaml:2: model.size_mm: 0 is out of range (0, inf] mm");
+}
+
+TEST(SceneParse, MissingRequiredKeyAndMissingFile) {
+  EXPECT_EQ(error_of("points:\n  label: a\n"), "/scenes/s.yaml:1: points.file: required key is missing");
+  EXPECT_EQ(error_of("points:\n  file: nowhere.csv\n"),
+            "/scenes/s.yaml:2: points.file: no such file or folder: /scenes/nowhere.csv");
+}
+
+TEST(SceneParse, DuplicatesSyntaxAndShapeErrors) {
+  EXPECT_EQ(error_of("model:\n  radius_mm: 1\n  radius_mm: 2\n"),
+            "/scenes/s.yaml:3: model.radius_mm: key given twice");
+  EXPECT_NE(error_of("model: [1, 2\n").find("/scenes/s.yaml:"), std::string::npos);
+  EXPECT_NE(error_of("model: [1, 2\n").find("YAML syntax error"), std::string::npos);
+  EXPECT_EQ(error_of(""), "/scenes/s.yaml:1: the scene is empty");
+  EXPECT_EQ(error_of("- a\n- b\n"), "/scenes/s.yaml:1: a scene is a mapping of sections");
+  EXPECT_EQ(error_of("model: 3\n"), "/scenes/s.yaml:1: model: a section is a mapping of keys");
+  EXPECT_EQ(error_of("model:\n  radius_mm: [1]\n"),
+            "/scenes/s.yaml:2: model.radius_mm: expected a number, got 'a list'");
+}
+
+TEST(SceneParse, RelativePathsResolveAgainstTheSceneFolder) {
+  const Schema schema = test_schema();
+  const std::string dir = ORGANFIT_SOURCE_DIR;
+  const Scene scene =
+      parse_scene("points:\n  file: CMakeLists.txt\n", dir + "/scene.yaml", schema);
+  EXPECT_EQ(scene.path("points", "file"), std::filesystem::path(dir + "/CMakeLists.txt"));
+}
+
+TEST(SceneParse, ResolvedYamlReparsesToTheSameValues) {
+  const Schema schema = test_schema();
+  const Scene a = parse_scene("model:\n  radius_mm: 2.25\n  method: paper\n", "/s.yaml", schema);
+  const Scene b = parse_scene(a.resolved_yaml(), "/r.yaml", schema);
+  EXPECT_EQ(a.to_json(), b.to_json());
+  EXPECT_NE(a.resolved_yaml().find("radius_mm: 2.25  # mm; particle radius"), std::string::npos);
+}
+
+TEST(Schema, RejectsDeclarationBugs) {
+  Schema s;
+  s.section("a", "doc").number("x", 1.0, "", 0.0, 2.0, "x");
+  EXPECT_THROW(s.number("x", 1.0, "", 0.0, 2.0, "again"), std::logic_error);
+  EXPECT_THROW(s.number("y", 5.0, "", 0.0, 2.0, "default out of range"), std::logic_error);
+  EXPECT_THROW(s.section("a", "twice"), std::logic_error);
+}
+
+TEST(Schema, TextListsEveryKeyWithUnitAndRange) {
+  const std::string t = test_schema().to_text();
+  EXPECT_NE(t.find("radius_mm"), std::string::npos);
+  EXPECT_NE(t.find("(0, inf]"), std::string::npos);
+  EXPECT_NE(t.find("{paper, spread}"), std::string::npos);
+  EXPECT_EQ(test_schema().to_json().size(), 2u);
+}
+
+}  // namespace
+}  // namespace organfit::config

@@ -1,0 +1,180 @@
+#include "organfit/evaluation/cohesion_benchmark.h"
+
+#include <omp.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <regex>
+#include <sstream>
+
+#include "organfit/particles/cohesion_force.h"
+#include "organfit/particles/integrator.h"
+#include "organfit/support/resources.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::evaluation {
+namespace {
+
+constexpr double kDensity = 0.8442;
+constexpr double kTemperature = 1.44;
+constexpr double kCutoffSigma = 2.5;
+constexpr double kSkinSigma = 0.3;
+constexpr double kTimeStep = 0.005;
+
+long long cells_for(long long particles) {
+  return std::max<long long>(1, std::llround(std::cbrt(particles / 4.0)));
+}
+
+struct OursResult {
+  long long particles;
+  double loop_s;
+  long long list_builds;
+};
+
+OursResult run_ours(long long requested, long long steps, int threads) {
+  using namespace organfit::particles;
+  const long long c = cells_for(requested);
+  const double a = std::cbrt(4.0 / kDensity);  // cubic cell of the fcc lattice, sigma
+  const long long n = 4 * c * c * c;
+  Positions x(3, n);
+  static const double basis[4][3] = {{0, 0, 0}, {0.5, 0.5, 0}, {0.5, 0, 0.5}, {0, 0.5, 0.5}};
+  long long idx = 0;
+  for (long long k = 0; k < c; ++k)
+    for (long long j = 0; j < c; ++j)
+      for (long long i = 0; i < c; ++i)
+        for (const auto& b : basis) x.col(idx++) = a * Eigen::Vector3d(i + b[0], j + b[1], k + b[2]);
+  State s(x);
+  std::mt19937_64 rng(87287);
+  std::normal_distribution<double> g(0.0, std::sqrt(kTemperature));
+  for (long long i = 0; i < n; ++i)
+    for (int d = 0; d < 3; ++d) s.v(d, i) = g(rng);
+  s.v.colwise() -= s.v.rowwise().mean();
+
+  CohesionParams p;  // LJ 12-6 in sigma units: r0 = 2^(1/6) sigma
+  p.r0_mm = std::pow(2.0, 1.0 / 6.0);
+  p.cutoff_r0 = kCutoffSigma / p.r0_mm;
+  p.floor_r0 = 0.5;
+  Model model(static_cast<int>(n), 1.0, 0.5 * p.r0_mm);
+  auto& cohesion = model.add(std::make_unique<CohesionForce>(LennardJones(p), kSkinSigma));
+  IntegratorOptions opt;
+  opt.time_step_s = kTimeStep;
+  opt.max_step_r0 = 0;  // plain NVE, as LAMMPS
+  opt.length_scale_mm = p.r0_mm;
+  omp_set_num_threads(threads);
+  Integrator integ(model, opt);
+  integ.refresh_forces(s);  // setup (LAMMPS's setup is also outside its loop time)
+  Stopwatch clock;
+  integ.run(s, steps);
+  return {n, clock.elapsed_s(), cohesion.neighbour_list().builds()};
+}
+
+struct LammpsResult {
+  bool ran = false;
+  double loop_s = 0;
+  std::string error;
+};
+
+LammpsResult run_lammps(const std::string& binary, long long requested, long long steps) {
+  LammpsResult r;
+  const fs::path dir = fs::temp_directory_path() / ("organfit-bench-lmp-" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  const long long c = cells_for(requested);
+  {
+    std::ofstream in(dir / "in.lj");
+    in << "# organfit bench cohesion: LAMMPS bench/in.lj with open boundaries\n"
+       << "units lj\natom_style atomic\nboundary s s s\n"
+       << "lattice fcc " << kDensity << "\n"
+       << "region box block 0 " << c << " 0 " << c << " 0 " << c << "\n"
+       << "create_box 1 box\ncreate_atoms 1 box\nmass 1 1.0\n"
+       << "velocity all create " << kTemperature << " 87287 loop geom\n"
+       << "pair_style lj/cut " << kCutoffSigma << "\npair_coeff 1 1 1.0 1.0 " << kCutoffSigma << "\n"
+       << "neighbor " << kSkinSigma << " bin\nneigh_modify delay 0 every 20 check no\n"
+       << "fix 1 all nve\ntimestep " << kTimeStep << "\nthermo " << steps << "\n"
+       << "run " << steps << "\n";
+  }
+  const std::string cmd = "cd '" + dir.string() + "' && OMP_NUM_THREADS=1 " + binary +
+                          " -in in.lj -log log.lammps -screen none > /dev/null 2>&1";
+  const int status = std::system(cmd.c_str());
+  std::ifstream log(dir / "log.lammps");
+  std::stringstream ss;
+  ss << log.rdbuf();
+  const std::string text = ss.str();
+  std::smatch m;
+  if (status == 0 && std::regex_search(text, m, std::regex(R"(Loop time of ([0-9.eE+-]+) on)"))) {
+    r.ran = true;
+    r.loop_s = std::stod(m[1]);
+  } else {
+    r.error = "lmp did not run (exit status " + std::to_string(status) + ")";
+  }
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+  return r;
+}
+
+bool on_path(const std::string& binary) {
+  const char* path = std::getenv("PATH");
+  if (!path) return false;
+  std::stringstream ss(path);
+  std::string dir;
+  while (std::getline(ss, dir, ':')) {
+    if (!dir.empty() && access((fs::path(dir) / binary).c_str(), X_OK) == 0) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+nlohmann::json run_cohesion_benchmark(const CohesionBenchOptions& o) {
+  const OursResult ours = run_ours(o.particles, o.steps, o.threads);
+  const double us = ours.loop_s / (double(ours.particles) * o.steps) * 1e6;
+  nlohmann::json j = {{"benchmark", "cohesion"},
+                      {"system", "LAMMPS bench/in.lj, open boundaries (boundary s s s)"},
+                      {"particles", ours.particles},
+                      {"steps", o.steps},
+                      {"threads", o.threads},
+                      {"wall_s", ours.loop_s},
+                      {"us_per_particle_step", us},
+                      {"neighbour_list_builds", ours.list_builds},
+                      {"lammps_us_per_particle_step", nullptr},
+                      {"ratio_vs_lammps", nullptr}};
+  if (o.run_lammps) {
+    if (!on_path(o.lammps_binary)) {
+      j["lammps_note"] = o.lammps_binary + " not found on PATH (Debian package lammps)";
+    } else {
+      const LammpsResult l = run_lammps(o.lammps_binary, o.particles, o.steps);
+      if (l.ran) {
+        const double lus = l.loop_s / (double(ours.particles) * o.steps) * 1e6;
+        j["lammps_wall_s"] = l.loop_s;
+        j["lammps_us_per_particle_step"] = lus;
+        j["lammps_threads"] = 1;
+        j["ratio_vs_lammps"] = us / lus;
+      } else {
+        j["lammps_note"] = l.error;
+      }
+    }
+  }
+  return j;
+}
+
+nlohmann::json run_cohesion_scaling(int threads) {
+  nlohmann::json rows = nlohmann::json::array();
+  double lo = 1e300, hi = 0;
+  for (long long n : {1000LL, 4000LL, 10000LL, 32000LL, 100000LL, 300000LL, 1000000LL}) {
+    const long long steps = std::max<long long>(10, std::min<long long>(200, 4000000 / n));
+    const OursResult r = run_ours(n, steps, threads);
+    const double us = r.loop_s / (double(r.particles) * steps) * 1e6;
+    rows.push_back({{"particles", r.particles}, {"steps", steps}, {"us_per_particle_step", us}});
+    if (r.particles >= 9000) lo = std::min(lo, us), hi = std::max(hi, us);
+  }
+  return {{"benchmark", "cohesion_scaling"},
+          {"threads", threads},
+          {"rows", rows},
+          {"spread_10k_to_1M", hi / lo - 1.0}};
+}
+
+}  // namespace organfit::evaluation

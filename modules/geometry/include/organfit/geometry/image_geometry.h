@@ -1,0 +1,65 @@
+#pragma once
+// The physical frame of a voxel grid, in patient coordinates (DICOM LPS, mm).
+//
+//   x_mm = origin_mm + direction * diag(spacing_mm) * index
+//
+// `origin_mm` is the centre of voxel (0,0,0); the columns of `direction` are the
+// unit axis directions of i, j, k (a rotation, possibly with a reflection).
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <vector>
+
+namespace organfit::geometry {
+
+/// Axis-aligned box in mm.
+struct Aabb {
+  Eigen::Vector3d min_mm = Eigen::Vector3d::Constant(0);
+  Eigen::Vector3d max_mm = Eigen::Vector3d::Constant(0);
+  Eigen::Vector3d size_mm() const { return max_mm - min_mm; }
+};
+
+struct ImageGeometry {
+  std::array<int, 3> size{0, 0, 0};                          ///< voxels along i, j, k
+  Eigen::Vector3d spacing_mm = Eigen::Vector3d::Ones();      ///< voxel size along i, j, k
+  Eigen::Vector3d origin_mm = Eigen::Vector3d::Zero();       ///< centre of voxel (0,0,0)
+  Eigen::Matrix3d direction = Eigen::Matrix3d::Identity();   ///< columns: axis directions
+
+  long long voxel_count() const { return 1LL * size[0] * size[1] * size[2]; }
+  double voxel_volume_mm3() const { return spacing_mm.prod(); }
+  /// Linear index of (i, j, k), i fastest.
+  long long linear_index(int i, int j, int k) const {
+    return i + 1LL * size[0] * (j + 1LL * size[1] * k);
+  }
+  /// Physical position of a (continuous) voxel index.
+  Eigen::Vector3d index_to_physical(const Eigen::Vector3d& index) const {
+    return origin_mm + direction * spacing_mm.cwiseProduct(index);
+  }
+  /// Continuous voxel index of a physical position.
+  Eigen::Vector3d physical_to_index(const Eigen::Vector3d& p_mm) const;
+  /// Bounding box of the voxel centres, in mm.
+  Aabb bounds_mm() const;
+};
+
+/// A binary or multi-label mask on an image grid (0 = background).
+struct LabelVolume {
+  ImageGeometry geometry;
+  std::vector<std::uint8_t> labels;  ///< voxel_count() values, i fastest
+
+  explicit LabelVolume(const ImageGeometry& g = {})
+      : geometry(g), labels(static_cast<size_t>(g.voxel_count()), 0) {}
+  std::uint8_t at(int i, int j, int k) const {
+    return labels[static_cast<size_t>(geometry.linear_index(i, j, k))];
+  }
+  std::uint8_t& at(int i, int j, int k) {
+    return labels[static_cast<size_t>(geometry.linear_index(i, j, k))];
+  }
+  /// Label at a physical point, nearest voxel; 0 outside the grid.
+  std::uint8_t at_physical(const Eigen::Vector3d& p_mm) const;
+  long long count(std::uint8_t label) const;
+  double volume_mm3(std::uint8_t label) const {
+    return static_cast<double>(count(label)) * geometry.voxel_volume_mm3();
+  }
+};
+
+}  // namespace organfit::geometry

@@ -1,0 +1,44 @@
+#include "organfit/geometry/image_geometry.h"
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <cmath>
+
+namespace organfit::geometry {
+
+Eigen::Vector3d ImageGeometry::physical_to_index(const Eigen::Vector3d& p_mm) const {
+  // direction is orthonormal in valid images, but solve generally to be safe.
+  return (direction.inverse() * (p_mm - origin_mm)).cwiseQuotient(spacing_mm);
+}
+
+Aabb ImageGeometry::bounds_mm() const {
+  Aabb box;
+  box.min_mm.setConstant(std::numeric_limits<double>::infinity());
+  box.max_mm.setConstant(-std::numeric_limits<double>::infinity());
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d idx((c & 1) ? size[0] - 1 : 0, (c & 2) ? size[1] - 1 : 0,
+                              (c & 4) ? size[2] - 1 : 0);
+    const Eigen::Vector3d p = index_to_physical(idx);
+    box.min_mm = box.min_mm.cwiseMin(p);
+    box.max_mm = box.max_mm.cwiseMax(p);
+  }
+  return box;
+}
+
+std::uint8_t LabelVolume::at_physical(const Eigen::Vector3d& p_mm) const {
+  const Eigen::Vector3d idx = geometry.physical_to_index(p_mm);
+  const int i = static_cast<int>(std::lround(idx.x()));
+  const int j = static_cast<int>(std::lround(idx.y()));
+  const int k = static_cast<int>(std::lround(idx.z()));
+  if (i < 0 || j < 0 || k < 0 || i >= geometry.size[0] || j >= geometry.size[1] ||
+      k >= geometry.size[2]) {
+    return 0;
+  }
+  return at(i, j, k);
+}
+
+long long LabelVolume::count(std::uint8_t label) const {
+  return std::count(labels.begin(), labels.end(), label);
+}
+
+}  // namespace organfit::geometry

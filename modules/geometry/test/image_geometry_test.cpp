@@ -1,0 +1,40 @@
+#include "organfit/geometry/image_geometry.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+
+namespace organfit::geometry {
+namespace {
+
+TEST(ImageGeometry, IndexPhysicalRoundTripWithRotatedDirection) {
+  ImageGeometry g;
+  g.size = {10, 12, 5};
+  g.spacing_mm = {0.9, 0.8, 3.0};
+  g.origin_mm = {-100, 50, 20};
+  g.direction = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  const Eigen::Vector3d idx(3.5, 7.25, 2);
+  EXPECT_LT((g.physical_to_index(g.index_to_physical(idx)) - idx).norm(), 1e-12);
+  // One step along k moves spacing_k mm along the third direction column.
+  const Eigen::Vector3d step = g.index_to_physical({0, 0, 1}) - g.index_to_physical({0, 0, 0});
+  EXPECT_NEAR(step.norm(), 3.0, 1e-12);
+  EXPECT_LT((step.normalized() - g.direction.col(2)).norm(), 1e-12);
+}
+
+TEST(LabelVolume, CountsVolumeAndPhysicalLookup) {
+  ImageGeometry g;
+  g.size = {4, 4, 4};
+  g.spacing_mm = {0.5, 0.5, 2.0};
+  LabelVolume v(g);
+  v.at(1, 2, 3) = 1;
+  v.at(0, 0, 0) = 1;
+  EXPECT_EQ(v.count(1), 2);
+  EXPECT_DOUBLE_EQ(v.volume_mm3(1), 2 * 0.5);
+  EXPECT_EQ(v.at_physical({0.5, 1.0, 6.0}), 1);
+  EXPECT_EQ(v.at_physical({-5, 0, 0}), 0);
+  const Aabb b = g.bounds_mm();
+  EXPECT_EQ(b.max_mm, Eigen::Vector3d(1.5, 1.5, 6.0));
+}
+
+}  // namespace
+}  // namespace organfit::geometry

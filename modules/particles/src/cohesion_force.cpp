@@ -1,0 +1,181 @@
+#include "organfit/particles/cohesion_force.h"
+
+#include <cmath>
+#include <cstdint>
+#include <stdexcept>
+
+namespace organfit::particles {
+namespace {
+
+// Kernels return LJ(r)/r from r^2 for r_f <= r < r_c, without std::pow:
+//   LJ(r)/r = c/r0 * ((r0/r)^(n+2) - (r0/r)^(m+2)),  c = m n E0 / ((n-m) r0).
+// With even m and n, both powers are integer powers of (r0/r)^2: no square root.
+
+/// m = 6, n = 12 with compile-time powers: the same arithmetic as LAMMPS lj/cut.
+struct Kernel612 {
+  double k, r02;
+  double operator()(double r2) const {
+    const double s2 = r02 / r2;
+    const double s4 = s2 * s2;
+    const double s8 = s4 * s4;
+    return k * (s8 * s4 * s2 - s8);
+  }
+};
+
+/// Any even m, n.
+struct KernelEven {
+  double k, r02;
+  int half_m2, half_n2;  // (m+2)/2, (n+2)/2
+  double operator()(double r2) const {
+    const double s2 = r02 / r2;
+    return k * (ipow(s2, half_n2) - ipow(s2, half_m2));
+  }
+};
+
+/// Any m, n (one square root per pair).
+struct KernelAny {
+  double k, r02;
+  int m2, n2;  // m+2, n+2
+  double operator()(double r2) const {
+    const double s = std::sqrt(r02 / r2);
+    return k * (ipow(s, n2) - ipow(s, m2));
+  }
+};
+
+/// A unit vector from a pair of particle ids, antisymmetric in the pair: the direction
+/// in which two exactly coincident particles are pushed apart. Deterministic.
+Eigen::Vector3d coincident_direction(int i, int j) {
+  const int a = std::min(i, j), b = std::max(i, j);
+  std::uint64_t h = (static_cast<std::uint64_t>(a) << 32) ^ static_cast<std::uint64_t>(b);
+  h ^= h >> 33;
+  h *= 0xff51afd7ed558ccdULL;
+  h ^= h >> 33;
+  const double phi = (h & 0xffff) * (2 * M_PI / 65536.0);
+  const double z = ((h >> 16) & 0xffff) / 32768.0 - 1.0;
+  const double rho = std::sqrt(std::max(0.0, 1 - z * z));
+  Eigen::Vector3d d(rho * std::cos(phi), rho * std::sin(phi), z);
+  return i < j ? d : Eigen::Vector3d(-d);
+}
+
+}  // namespace
+
+CohesionForce::CohesionForce(const LennardJones& law, double skin_mm, double pair_damping)
+    : law_(law), list_(law.cutoff(), skin_mm), pair_damping_(pair_damping) {
+  if (!(pair_damping >= 0) || !std::isfinite(pair_damping)) {
+    throw std::invalid_argument("cohesion: pair damping must be >= 0");
+  }
+}
+
+template <class Kernel, bool kDamped>
+double CohesionForce::pair_loop(const Kernel& kernel, bool want_energy) {
+  const auto& nb = list_.neighbours();
+  const auto& first = list_.first();
+  const auto& cell_start = list_.cell_start();
+  const auto& order = list_.order();
+  const double rc2 = law_.cutoff() * law_.cutoff();
+  const double rf2 = law_.floor_distance() * law_.floor_distance();
+  const double eps = 1e-9 * law_.r0();
+  const double gamma = pair_damping_;
+  double* fs = fs_.data();
+  const double* xs = xs_.data();
+  const double* vs = vs_.data();
+  double* es = es_.data();
+
+  const bool parallel = list_.size() >= kParallelMinParticles;
+#pragma omp parallel if (parallel)
+  {
+    for (const auto& colour : list_.colours()) {
+      const long cells = static_cast<long>(colour.size());
+#pragma omp for schedule(dynamic, 2)
+      for (long ci = 0; ci < cells; ++ci) {
+        const int c = colour[ci];
+        for (int s = cell_start[c]; s < cell_start[c + 1]; ++s) {
+          const double xi = xs[3 * s], yi = xs[3 * s + 1], zi = xs[3 * s + 2];
+          double fxi = 0, fyi = 0, fzi = 0, ei = 0;
+          for (int k = first[s]; k < first[s + 1]; ++k) {
+            const int t = nb[k];
+            double dx = xi - xs[3 * t], dy = yi - xs[3 * t + 1], dz = zi - xs[3 * t + 2];
+            double r2 = dx * dx + dy * dy + dz * dz;
+            if (r2 >= rc2) continue;
+            double fr;
+            if (r2 >= rf2) {
+              fr = kernel(r2);
+            } else {  // rare: close pair, linearised law (and a direction if coincident)
+              if (r2 < eps * eps) {
+                const Eigen::Vector3d d = eps * coincident_direction(order[s], order[t]);
+                dx = d.x(), dy = d.y(), dz = d.z(), r2 = eps * eps;
+              }
+              const double r = std::sqrt(r2);
+              fr = law_.force(r) / r;
+            }
+            if constexpr (kDamped) {
+              // -gamma ((v_i - v_j) . e) e, with e = d / r: coefficient gamma (dv.d) / r^2.
+              const double dvd = (vs[3 * s] - vs[3 * t]) * dx + (vs[3 * s + 1] - vs[3 * t + 1]) * dy +
+                                 (vs[3 * s + 2] - vs[3 * t + 2]) * dz;
+              fr -= gamma * dvd / r2;
+            }
+            fxi += dx * fr;
+            fyi += dy * fr;
+            fzi += dz * fr;
+            fs[3 * t] -= dx * fr;
+            fs[3 * t + 1] -= dy * fr;
+            fs[3 * t + 2] -= dz * fr;
+            if (want_energy) ei += law_.energy(std::sqrt(r2));
+          }
+          fs[3 * s] += fxi;
+          fs[3 * s + 1] += fyi;
+          fs[3 * s + 2] += fzi;
+          if (want_energy) es[s] = ei;
+        }
+      }
+    }
+  }
+  double energy = 0;
+  if (want_energy)
+    for (double e : es_) energy += e;  // serial: the same order for any thread count
+  return energy;
+}
+
+double CohesionForce::add_forces(const State& state, Forces& f, bool want_energy) {
+  const int n = state.size();
+  if (n < 2) return 0.0;
+  list_.update(state.x);
+  const auto& order = list_.order();
+  xs_.resize(3 * static_cast<size_t>(n));
+  fs_.assign(3 * static_cast<size_t>(n), 0.0);
+  if (want_energy) es_.assign(n, 0.0);
+  const bool damped = pair_damping_ > 0;
+  if (damped) vs_.resize(3 * static_cast<size_t>(n));
+#pragma omp parallel for schedule(static) if (n >= kParallelMinParticles)
+  for (int s = 0; s < n; ++s) {
+    const int i = order[s];
+    for (int d = 0; d < 3; ++d) xs_[3 * s + d] = state.x(d, i);
+    if (damped)
+      for (int d = 0; d < 3; ++d) vs_[3 * s + d] = state.v(d, i);
+  }
+
+  const auto& p = law_.params();
+  const double k = p.m * p.n * p.E0 / ((p.n - p.m) * p.r0_mm) / p.r0_mm;
+  const double r02 = p.r0_mm * p.r0_mm;
+  double energy = 0;
+  auto run = [&](const auto& kernel) {
+    energy = damped ? pair_loop<std::decay_t<decltype(kernel)>, true>(kernel, want_energy)
+                    : pair_loop<std::decay_t<decltype(kernel)>, false>(kernel, want_energy);
+  };
+  if (p.m == 6 && p.n == 12) {
+    run(Kernel612{k, r02});
+  } else if (p.m % 2 == 0 && p.n % 2 == 0) {
+    run(KernelEven{k, r02, (p.m + 2) / 2, (p.n + 2) / 2});
+  } else {
+    run(KernelAny{k, r02, p.m + 2, p.n + 2});
+  }
+
+#pragma omp parallel for schedule(static) if (n >= kParallelMinParticles)
+  for (int s = 0; s < n; ++s) {
+    const int i = order[s];
+    for (int d = 0; d < 3; ++d) f(d, i) += fs_[3 * s + d];
+  }
+  return energy;
+}
+
+}  // namespace organfit::particles

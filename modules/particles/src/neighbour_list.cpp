@@ -1,0 +1,171 @@
+#include "organfit/particles/neighbour_list.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <stdexcept>
+
+namespace organfit::particles {
+namespace {
+
+// Forward half stencil: the 13 neighbour cells "after" a cell, so each pair of cells
+// is visited once. Reach: [-1, 1] in x and y, [0, 1] in z.
+constexpr std::array<std::array<int, 3>, 13> kForward = {{{1, 0, 0},
+                                                          {-1, 1, 0}, {0, 1, 0}, {1, 1, 0},
+                                                          {-1, -1, 1}, {0, -1, 1}, {1, -1, 1},
+                                                          {-1, 0, 1}, {0, 0, 1}, {1, 0, 1},
+                                                          {-1, 1, 1}, {0, 1, 1}, {1, 1, 1}}};
+
+// Grids with more cells than this per particle are coarsened: a far-away particle
+// must not make the grid (and memory) explode. Larger cells stay correct, only slower.
+constexpr double kMaxCellsPerParticle = 8.0;
+constexpr long long kMinCellBudget = 4096;
+
+}  // namespace
+
+NeighbourList::NeighbourList(double cutoff_mm, double skin_mm) : cutoff_(cutoff_mm), skin_(skin_mm) {
+  if (!(cutoff_mm > 0) || !std::isfinite(cutoff_mm)) {
+    throw std::invalid_argument("neighbour list: cutoff must be > 0 mm");
+  }
+  if (!(skin_mm > 0) || !std::isfinite(skin_mm)) {
+    throw std::invalid_argument("neighbour list: skin must be > 0 mm");
+  }
+}
+
+bool NeighbourList::update(const Eigen::Matrix3Xd& x) {
+  if (valid_ && x.cols() == x_at_build_.cols()) {
+    const double limit2 = 0.25 * skin_ * skin_;
+    const long n = static_cast<long>(x.cols());
+    bool moved = false;
+#pragma omp parallel for reduction(|| : moved) schedule(static) if (n >= kParallelMinParticles)
+    for (long i = 0; i < n; ++i) {
+      if ((x.col(i) - x_at_build_.col(i)).squaredNorm() > limit2) moved = true;
+    }
+    if (!moved) return false;
+  }
+  build(x);
+  return true;
+}
+
+void NeighbourList::build(const Eigen::Matrix3Xd& x) {
+  ++builds_;
+  valid_ = true;
+  x_at_build_ = x;
+  const int n = static_cast<int>(x.cols());
+  order_.resize(n);
+  first_.assign(n + 1, 0);
+  neighbours_.clear();
+  colours_.assign(18, {});
+  if (n == 0) {
+    cell_start_.assign(1, 0);
+    return;
+  }
+
+  const Eigen::Vector3d lo = x.rowwise().minCoeff();
+  const Eigen::Vector3d hi = x.rowwise().maxCoeff();
+  const Eigen::Vector3d extent = (hi - lo).cwiseMax(1e-12);
+  const double reach = cutoff_ + skin_;
+  double cell = reach;
+  std::array<long long, 3> dims{};
+  const long long budget =
+      std::max<long long>(kMinCellBudget, static_cast<long long>(kMaxCellsPerParticle * n));
+  for (;;) {
+    for (int d = 0; d < 3; ++d) dims[d] = std::max<long long>(1, std::floor(extent[d] / cell));
+    if (dims[0] * dims[1] * dims[2] <= budget) break;
+    cell *= 1.25;
+  }
+  const int nx = static_cast<int>(dims[0]), ny = static_cast<int>(dims[1]),
+            nz = static_cast<int>(dims[2]);
+  const long long ncells = dims[0] * dims[1] * dims[2];
+  const Eigen::Vector3d inv_cell(nx / extent.x(), ny / extent.y(), nz / extent.z());
+
+  // Counting sort of particles by cell, stable in particle index (deterministic).
+  std::vector<int> cell_of(n);
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector3d q = (x.col(i) - lo).cwiseProduct(inv_cell);
+    const int cx = std::min(nx - 1, static_cast<int>(q.x()));
+    const int cy = std::min(ny - 1, static_cast<int>(q.y()));
+    const int cz = std::min(nz - 1, static_cast<int>(q.z()));
+    cell_of[i] = cx + nx * (cy + ny * cz);
+  }
+  cell_start_.assign(ncells + 1, 0);
+  for (int i = 0; i < n; ++i) ++cell_start_[cell_of[i] + 1];
+  for (long long c = 0; c < ncells; ++c) cell_start_[c + 1] += cell_start_[c];
+  {
+    std::vector<int> fill(cell_start_.begin(), cell_start_.end() - 1);
+    for (int i = 0; i < n; ++i) order_[fill[cell_of[i]]++] = i;
+  }
+  std::vector<double> xs(3 * static_cast<size_t>(n));
+  for (int s = 0; s < n; ++s)
+    for (int d = 0; d < 3; ++d) xs[3 * s + d] = x(d, order_[s]);
+
+  // Colour the non-empty cells.
+  for (int cz = 0; cz < nz; ++cz)
+    for (int cy = 0; cy < ny; ++cy)
+      for (int cx = 0; cx < nx; ++cx) {
+        const int c = cx + nx * (cy + ny * cz);
+        if (cell_start_[c] == cell_start_[c + 1]) continue;
+        colours_[(cx % 3) + 3 * (cy % 3) + 9 * (cz % 2)].push_back(c);
+      }
+
+  // One pass into a fixed stride per slot (parallel and deterministic: each slot's list
+  // depends only on the geometry), then compacted. The stride is re-learnt on overflow.
+  const double reach2 = reach * reach;
+  const Eigen::Vector3d cell_size(extent.x() / nx, extent.y() / ny, extent.z() / nz);
+  auto visit = [&](int s, auto&& emit) {
+    const int c = cell_of[order_[s]];
+    const int cx = c % nx, cy = (c / nx) % ny, cz = c / (nx * ny);
+    const double xi = xs[3 * s], yi = xs[3 * s + 1], zi = xs[3 * s + 2];
+    auto scan = [&](int from, int to) {
+      for (int t = from; t < to; ++t) {
+        const double dx = xi - xs[3 * t], dy = yi - xs[3 * t + 1], dz = zi - xs[3 * t + 2];
+        if (dx * dx + dy * dy + dz * dz < reach2) emit(t);
+      }
+    };
+    scan(s + 1, cell_start_[c + 1]);  // own cell: later slots only
+    for (const auto& o : kForward) {
+      const int ox = cx + o[0], oy = cy + o[1], oz = cz + o[2];
+      if (ox < 0 || oy < 0 || oz < 0 || ox >= nx || oy >= ny || oz >= nz) continue;
+      // Skip a cell whose box lies entirely beyond reach of this particle.
+      const int oi[3] = {ox, oy, oz};
+      const double p[3] = {xi, yi, zi};
+      double gap2 = 0;
+      for (int d = 0; d < 3; ++d) {
+        const double lo_d = lo[d] + oi[d] * cell_size[d];
+        const double g = std::max({0.0, lo_d - p[d], p[d] - (lo_d + cell_size[d])});
+        gap2 += g * g;
+      }
+      if (gap2 >= reach2) continue;
+      const int oc = ox + nx * (oy + ny * oz);
+      scan(cell_start_[oc], cell_start_[oc + 1]);
+    }
+  };
+  std::vector<int> counts(n, 0);
+  for (;;) {
+    const size_t stride = static_cast<size_t>(stride_);
+    scratch_.resize(stride * n);
+    int overflow = 0;
+#pragma omp parallel for schedule(dynamic, 256) reduction(max : overflow) if (n >= kParallelMinParticles)
+    for (int s = 0; s < n; ++s) {
+      int k = 0;
+      int* out = scratch_.data() + stride * s;
+      visit(s, [&](int t) {
+        if (k < stride_) out[k] = t;
+        ++k;
+      });
+      counts[s] = k;
+      overflow = std::max(overflow, k);
+    }
+    if (overflow <= stride_) break;
+    stride_ = overflow + 8;  // rare: denser than ever before; redo with room
+  }
+  for (int s = 0; s < n; ++s) first_[s + 1] = first_[s] + counts[s];
+  neighbours_.resize(first_[n]);
+#pragma omp parallel for schedule(static) if (n >= kParallelMinParticles)
+  for (int s = 0; s < n; ++s) {
+    std::copy_n(scratch_.data() + static_cast<size_t>(stride_) * s, counts[s],
+                neighbours_.data() + first_[s]);
+  }
+}
+
+}  // namespace organfit::particles

@@ -1,0 +1,25 @@
+#pragma once
+// The model stage: fill the organ with particles and relax them (physics core).
+#include <nlohmann/json.hpp>
+
+#include "organfit/config/scene.h"
+#include "organfit/particles/integrator.h"
+#include "organfit/particles/model.h"
+
+namespace organfit::pipeline {
+
+/// Cohesion law and integrator settings from the scene's `model` section.
+particles::CohesionParams cohesion_params_from(const config::Scene& scene);
+particles::IntegratorOptions integrator_options_from(const config::Scene& scene,
+                                                     const particles::Model& model);
+
+struct ModelStageResult {
+  particles::State state;
+  std::unique_ptr<particles::Model> model;
+  nlohmann::json summary;  ///< run.json "model" block
+};
+
+/// Fills the scene's body with particles at the relaxed fcc spacing and relaxes them.
+ModelStageResult run_model_stage(const config::Scene& scene);
+
+}  // namespace organfit::pipeline

@@ -1,0 +1,103 @@
+#include "organfit/pipeline/model_stage.h"
+
+#include <spdlog/spdlog.h>
+
+#include "organfit/particles/cohesion_force.h"
+#include "organfit/particles/diagnostics.h"
+#include "organfit/particles/lattice_fill.h"
+#include "organfit/support/error.h"
+#include "organfit/support/progress.h"
+#include "organfit/support/resources.h"
+
+namespace organfit::pipeline {
+
+particles::CohesionParams cohesion_params_from(const config::Scene& scene) {
+  particles::CohesionParams p;
+  p.E0 = scene.number("model", "cohesion_energy");
+  p.r0_mm = 2.0 * scene.number("model", "radius_mm");
+  p.m = static_cast<int>(scene.integer("model", "exponent_m"));
+  p.n = static_cast<int>(scene.integer("model", "exponent_n"));
+  p.cutoff_r0 = scene.number("model", "cutoff_r0");
+  p.floor_r0 = scene.number("model", "floor_r0");
+  return p;
+}
+
+particles::IntegratorOptions integrator_options_from(const config::Scene& scene,
+                                                     const particles::Model& model) {
+  particles::IntegratorOptions opt;
+  opt.time_step_fraction = scene.number("model", "time_step_fraction");
+  opt.damping = scene.number("model", "damping_ratio") * 2.0 *
+                std::sqrt(model.stiffness() * model.mass());
+  opt.length_scale_mm = 2.0 * model.radius_mm();
+  // No particle may carry more than 5 well depths of kinetic energy (see IntegratorOptions).
+  opt.max_speed_mm_s = std::sqrt(2.0 * 5.0 * scene.number("model", "cohesion_energy") / model.mass());
+  opt.seed = static_cast<std::uint64_t>(scene.integer("scene", "seed"));
+  return opt;
+}
+
+ModelStageResult run_model_stage(const config::Scene& scene) {
+  const particles::CohesionParams cp = cohesion_params_from(scene);
+  const particles::LennardJones law(cp);
+  const double spacing = particles::fcc_equilibrium_spacing(law);
+  const Eigen::Vector3d size = scene.vec3("body", "size_mm");
+  const Eigen::Vector3d centre = scene.vec3("body", "centre_mm");
+  const std::string shape = scene.text("body", "shape");
+  particles::Positions x = shape == "box" ? particles::fill_box(size, centre, spacing)
+                                          : particles::fill_ellipsoid(size, centre, spacing);
+  if (x.cols() < 2) {
+    scene.fail("body", "size_mm",
+               fmt::format("the body holds {} particle(s) at radius {} mm: make it larger or the "
+                           "particles smaller",
+                           x.cols(), 0.5 * cp.r0_mm));
+  }
+  ModelStageResult result;
+  result.state = particles::State(std::move(x));
+  const int n = result.state.size();
+  result.model = std::make_unique<particles::Model>(n, scene.number("model", "mass"), 0.5 * cp.r0_mm);
+  result.model->add(std::make_unique<particles::CohesionForce>(
+      law, scene.number("model", "neighbour_skin_r0") * cp.r0_mm,
+      scene.number("model", "pair_damping")));
+  const particles::IntegratorOptions opt = integrator_options_from(scene, *result.model);
+
+  spdlog::info("model: {} particles on an fcc lattice at {:.4f} mm ({:.4f} r0), relaxing", n,
+               spacing, spacing / cp.r0_mm);
+  const long long max_steps = scene.integer("model", "relax_steps");
+  const double tol = scene.number("model", "relax_tolerance");
+  Stopwatch clock;
+  particles::Integrator integ(*result.model, opt);
+  Progress progress("relax", max_steps);
+  long long steps = 0;
+  double ke = 0;
+  bool settled = max_steps == 0;
+  if (max_steps > 0) {
+    integ.run(result.state, max_steps, [&](long long step) {
+      steps = step;
+      if (step % 10 != 0) return true;
+      ke = integ.kinetic_energy(result.state) / n;
+      progress.update(step, fmt::format("KE {:.2e} per particle", ke));
+      settled = step >= 20 && ke < tol;
+      return !settled;
+    });
+  }
+  progress.finish();
+  const Eigen::Vector3d extents = particles::principal_extents(result.state.x);
+  result.summary = {
+      {"particles", n},
+      {"radius_mm", 0.5 * cp.r0_mm},
+      {"r0_mm", cp.r0_mm},
+      {"lattice_spacing_mm", spacing},
+      {"lattice_volume_mm3", n * particles::fcc_volume_per_particle(spacing)},
+      {"r_min_mm", law.r_min()},
+      {"f_max", law.f_max()},
+      {"time_step_s", integ.time_step_s()},
+      {"relax_steps", steps},
+      {"relax_settled", settled},
+      {"relax_wall_s", clock.elapsed_s()},
+      {"kinetic_energy_per_particle", ke},
+      {"capped_moves", integ.stats().capped_moves},
+      {"components", particles::connected_components(result.state.x, 1.5 * cp.r0_mm)},
+      {"principal_extents_mm", {extents.x(), extents.y(), extents.z()}}};
+  return result;
+}
+
+}  // namespace organfit::pipeline

@@ -1,0 +1,82 @@
+#include "organfit/pipeline/scene_schema.h"
+
+#include <fmt/format.h>
+
+namespace organfit::pipeline {
+namespace {
+
+config::Schema build_schema() {
+  using Eigen::Vector3d;
+  constexpr auto none = std::nullopt;
+  config::Schema s;
+
+  s.section("scene", "what this run is: name, seed, threads")
+      .text("name", "", "name shown in run.json and the report (default: the file's stem)")
+      .text("description", "", "one line saying what the scene does")
+      .integer("seed", 1, 0, none, "seed of every random choice (same seed, same result)")
+      .integer("threads", 0, 0, 256, "worker threads; 0 = all cores");
+
+  s.section("body", "an analytic organ shape, for scenes without CT")
+      .choice("shape", "ellipsoid", {"ellipsoid", "box"}, "shape of the body")
+      .vec3("size_mm", Vector3d(24, 19, 15), "mm", 0.0, "full extent along x, y, z (diameters)",
+            true)
+      .vec3("centre_mm", Vector3d(0, 0, 0), "mm", none, "centre, in patient coordinates");
+
+  s.section("model", "the particle model: cohesion (paper eq. 1-4), fill and relaxation")
+      .number("radius_mm", 1.85, "mm", 0.0, 100.0,
+              "particle radius rho; the LJ equilibrium distance r0 is 2 rho", true)
+      .number("cohesion_energy", 1.0, "E", 0.0, none, "well depth E0 of the LJ potential", true)
+      .integer("exponent_m", 6, 1, 63, "attractive exponent m of the LJ law")
+      .integer("exponent_n", 12, 2, 64, "repulsive exponent n of the LJ law (n > m)")
+      .number("cutoff_r0", 2.5, "r0", 1.0, 5.0, "cutoff of the pair force, in r0", true)
+      .number("floor_r0", 0.5, "r0", 0.0, 0.95,
+              "below this distance the repulsion is linearised (finite forces)", true)
+      .number("mass", 1.0, "M", 0.0, none, "mass of one particle", true)
+      .number("damping_ratio", 0.5, "", 0.0, none,
+              "damping K_a as a fraction of the critical 2 sqrt(k M) of one pair")
+      .number("pair_damping", 0.0, "M/s", 0.0, none,
+              "momentum-conserving pairwise damping coefficient (0 = off)")
+      .number("neighbour_skin_r0", 0.3, "r0", 0.0, 2.0, "Verlet skin of the neighbour list", true)
+      .number("time_step_fraction", 0.1, "", 0.0, 0.9,
+              "time step as a fraction of the stability limit 2 sqrt(M/k)", true)
+      .integer("relax_steps", 5000, 0, 10000000, "most steps of the damped relaxation after filling")
+      .number("relax_tolerance", 1e-6, "E", 0.0, none,
+              "relaxation ends when kinetic energy per particle falls below this", true);
+  return s;
+}
+
+}  // namespace
+
+const config::Schema& scene_schema() {
+  static const config::Schema schema = build_schema();
+  return schema;
+}
+
+void check_scene_rules(const config::Scene& scene) {
+  if (scene.has_section("model")) {
+    const auto m = scene.integer("model", "exponent_m");
+    const auto n = scene.integer("model", "exponent_n");
+    if (m >= n) {
+      scene.fail("model", scene.is_given("model", "exponent_n") ? "exponent_n" : "exponent_m",
+                 fmt::format("the repulsive exponent n ({}) must exceed the attractive m ({})", n, m));
+    }
+    const double rmin = std::pow(double(n + 1) / double(m + 1), 1.0 / double(n - m));
+    if (scene.number("model", "cutoff_r0") <= rmin) {
+      scene.fail("model", "cutoff_r0",
+                 fmt::format("must exceed r_min = {:.4f} r0 for m={}, n={}, else nothing holds "
+                             "the body together",
+                             rmin, m, n));
+    }
+    if (!scene.has_section("body")) {
+      scene.fail("model", "radius_mm", "the model needs a body to fill: add a 'body' section");
+    }
+  }
+}
+
+config::Scene load_and_check_scene(const std::filesystem::path& file) {
+  config::Scene scene = config::load_scene(file, scene_schema());
+  check_scene_rules(scene);
+  return scene;
+}
+
+}  // namespace organfit::pipeline

@@ -1,0 +1,40 @@
+#pragma once
+// Progress of a long stage on stderr: a redrawn bar when stderr is a terminal, plain
+// periodic lines ("fit: 40% (400/1000), 1.2 s") when it is not (logs, CI), nothing
+// when quiet. Updates are cheap to call every step: output is throttled by time.
+#include <chrono>
+#include <cstdio>
+#include <string>
+
+namespace organfit {
+
+class Progress {
+ public:
+  /// `total` is the number of units of work (0 = unknown: shows a count only).
+  Progress(std::string stage, long long total);
+  ~Progress();
+  Progress(const Progress&) = delete;
+  Progress& operator=(const Progress&) = delete;
+
+  /// Reports `done` units finished, with an optional short status ("residual 0.4 mm").
+  void update(long long done, const std::string& status = {});
+  /// Ends the display (also done by the destructor).
+  void finish();
+
+  /// Global switch: false silences every Progress (used by --quiet).
+  static void set_enabled(bool enabled);
+  /// Forces the plain-line mode even on a terminal (tests).
+  static void set_force_plain(bool plain);
+
+ private:
+  void draw(long long done, const std::string& status, bool final_line);
+  std::string stage_;
+  long long total_;
+  long long last_done_ = 0;
+  std::chrono::steady_clock::time_point start_, last_draw_;
+  bool tty_ = false;
+  bool finished_ = false;
+  bool drawn_ = false;
+};
+
+}  // namespace organfit

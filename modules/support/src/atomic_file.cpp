@@ -1,0 +1,53 @@
+#include "organfit/support/atomic_file.h"
+
+#include <unistd.h>
+
+#include <fmt/format.h>
+
+#include "organfit/support/error.h"
+
+namespace organfit {
+
+AtomicFile::AtomicFile(std::filesystem::path final_path, bool binary)
+    : final_path_(std::move(final_path)) {
+  const auto dir = final_path_.has_parent_path() ? final_path_.parent_path()
+                                                 : std::filesystem::path(".");
+  temp_path_ =
+      dir / fmt::format(".{}.tmp-{}", final_path_.filename().string(), static_cast<long>(getpid()));
+  out_.open(temp_path_, binary ? std::ios::out | std::ios::binary | std::ios::trunc
+                               : std::ios::out | std::ios::trunc);
+  if (!out_) {
+    throw InputError(fmt::format("{}: cannot write here (folder missing or not writable)",
+                                 final_path_.string()));
+  }
+}
+
+AtomicFile::~AtomicFile() {
+  if (!committed_) {
+    out_.close();
+    std::error_code ec;
+    std::filesystem::remove(temp_path_, ec);
+  }
+}
+
+void AtomicFile::commit() {
+  out_.flush();
+  const bool ok = static_cast<bool>(out_);
+  out_.close();
+  if (!ok) throw Error(ExitCode::kInternal, fmt::format("{}: write failed", final_path_.string()));
+  std::error_code ec;
+  std::filesystem::rename(temp_path_, final_path_, ec);
+  if (ec) {
+    throw Error(ExitCode::kInternal,
+                fmt::format("{}: cannot rename into place: {}", final_path_.string(), ec.message()));
+  }
+  committed_ = true;
+}
+
+void write_file_atomically(const std::filesystem::path& path, const std::string& content) {
+  AtomicFile file(path);
+  file.stream() << content;
+  file.commit();
+}
+
+}  // namespace organfit

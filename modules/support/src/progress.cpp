@@ -1,0 +1,73 @@
+#include "organfit/support/progress.h"
+
+#include <unistd.h>
+
+#include <fmt/format.h>
+
+namespace organfit {
+namespace {
+bool g_enabled = true;
+bool g_force_plain = false;
+// Terminals are redrawn often; logs get a line every few seconds at most.
+constexpr double kTtyIntervalS = 0.1;
+constexpr double kPlainIntervalS = 5.0;
+}  // namespace
+
+void Progress::set_enabled(bool enabled) { g_enabled = enabled; }
+void Progress::set_force_plain(bool plain) { g_force_plain = plain; }
+
+Progress::Progress(std::string stage, long long total)
+    : stage_(std::move(stage)),
+      total_(total),
+      start_(std::chrono::steady_clock::now()),
+      last_draw_(start_),
+      tty_(!g_force_plain && isatty(fileno(stderr))) {}
+
+Progress::~Progress() { finish(); }
+
+void Progress::update(long long done, const std::string& status) {
+  last_done_ = done;
+  if (!g_enabled || finished_) return;
+  const auto now = std::chrono::steady_clock::now();
+  const double since = std::chrono::duration<double>(now - last_draw_).count();
+  if (since < (tty_ ? kTtyIntervalS : kPlainIntervalS)) return;
+  last_draw_ = now;
+  draw(done, status, false);
+}
+
+void Progress::finish() {
+  if (finished_) return;
+  finished_ = true;
+  // Only close a display that was shown: a quick stage prints nothing.
+  if (g_enabled && drawn_) draw(last_done_, "done", true);
+}
+
+void Progress::draw(long long done, const std::string& status, bool final_line) {
+  drawn_ = true;
+  const double elapsed =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  std::string line;
+  if (total_ > 0) {
+    const double frac = std::min(1.0, static_cast<double>(done) / static_cast<double>(total_));
+    if (tty_) {
+      constexpr int kWidth = 30;
+      const int filled = static_cast<int>(frac * kWidth);
+      line = fmt::format("{} [{}{}] {:3.0f}% {:.1f} s", stage_, std::string(filled, '#'),
+                         std::string(kWidth - filled, '.'), 100 * frac, elapsed);
+    } else {
+      line = fmt::format("{}: {:.0f}% ({}/{}), {:.1f} s", stage_, 100 * frac, done, total_,
+                         elapsed);
+    }
+  } else {
+    line = fmt::format("{}: {} done, {:.1f} s", stage_, done, elapsed);
+  }
+  if (!status.empty()) line += ", " + status;
+  if (tty_) {
+    std::fprintf(stderr, "\r\033[K%s%s", line.c_str(), final_line ? "\n" : "");
+  } else {
+    std::fprintf(stderr, "%s\n", line.c_str());
+  }
+  std::fflush(stderr);
+}
+
+}  // namespace organfit

@@ -1,0 +1,65 @@
+#include "organfit/support/atomic_file.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "organfit/support/error.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit {
+namespace {
+
+fs::path fresh_dir(const std::string& name) {
+  auto dir = fs::temp_directory_path() / ("organfit_support_" + name + std::to_string(getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+std::string read_all(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+TEST(AtomicFile, CommitMakesTheFinalFileAndRemovesTheTemporary) {
+  const auto dir = fresh_dir("commit");
+  write_file_atomically(dir / "out.txt", "hello\n");
+  EXPECT_EQ(read_all(dir / "out.txt"), "hello\n");
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()), 1);
+}
+
+TEST(AtomicFile, WithoutCommitNothingIsLeftBehind) {
+  const auto dir = fresh_dir("abort");
+  {
+    AtomicFile f(dir / "half.txt");
+    f.stream() << "partial";
+    EXPECT_TRUE(fs::exists(f.temp_path()));
+  }
+  EXPECT_FALSE(fs::exists(dir / "half.txt"));
+  EXPECT_TRUE(fs::is_empty(dir));
+}
+
+TEST(AtomicFile, UnwritableFolderIsAnInputErrorNamingTheFile) {
+  try {
+    AtomicFile f("/nonexistent_dir_organfit/x.json");
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent_dir_organfit/x.json"), std::string::npos);
+    EXPECT_EQ(e.code(), ExitCode::kBadInput);
+  }
+}
+
+TEST(ExitCode, MapsErrorsToTheirCodesAndOthersToInternal) {
+  EXPECT_EQ(exit_code_of(InputError("x")), ExitCode::kBadInput);
+  EXPECT_EQ(exit_code_of(TargetNotMetError("x")), ExitCode::kTargetNotMet);
+  EXPECT_EQ(exit_code_of(std::runtime_error("x")), ExitCode::kInternal);
+}
+
+}  // namespace
+}  // namespace organfit

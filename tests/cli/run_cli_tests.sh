@@ -1,0 +1,89 @@
+#!/usr/bin/env bash
+# Whole-program tests of the `organfit` command: exit codes, one-line errors naming
+# file:line and key, outputs of a run. Prints "N passed, N failed" and exits non-zero
+# on any failure.
+set -u
+src="$1"
+bin="${ORGANFIT:?set ORGANFIT to the organfit binary}"
+scenes="$src/tests/scenes"
+tmp="$(mktemp -d)"
+trap 'rm -rf "$tmp"' EXIT
+passed=0
+failed=0
+
+# expect NAME CODE STDERR_SUBSTRING -- ARGS...
+expect() {
+  local name="$1" code="$2" needle="$3"
+  shift 4
+  "$bin" "$@" >"$tmp/out" 2>"$tmp/err"
+  local got=$?
+  local lines
+  lines=$(grep -c . "$tmp/err")
+  if [[ $got -ne $code ]]; then
+    echo "FAIL $name: exit $got, expected $code; stderr: $(head -c 400 "$tmp/err")"
+    failed=$((failed + 1))
+  elif [[ -n "$needle" ]] && ! grep -qF -- "$needle" "$tmp/err"; then
+    echo "FAIL $name: stderr lacks '$needle': $(head -c 400 "$tmp/err")"
+    failed=$((failed + 1))
+  elif [[ $code -eq 2 && $lines -ne 1 ]]; then
+    echo "FAIL $name: expected one line on stderr, got $lines"
+    failed=$((failed + 1))
+  else
+    echo "ok   $name"
+    passed=$((passed + 1))
+  fi
+}
+
+check() {  # check NAME CONDITION...
+  local name="$1"
+  shift
+  if "$@"; then echo "ok   $name"; passed=$((passed + 1)); else echo "FAIL $name"; failed=$((failed + 1)); fi
+}
+
+# validate: each config error with its own file:line message and exit code 2
+expect validate.misspelled_key 2 "bad-misspelled-key.yaml:5: model.raduis_mm: unknown key (did you mean 'radius_mm'?)" -- validate "$scenes/bad-misspelled-key.yaml"
+expect validate.string_for_number 2 "bad-string-for-number.yaml:4: model.radius_mm: expected a number, got 'two'" -- validate "$scenes/bad-string-for-number.yaml"
+expect validate.negative_radius 2 "bad-negative-radius.yaml:5: model.radius_mm: -1.5 is out of range (0, 100] mm" -- validate "$scenes/bad-negative-radius.yaml"
+expect validate.m_not_below_n 2 "bad-m-not-below-n.yaml:5: model.exponent_n: the repulsive exponent n (6) must exceed the attractive m (12)" -- validate "$scenes/bad-m-not-below-n.yaml"
+expect validate.unknown_section 2 "bad-unknown-section.yaml:3: modle: unknown section (did you mean 'model'?)" -- validate "$scenes/bad-unknown-section.yaml"
+expect validate.yaml_syntax 2 "bad-yaml-syntax.yaml:" -- validate "$scenes/bad-yaml-syntax.yaml"
+expect validate.model_without_body 2 "model.radius_mm: the model needs a body" -- validate "$scenes/bad-model-without-body.yaml"
+expect validate.missing_file 2 "no-such-scene.yaml: cannot read the scene file" -- validate "$scenes/no-such-scene.yaml"
+expect validate.good 0 "" -- validate "$scenes/small-model.yaml"
+expect validate.default_scene 0 "" -- validate "$src/pipelines/default.yaml"
+
+# usage errors are exit 2; help is 0
+expect usage.no_subcommand 2 "organfit: usage:" --
+expect usage.unknown_subcommand 2 "organfit: usage:" -- frobnicate
+expect usage.run_without_out 2 "--out" -- run "$scenes/small-model.yaml"
+expect usage.help 0 "" -- --help
+expect usage.run_help 0 "" -- run --help
+
+# schema and version
+expect schema.text 0 "" -- schema
+check schema.lists_keys grep -q "radius_mm .*mm .*(0, 100]" "$tmp/out"
+expect schema.json 0 "" -- schema --json
+check schema.json_parses python3 -c "import json,sys; d=json.load(open('$tmp/out')); assert any(s['section']=='model' for s in d)"
+expect version 0 "" -- version
+check version.prints grep -qE "^organfit [0-9]+\.[0-9]+\.[0-9]+$" "$tmp/out"
+
+# run: outputs, refusals
+expect run.small 0 "" -- --quiet run "$scenes/small-model.yaml" --out "$tmp/run1"
+check run.writes_run_json_and_resolved_yaml test -s "$tmp/run1/run.json" -a -s "$tmp/run1/resolved.yaml"
+check run.json_has_model_and_stage_times python3 -c "
+import json; d = json.load(open('$tmp/run1/run.json'))
+assert d['scene']['name'] == 'small' and d['status'] == 'ok'
+assert d['model']['particles'] > 50 and d['model']['components'] == 1
+assert d['stages'][0]['name'] == 'model' and d['stages'][0]['wall_s'] > 0
+assert 'fit' in d['stages_not_built_yet']"
+expect run.resolved_yaml_is_a_valid_scene 0 "" -- validate "$tmp/run1/resolved.yaml"
+check run.no_temporary_files_left test -z "$(find "$tmp/run1" -name '.*tmp*')"
+mkdir -p "$tmp/scene_dir" && cp "$scenes/small-model.yaml" "$tmp/scene_dir/s.yaml"
+expect run.out_equal_to_scene_folder 2 "is the scene's own folder" -- run "$tmp/scene_dir/s.yaml" --out "$tmp/scene_dir"
+check run.scene_folder_untouched test "$(ls "$tmp/scene_dir")" = "s.yaml"
+expect run.unwritable_out 2 "/dev/null/out: cannot create the output folder" -- run "$scenes/small-model.yaml" --out /dev/null/out
+expect run.bad_scene_writes_nothing 2 "unknown key" -- run "$scenes/bad-misspelled-key.yaml" --out "$tmp/run2"
+check run.bad_scene_left_no_outputs test ! -e "$tmp/run2/run.json"
+
+echo "$passed passed, $failed failed"
+[[ $failed -eq 0 ]]
