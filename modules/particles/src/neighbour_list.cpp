@@ -116,10 +116,12 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
     const int c = cell_of[order_[s]];
     const int cx = c % nx, cy = (c / nx) % ny, cz = c / (nx * ny);
     const double xi = xs[3 * s], yi = xs[3 * s + 1], zi = xs[3 * s + 2];
+    // Branchless: every candidate is written, the count advances only for those within
+    // reach (the test fails unpredictably for ~1/3 of candidates).
     auto scan = [&](int from, int to) {
       for (int t = from; t < to; ++t) {
         const double dx = xi - xs[3 * t], dy = yi - xs[3 * t + 1], dz = zi - xs[3 * t + 2];
-        if (dx * dx + dy * dy + dz * dz < reach2) emit(t);
+        emit(t, dx * dx + dy * dy + dz * dz < reach2);
       }
     };
     scan(s + 1, cell_start_[c + 1]);  // own cell: later slots only
@@ -149,12 +151,13 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
     for (int s = 0; s < n; ++s) {
       int k = 0;
       int* out = scratch_.data() + stride * s;
-      visit(s, [&](int t) {
-        if (k < stride_) out[k] = t;
-        ++k;
+      const int last = stride_ - 1;  // a rejected candidate may land one past the count
+      visit(s, [&](int t, bool within) {
+        out[std::min(k, last)] = t;
+        k += within;
       });
       counts[s] = k;
-      overflow = std::max(overflow, k);
+      overflow = std::max(overflow, k + 1);
     }
     if (overflow <= stride_) break;
     stride_ = overflow + 8;  // rare: denser than ever before; redo with room
