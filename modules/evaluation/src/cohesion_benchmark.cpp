@@ -13,6 +13,7 @@
 
 #include "organfit/particles/cohesion_force.h"
 #include "organfit/particles/integrator.h"
+#include "organfit/particles/lattice_fill.h"
 #include "organfit/support/resources.h"
 
 namespace fs = std::filesystem;
@@ -42,12 +43,11 @@ OursResult run_ours(long long requested, long long steps, int threads) {
   const double a = std::cbrt(4.0 / kDensity);  // cubic cell of the fcc lattice, sigma
   const long long n = 4 * c * c * c;
   Positions x(3, n);
-  static const double basis[4][3] = {{0, 0, 0}, {0.5, 0.5, 0}, {0.5, 0, 0.5}, {0, 0.5, 0.5}};
   long long idx = 0;
   for (long long k = 0; k < c; ++k)
     for (long long j = 0; j < c; ++j)
       for (long long i = 0; i < c; ++i)
-        for (const auto& b : basis) x.col(idx++) = a * Eigen::Vector3d(i + b[0], j + b[1], k + b[2]);
+        for (const auto& b : particles::kFccBasis) x.col(idx++) = a * Eigen::Vector3d(i + b[0], j + b[1], k + b[2]);
   State s(x);
   std::mt19937_64 rng(87287);
   std::normal_distribution<double> g(0.0, std::sqrt(kTemperature));

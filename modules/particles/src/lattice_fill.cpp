@@ -13,12 +13,11 @@ double fcc_equilibrium_spacing(const LennardJones& law) {
   auto virial = [&](double a) {
     const double cube = a * std::sqrt(2.0);
     const int reach = static_cast<int>(std::ceil(rc / cube)) + 1;
-    static const double basis[4][3] = {{0, 0, 0}, {0.5, 0.5, 0}, {0.5, 0, 0.5}, {0, 0.5, 0.5}};
     double w = 0;
     for (int i = -reach; i <= reach; ++i)
       for (int j = -reach; j <= reach; ++j)
         for (int k = -reach; k <= reach; ++k)
-          for (const auto& b : basis) {
+          for (const auto& b : kFccBasis) {
             const double r = cube * Eigen::Vector3d(i + b[0], j + b[1], k + b[2]).norm();
             if (r > 0 && r < rc) w += r * law.force(r);
           }
@@ -38,7 +37,6 @@ Positions fcc_lattice_points(const geometry::Aabb& box, const Eigen::Vector3d& c
                              double a_nn_mm,
                              const std::function<bool(const Eigen::Vector3d&)>& inside) {
   const double cube = a_nn_mm * std::sqrt(2.0);
-  static const double basis[4][3] = {{0, 0, 0}, {0.5, 0.5, 0}, {0.5, 0, 0.5}, {0, 0.5, 0.5}};
   const double tol = 1e-9 * a_nn_mm;  // points on the box faces are inside
   Eigen::Vector3i lo, hi;
   for (int d = 0; d < 3; ++d) {
@@ -49,7 +47,7 @@ Positions fcc_lattice_points(const geometry::Aabb& box, const Eigen::Vector3d& c
   for (int k = lo.z(); k <= hi.z(); ++k)
     for (int j = lo.y(); j <= hi.y(); ++j)
       for (int i = lo.x(); i <= hi.x(); ++i)
-        for (const auto& b : basis) {
+        for (const auto& b : kFccBasis) {
           const Eigen::Vector3d p = centre_mm + cube * Eigen::Vector3d(i + b[0], j + b[1], k + b[2]);
           if ((p.array() < box.min_mm.array() - tol).any() ||
               (p.array() > box.max_mm.array() + tol).any())

@@ -14,6 +14,9 @@
 
 namespace organfit::particles {
 
+/// The four sites of the fcc cubic cell, in units of the cube edge (a_nn sqrt(2)).
+inline constexpr double kFccBasis[4][3] = {{0, 0, 0}, {0.5, 0.5, 0}, {0.5, 0, 0.5}, {0, 0.5, 0.5}};
+
 /// Nearest-neighbour distance (mm) of an infinite fcc lattice in equilibrium under
 /// `law` with its cutoff (zero virial), found by minimising the lattice energy.
 double fcc_equilibrium_spacing(const LennardJones& law);
