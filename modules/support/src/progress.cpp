@@ -10,11 +10,12 @@ bool g_enabled = true;
 bool g_force_plain = false;
 // Terminals are redrawn often; logs get a line every few seconds at most.
 constexpr double kTtyIntervalS = 0.1;
-constexpr double kPlainIntervalS = 5.0;
+double g_plain_interval_s = 5.0;
 }  // namespace
 
 void Progress::set_enabled(bool enabled) { g_enabled = enabled; }
 void Progress::set_force_plain(bool plain) { g_force_plain = plain; }
+void Progress::set_plain_interval_s(double seconds) { g_plain_interval_s = seconds; }
 
 Progress::Progress(std::string stage, long long total)
     : stage_(std::move(stage)),
@@ -30,7 +31,7 @@ void Progress::update(long long done, const std::string& status) {
   if (!g_enabled || finished_) return;
   const auto now = std::chrono::steady_clock::now();
   const double since = std::chrono::duration<double>(now - last_draw_).count();
-  if (since < (tty_ ? kTtyIntervalS : kPlainIntervalS)) return;
+  if (since < (tty_ ? kTtyIntervalS : g_plain_interval_s)) return;
   last_draw_ = now;
   draw(done, status, false);
 }

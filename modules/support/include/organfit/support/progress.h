@@ -25,6 +25,8 @@ class Progress {
   static void set_enabled(bool enabled);
   /// Forces the plain-line mode even on a terminal (tests).
   static void set_force_plain(bool plain);
+  /// Seconds between plain lines (default 5; tests use 0).
+  static void set_plain_interval_s(double seconds);
 
  private:
   void draw(long long done, const std::string& status, bool final_line);
