@@ -78,6 +78,8 @@ assert d['stages'][0]['name'] == 'model' and d['stages'][0]['wall_s'] > 0
 assert 'fit' in d['stages_not_built_yet']"
 expect run.resolved_yaml_is_a_valid_scene 0 "" -- validate "$tmp/run1/resolved.yaml"
 check run.no_temporary_files_left test -z "$(find "$tmp/run1" -name '.*tmp*')"
+expect run.scene_without_scene_section 0 "" -- --quiet run "$scenes/no-scene-section.yaml" --out "$tmp/run3"
+check run.default_name_is_the_file_stem grep -q '"name": "no-scene-section"' "$tmp/run3/run.json"
 mkdir -p "$tmp/scene_dir" && cp "$scenes/small-model.yaml" "$tmp/scene_dir/s.yaml"
 expect run.out_equal_to_scene_folder 2 "is the scene's own folder" -- run "$tmp/scene_dir/s.yaml" --out "$tmp/scene_dir"
 check run.scene_folder_untouched test "$(ls "$tmp/scene_dir")" = "s.yaml"

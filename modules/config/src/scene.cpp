@@ -185,6 +185,15 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
       scene.entries_[p->key()] = {p->default_value, sec_line + 1, false};
     }
   }
+  for (const auto& sec : schema.sections()) {
+    if (!sec.always_present || scene.sections_.count(sec.name)) continue;
+    scene.sections_.insert(sec.name);
+    scene.section_lines_[sec.name] = 1;
+    for (const auto* p : schema.params_of(sec.name)) {
+      if (p->required()) parser.fail(0, p->key(), "required key is missing");
+      scene.entries_[p->key()] = {p->default_value, 1, false};
+    }
+  }
   return scene;
 }
 

@@ -54,9 +54,9 @@ std::string ParamSpec::range_text() const {
                      max ? format_number(*max) : "inf");
 }
 
-Schema& Schema::section(const std::string& name, const std::string& doc) {
+Schema& Schema::section(const std::string& name, const std::string& doc, bool always_present) {
   if (find_section(name)) throw std::logic_error("schema: section declared twice: " + name);
-  sections_.push_back({name, doc});
+  sections_.push_back({name, doc, always_present});
   return *this;
 }
 

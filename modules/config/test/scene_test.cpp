@@ -123,6 +123,15 @@ TEST(SceneParse, ResolvedYamlReparsesToTheSameValues) {
   EXPECT_NE(a.resolved_yaml().find("radius_mm: 2.25  # mm; particle radius"), std::string::npos);
 }
 
+TEST(SceneParse, AlwaysPresentSectionTakesItsDefaultsWhenOmitted) {
+  Schema schema = test_schema();
+  schema.section("run", "run-wide settings", true).integer("seed", 7, 0, std::nullopt, "seed");
+  const Scene scene = parse_scene("model:\n  radius_mm: 2\n", "/s.yaml", schema);
+  EXPECT_TRUE(scene.has_section("run"));
+  EXPECT_EQ(scene.integer("run", "seed"), 7);
+  EXPECT_FALSE(scene.has_section("points"));
+}
+
 TEST(Schema, RejectsDeclarationBugs) {
   Schema s;
   s.section("a", "doc").number("x", 1.0, "", 0.0, 2.0, "x");

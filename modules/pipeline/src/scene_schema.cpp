@@ -10,7 +10,7 @@ config::Schema build_schema() {
   constexpr auto none = std::nullopt;
   config::Schema s;
 
-  s.section("scene", "what this run is: name, seed, threads")
+  s.section("scene", "what this run is: name, seed, threads", /*always_present=*/true)
       .text("name", "", "name shown in run.json and the report (default: the file's stem)")
       .text("description", "", "one line saying what the scene does")
       .integer("seed", 1, 0, none, "seed of every random choice (same seed, same result)")

@@ -49,13 +49,15 @@ struct ParamSpec {
 struct SectionSpec {
   std::string name;
   std::string doc;
+  bool always_present = false;  ///< its defaults apply even when the scene omits it
 };
 
 /// The declared keys, grouped by section, in declaration order.
 class Schema {
  public:
-  /// Declares a section; keys added after it belong to it.
-  Schema& section(const std::string& name, const std::string& doc);
+  /// Declares a section; keys added after it belong to it. An `always_present`
+  /// section (run-wide settings) takes its defaults when a scene does not name it.
+  Schema& section(const std::string& name, const std::string& doc, bool always_present = false);
   /// Declares a key of the current section. Throws std::logic_error on a duplicate
   /// or a default outside the key's own range (a bug in the declaration).
   Schema& add(ParamSpec spec);
