@@ -7,6 +7,7 @@
 #include <iostream>
 
 #include "organfit/evaluation/cohesion_benchmark.h"
+#include "organfit/evaluation/skeleton_benchmark.h"
 #include "organfit/pipeline/runner.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
@@ -52,6 +53,18 @@ int run_main(int argc, char** argv) {
   bench_cohesion->add_flag("--scaling", scaling, "Cost per particle-step from 1e3 to 1e6 particles");
   bench_cohesion->add_flag("--no-lammps", no_lammps, "Do not run LAMMPS alongside");
 
+  organfit::evaluation::SkeletonBenchOptions sb;
+  auto* bench_skeleton = bench->add_subcommand(
+      "skeleton", "Shape kept with the skeleton vs rounding up without, in a fluid-like state");
+  bench_skeleton->add_option("--steps", sb.steps, "Thermostat steps")->check(CLI::Range(1LL, 100000000LL));
+  bench_skeleton->add_option("--temperature", sb.temperature, "kT in units of E0")->check(CLI::Range(0.0, 10.0));
+  bench_skeleton->add_option("--friction", sb.friction, "Thermostat friction K_a/M (1/s)")->check(CLI::PositiveNumber);
+  bench_skeleton->add_option("--stiffness", sb.stiffness_fraction, "Skeleton stiffness / LJ stiffness")->check(CLI::PositiveNumber);
+  bench_skeleton->add_option("--node-spacing", sb.node_spacing_r0, "Skeleton node spacing (r0)")->check(CLI::PositiveNumber);
+  bench_skeleton->add_option("--length", sb.size_x_mm, "Ellipsoid length (mm)")->check(CLI::PositiveNumber);
+  bench_skeleton->add_option("--width", sb.size_yz_mm, "Ellipsoid width (mm)")->check(CLI::PositiveNumber);
+  bench_skeleton->add_option("--threads", sb.threads, "OpenMP threads")->check(CLI::Range(1, 256));
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -80,6 +93,8 @@ int run_main(int argc, char** argv) {
     const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
     organfit::pipeline::run_scene(scene, out_dir);
     spdlog::info("done: {}/run.json", out_dir);
+  } else if (*bench_skeleton) {
+    std::cout << organfit::evaluation::run_skeleton_benchmark(sb).dump() << "\n";
   } else if (*bench_cohesion) {
     if (scaling) {
       std::cout << organfit::evaluation::run_cohesion_scaling(cb.threads).dump() << "\n";

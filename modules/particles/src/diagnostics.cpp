@@ -1,6 +1,9 @@
 #include "organfit/particles/diagnostics.h"
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+#include <Eigen/SVD>
+#include <algorithm>
 #include <numeric>
 #include <vector>
 
@@ -14,14 +17,16 @@ int find_root(std::vector<int>& parent, int i) {
 }
 }  // namespace
 
-int connected_components(const Positions& x, double link_mm) {
+namespace {
+/// Union-find root of every particle, joining pairs closer than link_mm.
+std::vector<int> component_roots(const Positions& x, double link_mm) {
   const int n = static_cast<int>(x.cols());
-  if (n == 0) return 0;
+  std::vector<int> parent(n);
+  std::iota(parent.begin(), parent.end(), 0);
+  if (n == 0) return parent;
   // The neighbour list with a tiny skin lists every pair closer than link_mm (+ skin).
   NeighbourList list(link_mm, 1e-6 * link_mm);
   list.update(x);
-  std::vector<int> parent(n);
-  std::iota(parent.begin(), parent.end(), 0);
   const auto& order = list.order();
   const double link2 = link_mm * link_mm;
   for (int s = 0; s < n; ++s) {
@@ -31,9 +36,38 @@ int connected_components(const Positions& x, double link_mm) {
       parent[find_root(parent, i)] = find_root(parent, j);
     }
   }
+  for (int i = 0; i < n; ++i) parent[i] = find_root(parent, i);
+  return parent;
+}
+}  // namespace
+
+int connected_components(const Positions& x, double link_mm) {
+  const std::vector<int> root = component_roots(x, link_mm);
   int components = 0;
-  for (int i = 0; i < n; ++i) components += find_root(parent, i) == i;
+  for (int i = 0; i < static_cast<int>(root.size()); ++i) components += root[i] == i;
   return components;
+}
+
+std::vector<int> largest_component(const Positions& x, double link_mm) {
+  const std::vector<int> root = component_roots(x, link_mm);
+  std::vector<int> size(root.size(), 0);
+  for (int r : root) ++size[r];
+  const int biggest = static_cast<int>(std::max_element(size.begin(), size.end()) - size.begin());
+  std::vector<int> members;
+  for (int i = 0; i < static_cast<int>(root.size()); ++i)
+    if (root[i] == biggest) members.push_back(i);
+  return members;
+}
+
+Positions rigid_align(const Positions& moving, const Positions& fixed) {
+  if (moving.cols() != fixed.cols() || moving.cols() == 0) return moving;
+  const Eigen::Vector3d cm = moving.rowwise().mean(), cf = fixed.rowwise().mean();
+  const Eigen::Matrix3d h = (moving.colwise() - cm) * (fixed.colwise() - cf).transpose();
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(h, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d v = svd.matrixV();
+  if ((v * svd.matrixU().transpose()).determinant() < 0) v.col(2) *= -1;
+  const Eigen::Matrix3d r = v * svd.matrixU().transpose();
+  return (r * (moving.colwise() - cm)).colwise() + cf;
 }
 
 Eigen::Vector3d principal_extents(const Positions& x) {

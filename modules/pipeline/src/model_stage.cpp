@@ -5,6 +5,7 @@
 #include "organfit/particles/cohesion_force.h"
 #include "organfit/particles/diagnostics.h"
 #include "organfit/particles/lattice_fill.h"
+#include "organfit/particles/skeleton.h"
 #include "organfit/support/error.h"
 #include "organfit/support/progress.h"
 #include "organfit/support/resources.h"
@@ -80,6 +81,22 @@ ModelStageResult run_model_stage(const config::Scene& scene) {
     });
   }
   progress.finish();
+  const double relax_wall_s = clock.elapsed_s();
+
+  // The skeleton is built on the relaxed body, which becomes its rest shape.
+  Stopwatch skeleton_clock;
+  int skeleton_nodes = 0;
+  if (scene.flag("model", "skeleton")) {
+    const particles::Skeleton skeleton = particles::medial_skeleton(
+        result.state.x, spacing, scene.number("model", "skeleton_node_spacing_r0") * cp.r0_mm);
+    particles::SkeletonParams sp;
+    sp.stiffness = scene.number("model", "skeleton_stiffness") * law.stiffness();
+    sp.overlap_mm = scene.number("model", "skeleton_overlap_r0") * cp.r0_mm;
+    auto& term = result.model->add(
+        std::make_unique<particles::SkeletonForce>(skeleton, result.state.x, sp));
+    skeleton_nodes = term.skeleton().node_count();
+    spdlog::info("model: skeleton of {} nodes, {} edges", skeleton_nodes, term.skeleton().edges.size());
+  }
   const Eigen::Vector3d extents = particles::principal_extents(result.state.x);
   result.summary = {
       {"particles", n},
@@ -92,10 +109,12 @@ ModelStageResult run_model_stage(const config::Scene& scene) {
       {"time_step_s", integ.time_step_s()},
       {"relax_steps", steps},
       {"relax_settled", settled},
-      {"relax_wall_s", clock.elapsed_s()},
+      {"relax_wall_s", relax_wall_s},
+      {"skeleton_wall_s", skeleton_clock.elapsed_s()},
       {"kinetic_energy_per_particle", ke},
       {"capped_moves", integ.stats().capped_moves},
       {"components", particles::connected_components(result.state.x, 1.5 * cp.r0_mm)},
+      {"skeleton_nodes", skeleton_nodes},
       {"principal_extents_mm", {extents.x(), extents.y(), extents.z()}}};
   return result;
 }

@@ -69,8 +69,10 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
     ModelStageResult model = run_model_stage(scene);
     record_stage("model", clock.elapsed_s());
     run["model"] = model.summary;
-    spdlog::info("model: {} particles, relaxed in {} steps ({:.2f} s)", model.state.size(),
-                 model.summary["relax_steps"].get<long long>(), clock.elapsed_s());
+    spdlog::info("model: {} particles, relaxed in {} steps ({:.2f} s), skeleton {:.2f} s",
+                 model.state.size(), model.summary["relax_steps"].get<long long>(),
+                 model.summary["relax_wall_s"].get<double>(),
+                 model.summary["skeleton_wall_s"].get<double>());
     if (!model.summary["relax_settled"].get<bool>()) {
       const std::string w = "model: relaxation did not settle within model.relax_steps";
       spdlog::warn(w);

@@ -41,7 +41,14 @@ config::Schema build_schema() {
               "time step as a fraction of the stability limit 2 sqrt(M/k)", true)
       .integer("relax_steps", 5000, 0, 10000000, "most steps of the damped relaxation after filling")
       .number("relax_tolerance", 1e-6, "E", 0.0, none,
-              "relaxation ends when kinetic energy per particle falls below this", true);
+              "relaxation ends when kinetic energy per particle falls below this", true)
+      .flag("skeleton", true, "tie the particles to a medial skeleton that keeps the global shape")
+      .number("skeleton_stiffness", 0.2, "k", 0.0, none,
+              "skeleton stiffness k_s as a fraction of the LJ stiffness k = m n E0 / r0^2", true)
+      .number("skeleton_node_spacing_r0", 3.0, "r0", 0.0, none,
+              "distance between skeleton nodes on the medial axis", true)
+      .number("skeleton_overlap_r0", 0.5, "r0", 0.0, none,
+              "a particle also joins nodes this much farther than its nearest one");
   return s;
 }
 

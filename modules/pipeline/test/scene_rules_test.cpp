@@ -48,6 +48,8 @@ TEST(ModelStage, FillsAndRelaxesTheBodyIntoOneComponent) {
   EXPECT_GT(r.state.size(), 100);
   EXPECT_EQ(r.summary["components"].get<int>(), 1);
   EXPECT_TRUE(r.summary["relax_settled"].get<bool>());
+  EXPECT_GE(r.summary["skeleton_nodes"].get<int>(), 2);
+  EXPECT_EQ(r.model->terms().size(), 2u);  // cohesion and skeleton
   // Lattice volume (count x volume per fcc site) is close to the box volume for a body
   // many particles wide; it misses the partial cells at the faces (27% for a body only
   // 5 cells wide), so it is no substitute for a gap-closing volume measure.

@@ -1,6 +1,7 @@
 #pragma once
 // Measurements of a particle configuration used by tests, fits and benchmarks.
 #include <Eigen/Core>
+#include <vector>
 
 #include "organfit/particles/state.h"
 
@@ -10,6 +11,9 @@ namespace organfit::particles {
 /// (grid + union-find, O(N)). A body torn apart has more than one.
 int connected_components(const Positions& x, double link_mm);
 
+/// Indices of the particles in the largest connected component (link as above).
+std::vector<int> largest_component(const Positions& x, double link_mm);
+
 /// Standard deviations of the positions along their principal axes, largest first (mm).
 Eigen::Vector3d principal_extents(const Positions& x);
 
@@ -18,6 +22,10 @@ inline double aspect_ratio(const Positions& x) {
   const Eigen::Vector3d e = principal_extents(x);
   return e[2] > 0 ? e[0] / e[2] : 0.0;
 }
+
+/// `moving` rigidly moved (rotation + translation, Kabsch) to best match `fixed`,
+/// particle by particle. Removes the drift and turn of a whole body before a comparison.
+Positions rigid_align(const Positions& moving, const Positions& fixed);
 
 /// True when every coordinate is finite.
 inline bool all_finite(const Eigen::Matrix3Xd& m) { return m.allFinite(); }
