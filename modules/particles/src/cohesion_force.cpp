@@ -70,7 +70,8 @@ template <class Kernel, bool kDamped>
 double CohesionForce::pair_loop(const Kernel& kernel, bool want_energy) {
   const auto& nb = list_.neighbours();
   const auto& first = list_.first();
-  const auto& cell_start = list_.cell_start();
+  const auto& block_begin = list_.block_begin();
+  const auto& block_end = list_.block_end();
   const auto& order = list_.order();
   const double rc2 = law_.cutoff() * law_.cutoff();
   const double rf2 = law_.floor_distance() * law_.floor_distance();
@@ -85,11 +86,11 @@ double CohesionForce::pair_loop(const Kernel& kernel, bool want_energy) {
 #pragma omp parallel if (parallel)
   {
     for (const auto& colour : list_.colours()) {
-      const long cells = static_cast<long>(colour.size());
-#pragma omp for schedule(dynamic, 2)
-      for (long ci = 0; ci < cells; ++ci) {
-        const int c = colour[ci];
-        for (int s = cell_start[c]; s < cell_start[c + 1]; ++s) {
+      const long blocks = static_cast<long>(colour.size());
+#pragma omp for schedule(dynamic, 1)
+      for (long bi = 0; bi < blocks; ++bi) {
+        const int b = colour[bi];
+        for (int s = block_begin[b]; s < block_end[b]; ++s) {
           const double xi = xs[3 * s], yi = xs[3 * s + 1], zi = xs[3 * s + 2];
           double fxi = 0, fyi = 0, fzi = 0, ei = 0;
           for (int k = first[s]; k < first[s + 1]; ++k) {

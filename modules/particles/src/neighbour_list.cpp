@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
 
 namespace organfit::particles {
@@ -15,6 +16,10 @@ constexpr std::array<std::array<int, 3>, 13> kForward = {{{1, 0, 0},
                                                           {-1, -1, 1}, {0, -1, 1}, {1, -1, 1},
                                                           {-1, 0, 1}, {0, 0, 1}, {1, 0, 1},
                                                           {-1, 1, 1}, {0, 1, 1}, {1, 1, 1}}};
+
+// Cells per block edge. A block's pairs write only to its own cells and the layer of
+// cells just beyond it, so blocks two apart (same colour) never write the same particle.
+constexpr int kBlock = 4;
 
 // Grids with more cells than this per particle are coarsened: a far-away particle
 // must not make the grid (and memory) explode. Larger cells stay correct, only slower.
@@ -55,9 +60,12 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
   order_.resize(n);
   first_.assign(n + 1, 0);
   neighbours_.clear();
-  colours_.assign(18, {});
+  colours_.assign(8, {});
+  block_begin_.clear();
+  block_end_.clear();
   if (n == 0) {
-    cell_start_.assign(1, 0);
+    cell_begin_.clear();
+    cell_end_.clear();
     return;
   }
 
@@ -79,7 +87,8 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
   const long long ncells = dims[0] * dims[1] * dims[2];
   const Eigen::Vector3d inv_cell(nx / extent.x(), ny / extent.y(), nz / extent.z());
 
-  // Counting sort of particles by cell, stable in particle index (deterministic).
+  // Cells are grouped in blocks of kBlock^3 cells; particles are stored block by block
+  // (cells in order within a block), counting-sorted and stable in particle index.
   std::vector<int> cell_of(n);
   for (int i = 0; i < n; ++i) {
     const Eigen::Vector3d q = (x.col(i) - lo).cwiseProduct(inv_cell);
@@ -88,25 +97,57 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
     const int cz = std::min(nz - 1, static_cast<int>(q.z()));
     cell_of[i] = cx + nx * (cy + ny * cz);
   }
-  cell_start_.assign(ncells + 1, 0);
-  for (int i = 0; i < n; ++i) ++cell_start_[cell_of[i] + 1];
-  for (long long c = 0; c < ncells; ++c) cell_start_[c + 1] += cell_start_[c];
+  const int bx = (nx + kBlock - 1) / kBlock, by = (ny + kBlock - 1) / kBlock,
+            bz = (nz + kBlock - 1) / kBlock;
+  const long long nblocks = 1LL * bx * by * bz;
+  // Rank of each cell in memory: block-major, then the cell's place in its block.
+  std::vector<int> rank(ncells);
   {
-    std::vector<int> fill(cell_start_.begin(), cell_start_.end() - 1);
+    std::vector<int> block_fill(nblocks + 1, 0);
+    auto block_of = [&](long long c) {
+      const int cx = static_cast<int>(c % nx), cy = static_cast<int>((c / nx) % ny),
+                cz = static_cast<int>(c / (1LL * nx * ny));
+      return (cx / kBlock) + bx * ((cy / kBlock) + by * (cz / kBlock));
+    };
+    for (long long c = 0; c < ncells; ++c) ++block_fill[block_of(c) + 1];
+    for (long long b = 0; b < nblocks; ++b) block_fill[b + 1] += block_fill[b];
+    for (long long c = 0; c < ncells; ++c) rank[c] = block_fill[block_of(c)]++;
+  }
+  std::vector<int> count(ncells + 1, 0);
+  for (int i = 0; i < n; ++i) ++count[rank[cell_of[i]] + 1];
+  for (long long r = 0; r < ncells; ++r) count[r + 1] += count[r];
+  cell_begin_.resize(ncells);
+  cell_end_.resize(ncells);
+  for (long long c = 0; c < ncells; ++c) {
+    cell_begin_[c] = count[rank[c]];
+    cell_end_[c] = count[rank[c] + 1];
+  }
+  {
+    std::vector<int> fill(cell_begin_);
     for (int i = 0; i < n; ++i) order_[fill[cell_of[i]]++] = i;
   }
-  std::vector<double> xs(3 * static_cast<size_t>(n));
-  for (int s = 0; s < n; ++s)
-    for (int d = 0; d < 3; ++d) xs[3 * s + d] = x(d, order_[s]);
-
-  // Colour the non-empty cells.
+  // Slot range of each block, and the blocks of each colour (block coordinates mod 2).
+  block_begin_.assign(nblocks, n);
+  block_end_.assign(nblocks, 0);
   for (int cz = 0; cz < nz; ++cz)
     for (int cy = 0; cy < ny; ++cy)
       for (int cx = 0; cx < nx; ++cx) {
         const int c = cx + nx * (cy + ny * cz);
-        if (cell_start_[c] == cell_start_[c + 1]) continue;
-        colours_[(cx % 3) + 3 * (cy % 3) + 9 * (cz % 2)].push_back(c);
+        const int b = (cx / kBlock) + bx * ((cy / kBlock) + by * (cz / kBlock));
+        block_begin_[b] = std::min(block_begin_[b], cell_begin_[c]);
+        block_end_[b] = std::max(block_end_[b], cell_end_[c]);
       }
+  colours_.assign(8, {});
+  for (int b3 = 0; b3 < bz; ++b3)
+    for (int b2 = 0; b2 < by; ++b2)
+      for (int b1 = 0; b1 < bx; ++b1) {
+        const int b = b1 + bx * (b2 + by * b3);
+        if (block_begin_[b] >= block_end_[b]) continue;
+        colours_[(b1 % 2) + 2 * (b2 % 2) + 4 * (b3 % 2)].push_back(b);
+      }
+  std::vector<double> xs(3 * static_cast<size_t>(n));
+  for (int s = 0; s < n; ++s)
+    for (int d = 0; d < 3; ++d) xs[3 * s + d] = x(d, order_[s]);
 
   // One pass into a fixed stride per slot (parallel and deterministic: each slot's list
   // depends only on the geometry), then compacted. The stride is re-learnt on overflow.
@@ -124,7 +165,7 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
         emit(t, dx * dx + dy * dy + dz * dz < reach2);
       }
     };
-    scan(s + 1, cell_start_[c + 1]);  // own cell: later slots only
+    scan(s + 1, cell_end_[c]);  // own cell: later slots only
     for (const auto& o : kForward) {
       const int ox = cx + o[0], oy = cy + o[1], oz = cz + o[2];
       if (ox < 0 || oy < 0 || oz < 0 || ox >= nx || oy >= ny || oz >= nz) continue;
@@ -139,7 +180,7 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
       }
       if (gap2 >= reach2) continue;
       const int oc = ox + nx * (oy + ny * oz);
-      scan(cell_start_[oc], cell_start_[oc + 1]);
+      scan(cell_begin_[oc], cell_end_[oc]);
     }
   };
   std::vector<int> counts(n, 0);

@@ -9,11 +9,14 @@
 // sorted slot to its particle. Open (non-periodic) boundaries: the grid spans the
 // particles' bounding box at build time.
 //
-// Deterministic threading: cells are coloured (i mod 3, j mod 3, k mod 2); a cell's
-// pairs reach only its own and its forward neighbour cells, so cells of one colour never
-// write to the same particle. Colours are processed one after another, cells of one
-// colour in parallel: every force is summed in an order fixed by the geometry alone,
-// hence bit-identical results for any thread count.
+// Deterministic threading: cells are grouped in blocks of 4^3 cells, stored one after
+// another in memory, and blocks are coloured by the parity of their block coordinates.
+// A block's pairs reach only its own cells and the layer of cells just beyond it, so
+// blocks of one colour never write to the same particle. Colours are processed one
+// after another, blocks of one colour in parallel, each block's slots in order: every
+// force is summed in an order fixed by the geometry alone, hence bit-identical results
+// for any thread count. Each block is a contiguous run of memory (cache friendly at
+// any size).
 #include <Eigen/Core>
 #include <vector>
 
@@ -45,9 +48,10 @@ class NeighbourList {
   /// Neighbours of sorted slot s (as sorted slots): neighbours()[first()[s] .. first()[s+1]).
   const std::vector<int>& first() const { return first_; }
   const std::vector<int>& neighbours() const { return neighbours_; }
-  /// Cells of each colour, and the sorted slots of each cell: [cell_start[c], cell_start[c+1]).
+  /// Blocks of each colour, and the sorted slots of each block: [block_begin[b], block_end[b]).
   const std::vector<std::vector<int>>& colours() const { return colours_; }
-  const std::vector<int>& cell_start() const { return cell_start_; }
+  const std::vector<int>& block_begin() const { return block_begin_; }
+  const std::vector<int>& block_end() const { return block_end_; }
   /// Number of listed pairs.
   long long pair_count() const { return static_cast<long long>(neighbours_.size()); }
 
@@ -57,7 +61,7 @@ class NeighbourList {
   bool valid_ = false;
   long long builds_ = 0;
   Eigen::Matrix3Xd x_at_build_;
-  std::vector<int> order_, first_, neighbours_, cell_start_;
+  std::vector<int> order_, first_, neighbours_, cell_begin_, cell_end_, block_begin_, block_end_;
   std::vector<int> scratch_;  // per-slot lists at a fixed stride, before compaction
   int stride_ = 64;           // room per slot; grows when a build overflows it
   std::vector<std::vector<int>> colours_;
