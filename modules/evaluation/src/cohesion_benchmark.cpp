@@ -76,10 +76,14 @@ OursResult run_ours(long long requested, long long steps, int threads) {
 struct LammpsResult {
   bool ran = false;
   double loop_s = 0;
+  long long atoms = 0;
   std::string error;
 };
 
-LammpsResult run_lammps(const std::string& binary, long long requested, long long steps) {
+/// `checked`: rebuild the list when an atom moved half the skin (`every 1 check yes`,
+/// organfit's policy) instead of in.lj's unconditional `every 20 check no`.
+LammpsResult run_lammps(const std::string& binary, long long requested, long long steps,
+                        bool checked) {
   LammpsResult r;
   const fs::path dir = fs::temp_directory_path() / ("organfit-bench-lmp-" + std::to_string(getpid()));
   fs::create_directories(dir);
@@ -90,10 +94,15 @@ LammpsResult run_lammps(const std::string& binary, long long requested, long lon
        << "units lj\natom_style atomic\nboundary s s s\n"
        << "lattice fcc " << kDensity << "\n"
        << "region box block 0 " << c << " 0 " << c << " 0 " << c << "\n"
-       << "create_box 1 box\ncreate_atoms 1 box\nmass 1 1.0\n"
+       // Atoms from a region a quarter cell inside the box: exactly 4 c^3 lattice sites
+       // (with shrink-wrapped boundaries `create_atoms 1 box` also fills the far faces).
+       << "create_box 1 box\n"
+       << "region sites block -0.25 " << c - 0.25 << " -0.25 " << c - 0.25 << " -0.25 " << c - 0.25 << "\n"
+       << "create_atoms 1 region sites\nmass 1 1.0\n"
        << "velocity all create " << kTemperature << " 87287 loop geom\n"
        << "pair_style lj/cut " << kCutoffSigma << "\npair_coeff 1 1 1.0 1.0 " << kCutoffSigma << "\n"
-       << "neighbor " << kSkinSigma << " bin\nneigh_modify delay 0 every 20 check no\n"
+       << "neighbor " << kSkinSigma << " bin\n"
+       << (checked ? "neigh_modify delay 0 every 1 check yes\n" : "neigh_modify delay 0 every 20 check no\n")
        << "fix 1 all nve\ntimestep " << kTimeStep << "\nthermo " << steps << "\n"
        << "run " << steps << "\n";
   }
@@ -105,9 +114,11 @@ LammpsResult run_lammps(const std::string& binary, long long requested, long lon
   ss << log.rdbuf();
   const std::string text = ss.str();
   std::smatch m;
-  if (status == 0 && std::regex_search(text, m, std::regex(R"(Loop time of ([0-9.eE+-]+) on)"))) {
+  if (status == 0 &&
+      std::regex_search(text, m, std::regex(R"(Loop time of ([0-9.eE+-]+) on .* with ([0-9]+) atoms)"))) {
     r.ran = true;
     r.loop_s = std::stod(m[1]);
+    r.atoms = std::stoll(m[2]);
   } else {
     r.error = "lmp did not run (exit status " + std::to_string(status) + ")";
   }
@@ -146,13 +157,23 @@ nlohmann::json run_cohesion_benchmark(const CohesionBenchOptions& o) {
     if (!on_path(o.lammps_binary)) {
       j["lammps_note"] = o.lammps_binary + " not found on PATH (Debian package lammps)";
     } else {
-      const LammpsResult l = run_lammps(o.lammps_binary, o.particles, o.steps);
-      if (l.ran) {
-        const double lus = l.loop_s / (double(ours.particles) * o.steps) * 1e6;
+      const LammpsResult l = run_lammps(o.lammps_binary, o.particles, o.steps, false);
+      const LammpsResult lc = run_lammps(o.lammps_binary, o.particles, o.steps, true);
+      if (l.ran && l.atoms != ours.particles) {
+        j["lammps_note"] = "LAMMPS made " + std::to_string(l.atoms) + " atoms, organfit " +
+                           std::to_string(ours.particles) + ": not the same system";
+      } else if (l.ran) {
+        const double lus = l.loop_s / (double(l.atoms) * o.steps) * 1e6;
+        j["lammps_atoms"] = l.atoms;
         j["lammps_wall_s"] = l.loop_s;
         j["lammps_us_per_particle_step"] = lus;
         j["lammps_threads"] = 1;
         j["ratio_vs_lammps"] = us / lus;
+        if (lc.ran && lc.atoms == ours.particles) {
+          const double lcus = lc.loop_s / (double(lc.atoms) * o.steps) * 1e6;
+          j["lammps_checked_us_per_particle_step"] = lcus;
+          j["ratio_vs_lammps_checked"] = us / lcus;
+        }
       } else {
         j["lammps_note"] = l.error;
       }

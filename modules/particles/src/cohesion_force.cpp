@@ -66,22 +66,76 @@ CohesionForce::CohesionForce(const LennardJones& law, double skin_mm, double pai
   }
 }
 
+namespace {
+
+/// Everything the pair loop of one block reads, by value (kept in registers).
+struct PairArrays {
+  const int* __restrict nb;
+  const int* __restrict first;
+  const int* __restrict order;
+  const double* __restrict xs;
+  const double* __restrict vs;
+  double* __restrict fs;
+  double* __restrict es;
+};
+
+/// Pair forces of the slots [s_begin, s_end), half list, Newton's third law.
+template <class Kernel, bool kDamped>
+void block_pairs(int s_begin, int s_end, const Kernel kernel, const PairArrays a, const double rc2,
+                 const double rf2, const double eps, const double gamma, const LennardJones& law,
+                 const bool want_energy) {
+  for (int s = s_begin; s < s_end; ++s) {
+    const double xi = a.xs[3 * s], yi = a.xs[3 * s + 1], zi = a.xs[3 * s + 2];
+    double fxi = 0, fyi = 0, fzi = 0, ei = 0;
+    const int kend = a.first[s + 1];
+    for (int k = a.first[s]; k < kend; ++k) {
+      const int t = a.nb[k];
+      double dx = xi - a.xs[3 * t], dy = yi - a.xs[3 * t + 1], dz = zi - a.xs[3 * t + 2];
+      double r2 = dx * dx + dy * dy + dz * dz;
+      if (r2 >= rc2) continue;
+      double fr;
+      if (r2 >= rf2) {
+        fr = kernel(r2);
+      } else {  // rare: close pair, linearised law (and a direction if coincident)
+        if (r2 < eps * eps) {
+          const Eigen::Vector3d d = eps * coincident_direction(a.order[s], a.order[t]);
+          dx = d.x(), dy = d.y(), dz = d.z(), r2 = eps * eps;
+        }
+        const double r = std::sqrt(r2);
+        fr = law.force(r) / r;
+      }
+      if constexpr (kDamped) {
+        // -gamma ((v_i - v_j) . e) e, with e = d / r: coefficient gamma (dv.d) / r^2.
+        const double dvd = (a.vs[3 * s] - a.vs[3 * t]) * dx + (a.vs[3 * s + 1] - a.vs[3 * t + 1]) * dy +
+                           (a.vs[3 * s + 2] - a.vs[3 * t + 2]) * dz;
+        fr -= gamma * dvd / r2;
+      }
+      fxi += dx * fr;
+      fyi += dy * fr;
+      fzi += dz * fr;
+      a.fs[3 * t] -= dx * fr;
+      a.fs[3 * t + 1] -= dy * fr;
+      a.fs[3 * t + 2] -= dz * fr;
+      if (want_energy) ei += law.energy(std::sqrt(r2));
+    }
+    a.fs[3 * s] += fxi;
+    a.fs[3 * s + 1] += fyi;
+    a.fs[3 * s + 2] += fzi;
+    if (want_energy) a.es[s] = ei;
+  }
+}
+
+}  // namespace
+
 template <class Kernel, bool kDamped>
 double CohesionForce::pair_loop(const Kernel& kernel, bool want_energy) {
-  const auto& nb = list_.neighbours();
-  const auto& first = list_.first();
-  const auto& block_begin = list_.block_begin();
-  const auto& block_end = list_.block_end();
-  const auto& order = list_.order();
+  const PairArrays arrays{list_.neighbours().data(), list_.first().data(), list_.order().data(),
+                          xs_.data(), vs_.data(), fs_.data(), es_.data()};
   const double rc2 = law_.cutoff() * law_.cutoff();
   const double rf2 = law_.floor_distance() * law_.floor_distance();
   const double eps = 1e-9 * law_.r0();
-  const double gamma = pair_damping_;
-  double* fs = fs_.data();
-  const double* xs = xs_.data();
-  const double* vs = vs_.data();
-  double* es = es_.data();
-
+  const auto& block_begin = list_.block_begin();
+  const auto& block_end = list_.block_end();
   const bool parallel = list_.size() >= kParallelMinParticles;
 #pragma omp parallel if (parallel)
   {
@@ -90,44 +144,8 @@ double CohesionForce::pair_loop(const Kernel& kernel, bool want_energy) {
 #pragma omp for schedule(dynamic, 1)
       for (long bi = 0; bi < blocks; ++bi) {
         const int b = colour[bi];
-        for (int s = block_begin[b]; s < block_end[b]; ++s) {
-          const double xi = xs[3 * s], yi = xs[3 * s + 1], zi = xs[3 * s + 2];
-          double fxi = 0, fyi = 0, fzi = 0, ei = 0;
-          for (int k = first[s]; k < first[s + 1]; ++k) {
-            const int t = nb[k];
-            double dx = xi - xs[3 * t], dy = yi - xs[3 * t + 1], dz = zi - xs[3 * t + 2];
-            double r2 = dx * dx + dy * dy + dz * dz;
-            if (r2 >= rc2) continue;
-            double fr;
-            if (r2 >= rf2) {
-              fr = kernel(r2);
-            } else {  // rare: close pair, linearised law (and a direction if coincident)
-              if (r2 < eps * eps) {
-                const Eigen::Vector3d d = eps * coincident_direction(order[s], order[t]);
-                dx = d.x(), dy = d.y(), dz = d.z(), r2 = eps * eps;
-              }
-              const double r = std::sqrt(r2);
-              fr = law_.force(r) / r;
-            }
-            if constexpr (kDamped) {
-              // -gamma ((v_i - v_j) . e) e, with e = d / r: coefficient gamma (dv.d) / r^2.
-              const double dvd = (vs[3 * s] - vs[3 * t]) * dx + (vs[3 * s + 1] - vs[3 * t + 1]) * dy +
-                                 (vs[3 * s + 2] - vs[3 * t + 2]) * dz;
-              fr -= gamma * dvd / r2;
-            }
-            fxi += dx * fr;
-            fyi += dy * fr;
-            fzi += dz * fr;
-            fs[3 * t] -= dx * fr;
-            fs[3 * t + 1] -= dy * fr;
-            fs[3 * t + 2] -= dz * fr;
-            if (want_energy) ei += law_.energy(std::sqrt(r2));
-          }
-          fs[3 * s] += fxi;
-          fs[3 * s + 1] += fyi;
-          fs[3 * s + 2] += fzi;
-          if (want_energy) es[s] = ei;
-        }
+        block_pairs<Kernel, kDamped>(block_begin[b], block_end[b], kernel, arrays, rc2, rf2, eps,
+                                     pair_damping_, law_, want_energy);
       }
     }
   }
