@@ -75,7 +75,7 @@ import json; d = json.load(open('$tmp/run1/run.json'))
 assert d['scene']['name'] == 'small' and d['status'] == 'ok'
 assert d['model']['particles'] > 50 and d['model']['components'] == 1
 assert d['stages'][0]['name'] == 'model' and d['stages'][0]['wall_s'] > 0
-assert 'fit' in d['stages_not_built_yet']"
+assert 'export' in d['stages_not_built_yet'] and 'fit' not in d['stages_not_built_yet']"
 expect run.resolved_yaml_is_a_valid_scene 0 "" -- validate "$tmp/run1/resolved.yaml"
 check run.no_temporary_files_left test -z "$(find "$tmp/run1" -name '.*tmp*')"
 expect run.scene_without_scene_section 0 "" -- --quiet run "$scenes/no-scene-section.yaml" --out "$tmp/run3"
@@ -86,6 +86,26 @@ check run.scene_folder_untouched test "$(ls "$tmp/scene_dir")" = "s.yaml"
 expect run.unwritable_out 2 "/dev/null/out: cannot create the output folder" -- run "$scenes/small-model.yaml" --out /dev/null/out
 expect run.bad_scene_writes_nothing 2 "unknown key" -- run "$scenes/bad-misspelled-key.yaml" --out "$tmp/run2"
 check run.bad_scene_left_no_outputs test ! -e "$tmp/run2/run.json"
+
+# fit: our method converges on the paper's prostate scene; the literal one stops with 3
+expect fit.spread_converges 0 "" -- --quiet run "$src/pipelines/paper-prostate.yaml" --out "$tmp/fit1"
+check fit.run_json_has_fit_and_truth_keys python3 -c "
+import json; d = json.load(open('$tmp/fit1/run.json'))
+f, t = d['fit'], d['truth']
+for k in ['attractive_points', 'iterations', 'wall_s', 'converged', 'residual_mean_mm', 'residual_max_mm', 'volume_change_pct', 'method']: assert k in f, k
+for k in ['msd_mm', 'hd95_mm', 'msd_undeformed_mm', 'msd_floor_mm', 'recovery']: assert k in t, k
+assert f['converged'] and f['method'] == 'spread' and d['model']['skin_particles'] > 0
+assert t['msd_mm'] < t['msd_undeformed_mm']"
+check fit.history_csv_has_rows python3 -c "
+rows = open('$tmp/fit1/history.csv').read().splitlines()
+assert rows[0] == 'step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,kinetic_energy_per_particle' and len(rows) > 2"
+expect fit.literal_not_converged_is_exit_3 3 "fit did not converge" -- --quiet run "$src/pipelines/paper-prostate-literal.yaml" --out "$tmp/fit2"
+check fit.not_converged_still_writes_results python3 -c "
+import json; d = json.load(open('$tmp/fit2/run.json')); assert d['status'] == 'target_not_met' and not d['fit']['converged']"
+printf 'x,y,z\n1,2,nan\n' > "$tmp/bad_points.csv"
+printf 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\npoints:\n  source: file\n  file: bad_points.csv\nfit:\n  method: paper\n' > "$tmp/nan_points.yaml"
+expect fit.nan_point_is_exit_2 2 "bad_points.csv:2: non-finite coordinate" -- --quiet run "$tmp/nan_points.yaml" --out "$tmp/fit3"
+check fit.nan_point_leaves_no_outputs test ! -e "$tmp/fit3/run.json"
 
 echo "$passed passed, $failed failed"
 [[ $failed -eq 0 ]]

@@ -241,7 +241,7 @@ const std::string& Scene::text(const std::string& s, const std::string& n) const
   return std::get<std::string>(entry(s, n, t).value);
 }
 fs::path Scene::path(const std::string& s, const std::string& n) const {
-  return std::get<std::string>(entry(s, n, ParamType::kInputPath).value);
+  return std::get<std::string>(entry(s, n, ParamType::kInputPath).value);  // "" when not given
 }
 Eigen::Vector3d Scene::vec3(const std::string& s, const std::string& n) const {
   return std::get<Eigen::Vector3d>(entry(s, n, ParamType::kVec3).value);

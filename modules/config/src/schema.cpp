@@ -145,10 +145,11 @@ Schema& Schema::choice(const std::string& name, const std::string& def,
   return add(std::move(s));
 }
 
-Schema& Schema::input_path(const std::string& name, const std::string& doc) {
+Schema& Schema::input_path(const std::string& name, const std::string& doc, bool required) {
   ParamSpec s;
   s.name = name;
   s.type = ParamType::kInputPath;
+  if (!required) s.default_value = std::string();
   s.doc = doc;
   return add(std::move(s));
 }

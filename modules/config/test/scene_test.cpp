@@ -123,6 +123,14 @@ TEST(SceneParse, ResolvedYamlReparsesToTheSameValues) {
   EXPECT_NE(a.resolved_yaml().find("radius_mm: 2.25  # mm; particle radius"), std::string::npos);
 }
 
+TEST(SceneParse, OptionalInputPathIsEmptyWhenNotGiven) {
+  Schema schema = test_schema();
+  schema.section("extra", "optional file").input_path("maybe", "an optional file", false);
+  const Scene scene = parse_scene("extra:\n", "/s.yaml", schema);
+  EXPECT_EQ(scene.path("extra", "maybe"), std::filesystem::path());
+  EXPECT_FALSE(scene.is_given("extra", "maybe"));
+}
+
 TEST(SceneParse, AlwaysPresentSectionTakesItsDefaultsWhenOmitted) {
   Schema schema = test_schema();
   schema.section("run", "run-wide settings", true).integer("seed", 7, 0, std::nullopt, "seed");

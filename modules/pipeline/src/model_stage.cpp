@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "organfit/evaluation/synthetic.h"
 #include "organfit/particles/cohesion_force.h"
 #include "organfit/particles/diagnostics.h"
 #include "organfit/particles/lattice_fill.h"
@@ -42,9 +43,9 @@ ModelStageResult run_model_stage(const config::Scene& scene) {
   const double spacing = particles::fcc_equilibrium_spacing(law);
   const Eigen::Vector3d size = scene.vec3("body", "size_mm");
   const Eigen::Vector3d centre = scene.vec3("body", "centre_mm");
-  const std::string shape = scene.text("body", "shape");
-  particles::Positions x = shape == "box" ? particles::fill_box(size, centre, spacing)
-                                          : particles::fill_ellipsoid(size, centre, spacing);
+  const evaluation::Shape shape = evaluation::make_shape(scene.text("body", "shape"), size, centre);
+  particles::Positions x = particles::fcc_lattice_points(
+      shape.bounds(), centre, spacing, [&](const Eigen::Vector3d& p) { return shape.inside(p); });
   if (x.cols() < 2) {
     scene.fail("body", "size_mm",
                fmt::format("the body holds {} particle(s) at radius {} mm: make it larger or the "
@@ -52,6 +53,9 @@ ModelStageResult run_model_stage(const config::Scene& scene) {
                            x.cols(), 0.5 * cp.r0_mm));
   }
   ModelStageResult result;
+  result.shape = shape;
+  result.lattice_spacing_mm = spacing;
+  result.cohesion = cp;
   result.state = particles::State(std::move(x));
   const int n = result.state.size();
   result.model = std::make_unique<particles::Model>(n, scene.number("model", "mass"), 0.5 * cp.r0_mm);
@@ -94,6 +98,8 @@ ModelStageResult run_model_stage(const config::Scene& scene) {
     sp.overlap_mm = scene.number("model", "skeleton_overlap_r0") * cp.r0_mm;
     auto& term = result.model->add(
         std::make_unique<particles::SkeletonForce>(skeleton, result.state.x, sp));
+    result.skeleton = &term;
+    result.skeleton_params = sp;
     skeleton_nodes = term.skeleton().node_count();
     spdlog::info("model: skeleton of {} nodes, {} edges", skeleton_nodes, term.skeleton().edges.size());
   }

@@ -1,8 +1,12 @@
 #include "organfit/pipeline/runner.h"
 
+#include <fmt/format.h>
 #include <omp.h>
+
+#include <optional>
 #include <spdlog/spdlog.h>
 
+#include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_stage.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
@@ -16,8 +20,8 @@ const char* version() { return ORGANFIT_VERSION; }
 
 const std::vector<StageInfo>& pipeline_stages() {
   static const std::vector<StageInfo> stages = {
-      {"ct", false},  {"organ", false},  {"model", true},  {"ultrasound", false},
-      {"fit", false}, {"export", false}, {"report", false}};
+      {"ct", false},  {"organ", false},  {"model", true},  {"points", true},
+      {"ultrasound", false}, {"fit", true}, {"export", false}, {"report", false}};
   return stages;
 }
 
@@ -64,22 +68,60 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
     if (!stage.available) skipped.push_back(stage.name);
   }
 
+  std::optional<ModelStageResult> model;
   if (scene.has_section("model")) {
     Stopwatch clock;
-    ModelStageResult model = run_model_stage(scene);
+    model = run_model_stage(scene);
     record_stage("model", clock.elapsed_s());
-    run["model"] = model.summary;
+    run["model"] = model->summary;
     spdlog::info("model: {} particles, relaxed in {} steps ({:.2f} s), skeleton {:.2f} s",
-                 model.state.size(), model.summary["relax_steps"].get<long long>(),
-                 model.summary["relax_wall_s"].get<double>(),
-                 model.summary["skeleton_wall_s"].get<double>());
-    if (!model.summary["relax_settled"].get<bool>()) {
+                 model->state.size(), model->summary["relax_steps"].get<long long>(),
+                 model->summary["relax_wall_s"].get<double>(),
+                 model->summary["skeleton_wall_s"].get<double>());
+    if (!model->summary["relax_settled"].get<bool>()) {
       const std::string w = "model: relaxation did not settle within model.relax_steps";
       spdlog::warn(w);
       run["warnings"].push_back(w);
     }
   } else {
-    spdlog::info("the scene names no stage this version can run (model)");
+    spdlog::info("the scene names no model");
+  }
+  std::optional<PointsStageResult> points;
+  if (scene.has_section("points") && model) {
+    Stopwatch clock;
+    points = run_points_stage(scene, *model);
+    record_stage("points", clock.elapsed_s());
+    run["points"] = points->summary;
+  }
+  std::vector<std::pair<std::string, std::string>> files;  // name, content
+  std::string not_converged;
+  if (scene.has_section("fit") && model && points) {
+    Stopwatch clock;
+    FitStageResult fit = run_fit_stage(scene, *model, *points);
+    record_stage("fit", clock.elapsed_s());
+    run["fit"] = fit.fit_summary;
+    run["model"]["skin_particles"] = fit.fit_summary["skin_particles"];
+    if (!fit.truth_summary.is_null()) run["truth"] = fit.truth_summary;
+    files.push_back({"history.csv", fit.history_csv});
+    spdlog::info("fit ({}): {} in {} steps, {:.3f} s; residual mean {:.3f} mm, max {:.3f} mm; volume {:+.2f}%",
+                 fit.fit_summary["method"].get<std::string>(), fit.fit.stop_reason, fit.fit.steps,
+                 fit.fit.wall_s, fit.fit.residual_mean_mm, fit.fit.residual_max_mm,
+                 fit.fit_summary["volume_change_pct"].get<double>());
+    if (!fit.truth_summary.is_null()) {
+      spdlog::info("truth: mean surface distance {:.3f} mm (undeformed {:.3f}, floor {:.3f}), HD95 {:.3f} mm, "
+                   "recovery {:.2f}",
+                   fit.truth_summary["msd_mm"].get<double>(), fit.truth_summary["msd_undeformed_mm"].get<double>(),
+                   fit.truth_summary["msd_floor_mm"].get<double>(), fit.truth_summary["hd95_mm"].get<double>(),
+                   fit.truth_summary["recovery"].get<double>());
+    }
+    if (fit.fit_summary["rejected_points"].get<int>() > 0) {
+      const std::string w = fmt::format("fit: {} points rejected as outliers",
+                                        fit.fit_summary["rejected_points"].get<int>());
+      spdlog::warn(w);
+      run["warnings"].push_back(w);
+    }
+    not_converged = fit.not_converged_message;
+    if (!not_converged.empty()) run["warnings"].push_back(not_converged);
   }
   if (!skipped.empty()) {
     std::string list;
@@ -92,10 +134,14 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
   run["wall_s"] = total.elapsed_s();
   run["peak_memory_mib"] = peak_memory_mib();
   run["outputs"] = {"resolved.yaml", "run.json"};
-  run["status"] = "ok";
-  // Both files are committed only now: a failed run leaves neither.
+  for (const auto& f : files) run["outputs"].push_back(f.first);
+  run["status"] = not_converged.empty() ? "ok" : "target_not_met";
+  // Files are committed only now: a run that fails with an error leaves none. A fit
+  // that did not converge still writes its results (run.json says so), then exits 3.
+  for (const auto& f : files) write_file_atomically(out_dir / f.first, f.second);
   write_file_atomically(out_dir / "resolved.yaml", scene.resolved_yaml());
   write_file_atomically(out_dir / "run.json", run.dump(2) + "\n");
+  if (!not_converged.empty()) throw TargetNotMetError(not_converged);
   return run;
 }
 

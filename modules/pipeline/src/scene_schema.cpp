@@ -17,7 +17,8 @@ config::Schema build_schema() {
       .integer("threads", 0, 0, 256, "worker threads; 0 = all cores");
 
   s.section("body", "an analytic organ shape, for scenes without CT")
-      .choice("shape", "ellipsoid", {"ellipsoid", "box"}, "shape of the body")
+      .choice("shape", "ellipsoid", {"ellipsoid", "box", "egg", "lung"},
+              "shape: egg = prostate-like (narrower apex at -x), lung = ellipsoid with a notch")
       .vec3("size_mm", Vector3d(24, 19, 15), "mm", 0.0, "full extent along x, y, z (diameters)",
             true)
       .vec3("centre_mm", Vector3d(0, 0, 0), "mm", none, "centre, in patient coordinates");
@@ -49,6 +50,37 @@ config::Schema build_schema() {
               "distance between skeleton nodes on the medial axis", true)
       .number("skeleton_overlap_r0", 0.5, "r0", 0.0, none,
               "a particle also joins nodes this much farther than its nearest one");
+  s.section("points", "attractive points: generated on a known deformation of the body, or read")
+      .choice("source", "generate", {"generate", "file"},
+              "generate on the deformed body (truth known) or read from points.file")
+      .input_path("file", "CSV of x,y,z[,confidence] in mm (when source: file)", false)
+      .integer("count", 87, 1, 100000, "number of points to generate")
+      .number("noise_mm", 0.5, "mm", 0.0, 20.0, "Gaussian noise added to generated points")
+      .number("outlier_fraction", 0.0, "", 0.0, 0.5, "fraction of generated points moved 5-15 mm off")
+      .choice("coverage", "full", {"full", "half"}, "surface the points cover (half: the +y side)")
+      .number("stretch", 1.0, "", 0.5, 2.0, "volume-preserving stretch along x of the true deformation")
+      .number("bend_mm", 0.0, "mm", -30.0, 30.0, "sideways (y) displacement of the ends in the true deformation");
+
+  s.section("fit", "deform the model onto the attractive points (paper s.3)")
+      .choice("method", "spread", {"paper", "spread"},
+              "paper = the literal method with METHOD s.8's fixes; spread = ours (README)")
+      .number("residual_tolerance_mm", 0.5, "mm", 0.0, none,
+              "converged when the mean data residual is at most this", true)
+      .number("residual_max_tolerance_mm", 0.0, "mm", 0.0, none,
+              "... and the largest at most this (0 = the particle radius)")
+      .integer("max_steps", 20000, 1, 100000000, "step budget")
+      .number("max_wall_s", 60.0, "s", 0.0, none, "wall-time budget", true)
+      .integer("record_every", 20, 1, 100000, "steps between history rows")
+      .number("damping_ratio", 0.5, "", 0.0, none, "damping during the fit, fraction of critical", true)
+      .number("kinetic_tolerance", 1e-4, "E", 0.0, none, "settled when KE per particle is below this", true)
+      .number("alpha", 2.0, "", 1.0, 20.0, "fall-off exponent alpha_k of eq. 5")
+      .number("influence_radius_min_r0", 1.2, "r0", 0.0, none, "influence radius at contact", true)
+      .number("influence_growth", 0.5, "", 0.0, none, "extra influence radius per mm of distance")
+      .number("influence_radius_max_r0", 4.0, "r0", 0.0, none, "bound on the influence radius", true)
+      .number("total_force_factor", 3.0, "", 1.0, none, "a point's total force <= this x F_max_k")
+      .number("outlier_distance_mm", 0.0, "mm", 0.0, none,
+              "reject points farther than this from the model (0 = half its diameter)")
+      .number("skin_voxel_r0", 0.5, "r0", 0.0, none, "voxel size of skin detection (0.5 r0 = rho)", true);
   return s;
 }
 
@@ -77,6 +109,18 @@ void check_scene_rules(const config::Scene& scene) {
     if (!scene.has_section("body")) {
       scene.fail("model", "radius_mm", "the model needs a body to fill: add a 'body' section");
     }
+  }
+  if (scene.has_section("points")) {
+    if (scene.text("points", "source") == "file" && !scene.is_given("points", "file")) {
+      scene.fail("points", "source", "source is 'file' but points.file is not given");
+    }
+    if (scene.text("points", "source") == "generate" && !scene.has_section("body")) {
+      scene.fail("points", "source", "generated points need the 'body' they are sampled from");
+    }
+  }
+  if (scene.has_section("fit")) {
+    if (!scene.has_section("model")) scene.fail("fit", "method", "a fit needs a 'model' section");
+    if (!scene.has_section("points")) scene.fail("fit", "method", "a fit needs a 'points' section");
   }
 }
 

@@ -72,7 +72,8 @@ class Schema {
   Schema& text(const std::string& name, std::optional<std::string> def, const std::string& doc);
   Schema& choice(const std::string& name, const std::string& def,
                  std::vector<std::string> choices, const std::string& doc);
-  Schema& input_path(const std::string& name, const std::string& doc);
+  /// An input file or folder; optional ones default to "" (not given).
+  Schema& input_path(const std::string& name, const std::string& doc, bool required = true);
   Schema& vec3(const std::string& name, std::optional<Eigen::Vector3d> def, const std::string& unit,
                std::optional<double> min, const std::string& doc, bool min_exclusive = false);
 

@@ -3,6 +3,8 @@
 #include <nlohmann/json.hpp>
 
 #include "organfit/config/scene.h"
+#include "organfit/evaluation/synthetic.h"
+#include "organfit/particles/skeleton.h"
 #include "organfit/particles/integrator.h"
 #include "organfit/particles/model.h"
 
@@ -16,6 +18,11 @@ particles::IntegratorOptions integrator_options_from(const config::Scene& scene,
 struct ModelStageResult {
   particles::State state;
   std::unique_ptr<particles::Model> model;
+  evaluation::Shape shape;               ///< the body that was filled
+  double lattice_spacing_mm = 0;         ///< relaxed fcc nearest-neighbour distance
+  particles::CohesionParams cohesion;
+  particles::SkeletonForce* skeleton = nullptr;  ///< owned by `model`; null without skeleton
+  particles::SkeletonParams skeleton_params;
   nlohmann::json summary;  ///< run.json "model" block
 };
 

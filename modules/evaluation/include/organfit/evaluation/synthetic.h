@@ -1,0 +1,76 @@
+#pragma once
+// Ground truth for fits (METHOD.md s.7): analytic organ shapes, known volume-preserving
+// deformations with exact inverses, points sampled on the deformed surface, and the
+// fitted model's surface compared with the true one.
+#include <Eigen/Core>
+#include <functional>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "organfit/fitting/attractive_points.h"
+#include "organfit/geometry/mask_ops.h"
+
+namespace organfit::evaluation {
+
+/// An organ shape given by an inside test, in mm.
+struct Shape {
+  std::string kind;                                    ///< "ellipsoid", "box", "egg", "lung"
+  Eigen::Vector3d size_mm = Eigen::Vector3d::Ones();   ///< full extents (before the notch)
+  Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();
+  bool inside(const Eigen::Vector3d& p) const;
+  geometry::Aabb bounds() const { return {centre_mm - 0.5 * size_mm, centre_mm + 0.5 * size_mm}; }
+};
+
+/// Makes a shape: "ellipsoid" and "box" as named; "egg" is an ellipsoid whose cross-
+/// section narrows linearly towards -x (a prostate's apex, 30% narrower at the tip);
+/// "lung" is an ellipsoid with a spherical notch cut from its -x side (the cardiac
+/// notch). Throws std::invalid_argument on an unknown kind or non-positive size.
+Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
+                 const Eigen::Vector3d& centre_mm);
+
+/// Volume of a shape by counting voxel centres (mm^3).
+double shape_volume_mm3(const Shape& shape, double voxel_mm);
+
+/// A volume-preserving deformation with a known inverse, about a centre c:
+///   stretch: x' = c + S (x - c), S = diag(s, 1/sqrt(s), 1/sqrt(s))      (det 1)
+///   bend:    y' = y + b ((x' - c_x) / L)^2, with L the half-length along x  (det 1)
+/// applied stretch first. `bend_mm` is how far the ends move sideways.
+struct Deformation {
+  double stretch = 1.0;
+  double bend_mm = 0.0;
+  Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();
+  double half_length_mm = 1.0;
+  Eigen::Vector3d apply(const Eigen::Vector3d& p) const;
+  Eigen::Vector3d inverse(const Eigen::Vector3d& p) const;
+  bool is_identity() const { return stretch == 1.0 && bend_mm == 0.0; }
+};
+
+struct SamplingOptions {
+  int count = 87;
+  double noise_mm = 0.5;          ///< isotropic Gaussian noise
+  double outlier_fraction = 0.0;  ///< this fraction of points moved 5 to 15 mm off the surface
+  bool half_coverage = false;     ///< only the +y half of the surface (what a probe sees)
+  unsigned seed = 1;
+};
+
+/// Points on the deformed surface: boundary points of `shape` found along rays from its
+/// centre (uniform directions; bisection to 0.01 mm), mapped by `deformation`, then noise
+/// and outliers. Deterministic for a seed.
+std::vector<fitting::AttractivePoint> sample_deformed_surface(const Shape& shape,
+                                                              const Deformation& deformation,
+                                                              const SamplingOptions& options);
+
+/// The deformed shape's inside test: inside(deformation.inverse(p)).
+std::function<bool(const Eigen::Vector3d&)> deformed_inside(const Shape& shape,
+                                                            const Deformation& deformation);
+
+/// Compares the closed body of a particle set (balls of `radius_mm`, closed by the same)
+/// with a body given by its inside test, on a grid of `voxel_mm` covering both
+/// (mask_ops.h has the definitions).
+geometry::SurfaceComparison compare_with_body(const Eigen::Matrix3Xd& particles, double radius_mm,
+                                              const std::function<bool(const Eigen::Vector3d&)>& inside,
+                                              const geometry::Aabb& body_bounds, double voxel_mm);
+
+}  // namespace organfit::evaluation

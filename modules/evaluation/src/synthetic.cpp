@@ -1,0 +1,125 @@
+#include "organfit/evaluation/synthetic.h"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace organfit::evaluation {
+
+bool Shape::inside(const Eigen::Vector3d& p) const {
+  const Eigen::Vector3d semi = 0.5 * size_mm;
+  const Eigen::Vector3d q = p - centre_mm;
+  if (kind == "box") return (q.cwiseAbs().array() <= semi.array()).all();
+  if (kind == "egg") {
+    // Cross-section scale: 1 at +x end and at the middle, 0.7 at the -x tip.
+    const double t = std::clamp(q.x() / semi.x(), -1.0, 1.0);
+    const double taper = t < 0 ? 1.0 + 0.3 * t : 1.0;
+    const Eigen::Vector3d s(semi.x(), semi.y() * taper, semi.z() * taper);
+    return q.cwiseQuotient(s).squaredNorm() <= 1.0;
+  }
+  const bool in_ellipsoid = q.cwiseQuotient(semi).squaredNorm() <= 1.0;
+  if (kind == "lung") {
+    const Eigen::Vector3d notch(-semi.x() * 1.05, 0, -0.2 * semi.z());
+    return in_ellipsoid && (q - notch).norm() > 0.55 * semi.x();
+  }
+  return in_ellipsoid;
+}
+
+Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
+                 const Eigen::Vector3d& centre_mm) {
+  if (kind != "ellipsoid" && kind != "box" && kind != "egg" && kind != "lung") {
+    throw std::invalid_argument("unknown shape '" + kind + "' (ellipsoid, box, egg, lung)");
+  }
+  if (!(size_mm.array() > 0).all()) throw std::invalid_argument("shape size must be > 0 mm");
+  return Shape{kind, size_mm, centre_mm};
+}
+
+double shape_volume_mm3(const Shape& shape, double voxel_mm) {
+  const geometry::Aabb b = shape.bounds();
+  long long n = 0;
+  for (double z = b.min_mm.z() + 0.5 * voxel_mm; z < b.max_mm.z(); z += voxel_mm)
+    for (double y = b.min_mm.y() + 0.5 * voxel_mm; y < b.max_mm.y(); y += voxel_mm)
+      for (double x = b.min_mm.x() + 0.5 * voxel_mm; x < b.max_mm.x(); x += voxel_mm)
+        n += shape.inside({x, y, z});
+  return static_cast<double>(n) * voxel_mm * voxel_mm * voxel_mm;
+}
+
+Eigen::Vector3d Deformation::apply(const Eigen::Vector3d& p) const {
+  const double s = stretch, t = 1.0 / std::sqrt(stretch);
+  Eigen::Vector3d q = centre_mm + Eigen::Vector3d(s, t, t).cwiseProduct(p - centre_mm);
+  const double u = (q.x() - centre_mm.x()) / half_length_mm;
+  q.y() += bend_mm * u * u;
+  return q;
+}
+
+Eigen::Vector3d Deformation::inverse(const Eigen::Vector3d& p) const {
+  Eigen::Vector3d q = p;
+  const double u = (q.x() - centre_mm.x()) / half_length_mm;
+  q.y() -= bend_mm * u * u;
+  const double s = stretch, t = 1.0 / std::sqrt(stretch);
+  return centre_mm + Eigen::Vector3d(1 / s, 1 / t, 1 / t).cwiseProduct(q - centre_mm);
+}
+
+std::function<bool(const Eigen::Vector3d&)> deformed_inside(const Shape& shape,
+                                                            const Deformation& d) {
+  return [shape, d](const Eigen::Vector3d& p) { return shape.inside(d.inverse(p)); };
+}
+
+std::vector<fitting::AttractivePoint> sample_deformed_surface(const Shape& shape,
+                                                              const Deformation& deformation,
+                                                              const SamplingOptions& o) {
+  std::mt19937_64 rng(o.seed);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  const double reach = 0.5 * shape.size_mm.norm() + 1.0;
+  std::vector<fitting::AttractivePoint> points;
+  while (static_cast<int>(points.size()) < o.count) {
+    Eigen::Vector3d dir(gauss(rng), gauss(rng), gauss(rng));
+    dir.normalize();
+    if (o.half_coverage && dir.y() < 0) dir.y() = -dir.y();
+    // March out from the centre to the first exit, then bisect to 0.01 mm.
+    double inside_t = 0, outside_t = -1;
+    for (double t = 0.25; t <= reach; t += 0.25) {
+      if (!shape.inside(shape.centre_mm + t * dir)) {
+        outside_t = t;
+        break;
+      }
+      inside_t = t;
+    }
+    if (outside_t < 0) continue;
+    while (outside_t - inside_t > 0.01) {
+      const double mid = 0.5 * (inside_t + outside_t);
+      (shape.inside(shape.centre_mm + mid * dir) ? inside_t : outside_t) = mid;
+    }
+    Eigen::Vector3d p = deformation.apply(shape.centre_mm + 0.5 * (inside_t + outside_t) * dir);
+    p += o.noise_mm * Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng));
+    points.push_back({p, 1.0});
+  }
+  const int outliers = static_cast<int>(std::lround(o.outlier_fraction * o.count));
+  for (int k = 0; k < outliers; ++k) {
+    Eigen::Vector3d dir(gauss(rng), gauss(rng), gauss(rng));
+    auto& p = points[static_cast<size_t>(k * o.count / std::max(1, outliers))].p_mm;
+    p += (5.0 + 10.0 * uni(rng)) * dir.normalized();
+  }
+  return points;
+}
+
+geometry::SurfaceComparison compare_with_body(const Eigen::Matrix3Xd& particles, double radius_mm,
+                                              const std::function<bool(const Eigen::Vector3d&)>& inside,
+                                              const geometry::Aabb& body_bounds, double voxel_mm) {
+  geometry::Aabb box = body_bounds;
+  if (particles.cols() > 0) {
+    box.min_mm = box.min_mm.cwiseMin(particles.rowwise().minCoeff());
+    box.max_mm = box.max_mm.cwiseMax(particles.rowwise().maxCoeff());
+  }
+  const geometry::ImageGeometry g = geometry::grid_covering(box, voxel_mm, 2 * radius_mm + 2 * voxel_mm);
+  geometry::LabelVolume model = geometry::rasterize_balls(particles, radius_mm, g);
+  geometry::close_mask(model, radius_mm);
+  geometry::LabelVolume truth(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        truth.at(i, j, k) = inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  return geometry::compare_masks(model, truth);
+}
+
+}  // namespace organfit::evaluation

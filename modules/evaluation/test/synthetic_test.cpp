@@ -1,0 +1,64 @@
+#include "organfit/evaluation/synthetic.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/LU>
+
+namespace organfit::evaluation {
+namespace {
+
+TEST(Deformation, IsVolumePreservingAndExactlyInvertible) {
+  Deformation d;
+  d.stretch = 1.2;
+  d.bend_mm = 3.0;
+  d.centre_mm = {1, 2, 3};
+  d.half_length_mm = 25;
+  const Eigen::Vector3d p(7, -4, 9);
+  EXPECT_LT((d.inverse(d.apply(p)) - p).norm(), 1e-12);
+  // Jacobian determinant by central differences.
+  Eigen::Matrix3d j;
+  for (int c = 0; c < 3; ++c) {
+    Eigen::Vector3d h = Eigen::Vector3d::Zero();
+    h[c] = 1e-6;
+    j.col(c) = (d.apply(p + h) - d.apply(p - h)) / 2e-6;
+  }
+  EXPECT_NEAR(j.determinant(), 1.0, 1e-8);
+  const Shape s = make_shape("egg", {50, 40, 34}, {0, 0, 0});
+  const double v0 = shape_volume_mm3(s, 0.5);
+  // The deformed body's volume, by counting voxel centres inside it.
+  const auto in1 = deformed_inside(s, d);
+  long long n = 0;
+  for (double z = -30; z < 30; z += 0.5)
+    for (double y = -30; y < 30; y += 0.5)
+      for (double x = -40; x < 40; x += 0.5) n += in1({x, y, z});
+  EXPECT_NEAR(n * 0.125, v0, 0.005 * v0);
+}
+
+TEST(Sampling, PointsLieOnTheDeformedSurfaceWithinTheNoise) {
+  const Shape s = make_shape("ellipsoid", {48, 38, 30}, {0, 0, 0});
+  Deformation d;
+  d.stretch = 1.2;
+  d.half_length_mm = 24;
+  SamplingOptions o;
+  o.noise_mm = 0.0;
+  o.count = 200;
+  for (const auto& p : sample_deformed_surface(s, d, o)) {
+    const Eigen::Vector3d q = d.inverse(p.p_mm).cwiseQuotient(Eigen::Vector3d(24, 19, 15));
+    EXPECT_NEAR(q.norm(), 1.0, 0.002);
+  }
+  o.half_coverage = true;
+  for (const auto& p : sample_deformed_surface(s, d, o)) EXPECT_GE(p.p_mm.y(), -1e-9);
+  const auto a = sample_deformed_surface(s, d, o), b = sample_deformed_surface(s, d, o);
+  EXPECT_EQ(a[17].p_mm, b[17].p_mm);  // deterministic for a seed
+}
+
+TEST(Shapes, LungHasItsNotchAndUnknownShapesAreRefused) {
+  const Shape lung = make_shape("lung", {40, 30, 60}, {0, 0, 0});
+  EXPECT_TRUE(lung.inside({10, 0, 0}));
+  EXPECT_FALSE(lung.inside({-18, 0, -6}));
+  EXPECT_LT(shape_volume_mm3(lung, 1.0), shape_volume_mm3(make_shape("ellipsoid", {40, 30, 60}, {0, 0, 0}), 1.0));
+  EXPECT_THROW(make_shape("donut", {1, 1, 1}, {0, 0, 0}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace organfit::evaluation

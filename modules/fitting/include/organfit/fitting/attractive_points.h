@@ -1,0 +1,88 @@
+#pragma once
+// Attractive points (ultrasound data) and the paper's force towards them (s.3.2-3.3,
+// eq. 5-6; METHOD.md s.5 and s.8).
+#include <Eigen/Core>
+#include <vector>
+
+#include "organfit/fitting/skin.h"
+#include "organfit/particles/model.h"
+
+namespace organfit::fitting {
+
+struct AttractivePoint {
+  Eigen::Vector3d p_mm;      ///< position, patient coordinates
+  double confidence = 1.0;   ///< in (0, 1]: scales the point's force
+};
+
+/// Checks points on entry: finite coordinates, confidence in (0, 1]. Throws
+/// std::invalid_argument naming the first bad point (index from 0).
+void validate_points(const std::vector<AttractivePoint>& points);
+
+/// What became of each point at the last evaluation.
+struct PointStatus {
+  int epicentre = -1;          ///< nearest skin particle
+  double d_min_mm = 0;         ///< distance from the point to the nearest influenced centre
+  bool inside_model = false;   ///< case 3: the point lies inside the body
+  bool reached = false;        ///< case 2: d_min <= rho, no force
+  bool rejected = false;       ///< an outlier: too far from the model to be fitted
+  int influence_count = 0;
+  double f_max_k = 0;          ///< force on the epicentre when the point was assigned
+};
+
+struct PaperForceParams {
+  double alpha = 2.0;                  ///< fall-off exponent alpha_k (> 1: falls off)
+  double influence_radius_min_r0 = 1.2;  ///< influence radius at d_min = rho, in r0
+  double influence_growth = 0.5;       ///< extra influence radius per mm of (d_min - rho)
+  double influence_radius_max_r0 = 4.0;  ///< bound on the influence radius, in r0
+  double total_force_factor = 3.0;     ///< a point's total force <= this x its F_max_k
+  double outlier_distance_mm = 0.0;    ///< reject points farther than this from the skin (0: 0.5 x model diameter)
+  double first_shell_r0 = 1.3;         ///< W(i) counts neighbours within this distance
+};
+
+/// The paper's attractive force, with the fixes METHOD.md s.8 calls for:
+///  * epicentre e_k: the skin particle nearest p_k; influence set: skin particles within
+///    R_k = min(R_max, R_min + growth (d_min - rho)) of the epicentre (grows with the
+///    distance, bounded);
+///  * G_ik = K_k ((d_min - rho)/(r_ik - rho))^alpha (r_ik - rho) u_ik, pointing at p_k
+///    in all three cases (one formula: outside pulls out, inside pushes in);
+///  * K_k = F_max_k / (d_min - rho) (eq. 6) is fixed when the point is (re)assigned, at
+///    each skin computation, and d_min is taken at every evaluation as the smallest
+///    r_ik over the influence set, the ratio clamped at 1: the epicentre gets exactly
+///    F_max_k on assignment and every force falls smoothly to zero as the set reaches
+///    the point (with K_k recomputed every step the force is on/off and chatters);
+///  * F_max_k = min(W(e_k) F_max / 2, F_max_k) with W counting the first shell of
+///    neighbours (within 1.3 r0), times the point's confidence;
+///  * the sum of a point's forces is capped at total_force_factor F_max_k (the others
+///    are scaled down, the epicentre keeps its force), and points
+///    farther than outlier_distance from the skin are rejected: a far outlier can
+///    neither drag nor tear the body.
+/// The paper's damping -K_a v is the integrator's (IntegratorOptions::damping).
+class PaperAttractiveForce : public particles::ForceTerm {
+ public:
+  /// Throws std::invalid_argument on bad points or parameters (alpha < 1, ...).
+  PaperAttractiveForce(std::vector<AttractivePoint> points, const particles::LennardJones& law,
+                       double radius_mm, const PaperForceParams& params, double skin_voxel_mm);
+
+  std::string name() const override { return "attractive_points_paper"; }
+  double add_forces(const particles::State& state, particles::Forces& f, bool want_energy) override;
+  bool conservative() const override { return false; }
+
+  const std::vector<AttractivePoint>& points() const { return points_; }
+  const std::vector<PointStatus>& status() const { return status_; }
+  const SkinDetector& skin() const { return skin_; }
+  double f_max() const { return f_max_; }
+  /// W(i): neighbours of particle i within first_shell_r0 r0 (for tests).
+  int first_shell_count(const particles::Positions& x, int i) const;
+
+ private:
+  void assign(const particles::Positions& x);
+  std::vector<AttractivePoint> points_;
+  double rho_, r0_, f_max_;
+  PaperForceParams params_;
+  SkinDetector skin_;
+  std::vector<PointStatus> status_;
+  std::vector<std::vector<int>> influence_;
+  std::vector<double> k_;  // K_k of eq. 6
+};
+
+}  // namespace organfit::fitting

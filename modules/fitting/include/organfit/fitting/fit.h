@@ -1,0 +1,64 @@
+#pragma once
+// The fit loop: integrate the model under the data forces until the points are reached
+// and the model has settled, or progress stalls, or a budget runs out.
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "organfit/fitting/attractive_points.h"
+#include "organfit/particles/integrator.h"
+
+namespace organfit::fitting {
+
+/// Data residual of each point (mm): distance from the point to the model surface,
+/// taken as | min over skin particles of |p - x_i|  -  rho |.
+std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
+                                   const particles::Positions& x, const std::vector<int>& skin,
+                                   double radius_mm);
+
+struct FitOptions {
+  double residual_mean_tolerance_mm = 0.5;  ///< converged: mean residual at most this
+  double residual_max_tolerance_mm = 0.0;   ///< ... and max at most this (0: the particle radius)
+  double kinetic_tolerance = 1e-4;          ///< ... and kinetic energy per particle below this
+  long long max_steps = 20000;
+  double max_wall_s = 60.0;
+  int record_every = 20;                    ///< steps between history rows
+  int stall_rows = 25;                      ///< stop when the mean residual has not improved by
+  double stall_improvement = 0.01;          ///< this fraction over that many rows
+  /// Volume of the model (mm^3) for the history; empty: not recorded.
+  std::function<double(const particles::Positions&)> volume;
+  int volume_every_rows = 5;
+};
+
+struct HistoryRow {
+  long long step = 0;
+  double wall_s = 0;
+  double residual_mean_mm = 0, residual_max_mm = 0;
+  double volume_change_pct = 0;  ///< NaN when not measured at this row
+  double kinetic_energy_per_particle = 0;
+};
+
+struct FitResult {
+  bool converged = false;
+  std::string stop_reason;  ///< "converged", "stalled", "step budget", "wall-time budget"
+  long long steps = 0;
+  double wall_s = 0;             ///< fitting work
+  double instrument_wall_s = 0;  ///< history measurements (volume), not part of the fit
+  double residual_mean_mm = 0, residual_max_mm = 0;
+  std::vector<double> residuals_mm;
+  std::vector<HistoryRow> history;
+};
+
+/// Runs the fit. `data_term` must already be in `model`; `skin_of` returns the current
+/// skin particles (for residuals). `on_row` (optional) sees each history row;
+/// `after_row` (optional) may adjust the state or force terms between rows (e.g. let
+/// the skeleton's rest shape follow the fit); forces are recomputed after it.
+FitResult run_fit(particles::Model& model, particles::State& state,
+                  const particles::IntegratorOptions& integrator_options,
+                  const std::vector<AttractivePoint>& points,
+                  const std::function<const std::vector<int>&(const particles::Positions&)>& skin_of,
+                  const FitOptions& options,
+                  const std::function<void(const HistoryRow&)>& on_row = nullptr,
+                  const std::function<void(particles::State&)>& after_row = nullptr);
+
+}  // namespace organfit::fitting

@@ -1,0 +1,55 @@
+#pragma once
+// Local stage of the "spread" fit: a smooth attractive force that moves a patch of
+// skin around each point coherently, instead of pulling single particles into "tents".
+//
+// For point k with epicentre e_k (nearest skin particle, re-assigned when the skin is
+// recomputed), the residual is the vector from the epicentre's surface point to p_k:
+//     r_k = (|p_k - x_e| - rho) u_ek,   u_ek = (p_k - x_e) / |p_k - x_e|.
+// Skin particles i of the patch (within patch_radius of e_k) share that displacement with
+// Gaussian weights w_ik = exp(-|x_i - x_e|^2 / (2 sigma^2)) (positions at assignment),
+// normalised where patches overlap (a partition of unity, so nearby points average
+// rather than add):
+//     F_i = kappa * sum_k w_ik r_k / max(1, sum_k w_ik),   |F_i| <= W F_max / 2.
+// Every force is proportional to the residuals, so it vanishes smoothly as the surface
+// reaches the points (no chatter). Far outliers are rejected as in the paper's method.
+#include <vector>
+
+#include "organfit/fitting/attractive_points.h"
+#include "organfit/fitting/skin.h"
+
+namespace organfit::fitting {
+
+struct SpreadForceParams {
+  double stiffness_fraction = 0.3;  ///< kappa as a fraction of the LJ stiffness m n E0 / r0^2
+  double patch_sigma_r0 = 1.5;      ///< Gaussian width of a patch, in r0
+  double patch_radius_r0 = 3.5;     ///< bound of a patch, in r0
+  double outlier_distance_mm = 0;   ///< reject points farther (0: half the model's diameter)
+  double max_force_shells = 6.0;    ///< per-particle cap in units of F_max (W/2 with W = 12)
+};
+
+class SpreadAttractiveForce : public particles::ForceTerm {
+ public:
+  SpreadAttractiveForce(std::vector<AttractivePoint> points, const particles::LennardJones& law,
+                        double radius_mm, const SpreadForceParams& params, double skin_voxel_mm);
+
+  std::string name() const override { return "attractive_points_spread"; }
+  double add_forces(const particles::State& state, particles::Forces& f, bool want_energy) override;
+  bool conservative() const override { return false; }
+  double stiffness() const override { return kappa_; }
+
+  const SkinDetector& skin() const { return skin_; }
+  const std::vector<PointStatus>& status() const { return status_; }
+
+ private:
+  void assign(const particles::Positions& x);
+  std::vector<AttractivePoint> points_;
+  double rho_, r0_, kappa_, f_cap_;
+  SpreadForceParams params_;
+  SkinDetector skin_;
+  std::vector<PointStatus> status_;
+  std::vector<std::vector<std::pair<int, double>>> patch_;  // (particle, weight) per point
+  std::vector<Eigen::Vector3d> num_;
+  std::vector<double> den_;
+};
+
+}  // namespace organfit::fitting

@@ -1,0 +1,124 @@
+#include "organfit/fitting/attractive_points.h"
+
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace organfit::fitting {
+
+void validate_points(const std::vector<AttractivePoint>& points) {
+  for (size_t k = 0; k < points.size(); ++k) {
+    if (!points[k].p_mm.allFinite()) {
+      throw std::invalid_argument("attractive point " + std::to_string(k) + " has a non-finite coordinate");
+    }
+    if (!(points[k].confidence > 0 && points[k].confidence <= 1)) {
+      throw std::invalid_argument("attractive point " + std::to_string(k) + " has a confidence outside (0, 1]");
+    }
+  }
+}
+
+PaperAttractiveForce::PaperAttractiveForce(std::vector<AttractivePoint> points,
+                                           const particles::LennardJones& law, double radius_mm,
+                                           const PaperForceParams& params, double skin_voxel_mm)
+    : points_(std::move(points)),
+      rho_(radius_mm),
+      r0_(law.r0()),
+      f_max_(law.f_max()),
+      params_(params),
+      skin_(skin_voxel_mm, radius_mm) {
+  validate_points(points_);
+  if (!(params.alpha >= 1)) throw std::invalid_argument("attractive force: alpha must be >= 1");
+  if (!(params.influence_radius_min_r0 > 0) || !(params.influence_radius_max_r0 >= params.influence_radius_min_r0))
+    throw std::invalid_argument("attractive force: need 0 < influence radius min <= max");
+  if (!(params.influence_growth >= 0)) throw std::invalid_argument("attractive force: influence growth must be >= 0");
+  if (!(params.total_force_factor >= 1)) throw std::invalid_argument("attractive force: total force factor must be >= 1");
+  status_.resize(points_.size());
+  influence_.resize(points_.size());
+  k_.assign(points_.size(), 0.0);
+}
+
+int PaperAttractiveForce::first_shell_count(const particles::Positions& x, int i) const {
+  const double shell2 = std::pow(params_.first_shell_r0 * r0_, 2);
+  int w = 0;
+  for (int j = 0; j < x.cols(); ++j)
+    if (j != i && (x.col(j) - x.col(i)).squaredNorm() < shell2) ++w;
+  return w;
+}
+
+void PaperAttractiveForce::assign(const particles::Positions& x) {
+  const auto& skin = skin_.skin();
+  // Default outlier distance: half the model's diameter.
+  double outlier = params_.outlier_distance_mm;
+  if (outlier <= 0 && x.cols() > 0) outlier = 0.5 * (x.rowwise().maxCoeff() - x.rowwise().minCoeff()).norm();
+  for (size_t k = 0; k < points_.size(); ++k) {
+    PointStatus& st = status_[k];
+    st = PointStatus{};
+    influence_[k].clear();
+    const Eigen::Vector3d& p = points_[k].p_mm;
+    double best = std::numeric_limits<double>::infinity();
+    for (int i : skin) {
+      const double d = (x.col(i) - p).squaredNorm();
+      if (d < best) best = d, st.epicentre = i;
+    }
+    if (st.epicentre < 0) continue;
+    st.d_min_mm = std::sqrt(best);
+    st.inside_model = skin_.inside(p);
+    if (!st.inside_model && st.d_min_mm - rho_ > outlier) {
+      st.rejected = true;
+      continue;
+    }
+    if (st.d_min_mm <= rho_) {
+      st.reached = true;
+      continue;
+    }
+    const double radius = std::min(params_.influence_radius_max_r0 * r0_,
+                                   params_.influence_radius_min_r0 * r0_ +
+                                       params_.influence_growth * (st.d_min_mm - rho_));
+    const Eigen::Vector3d e = x.col(st.epicentre);
+    for (int i : skin)
+      if ((x.col(i) - e).squaredNorm() <= radius * radius) influence_[k].push_back(i);
+    st.influence_count = static_cast<int>(influence_[k].size());
+    const int w = first_shell_count(x, st.epicentre);
+    st.f_max_k = points_[k].confidence * 0.5 * w * f_max_;
+    k_[k] = st.f_max_k / (st.d_min_mm - rho_);  // eq. 6
+  }
+}
+
+double PaperAttractiveForce::add_forces(const particles::State& state, particles::Forces& f, bool) {
+  if (skin_.update(state.x)) assign(state.x);
+  for (size_t k = 0; k < points_.size(); ++k) {
+    PointStatus& st = status_[k];
+    if (st.rejected || influence_[k].empty()) continue;
+    const Eigen::Vector3d& p = points_[k].p_mm;
+    // d_min now: the smallest distance from the point over its influence set.
+    double d_min = std::numeric_limits<double>::infinity();
+    for (int i : influence_[k]) d_min = std::min(d_min, (p - state.x.col(i)).norm());
+    st.d_min_mm = d_min;
+    st.reached = d_min <= rho_;
+    if (st.reached) continue;
+    // Forces of eq. 5; the epicentre's (ratio 1) is kept whole, the others are scaled
+    // down together when the point's total would exceed its bound.
+    double others = 0, epicentre_force = 0;
+    thread_local std::vector<Eigen::Vector3d> g;
+    g.assign(influence_[k].size(), Eigen::Vector3d::Zero());
+    for (size_t m = 0; m < influence_[k].size(); ++m) {
+      const int i = influence_[k][m];
+      const Eigen::Vector3d to_p = p - state.x.col(i);
+      const double r = to_p.norm();
+      if (r <= rho_) continue;  // touching the point already
+      const double ratio = std::min(1.0, (d_min - rho_) / (r - rho_));
+      g[m] = k_[k] * std::pow(ratio, params_.alpha) * (r - rho_) * (to_p / r);  // eq. 5
+      (i == st.epicentre ? epicentre_force : others) += g[m].norm();
+    }
+    const double room = params_.total_force_factor * st.f_max_k - epicentre_force;
+    const double scale = others > room ? std::max(0.0, room) / others : 1.0;
+    for (size_t m = 0; m < influence_[k].size(); ++m) {
+      const int i = influence_[k][m];
+      f.col(i) += (i == st.epicentre ? 1.0 : scale) * g[m];
+    }
+  }
+  return 0.0;
+}
+
+}  // namespace organfit::fitting

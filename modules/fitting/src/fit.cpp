@@ -1,0 +1,102 @@
+#include "organfit/fitting/fit.h"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+namespace organfit::fitting {
+
+std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
+                                   const particles::Positions& x, const std::vector<int>& skin,
+                                   double radius_mm) {
+  std::vector<double> out(points.size(), std::numeric_limits<double>::infinity());
+  for (size_t k = 0; k < points.size(); ++k) {
+    double best = std::numeric_limits<double>::infinity();
+    for (int i : skin) best = std::min(best, (x.col(i) - points[k].p_mm).squaredNorm());
+    if (std::isfinite(best)) out[k] = std::abs(std::sqrt(best) - radius_mm);
+  }
+  return out;
+}
+
+FitResult run_fit(particles::Model& model, particles::State& state,
+                  const particles::IntegratorOptions& integrator_options,
+                  const std::vector<AttractivePoint>& points,
+                  const std::function<const std::vector<int>&(const particles::Positions&)>& skin_of,
+                  const FitOptions& o, const std::function<void(const HistoryRow&)>& on_row,
+                  const std::function<void(particles::State&)>& after_row) {
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  double instrument_s = 0;
+  auto now_s = [&] { return std::chrono::duration<double>(Clock::now() - start).count() - instrument_s; };
+
+  FitResult result;
+  const double rho = model.radius_mm();
+  const double max_tol = o.residual_max_tolerance_mm > 0 ? o.residual_max_tolerance_mm : rho;
+  const int n = std::max(1, state.size());
+  particles::Integrator integ(model, integrator_options);
+  integ.refresh_forces(state);
+  double v0 = 0;
+  if (o.volume) {
+    const auto t0 = Clock::now();
+    v0 = o.volume(state.x);
+    instrument_s += std::chrono::duration<double>(Clock::now() - t0).count();
+  }
+  double best_mean = std::numeric_limits<double>::infinity();
+  int rows_since_best = 0;
+  for (int row = 0;; ++row) {
+    HistoryRow h;
+    h.step = integ.stats().steps;
+    const std::vector<double> r = data_residuals(points, state.x, skin_of(state.x), rho);
+    double sum = 0, mx = 0;
+    for (double v : r) sum += v, mx = std::max(mx, v);
+    h.residual_mean_mm = r.empty() ? 0 : sum / static_cast<double>(r.size());
+    h.residual_max_mm = mx;
+    h.kinetic_energy_per_particle = integ.kinetic_energy(state) / n;
+    h.volume_change_pct = std::numeric_limits<double>::quiet_NaN();
+    if (o.volume && row % std::max(1, o.volume_every_rows) == 0) {
+      const auto t0 = Clock::now();
+      h.volume_change_pct = 100.0 * (o.volume(state.x) - v0) / v0;
+      instrument_s += std::chrono::duration<double>(Clock::now() - t0).count();
+    }
+    h.wall_s = now_s();
+    result.history.push_back(h);
+    if (on_row) on_row(h);
+    result.residuals_mm = r;
+    result.residual_mean_mm = h.residual_mean_mm;
+    result.residual_max_mm = h.residual_max_mm;
+
+    if (h.residual_mean_mm <= o.residual_mean_tolerance_mm && h.residual_max_mm <= max_tol &&
+        h.kinetic_energy_per_particle <= o.kinetic_tolerance && row > 0) {
+      result.converged = true;
+      result.stop_reason = "converged";
+      break;
+    }
+    if (h.residual_mean_mm < best_mean * (1 - o.stall_improvement)) {
+      best_mean = h.residual_mean_mm;
+      rows_since_best = 0;
+    } else if (++rows_since_best >= o.stall_rows) {
+      result.stop_reason = "stalled";
+      break;
+    }
+    if (integ.stats().steps >= o.max_steps) {
+      result.stop_reason = "step budget";
+      break;
+    }
+    if (h.wall_s >= o.max_wall_s) {
+      result.stop_reason = "wall-time budget";
+      break;
+    }
+    if (after_row) {
+      after_row(state);
+      integ.refresh_forces(state);
+    }
+    integ.run(state, std::min<long long>(o.record_every, o.max_steps - integ.stats().steps));
+  }
+  result.steps = integ.stats().steps;
+  result.wall_s = now_s();
+  result.instrument_wall_s = instrument_s;
+  return result;
+}
+
+}  // namespace organfit::fitting

@@ -1,0 +1,139 @@
+#include "organfit/fitting/skin.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace organfit::fitting {
+
+SkinDetector::SkinDetector(double voxel_mm, double radius_mm, double recompute_fraction)
+    : voxel_mm_(voxel_mm), radius_mm_(radius_mm), recompute_fraction_(recompute_fraction) {
+  if (!(voxel_mm > 0) || !std::isfinite(voxel_mm)) throw std::invalid_argument("skin: voxel size must be > 0 mm");
+  if (!(radius_mm > 0)) throw std::invalid_argument("skin: particle radius must be > 0 mm");
+  if (!(recompute_fraction > 0 && recompute_fraction <= 1))
+    throw std::invalid_argument("skin: recompute fraction must be in (0, 1]");
+}
+
+bool SkinDetector::update(const Eigen::Matrix3Xd& x) {
+  if (valid_ && x.cols() == x_at_compute_.cols()) {
+    const double limit = recompute_fraction_ * voxel_mm_;
+    if (x.cols() == 0 || (x - x_at_compute_).colwise().squaredNorm().maxCoeff() <= limit * limit) {
+      return false;
+    }
+  }
+  compute(x);
+  return true;
+}
+
+void SkinDetector::compute(const Eigen::Matrix3Xd& x) {
+  ++computations_;
+  valid_ = true;
+  x_at_compute_ = x;
+  const int n = static_cast<int>(x.cols());
+  skin_.clear();
+  is_skin_.assign(n, 0);
+  if (n == 0) {
+    grid_ = {};
+    closed_.clear();
+    return;
+  }
+  // 1. The bounding box of the balls, one free voxel of margin all round.
+  const double h = voxel_mm_;
+  const Eigen::Vector3d lo = x.rowwise().minCoeff().array() - radius_mm_ - 1.5 * h;
+  const Eigen::Vector3d hi = x.rowwise().maxCoeff().array() + radius_mm_ + 1.5 * h;
+  grid_ = {};
+  grid_.spacing_mm = Eigen::Vector3d::Constant(h);
+  grid_.origin_mm = lo.array() + 0.5 * h;  // voxel centres
+  for (int d = 0; d < 3; ++d) grid_.size[d] = static_cast<int>(std::ceil((hi[d] - lo[d]) / h));
+  const int nx = grid_.size[0], ny = grid_.size[1], nz = grid_.size[2];
+  const size_t total = static_cast<size_t>(grid_.voxel_count());
+  std::vector<std::uint8_t> kept(total, 0);
+
+  // 2. Voxels intersecting a ball: the box-to-centre distance is at most rho.
+  const double r2 = radius_mm_ * radius_mm_;
+  auto for_each_voxel_of = [&](int i, auto&& visit) {
+    const Eigen::Vector3d c = x.col(i);
+    int a[3], b[3];
+    for (int d = 0; d < 3; ++d) {
+      a[d] = std::max(0, static_cast<int>(std::floor((c[d] - radius_mm_ - lo[d]) / h)));
+      b[d] = std::min(grid_.size[d] - 1, static_cast<int>(std::floor((c[d] + radius_mm_ - lo[d]) / h)));
+    }
+    for (int k = a[2]; k <= b[2]; ++k)
+      for (int j = a[1]; j <= b[1]; ++j)
+        for (int v = a[0]; v <= b[0]; ++v) {
+          double d2 = 0;
+          const int idx[3] = {v, j, k};
+          for (int d = 0; d < 3; ++d) {
+            const double vlo = lo[d] + idx[d] * h;
+            const double g = std::max({0.0, vlo - c[d], c[d] - (vlo + h)});
+            d2 += g * g;
+          }
+          if (d2 <= r2) visit(grid_.linear_index(v, j, k));
+        }
+  };
+  for (int i = 0; i < n; ++i) for_each_voxel_of(i, [&](long long v) { kept[v] = 1; });
+
+  // 3. Boundary voxels: kept, with at least one of the 26 neighbours not kept. The
+  // margin guarantees every kept voxel has all 26 neighbours on the grid.
+  std::vector<std::uint8_t> boundary(total, 0);
+  for (int k = 1; k < nz - 1; ++k)
+    for (int j = 1; j < ny - 1; ++j)
+      for (int v = 1; v < nx - 1; ++v) {
+        const long long idx = grid_.linear_index(v, j, k);
+        if (!kept[idx]) continue;
+        bool full = true;
+        for (int dz = -1; dz <= 1 && full; ++dz)
+          for (int dy = -1; dy <= 1 && full; ++dy)
+            for (int dx = -1; dx <= 1 && full; ++dx)
+              if (!kept[grid_.linear_index(v + dx, j + dy, k + dz)]) full = false;
+        boundary[idx] = !full;
+      }
+
+  // 4. Skin particles touch a boundary voxel.
+  for (int i = 0; i < n; ++i) {
+    bool touches = false;
+    for_each_voxel_of(i, [&](long long v) { touches = touches || boundary[v]; });
+    if (touches) {
+      is_skin_[i] = 1;
+      skin_.push_back(i);
+    }
+  }
+
+  // Closed body: everything not reachable from the border through free voxels.
+  closed_.assign(total, 1);
+  std::vector<long long> stack;
+  auto push = [&](int v, int j, int k) {
+    const long long idx = grid_.linear_index(v, j, k);
+    if (closed_[idx] && !kept[idx]) {
+      closed_[idx] = 0;
+      stack.push_back(idx);
+    }
+  };
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int v = 0; v < nx; ++v)
+        if (v == 0 || j == 0 || k == 0 || v == nx - 1 || j == ny - 1 || k == nz - 1) push(v, j, k);
+  while (!stack.empty()) {
+    const long long idx = stack.back();
+    stack.pop_back();
+    const int v = static_cast<int>(idx % nx), j = static_cast<int>((idx / nx) % ny),
+              k = static_cast<int>(idx / (1LL * nx * ny));
+    if (v > 0) push(v - 1, j, k);
+    if (v < nx - 1) push(v + 1, j, k);
+    if (j > 0) push(v, j - 1, k);
+    if (j < ny - 1) push(v, j + 1, k);
+    if (k > 0) push(v, j, k - 1);
+    if (k < nz - 1) push(v, j, k + 1);
+  }
+}
+
+bool SkinDetector::inside(const Eigen::Vector3d& p) const {
+  if (closed_.empty()) return false;
+  const Eigen::Vector3d idx = (p - grid_.origin_mm) / voxel_mm_;
+  const int v = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
+            k = static_cast<int>(std::lround(idx.z()));
+  if (v < 0 || j < 0 || k < 0 || v >= grid_.size[0] || j >= grid_.size[1] || k >= grid_.size[2]) return false;
+  return closed_[grid_.linear_index(v, j, k)] != 0;
+}
+
+}  // namespace organfit::fitting

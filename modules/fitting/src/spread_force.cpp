@@ -1,0 +1,87 @@
+#include "organfit/fitting/spread_force.h"
+
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace organfit::fitting {
+
+SpreadAttractiveForce::SpreadAttractiveForce(std::vector<AttractivePoint> points,
+                                             const particles::LennardJones& law, double radius_mm,
+                                             const SpreadForceParams& params, double skin_voxel_mm)
+    : points_(std::move(points)),
+      rho_(radius_mm),
+      r0_(law.r0()),
+      kappa_(params.stiffness_fraction * law.stiffness()),
+      f_cap_(params.max_force_shells * law.f_max()),
+      params_(params),
+      skin_(skin_voxel_mm, radius_mm) {
+  validate_points(points_);
+  if (!(params.stiffness_fraction > 0)) throw std::invalid_argument("spread force: stiffness must be > 0");
+  if (!(params.patch_sigma_r0 > 0) || !(params.patch_radius_r0 > 0))
+    throw std::invalid_argument("spread force: patch sizes must be > 0");
+  status_.resize(points_.size());
+  patch_.resize(points_.size());
+}
+
+void SpreadAttractiveForce::assign(const particles::Positions& x) {
+  const auto& skin = skin_.skin();
+  double outlier = params_.outlier_distance_mm;
+  if (outlier <= 0 && x.cols() > 0) outlier = 0.5 * (x.rowwise().maxCoeff() - x.rowwise().minCoeff()).norm();
+  const double sigma = params_.patch_sigma_r0 * r0_, radius = params_.patch_radius_r0 * r0_;
+  for (size_t k = 0; k < points_.size(); ++k) {
+    PointStatus& st = status_[k];
+    st = PointStatus{};
+    patch_[k].clear();
+    double best = std::numeric_limits<double>::infinity();
+    for (int i : skin) {
+      const double d = (x.col(i) - points_[k].p_mm).squaredNorm();
+      if (d < best) best = d, st.epicentre = i;
+    }
+    if (st.epicentre < 0) continue;
+    st.d_min_mm = std::sqrt(best);
+    st.inside_model = skin_.inside(points_[k].p_mm);
+    if (!st.inside_model && st.d_min_mm - rho_ > outlier) {
+      st.rejected = true;
+      continue;
+    }
+    const Eigen::Vector3d e = x.col(st.epicentre);
+    for (int i : skin) {
+      const double d2 = (x.col(i) - e).squaredNorm();
+      if (d2 <= radius * radius)
+        patch_[k].push_back({i, points_[k].confidence * std::exp(-d2 / (2 * sigma * sigma))});
+    }
+    st.influence_count = static_cast<int>(patch_[k].size());
+  }
+}
+
+double SpreadAttractiveForce::add_forces(const particles::State& state, particles::Forces& f, bool) {
+  if (skin_.update(state.x)) assign(state.x);
+  const int n = state.size();
+  num_.assign(n, Eigen::Vector3d::Zero());
+  den_.assign(n, 0.0);
+  for (size_t k = 0; k < points_.size(); ++k) {
+    PointStatus& st = status_[k];
+    if (st.rejected || patch_[k].empty()) continue;
+    const Eigen::Vector3d to_p = points_[k].p_mm - state.x.col(st.epicentre);
+    const double d = to_p.norm();
+    st.d_min_mm = d;
+    st.reached = std::abs(d - rho_) < 1e-3 * rho_;
+    if (d < 1e-12) continue;
+    const Eigen::Vector3d r = (d - rho_) * (to_p / d);
+    for (const auto& [i, w] : patch_[k]) {
+      num_[i] += w * r;
+      den_[i] += w;
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    if (den_[i] == 0) continue;
+    Eigen::Vector3d force = kappa_ * num_[i] / std::max(1.0, den_[i]);
+    const double mag = force.norm();
+    if (mag > f_cap_) force *= f_cap_ / mag;
+    f.col(i) += force;
+  }
+  return 0.0;
+}
+
+}  // namespace organfit::fitting

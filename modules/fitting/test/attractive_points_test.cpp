@@ -1,0 +1,136 @@
+#include "organfit/fitting/attractive_points.h"
+
+#include <gtest/gtest.h>
+
+#include "organfit/particles/lattice_fill.h"
+
+namespace organfit::fitting {
+namespace {
+
+using particles::Forces;
+using particles::State;
+
+class PaperForceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    params_.r0_mm = 2.0;
+    law_ = std::make_unique<particles::LennardJones>(params_);
+    a_ = particles::fcc_equilibrium_spacing(*law_);
+    state_ = State(particles::fill_ellipsoid({30, 20, 20}, {0, 0, 0}, a_));
+    force_params_.total_force_factor = 1000;  // no cap unless a test asks for it
+  }
+  Forces forces_of(PaperAttractiveForce& term) {
+    Forces f = Forces::Zero(3, state_.size());
+    term.add_forces(state_, f, false);
+    return f;
+  }
+  double rho() const { return 0.5 * params_.r0_mm; }
+  particles::CohesionParams params_;
+  std::unique_ptr<particles::LennardJones> law_;
+  double a_ = 0;
+  State state_;
+  PaperForceParams force_params_;
+};
+
+TEST_F(PaperForceTest, EpicentreReceivesExactlyFMaxKTowardsThePoint) {
+  const Eigen::Vector3d p(15 + 5, 0.3, -0.2);
+  PaperAttractiveForce term({{p, 1.0}}, *law_, rho(), force_params_, rho());
+  const Forces f = forces_of(term);
+  const PointStatus& st = term.status()[0];
+  ASSERT_GE(st.epicentre, 0);
+  const int w = term.first_shell_count(state_.x, st.epicentre);
+  EXPECT_GE(w, 5);
+  EXPECT_LE(w, 12);
+  EXPECT_NEAR(st.f_max_k, 0.5 * w * law_->f_max(), 1e-12);
+  EXPECT_NEAR(f.col(st.epicentre).norm(), st.f_max_k, 1e-9 * st.f_max_k);
+  const Eigen::Vector3d u = (p - state_.x.col(st.epicentre)).normalized();
+  EXPECT_NEAR(f.col(st.epicentre).normalized().dot(u), 1.0, 1e-12);
+  EXPECT_FALSE(st.inside_model);
+}
+
+TEST_F(PaperForceTest, OthersFallOffAsTheRatioToThePowerAlphaMinusOne) {
+  force_params_.alpha = 3.0;
+  force_params_.influence_radius_min_r0 = 2.5;
+  const Eigen::Vector3d p(20, 0, 0);
+  PaperAttractiveForce term({{p, 1.0}}, *law_, rho(), force_params_, rho());
+  const Forces f = forces_of(term);
+  const PointStatus& st = term.status()[0];
+  ASSERT_GT(st.influence_count, 3);
+  int checked = 0;
+  for (int i = 0; i < state_.size(); ++i) {
+    if (i == st.epicentre || f.col(i).norm() == 0) continue;
+    const double r = (p - state_.x.col(i)).norm();
+    const double expected = st.f_max_k * std::pow((st.d_min_mm - rho()) / (r - rho()), 2.0);
+    EXPECT_NEAR(f.col(i).norm(), expected, 1e-9 * st.f_max_k) << i;
+    EXPECT_LT(f.col(i).norm(), st.f_max_k);
+    ++checked;
+  }
+  EXPECT_EQ(checked + 1, st.influence_count);
+}
+
+TEST_F(PaperForceTest, TotalForceCapScalesTheOthersNotTheEpicentre) {
+  force_params_.total_force_factor = 1.5;
+  force_params_.influence_radius_min_r0 = 3.0;
+  PaperAttractiveForce term({{Eigen::Vector3d(20, 0, 0), 1.0}}, *law_, rho(), force_params_, rho());
+  const Forces f = forces_of(term);
+  const PointStatus& st = term.status()[0];
+  double total = 0;
+  for (int i = 0; i < state_.size(); ++i) total += f.col(i).norm();
+  EXPECT_NEAR(total, 1.5 * st.f_max_k, 1e-9 * st.f_max_k);
+  EXPECT_NEAR(f.col(st.epicentre).norm(), st.f_max_k, 1e-9 * st.f_max_k);
+}
+
+TEST_F(PaperForceTest, ZeroOnArrivalAndForAPointOnAParticle) {
+  // Case 2: the point lies inside a skin particle: no force at all.
+  PaperAttractiveForce on_particle({{state_.x.col(0) + Eigen::Vector3d(0.2, 0, 0), 1.0}}, *law_,
+                                   rho(), force_params_, rho());
+  EXPECT_EQ(forces_of(on_particle).norm(), 0.0);
+  EXPECT_TRUE(on_particle.status()[0].reached);
+  // Arrival: the epicentre moved onto its point (the skin not recomputed): all forces vanish.
+  const Eigen::Vector3d p(15 + 1.5, 0, 0);
+  PaperAttractiveForce term({{p, 1.0}}, *law_, rho(), force_params_, 10.0 /* coarse skin: no recompute */);
+  forces_of(term);
+  const int e = term.status()[0].epicentre;
+  state_.x.col(e) = p + Eigen::Vector3d(0.5 * rho(), 0, 0);
+  EXPECT_EQ(forces_of(term).norm(), 0.0);
+  EXPECT_TRUE(term.status()[0].reached);
+}
+
+TEST_F(PaperForceTest, InsidePointPushesTheSkinInwardsTowardsIt) {
+  const Eigen::Vector3d p(9, 0, 0);  // inside, 6 mm below the x = 15 mm surface
+  force_params_.influence_radius_min_r0 = 2.0;
+  PaperAttractiveForce term({{p, 1.0}}, *law_, rho(), force_params_, rho());
+  const Forces f = forces_of(term);
+  EXPECT_TRUE(term.status()[0].inside_model);
+  int pushed = 0;
+  for (int i = 0; i < state_.size(); ++i) {
+    if (f.col(i).norm() == 0) continue;
+    // Pushed towards the point: into the body (skin around the cap and the sides nearby).
+    EXPECT_NEAR(f.col(i).normalized().dot((p - state_.x.col(i)).normalized()), 1.0, 1e-12);
+    ++pushed;
+  }
+  EXPECT_GT(pushed, 0);
+}
+
+TEST_F(PaperForceTest, FarOutlierIsRejectedAndExertsNoForce) {
+  PaperAttractiveForce term({{Eigen::Vector3d(300, 0, 0), 1.0}, {Eigen::Vector3d(18, 0, 0), 1.0}},
+                            *law_, rho(), force_params_, rho());
+  const Forces f = forces_of(term);
+  EXPECT_TRUE(term.status()[0].rejected);
+  EXPECT_FALSE(term.status()[1].rejected);
+  EXPECT_GT(f.norm(), 0.0);
+  EXPECT_LT(f.colwise().norm().maxCoeff(), 1.0001 * term.status()[1].f_max_k);
+}
+
+TEST(PaperForce, BadPointsAndParametersAreRefused) {
+  particles::LennardJones law{particles::CohesionParams{}};
+  PaperForceParams p;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(PaperAttractiveForce({{Eigen::Vector3d(nan, 0, 0), 1.0}}, law, 0.5, p, 0.5), std::invalid_argument);
+  EXPECT_THROW(PaperAttractiveForce({{Eigen::Vector3d(0, 0, 0), 0.0}}, law, 0.5, p, 0.5), std::invalid_argument);
+  p.alpha = 0.5;
+  EXPECT_THROW(PaperAttractiveForce({}, law, 0.5, p, 0.5), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace organfit::fitting

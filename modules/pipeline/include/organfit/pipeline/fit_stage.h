@@ -1,0 +1,37 @@
+#pragma once
+// The points stage (generate on a known deformation, or read a file) and the fit stage.
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+
+#include "organfit/config/scene.h"
+#include "organfit/evaluation/synthetic.h"
+#include "organfit/fitting/fit.h"
+#include "organfit/pipeline/model_stage.h"
+
+namespace organfit::pipeline {
+
+struct PointsStageResult {
+  std::vector<fitting::AttractivePoint> points;
+  std::optional<evaluation::Deformation> truth;  ///< set when the points were generated
+  nlohmann::json summary;
+};
+
+/// Reads `x,y,z[,confidence]` lines (mm; '#' comments and a header line allowed).
+/// Throws InputError "file:line: reason" on text, missing columns, NaN or Inf.
+std::vector<fitting::AttractivePoint> read_points_csv(const std::filesystem::path& file);
+
+PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model);
+
+struct FitStageResult {
+  fitting::FitResult fit;
+  nlohmann::json fit_summary;    ///< run.json "fit"
+  nlohmann::json truth_summary;  ///< run.json "truth" (when the truth is known)
+  std::string history_csv;
+  std::string not_converged_message;  ///< which points are left and how far
+};
+
+FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model,
+                             const PointsStageResult& points);
+
+}  // namespace organfit::pipeline

@@ -1,0 +1,279 @@
+#include "organfit/pipeline/fit_stage.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <Eigen/SVD>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "organfit/fitting/global_fit.h"
+#include "organfit/fitting/spread_force.h"
+#include "organfit/geometry/mask_ops.h"
+#include "organfit/particles/diagnostics.h"
+#include "organfit/support/error.h"
+#include "organfit/support/progress.h"
+#include "organfit/support/resources.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::pipeline {
+
+std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
+  std::ifstream in(file);
+  if (!in) throw InputError(file.string() + ": cannot read the points file");
+  std::vector<fitting::AttractivePoint> points;
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first == std::string::npos || line[first] == '#') continue;
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) cells.push_back(cell);
+    auto fail = [&](const std::string& why) {
+      throw InputError(fmt::format("{}:{}: {}", file.string(), line_no, why));
+    };
+    std::vector<double> v;
+    for (const auto& c : cells) {
+      size_t used = 0;
+      double d = 0;
+      try {
+        d = std::stod(c, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (used == 0 || c.find_first_not_of(" \t\r", used) != std::string::npos) {
+        if (points.empty() && v.empty()) goto next_line;  // a header line
+        fail(fmt::format("'{}' is not a number", c));
+      }
+      if (!std::isfinite(d)) fail("non-finite coordinate");
+      v.push_back(d);
+    }
+    if (v.size() != 3 && v.size() != 4) fail(fmt::format("expected x,y,z[,confidence], got {} columns", v.size()));
+    if (v.size() == 4 && !(v[3] > 0 && v[3] <= 1)) fail("confidence must be in (0, 1]");
+    points.push_back({Eigen::Vector3d(v[0], v[1], v[2]), v.size() == 4 ? v[3] : 1.0});
+  next_line:;
+  }
+  if (points.empty()) throw InputError(file.string() + ": no points in the file");
+  return points;
+}
+
+PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model) {
+  PointsStageResult r;
+  if (scene.text("points", "source") == "file") {
+    r.points = read_points_csv(scene.path("points", "file"));
+    r.summary = {{"source", "file"}, {"count", r.points.size()}};
+    return r;
+  }
+  evaluation::Deformation d;
+  d.stretch = scene.number("points", "stretch");
+  d.bend_mm = scene.number("points", "bend_mm");
+  d.centre_mm = model.shape.centre_mm;
+  d.half_length_mm = 0.5 * model.shape.size_mm.x() * d.stretch;
+  evaluation::SamplingOptions o;
+  o.count = static_cast<int>(scene.integer("points", "count"));
+  o.noise_mm = scene.number("points", "noise_mm");
+  o.outlier_fraction = scene.number("points", "outlier_fraction");
+  o.half_coverage = scene.text("points", "coverage") == "half";
+  o.seed = static_cast<unsigned>(scene.integer("scene", "seed"));
+  r.points = evaluation::sample_deformed_surface(model.shape, d, o);
+  r.truth = d;
+  r.summary = {{"source", "generate"}, {"count", r.points.size()}, {"noise_mm", o.noise_mm},
+               {"outlier_fraction", o.outlier_fraction}, {"coverage", scene.text("points", "coverage")},
+               {"stretch", d.stretch}, {"bend_mm", d.bend_mm}};
+  return r;
+}
+
+namespace {
+
+double body_volume(const particles::Positions& x, double rho) {
+  return geometry::particle_body_volume_mm3(x, rho, 0.5 * rho, rho);
+}
+
+/// Bounds of the deformed shape: its corners mapped, widened by the bend.
+geometry::Aabb deformed_bounds(const evaluation::Shape& s, const evaluation::Deformation& d) {
+  const geometry::Aabb b = s.bounds();
+  geometry::Aabb out{Eigen::Vector3d::Constant(1e300), Eigen::Vector3d::Constant(-1e300)};
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d corner((c & 1) ? b.max_mm.x() : b.min_mm.x(), (c & 2) ? b.max_mm.y() : b.min_mm.y(),
+                                 (c & 4) ? b.max_mm.z() : b.min_mm.z());
+    const Eigen::Vector3d q = d.apply(corner);
+    out.min_mm = out.min_mm.cwiseMin(q);
+    out.max_mm = out.max_mm.cwiseMax(q);
+  }
+  out.min_mm.y() -= std::abs(d.bend_mm);
+  out.max_mm.y() += std::abs(d.bend_mm);
+  return out;
+}
+
+}  // namespace
+
+FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model,
+                             const PointsStageResult& pts) {
+  FitStageResult out;
+  const std::string method = scene.text("fit", "method");
+  particles::Model& m = *model.model;
+  particles::State& state = model.state;
+  const double rho = m.radius_mm();
+  const particles::LennardJones law(model.cohesion);
+  const double skin_voxel = scene.number("fit", "skin_voxel_r0") * law.r0();
+  const auto& points = pts.points;
+  try {
+    fitting::validate_points(points);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(std::string("points: ") + e.what());
+  }
+
+  // Truth before fitting: the discretisation floor and the undeformed error.
+  const double truth_voxel = 0.5 * rho;
+  const particles::Positions start = state.x;
+  std::optional<geometry::SurfaceComparison> floor, undeformed;
+  if (pts.truth) {
+    floor = evaluation::compare_with_body(start, rho, [&](const Eigen::Vector3d& p) { return model.shape.inside(p); },
+                                          model.shape.bounds(), truth_voxel);
+    undeformed = evaluation::compare_with_body(start, rho, evaluation::deformed_inside(model.shape, *pts.truth),
+                                               deformed_bounds(model.shape, *pts.truth), truth_voxel);
+  }
+  const double v0 = body_volume(start, rho);
+
+  particles::IntegratorOptions opt = integrator_options_from(scene, m);
+  opt.damping = scene.number("fit", "damping_ratio") * 2.0 * std::sqrt(law.stiffness() * m.mass());
+
+  fitting::FitOptions fo;
+  fo.residual_mean_tolerance_mm = scene.number("fit", "residual_tolerance_mm");
+  fo.residual_max_tolerance_mm = scene.number("fit", "residual_max_tolerance_mm");
+  fo.kinetic_tolerance = scene.number("fit", "kinetic_tolerance");
+  fo.max_steps = scene.integer("fit", "max_steps");
+  fo.max_wall_s = scene.number("fit", "max_wall_s");
+  fo.record_every = static_cast<int>(scene.integer("fit", "record_every"));
+  fo.volume = [&](const particles::Positions& x) { return body_volume(x, rho); };
+  fo.volume_every_rows = 5;
+
+  Stopwatch clock;
+  nlohmann::json global = nullptr;
+  std::function<const std::vector<int>&(const particles::Positions&)> skin_of;
+  std::function<void(particles::State&)> after_row;
+  const std::vector<fitting::PointStatus>* status = nullptr;
+  if (method == "paper") {
+    fitting::PaperForceParams pp;
+    pp.alpha = scene.number("fit", "alpha");
+    pp.influence_radius_min_r0 = scene.number("fit", "influence_radius_min_r0");
+    pp.influence_growth = scene.number("fit", "influence_growth");
+    pp.influence_radius_max_r0 = scene.number("fit", "influence_radius_max_r0");
+    pp.total_force_factor = scene.number("fit", "total_force_factor");
+    pp.outlier_distance_mm = scene.number("fit", "outlier_distance_mm");
+    auto& term = m.add(std::make_unique<fitting::PaperAttractiveForce>(points, law, rho, pp, skin_voxel));
+    skin_of = [&term](const particles::Positions&) -> const std::vector<int>& { return term.skin().skin(); };
+    status = &term.status();
+  } else {
+    // Global stage: volume-preserving affine map, the body re-made in its new shape.
+    fitting::SkinDetector skin(skin_voxel, rho);
+    skin.update(state.x);
+    const fitting::SurfaceSamples samples = fitting::surface_samples(state.x, skin.skin(), rho);
+    const fitting::GlobalMap map{fitting::fit_volume_preserving_affine(samples, points, {})};
+    const fitting::AffineFit& affine = map.affine;
+    state = particles::State(fitting::refill_mapped_body(state.x, rho, model.lattice_spacing_mm, map));
+    const Eigen::Vector3d stretches =
+        Eigen::JacobiSVD<Eigen::Matrix3d>(affine.a).singularValues();
+    global = {{"rms_before_mm", affine.rms_before_mm}, {"rms_after_mm", affine.rms_after_mm},
+              {"iterations", affine.iterations},
+              {"principal_stretches", {stretches.x(), stretches.y(), stretches.z()}},
+              {"translation_mm", {affine.t.x(), affine.t.y(), affine.t.z()}},
+              {"wall_s", clock.elapsed_s()}};
+    global["volume_change_after_refill_pct"] = 100.0 * (body_volume(state.x, rho) - v0) / v0;
+    if (model.skeleton) {
+      m.remove(*model.skeleton);
+      model.skeleton = nullptr;
+    }
+    {  // settle the new surface before the local stage
+      particles::IntegratorOptions relax_opt = opt;
+      particles::relax(m, state, relax_opt, 300, scene.number("fit", "kinetic_tolerance"));
+    }
+    if (scene.flag("model", "skeleton")) {
+      const particles::Skeleton sk = particles::medial_skeleton(
+          state.x, model.lattice_spacing_mm, scene.number("model", "skeleton_node_spacing_r0") * law.r0());
+      model.skeleton = &m.add(std::make_unique<particles::SkeletonForce>(sk, state.x, model.skeleton_params));
+    }
+    // Local stage: smooth patches; the skeleton's rest shape follows the fit (it keeps
+    // the global shape between rows but does not pull the body back to where it was).
+    auto& term = m.add(std::make_unique<fitting::SpreadAttractiveForce>(points, law, rho,
+                                                                        fitting::SpreadForceParams{}, skin_voxel));
+    skin_of = [&term](const particles::Positions&) -> const std::vector<int>& { return term.skin().skin(); };
+    status = &term.status();
+    if (model.skeleton) {
+      after_row = [&model](particles::State& s) { model.skeleton->set_rest_shape(s.x); };
+    }
+  }
+
+  Progress progress("fit", fo.max_steps);
+  out.fit = fitting::run_fit(m, state, opt, points, skin_of, fo,
+                             [&](const fitting::HistoryRow& h) {
+                               progress.update(h.step, fmt::format("residual {:.2f} mm", h.residual_mean_mm));
+                             },
+                             after_row);
+  progress.finish();
+  out.fit.wall_s += global.is_null() ? 0.0 : global["wall_s"].get<double>();
+
+  const double v1 = body_volume(state.x, rho);
+  int rejected = 0;
+  for (const auto& st : *status) rejected += st.rejected;
+  out.fit_summary = {{"method", method},
+                     {"attractive_points", points.size()},
+                     {"rejected_points", rejected},
+                     {"iterations", out.fit.steps},
+                     {"wall_s", out.fit.wall_s},
+                     {"instrument_wall_s", out.fit.instrument_wall_s},
+                     {"converged", out.fit.converged},
+                     {"stop_reason", out.fit.stop_reason},
+                     {"residual_mean_mm", out.fit.residual_mean_mm},
+                     {"residual_max_mm", out.fit.residual_max_mm},
+                     {"volume_before_mm3", v0},
+                     {"volume_after_mm3", v1},
+                     {"volume_change_pct", 100.0 * (v1 - v0) / v0},
+                     {"components", particles::connected_components(state.x, 1.5 * law.r0())},
+                     {"skin_particles", skin_of(state.x).size()},
+                     {"finite", state.x.allFinite()}};
+  if (!global.is_null()) out.fit_summary["global"] = global;
+  if (pts.truth) {
+    const auto fitted = evaluation::compare_with_body(state.x, rho, evaluation::deformed_inside(model.shape, *pts.truth),
+                                                      deformed_bounds(model.shape, *pts.truth), truth_voxel);
+    const double denom = undeformed->msd_mm - floor->msd_mm;
+    out.truth_summary = {{"msd_mm", fitted.msd_mm},
+                         {"hd95_mm", fitted.hd95_mm},
+                         {"dice", fitted.dice},
+                         {"msd_undeformed_mm", undeformed->msd_mm},
+                         {"hd95_undeformed_mm", undeformed->hd95_mm},
+                         {"msd_floor_mm", floor->msd_mm},
+                         {"recovery", denom > 0 ? (undeformed->msd_mm - fitted.msd_mm) / denom : 0.0},
+                         {"voxel_mm", truth_voxel}};
+  }
+  std::ostringstream csv;
+  csv << "step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,kinetic_energy_per_particle\n";
+  for (const auto& h : out.fit.history) {
+    csv << fmt::format("{},{:.6f},{:.6f},{:.6f},{},{:.6g}\n", h.step, h.wall_s, h.residual_mean_mm,
+                       h.residual_max_mm, std::isnan(h.volume_change_pct) ? std::string() : fmt::format("{:.4f}", h.volume_change_pct),
+                       h.kinetic_energy_per_particle);
+  }
+  out.history_csv = csv.str();
+  if (!out.fit.converged) {
+    std::vector<std::pair<double, int>> worst;
+    for (size_t k = 0; k < out.fit.residuals_mm.size(); ++k) worst.push_back({out.fit.residuals_mm[k], static_cast<int>(k)});
+    std::sort(worst.rbegin(), worst.rend());
+    int far = 0;
+    for (const auto& [r, k] : worst) far += r > rho;
+    std::string list;
+    for (size_t w = 0; w < std::min<size_t>(5, worst.size()); ++w)
+      list += fmt::format("{}#{} ({:.2f} mm)", w ? ", " : "", worst[w].second, worst[w].first);
+    out.not_converged_message = fmt::format(
+        "fit did not converge ({}): mean residual {:.2f} mm (tolerance {:.2f}), {} of {} points farther than "
+        "{:.2f} mm; worst: {}",
+        out.fit.stop_reason, out.fit.residual_mean_mm, fo.residual_mean_tolerance_mm, far, points.size(), rho, list);
+  }
+  return out;
+}
+
+}  // namespace organfit::pipeline
