@@ -35,6 +35,43 @@ SurfaceSamples surface_samples(const particles::Positions& x, const std::vector<
   return out;
 }
 
+SurfaceSamples reference_surface(const geometry::LabelVolume& reference, int stride) {
+  const geometry::ImageGeometry& g = reference.geometry;
+  const size_t total = reference.labels.size();
+  std::vector<std::uint8_t> in(total), out(total);
+  for (size_t i = 0; i < total; ++i) in[i] = reference.labels[i] != 0, out[i] = !in[i];
+  const std::vector<double> to_in = geometry::squared_distance_transform(in, g);
+  const std::vector<double> to_out = geometry::squared_distance_transform(out, g);
+  // Signed distance at voxel centres, positive outside (half a voxel at the boundary).
+  auto sd = [&](int i, int j, int k) {
+    i = std::clamp(i, 0, g.size[0] - 1), j = std::clamp(j, 0, g.size[1] - 1), k = std::clamp(k, 0, g.size[2] - 1);
+    const long long v = g.linear_index(i, j, k);
+    const double h = 0.5 * g.spacing_mm.minCoeff();
+    return in[v] ? -(std::sqrt(to_out[v]) - h) : std::sqrt(to_in[v]) - h;
+  };
+  const std::vector<std::uint8_t> boundary = geometry::surface_of(reference);
+  std::vector<Eigen::Vector3d> pts, nrm;
+  long long seen = 0;
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        if (!boundary[g.linear_index(i, j, k)] || (seen++ % std::max(1, stride)) != 0) continue;
+        Eigen::Vector3d grad((sd(i + 1, j, k) - sd(i - 1, j, k)) / (2 * g.spacing_mm.x()),
+                             (sd(i, j + 1, k) - sd(i, j - 1, k)) / (2 * g.spacing_mm.y()),
+                             (sd(i, j, k + 1) - sd(i, j, k - 1)) / (2 * g.spacing_mm.z()));
+        if (grad.norm() < 1e-9) continue;
+        grad = g.direction * grad;
+        const Eigen::Vector3d n = grad.normalized();
+        pts.push_back(g.index_to_physical(Eigen::Vector3d(i, j, k)) - sd(i, j, k) * n);
+        nrm.push_back(n);
+      }
+  SurfaceSamples s;
+  s.points.resize(3, static_cast<Eigen::Index>(pts.size()));
+  s.normals.resize(3, static_cast<Eigen::Index>(pts.size()));
+  for (size_t q = 0; q < pts.size(); ++q) s.points.col(q) = pts[q], s.normals.col(q) = nrm[q];
+  return s;
+}
+
 AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
                                        const std::vector<AttractivePoint>& points,
                                        const AffineFitOptions& o) {
@@ -127,22 +164,141 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
   return fit;
 }
 
-Eigen::Vector3d GlobalMap::inverse(const Eigen::Vector3d& q) const {
-  return affine.a.inverse() * (q - affine.t);
+Eigen::Vector3d QuadraticShears::apply(const Eigen::Vector3d& q) const {
+  Eigen::Vector3d u = q - centre;
+  u.x() += c(0) * u.y() * u.y() + c(1) * u.z() * u.z() + c(2) * u.y() * u.z();
+  u.y() += c(3) * u.x() * u.x() + c(4) * u.z() * u.z() + c(5) * u.x() * u.z();
+  u.z() += c(6) * u.x() * u.x() + c(7) * u.y() * u.y() + c(8) * u.x() * u.y();
+  return centre + u;
 }
 
-particles::Positions refill_mapped_body(const particles::Positions& x, double radius_mm,
+Eigen::Vector3d QuadraticShears::inverse(const Eigen::Vector3d& q) const {
+  Eigen::Vector3d u = q - centre;  // undo the shears in reverse order
+  u.z() -= c(6) * u.x() * u.x() + c(7) * u.y() * u.y() + c(8) * u.x() * u.y();
+  u.y() -= c(3) * u.x() * u.x() + c(4) * u.z() * u.z() + c(5) * u.x() * u.z();
+  u.x() -= c(0) * u.y() * u.y() + c(1) * u.z() * u.z() + c(2) * u.y() * u.z();
+  return centre + u;
+}
+
+Eigen::Vector3d GlobalMap::inverse(const Eigen::Vector3d& q) const {
+  return affine.a.inverse() * (shears.inverse(q) - affine.t);
+}
+
+namespace {
+
+/// Weights by the outlier rule: beyond median + mads * 1.4826 MAD of r get none.
+double robust_weights(const std::vector<double>& r, const std::vector<AttractivePoint>& points,
+                      double mads, std::vector<double>& w) {
+  const int m = static_cast<int>(r.size());
+  std::vector<double> sorted = r;
+  std::nth_element(sorted.begin(), sorted.begin() + m / 2, sorted.end());
+  const double median = sorted[m / 2];
+  for (double& v : sorted) v = std::abs(v - median);
+  std::nth_element(sorted.begin(), sorted.begin() + m / 2, sorted.end());
+  const double cut = median + mads * 1.4826 * std::max(sorted[m / 2], 1e-6);
+  double sum = 0;
+  int kept = 0;
+  w.assign(m, 0.0);
+  for (int k = 0; k < m; ++k) {
+    w[k] = r[k] <= cut ? points[k].confidence : 0.0;
+    if (w[k] > 0) sum += r[k] * r[k], ++kept;
+  }
+  return std::sqrt(sum / std::max(1, kept));
+}
+
+}  // namespace
+
+GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
+                         const AffineFitOptions& o) {
+  GlobalMap map;
+  map.affine = fit_volume_preserving_affine(surface, points, o);  // the starting point
+  map.rms_after_mm = map.affine.rms_after_mm;
+  const int m = static_cast<int>(points.size());
+  if (m < 21 || surface.points.cols() == 0) return map;  // 21 unknowns below
+  map.shears.centre = ((map.affine.a * surface.points).colwise() + map.affine.t).rowwise().mean();
+  Eigen::Matrix3Xd p(3, m);
+  for (int k = 0; k < m; ++k) p.col(k) = points[k].p_mm;
+  const double extent2 = (p.colwise() - map.shears.centre).colwise().squaredNorm().mean();
+  const double lambda_a = o.regularisation * m * extent2;
+  const double lambda_c = o.shear_regularisation * m * extent2 * extent2;  // coefficients are 1/mm
+  const Eigen::Vector3d centroid = surface.points.rowwise().mean();
+
+  std::vector<int> match(m);
+  std::vector<double> r(m), w;
+  using Vec21 = Eigen::Matrix<double, 21, 1>;
+  auto basis = [](const Eigen::Vector3d& u) {  // d(shear image)/dc at u: 3 x 9
+    Eigen::Matrix<double, 3, 9> b = Eigen::Matrix<double, 3, 9>::Zero();
+    b(0, 0) = u.y() * u.y(), b(0, 1) = u.z() * u.z(), b(0, 2) = u.y() * u.z();
+    b(1, 3) = u.x() * u.x(), b(1, 4) = u.z() * u.z(), b(1, 5) = u.x() * u.z();
+    b(2, 6) = u.x() * u.x(), b(2, 7) = u.y() * u.y(), b(2, 8) = u.x() * u.y();
+    return b;
+  };
+  for (int it = 0; it < o.iterations; ++it) {
+    const Eigen::Matrix3Xd affine_img = (map.affine.a * surface.points).colwise() + map.affine.t;
+    Eigen::Matrix3Xd moved(3, affine_img.cols());
+    for (Eigen::Index j = 0; j < affine_img.cols(); ++j) moved.col(j) = map.shears.apply(affine_img.col(j));
+    for (int k = 0; k < m; ++k) {
+      Eigen::Index j;
+      r[k] = std::sqrt((moved.colwise() - p.col(k)).colwise().squaredNorm().minCoeff(&j));
+      match[k] = static_cast<int>(j);
+    }
+    const double rms = robust_weights(r, points, o.outlier_mads, w);
+    if (it > 0 && std::abs(map.rms_after_mm - rms) < 1e-5 * (1 + rms)) {
+      map.rms_after_mm = rms;
+      break;
+    }
+    map.rms_after_mm = rms;
+    // Linearised image of sample s: a s + t + B(u) c, u = the current affine image - centre.
+    const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
+    Eigen::Matrix<double, 21, 21> nrm = Eigen::Matrix<double, 21, 21>::Zero();
+    Vec21 rhs = Vec21::Zero();
+    for (int k = 0; k < m; ++k) {
+      if (w[k] == 0) continue;
+      const Eigen::Vector3d s = surface.points.col(match[k]);
+      const Eigen::Vector3d n = (normal_map * surface.normals.col(match[k])).normalized();
+      const Eigen::Matrix<double, 3, 9> b = basis(affine_img.col(match[k]) - map.shears.centre);
+      Vec21 row;
+      row << n.x() * s, n.y() * s, n.z() * s, n, (n.transpose() * b).transpose();
+      nrm += w[k] * row * row.transpose();
+      rhs += w[k] * row * n.dot(p.col(k));
+      for (int c = 0; c < 3; ++c) {
+        Vec21 pp = Vec21::Zero();
+        pp.segment<3>(3 * c) = s;
+        pp(9 + c) = 1.0;
+        pp.segment<9>(12) = b.row(c).transpose();
+        nrm += o.point_to_point * w[k] * pp * pp.transpose();
+        rhs += o.point_to_point * w[k] * pp * p(c, k);
+      }
+    }
+    for (int c = 0; c < 3; ++c) {
+      for (int d = 0; d < 3; ++d) nrm(3 * c + d, 3 * c + d) += lambda_a;
+      rhs(3 * c + c) += lambda_a;
+    }
+    for (int c = 0; c < 9; ++c) nrm(12 + c, 12 + c) += lambda_c;
+    const Vec21 theta = nrm.ldlt().solve(rhs);
+    Eigen::Matrix3d a;
+    a << theta.segment<3>(0).transpose(), theta.segment<3>(3).transpose(), theta.segment<3>(6).transpose();
+    Eigen::Vector3d t = theta.segment<3>(9);
+    const double det = a.determinant();
+    if (!(det > 0) || !theta.allFinite()) break;  // degenerate: keep the last good map
+    const Eigen::Vector3d image = a * centroid + t;  // det(a) = 1 about the body's centre
+    a /= std::cbrt(det);
+    t = image - a * centroid;
+    map.affine.a = a;
+    map.affine.t = t;
+    map.shears.c = theta.segment<9>(12);
+  }
+  map.affine.rms_after_mm = map.rms_after_mm;
+  return map;
+}
+
+particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, int count,
                                         double a_nn_mm, const GlobalMap& map) {
-  const int n = static_cast<int>(x.cols());
-  if (n == 0) return x;
-  // Depth inside the current body (balls closed), on a grid of rho/2.
-  const double voxel = 0.5 * radius_mm;
-  const geometry::Aabb box{x.rowwise().minCoeff(), x.rowwise().maxCoeff()};
-  const geometry::ImageGeometry g = geometry::grid_covering(box, voxel, 2 * radius_mm + 2 * voxel);
-  geometry::LabelVolume body = geometry::rasterize_balls(x, radius_mm, g);
-  geometry::close_mask(body, radius_mm);
-  std::vector<std::uint8_t> outside(body.labels.size());
-  for (size_t i = 0; i < outside.size(); ++i) outside[i] = body.labels[i] == 0;
+  if (count <= 0) return particles::Positions(3, 0);
+  const geometry::ImageGeometry& g = reference.geometry;
+  // Depth inside the reference body (distance to the nearest outside voxel).
+  std::vector<std::uint8_t> outside(reference.labels.size());
+  for (size_t i = 0; i < outside.size(); ++i) outside[i] = reference.labels[i] == 0;
   const std::vector<double> depth2 = geometry::squared_distance_transform(outside, g);
   auto depth_at = [&](const Eigen::Vector3d& q) {
     const Eigen::Vector3d idx = g.physical_to_index(q);
@@ -152,8 +308,16 @@ particles::Positions refill_mapped_body(const particles::Positions& x, double ra
     return std::sqrt(depth2[g.linear_index(i, j, k)]);
   };
   // Candidate sites: the lattice over the mapped box, centred on the mapped centroid.
+  const geometry::Aabb box = g.bounds_mm();
   geometry::Aabb mapped{Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()),
                         Eigen::Vector3d::Constant(-std::numeric_limits<double>::infinity())};
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  long long inside = 0;
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        if (reference.at(i, j, k)) centroid += g.index_to_physical(Eigen::Vector3d(i, j, k)), ++inside;
+  centroid /= static_cast<double>(std::max<long long>(1, inside));
   for (int c = 0; c < 8; ++c) {
     const Eigen::Vector3d corner((c & 1) ? box.max_mm.x() : box.min_mm.x(),
                                  (c & 2) ? box.max_mm.y() : box.min_mm.y(),
@@ -162,16 +326,13 @@ particles::Positions refill_mapped_body(const particles::Positions& x, double ra
     mapped.min_mm = mapped.min_mm.cwiseMin(q);
     mapped.max_mm = mapped.max_mm.cwiseMax(q);
   }
-  mapped.min_mm.array() -= radius_mm;
-  mapped.max_mm.array() += radius_mm;
-  const Eigen::Vector3d centre = map.apply(x.rowwise().mean());
   const particles::Positions sites = particles::fcc_lattice_points(
-      mapped, centre, a_nn_mm, [](const Eigen::Vector3d&) { return true; });
+      mapped, map.apply(centroid), a_nn_mm, [](const Eigen::Vector3d&) { return true; });
   std::vector<double> d(sites.cols());
   for (Eigen::Index s = 0; s < sites.cols(); ++s) d[s] = depth_at(map.inverse(sites.col(s)));
   std::vector<int> idx(sites.cols());
   std::iota(idx.begin(), idx.end(), 0);
-  const int keep = std::min<int>(n, static_cast<int>(idx.size()));
+  const int keep = std::min<int>(count, static_cast<int>(idx.size()));
   // The deepest `keep` sites; ties broken by index (deterministic).
   std::stable_sort(idx.begin(), idx.end(), [&](int l, int r) { return d[l] > d[r]; });
   std::sort(idx.begin(), idx.begin() + keep);

@@ -74,12 +74,23 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
       den_[i] += w;
     }
   }
+  // Pressure compensation: the patches' net outward push, sum F_i . n_i, is taken back
+  // evenly over the whole skin, so the local stage moves the surface without inflating
+  // or deflating the body (normals radial from the centroid: organs are near-convex).
+  const auto& skin = skin_.skin();
+  const Eigen::Vector3d centroid = state.x.rowwise().mean();
+  double inflation = 0;
   for (int i = 0; i < n; ++i) {
     if (den_[i] == 0) continue;
     Eigen::Vector3d force = kappa_ * num_[i] / std::max(1.0, den_[i]);
     const double mag = force.norm();
     if (mag > f_cap_) force *= f_cap_ / mag;
     f.col(i) += force;
+    inflation += force.dot((state.x.col(i) - centroid).normalized());
+  }
+  if (!skin.empty() && params_.hold_volume) {
+    const double pressure = inflation / static_cast<double>(skin.size());
+    for (int i : skin) f.col(i) -= pressure * (state.x.col(i) - centroid).normalized();
   }
   return 0.0;
 }

@@ -171,18 +171,18 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     status = &term.status();
   } else {
     // Global stage: volume-preserving affine map, the body re-made in its new shape.
-    fitting::SkinDetector skin(skin_voxel, rho);
-    skin.update(state.x);
-    const fitting::SurfaceSamples samples = fitting::surface_samples(state.x, skin.skin(), rho);
-    const fitting::GlobalMap map{fitting::fit_volume_preserving_affine(samples, points, {})};
+    const fitting::SurfaceSamples samples = fitting::reference_surface(model.reference, 2);
+    const fitting::GlobalMap map = fitting::fit_global_map(samples, points, {});
     const fitting::AffineFit& affine = map.affine;
-    state = particles::State(fitting::refill_mapped_body(state.x, rho, model.lattice_spacing_mm, map));
+    state = particles::State(
+        fitting::refill_mapped_body(model.reference, state.size(), model.lattice_spacing_mm, map));
     const Eigen::Vector3d stretches =
         Eigen::JacobiSVD<Eigen::Matrix3d>(affine.a).singularValues();
     global = {{"rms_before_mm", affine.rms_before_mm}, {"rms_after_mm", affine.rms_after_mm},
               {"iterations", affine.iterations},
               {"principal_stretches", {stretches.x(), stretches.y(), stretches.z()}},
               {"translation_mm", {affine.t.x(), affine.t.y(), affine.t.z()}},
+              {"shear_coefficients_per_mm", std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
               {"wall_s", clock.elapsed_s()}};
     global["volume_change_after_refill_pct"] = 100.0 * (body_volume(state.x, rho) - v0) / v0;
     if (model.skeleton) {

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include "organfit/evaluation/synthetic.h"
+#include "organfit/geometry/mask_ops.h"
 #include "organfit/particles/cohesion_force.h"
 #include "organfit/particles/diagnostics.h"
 #include "organfit/particles/lattice_fill.h"
@@ -54,6 +55,14 @@ ModelStageResult run_model_stage(const config::Scene& scene) {
   }
   ModelStageResult result;
   result.shape = shape;
+  {  // the reference body: what the particles stand for, kept for re-filling after a fit
+    const geometry::ImageGeometry g = geometry::grid_covering(shape.bounds(), 0.25 * cp.r0_mm, 0.5 * cp.r0_mm);
+    result.reference = geometry::LabelVolume(g);
+    for (int k = 0; k < g.size[2]; ++k)
+      for (int j = 0; j < g.size[1]; ++j)
+        for (int i = 0; i < g.size[0]; ++i)
+          result.reference.at(i, j, k) = shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  }
   result.lattice_spacing_mm = spacing;
   result.cohesion = cp;
   result.state = particles::State(std::move(x));

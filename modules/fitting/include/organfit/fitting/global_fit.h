@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "organfit/fitting/attractive_points.h"
+#include "organfit/geometry/image_geometry.h"
 #include "organfit/particles/state.h"
 
 namespace organfit::fitting {
@@ -20,6 +21,7 @@ struct AffineFitOptions {
   double outlier_mads = 3.0;     ///< points beyond median + this x 1.4826 MAD get no weight
   double point_to_point = 0.1;   ///< weight of the point-to-point term beside point-to-plane
   double regularisation = 1e-3;  ///< pull of A towards I, relative to the points' spread
+  double shear_regularisation = 1e-3;  ///< pull of the shears towards none, likewise
 };
 
 struct AffineFit {
@@ -38,6 +40,11 @@ struct SurfaceSamples {
 SurfaceSamples surface_samples(const particles::Positions& x, const std::vector<int>& skin,
                                double radius_mm);
 
+/// Surface samples of a reference body (a mask): every `stride`-th boundary voxel,
+/// moved onto the zero level of the signed distance, with the distance's gradient as
+/// normal. Denser and smoother than the particles' own surface.
+SurfaceSamples reference_surface(const geometry::LabelVolume& reference, int stride = 1);
+
 /// Robust ICP for x -> a x + t with det(a) = 1 matching the surface to the points:
 /// point-to-plane (normals mapped by a^-T) plus a small point-to-point term, outliers
 /// by a median + MAD rule, then det(a) = 1 by scaling at each iteration.
@@ -45,17 +52,41 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
                                        const std::vector<AttractivePoint>& points,
                                        const AffineFitOptions& options);
 
-/// The global map (affine, det 1).
-struct GlobalMap {
-  AffineFit affine;
-  Eigen::Vector3d apply(const Eigen::Vector3d& p) const { return affine.a * p + affine.t; }
+/// Bending and twisting on top of the affine map: three shears applied in turn about
+/// `centre` (u = q - centre),
+///   x += c0 u_y^2 + c1 u_z^2 + c2 u_y u_z,
+///   y += c3 u_x^2 + c4 u_z^2 + c5 u_x u_z,
+///   z += c6 u_x^2 + c7 u_y^2 + c8 u_x u_y,
+/// each moving one coordinate by a function of the other two: every shear, and so the
+/// whole map, keeps volume exactly (Jacobian determinant 1), and inverts exactly.
+struct QuadraticShears {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  Eigen::Matrix<double, 9, 1> c = Eigen::Matrix<double, 9, 1>::Zero();
+  Eigen::Vector3d apply(const Eigen::Vector3d& q) const;
   Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
 };
 
-/// The body of `x` (balls of `radius_mm`, closed) mapped by `map` and re-filled with
-/// exactly x.cols() particles: the deepest sites of an fcc lattice of spacing `a_nn_mm`
-/// inside the mapped body. Same count, same density: the same volume.
-particles::Positions refill_mapped_body(const particles::Positions& x, double radius_mm,
+/// The global map: affine (det 1), then quadratic shears. Volume-preserving.
+struct GlobalMap {
+  AffineFit affine;
+  QuadraticShears shears;
+  double rms_after_mm = 0;  ///< point-to-surface over the kept points
+  Eigen::Vector3d apply(const Eigen::Vector3d& p) const { return shears.apply(affine.a * p + affine.t); }
+  Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
+};
+
+/// Fits the whole map jointly (Gauss-Newton, point-to-plane plus a small point-to-point
+/// term, the same outlier rule), starting from the affine fit; the shears are
+/// regularised towards none.
+GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
+                         const AffineFitOptions& options);
+
+/// The model's reference body (the mask it was filled from) mapped by `map` and re-filled
+/// with exactly `count` particles: the deepest sites of an fcc lattice of spacing
+/// `a_nn_mm` inside the mapped body. Same count, same density: the same volume. The
+/// reference, not the particles' own ball surface, is mapped: re-sampling the balls
+/// would add a second discretisation error to the first.
+particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, int count,
                                         double a_nn_mm, const GlobalMap& map);
 
 }  // namespace organfit::fitting

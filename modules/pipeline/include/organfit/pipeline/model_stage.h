@@ -19,6 +19,7 @@ struct ModelStageResult {
   particles::State state;
   std::unique_ptr<particles::Model> model;
   evaluation::Shape shape;               ///< the body that was filled
+  geometry::LabelVolume reference;       ///< the same body as a mask (voxels of rho/2)
   double lattice_spacing_mm = 0;         ///< relaxed fcc nearest-neighbour distance
   particles::CohesionParams cohesion;
   particles::SkeletonForce* skeleton = nullptr;  ///< owned by `model`; null without skeleton
