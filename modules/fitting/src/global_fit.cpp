@@ -77,11 +77,13 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
                                        const AffineFitOptions& o) {
   AffineFit fit;
   const int m = static_cast<int>(points.size());
-  if (m < 4 || surface.points.cols() == 0) return fit;
+  // Even one or two points are well posed: the pull towards the identity picks the
+  // least change that reaches them (two points: a stretch along their axis).
+  if (m < 1 || surface.points.cols() == 0) return fit;
   Eigen::Matrix3Xd p(3, m);
   for (int k = 0; k < m; ++k) p.col(k) = points[k].p_mm;
-  const Eigen::Vector3d pc = p.rowwise().mean();
-  const double spread2 = (p.colwise() - pc).squaredNorm() / m;
+  const Eigen::Vector3d sc = surface.points.rowwise().mean();
+  const double spread2 = (surface.points.colwise() - sc).squaredNorm() / surface.points.cols();
   const double lambda = o.regularisation * spread2 * m;
 
   std::vector<int> match(m);

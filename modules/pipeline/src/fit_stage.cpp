@@ -69,22 +69,34 @@ PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageR
     r.summary = {{"source", "file"}, {"count", r.points.size()}};
     return r;
   }
+  // The shape the points come from: the body itself, or another of the same volume.
+  r.truth_shape = model.shape;
+  const std::string target = scene.text("points", "target_shape");
+  if (target != "same") {
+    evaluation::Shape t = evaluation::make_shape(target, scene.vec3("points", "target_size_mm"), model.shape.centre_mm);
+    const double voxel = 0.25 * model.cohesion.r0_mm;
+    const double scale = std::cbrt(evaluation::shape_volume_mm3(model.shape, voxel) /
+                                   evaluation::shape_volume_mm3(t, voxel));
+    t.size_mm *= scale;
+    r.truth_shape = t;
+  }
   evaluation::Deformation d;
   d.stretch = scene.number("points", "stretch");
   d.bend_mm = scene.number("points", "bend_mm");
-  d.centre_mm = model.shape.centre_mm;
-  d.half_length_mm = 0.5 * model.shape.size_mm.x() * d.stretch;
+  d.centre_mm = r.truth_shape.centre_mm;
+  d.half_length_mm = 0.5 * r.truth_shape.size_mm.x() * d.stretch;
   evaluation::SamplingOptions o;
   o.count = static_cast<int>(scene.integer("points", "count"));
   o.noise_mm = scene.number("points", "noise_mm");
   o.outlier_fraction = scene.number("points", "outlier_fraction");
   o.half_coverage = scene.text("points", "coverage") == "half";
   o.seed = static_cast<unsigned>(scene.integer("scene", "seed"));
-  r.points = evaluation::sample_deformed_surface(model.shape, d, o);
+  r.points = evaluation::sample_deformed_surface(r.truth_shape, d, o);
   r.truth = d;
   r.summary = {{"source", "generate"}, {"count", r.points.size()}, {"noise_mm", o.noise_mm},
                {"outlier_fraction", o.outlier_fraction}, {"coverage", scene.text("points", "coverage")},
-               {"stretch", d.stretch}, {"bend_mm", d.bend_mm}};
+               {"stretch", d.stretch}, {"bend_mm", d.bend_mm}, {"target_shape", r.truth_shape.kind},
+               {"target_size_mm", {r.truth_shape.size_mm.x(), r.truth_shape.size_mm.y(), r.truth_shape.size_mm.z()}}};
   return r;
 }
 
@@ -135,8 +147,8 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   if (pts.truth) {
     floor = evaluation::compare_with_body(start, rho, [&](const Eigen::Vector3d& p) { return model.shape.inside(p); },
                                           model.shape.bounds(), truth_voxel);
-    undeformed = evaluation::compare_with_body(start, rho, evaluation::deformed_inside(model.shape, *pts.truth),
-                                               deformed_bounds(model.shape, *pts.truth), truth_voxel);
+    undeformed = evaluation::compare_with_body(start, rho, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
+                                               deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
   }
   const double v0 = body_volume(start, rho);
 
@@ -174,25 +186,34 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     const fitting::SurfaceSamples samples = fitting::reference_surface(model.reference, 2);
     const fitting::GlobalMap map = fitting::fit_global_map(samples, points, {});
     const fitting::AffineFit& affine = map.affine;
-    state = particles::State(
-        fitting::refill_mapped_body(model.reference, state.size(), model.lattice_spacing_mm, map));
-    const Eigen::Vector3d stretches =
-        Eigen::JacobiSVD<Eigen::Matrix3d>(affine.a).singularValues();
-    global = {{"rms_before_mm", affine.rms_before_mm}, {"rms_after_mm", affine.rms_after_mm},
-              {"iterations", affine.iterations},
-              {"principal_stretches", {stretches.x(), stretches.y(), stretches.z()}},
-              {"translation_mm", {affine.t.x(), affine.t.y(), affine.t.z()}},
-              {"shear_coefficients_per_mm", std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
-              {"wall_s", clock.elapsed_s()}};
-    global["volume_change_after_refill_pct"] = 100.0 * (body_volume(state.x, rho) - v0) / v0;
     if (model.skeleton) {
       m.remove(*model.skeleton);
       model.skeleton = nullptr;
     }
-    {  // settle the new surface before the local stage
-      particles::IntegratorOptions relax_opt = opt;
-      particles::relax(m, state, relax_opt, 300, scene.number("fit", "kinetic_tolerance"));
+    // Re-fill the mapped reference and let its new surface settle; the settled surface
+    // layer sits a little outside the lattice (more so for a larger surface), so the
+    // count is corrected until the settled volume matches the model's (at most 3 passes).
+    int count = state.size();
+    int passes = 0;
+    double settled_change_pct = 0;
+    for (; passes < 3; ++passes) {
+      state = particles::State(fitting::refill_mapped_body(model.reference, count, model.lattice_spacing_mm, map));
+      particles::relax(m, state, opt, 300, scene.number("fit", "kinetic_tolerance"));
+      const double v = body_volume(state.x, rho);
+      settled_change_pct = 100.0 * (v - v0) / v0;
+      if (std::abs(settled_change_pct) <= 0.25) break;
+      count = static_cast<int>(std::lround(count * v0 / v));
     }
+    const Eigen::Vector3d stretches = Eigen::JacobiSVD<Eigen::Matrix3d>(affine.a).singularValues();
+    global = {{"rms_before_mm", affine.rms_before_mm}, {"rms_after_mm", map.rms_after_mm},
+              {"iterations", affine.iterations},
+              {"principal_stretches", {stretches.x(), stretches.y(), stretches.z()}},
+              {"translation_mm", {affine.t.x(), affine.t.y(), affine.t.z()}},
+              {"shear_coefficients_per_mm", std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
+              {"refill_passes", passes + (passes < 3 ? 1 : 0)},
+              {"particles_after_refill", state.size()},
+              {"volume_change_after_settling_pct", settled_change_pct},
+              {"wall_s", clock.elapsed_s()}};
     if (scene.flag("model", "skeleton")) {
       const particles::Skeleton sk = particles::medial_skeleton(
           state.x, model.lattice_spacing_mm, scene.number("model", "skeleton_node_spacing_r0") * law.r0());
@@ -239,8 +260,8 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
                      {"finite", state.x.allFinite()}};
   if (!global.is_null()) out.fit_summary["global"] = global;
   if (pts.truth) {
-    const auto fitted = evaluation::compare_with_body(state.x, rho, evaluation::deformed_inside(model.shape, *pts.truth),
-                                                      deformed_bounds(model.shape, *pts.truth), truth_voxel);
+    const auto fitted = evaluation::compare_with_body(state.x, rho, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
+                                                      deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
     const double denom = undeformed->msd_mm - floor->msd_mm;
     out.truth_summary = {{"msd_mm", fitted.msd_mm},
                          {"hd95_mm", fitted.hd95_mm},

@@ -59,7 +59,11 @@ config::Schema build_schema() {
       .number("outlier_fraction", 0.0, "", 0.0, 0.5, "fraction of generated points moved 5-15 mm off")
       .choice("coverage", "full", {"full", "half"}, "surface the points cover (half: the +y side)")
       .number("stretch", 1.0, "", 0.5, 2.0, "volume-preserving stretch along x of the true deformation")
-      .number("bend_mm", 0.0, "mm", -30.0, 30.0, "sideways (y) displacement of the ends in the true deformation");
+      .number("bend_mm", 0.0, "mm", -30.0, 30.0, "sideways (y) displacement of the ends in the true deformation")
+      .choice("target_shape", "same", {"same", "ellipsoid", "box", "egg", "lung"},
+              "sample a different shape than the body (same = the body, deformed)")
+      .vec3("target_size_mm", Eigen::Vector3d(40, 30, 60), "mm", 0.0,
+            "target_shape's proportions; scaled to the body's volume", true);
 
   s.section("fit", "deform the model onto the attractive points (paper s.3)")
       .choice("method", "spread", {"paper", "spread"},

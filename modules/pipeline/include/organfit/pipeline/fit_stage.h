@@ -14,6 +14,7 @@ namespace organfit::pipeline {
 struct PointsStageResult {
   std::vector<fitting::AttractivePoint> points;
   std::optional<evaluation::Deformation> truth;  ///< set when the points were generated
+  evaluation::Shape truth_shape;                 ///< the shape they were sampled on
   nlohmann::json summary;
 };
 
