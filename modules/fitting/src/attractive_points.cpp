@@ -1,11 +1,39 @@
 #include "organfit/fitting/attractive_points.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <string>
 
+#include "organfit/particles/neighbour_list.h"
+
 namespace organfit::fitting {
+
+std::vector<int> first_shell_counts(const particles::Positions& x, double shell_mm) {
+  const int n = static_cast<int>(x.cols());
+  std::vector<int> w(n, 0);
+  if (n < 2) return w;
+  particles::NeighbourList list(shell_mm, 1e-9 * shell_mm);
+  list.update(x);
+  const auto& order = list.order();
+  const double shell2 = shell_mm * shell_mm;
+  for (int s = 0; s < n; ++s)
+    for (int k = list.first()[s]; k < list.first()[s + 1]; ++k) {
+      const int i = order[s], j = order[list.neighbours()[k]];
+      if ((x.col(i) - x.col(j)).squaredNorm() < shell2) ++w[i], ++w[j];
+    }
+  return w;
+}
+
+void cap_by_cohesion(particles::Forces& g, const std::vector<int>& touched, const std::vector<int>& w,
+                     double f_max) {
+  for (int i : touched) {
+    const double cap = 0.5 * std::max(1, w[i]) * f_max;
+    const double mag = g.col(i).norm();
+    if (mag > cap) g.col(i) *= cap / mag;
+  }
+}
 
 void validate_points(const std::vector<AttractivePoint>& points) {
   for (size_t k = 0; k < points.size(); ++k) {
@@ -48,6 +76,7 @@ int PaperAttractiveForce::first_shell_count(const particles::Positions& x, int i
 
 void PaperAttractiveForce::assign(const particles::Positions& x) {
   const auto& skin = skin_.skin();
+  w_ = first_shell_counts(x, params_.first_shell_r0 * r0_);
   // Default outlier distance: half the model's diameter.
   double outlier = params_.outlier_distance_mm;
   if (outlier <= 0 && x.cols() > 0) outlier = 0.5 * (x.rowwise().maxCoeff() - x.rowwise().minCoeff()).norm();
@@ -79,7 +108,7 @@ void PaperAttractiveForce::assign(const particles::Positions& x) {
     for (int i : skin)
       if ((x.col(i) - e).squaredNorm() <= radius * radius) influence_[k].push_back(i);
     st.influence_count = static_cast<int>(influence_[k].size());
-    const int w = first_shell_count(x, st.epicentre);
+    const int w = w_[st.epicentre];
     st.f_max_k = points_[k].confidence * 0.5 * w * f_max_;
     k_[k] = st.f_max_k / (st.d_min_mm - rho_);  // eq. 6
   }
@@ -87,6 +116,8 @@ void PaperAttractiveForce::assign(const particles::Positions& x) {
 
 double PaperAttractiveForce::add_forces(const particles::State& state, particles::Forces& f, bool) {
   if (skin_.update(state.x)) assign(state.x);
+  g_.setZero(3, state.size());
+  touched_.clear();
   for (size_t k = 0; k < points_.size(); ++k) {
     PointStatus& st = status_[k];
     if (st.rejected || influence_[k].empty()) continue;
@@ -115,9 +146,14 @@ double PaperAttractiveForce::add_forces(const particles::State& state, particles
     const double scale = others > room ? std::max(0.0, room) / others : 1.0;
     for (size_t m = 0; m < influence_[k].size(); ++m) {
       const int i = influence_[k][m];
-      f.col(i) += (i == st.epicentre ? 1.0 : scale) * g[m];
+      g_.col(i) += (i == st.epicentre ? 1.0 : scale) * g[m];
+      touched_.push_back(i);
     }
   }
+  std::sort(touched_.begin(), touched_.end());
+  touched_.erase(std::unique(touched_.begin(), touched_.end()), touched_.end());
+  cap_by_cohesion(g_, touched_, w_, f_max_);
+  for (int i : touched_) f.col(i) += g_.col(i);
   return 0.0;
 }
 

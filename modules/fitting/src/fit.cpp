@@ -9,9 +9,13 @@ namespace organfit::fitting {
 
 std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
                                    const particles::Positions& x, const std::vector<int>& skin,
-                                   double radius_mm) {
+                                   double radius_mm, const std::vector<PointStatus>* status) {
   std::vector<double> out(points.size(), std::numeric_limits<double>::infinity());
   for (size_t k = 0; k < points.size(); ++k) {
+    if (status && k < status->size() && (*status)[k].rejected) {
+      out[k] = std::numeric_limits<double>::quiet_NaN();
+      continue;
+    }
     double best = std::numeric_limits<double>::infinity();
     for (int i : skin) best = std::min(best, (x.col(i) - points[k].p_mm).squaredNorm());
     if (std::isfinite(best)) out[k] = std::abs(std::sqrt(best) - radius_mm);
@@ -23,7 +27,7 @@ FitResult run_fit(particles::Model& model, particles::State& state,
                   const particles::IntegratorOptions& integrator_options,
                   const std::vector<AttractivePoint>& points,
                   const std::function<const std::vector<int>&(const particles::Positions&)>& skin_of,
-                  const FitOptions& o, const std::function<void(const HistoryRow&)>& on_row,
+                  const std::vector<PointStatus>* status, const FitOptions& o, const std::function<void(const HistoryRow&)>& on_row,
                   const std::function<void(particles::State&)>& after_row) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
@@ -47,10 +51,12 @@ FitResult run_fit(particles::Model& model, particles::State& state,
   for (int row = 0;; ++row) {
     HistoryRow h;
     h.step = integ.stats().steps;
-    const std::vector<double> r = data_residuals(points, state.x, skin_of(state.x), rho);
+    const std::vector<double> r = data_residuals(points, state.x, skin_of(state.x), rho, status);
     double sum = 0, mx = 0;
-    for (double v : r) sum += v, mx = std::max(mx, v);
-    h.residual_mean_mm = r.empty() ? 0 : sum / static_cast<double>(r.size());
+    int counted = 0;
+    for (double v : r)
+      if (!std::isnan(v)) sum += v, mx = std::max(mx, v), ++counted;
+    h.residual_mean_mm = counted == 0 ? 0 : sum / counted;
     h.residual_max_mm = mx;
     h.kinetic_energy_per_particle = integ.kinetic_energy(state) / n;
     h.volume_change_pct = std::numeric_limits<double>::quiet_NaN();

@@ -1,12 +1,14 @@
 #include "organfit/fitting/global_fit.h"
 
 #include <Eigen/Dense>
+#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numeric>
 
 #include "organfit/geometry/mask_ops.h"
+#include "organfit/particles/diagnostics.h"
 #include "organfit/particles/lattice_fill.h"
 
 namespace organfit::fitting {
@@ -291,6 +293,21 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     map.shears.c = theta.segment<9>(12);
   }
   map.affine.rms_after_mm = map.rms_after_mm;
+  // Plausibility: bounded stretches and shear displacements, else the identity.
+  const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(map.affine.a).singularValues();
+  const double size = (surface.points.rowwise().maxCoeff() - surface.points.rowwise().minCoeff()).norm();
+  double shear_move = 0;
+  for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
+    const Eigen::Vector3d q = map.affine.a * surface.points.col(j) + map.affine.t;
+    shear_move = std::max(shear_move, (map.shears.apply(q) - q).norm());
+  }
+  if (!(sv[0] <= o.max_stretch) || !(sv[2] >= 1.0 / o.max_stretch) || !(shear_move <= o.max_shear_mm * size)) {
+    GlobalMap identity;
+    identity.refused = true;
+    identity.rms_after_mm = identity.affine.rms_after_mm = map.affine.rms_before_mm;
+    identity.affine.rms_before_mm = map.affine.rms_before_mm;
+    return identity;
+  }
   return map;
 }
 
@@ -332,14 +349,32 @@ particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, 
       mapped, map.apply(centroid), a_nn_mm, [](const Eigen::Vector3d&) { return true; });
   std::vector<double> d(sites.cols());
   for (Eigen::Index s = 0; s < sites.cols(); ++s) d[s] = depth_at(map.inverse(sites.col(s)));
-  std::vector<int> idx(sites.cols());
-  std::iota(idx.begin(), idx.end(), 0);
-  const int keep = std::min<int>(count, static_cast<int>(idx.size()));
-  // The deepest `keep` sites; ties broken by index (deterministic).
+  // Sites inside the mapped reference, deepest first (ties by index: deterministic).
+  std::vector<int> idx;
+  for (Eigen::Index s = 0; s < sites.cols(); ++s)
+    if (d[s] > 0) idx.push_back(static_cast<int>(s));
   std::stable_sort(idx.begin(), idx.end(), [&](int l, int r) { return d[l] > d[r]; });
-  std::sort(idx.begin(), idx.begin() + keep);
-  particles::Positions out(3, keep);
-  for (int s = 0; s < keep; ++s) out.col(s) = sites.col(idx[s]);
+  const int keep = std::min<int>(count, static_cast<int>(idx.size()));
+  // One body: the largest group of the deepest `keep` sites (joined within 1.2 a_nn),
+  // topped up with the next deepest sites that touch it.
+  const double link2 = (1.2 * a_nn_mm) * (1.2 * a_nn_mm);
+  particles::Positions chosen(3, keep);
+  for (int s = 0; s < keep; ++s) chosen.col(s) = sites.col(idx[s]);
+  const std::vector<int> body = particles::largest_component(chosen, 1.2 * a_nn_mm);
+  std::vector<char> taken(sites.cols(), 0);
+  std::vector<int> result;
+  for (int b : body) result.push_back(idx[b]), taken[idx[b]] = 1;
+  for (size_t q = keep; q < idx.size() && static_cast<int>(result.size()) < keep; ++q) {
+    const int s = idx[q];
+    for (int r : result)
+      if ((sites.col(s) - sites.col(r)).squaredNorm() < link2) {
+        result.push_back(s), taken[s] = 1;
+        break;
+      }
+  }
+  std::sort(result.begin(), result.end());
+  particles::Positions out(3, static_cast<Eigen::Index>(result.size()));
+  for (size_t s = 0; s < result.size(); ++s) out.col(static_cast<Eigen::Index>(s)) = sites.col(result[s]);
   return out;
 }
 

@@ -13,7 +13,7 @@ SpreadAttractiveForce::SpreadAttractiveForce(std::vector<AttractivePoint> points
       rho_(radius_mm),
       r0_(law.r0()),
       kappa_(params.stiffness_fraction * law.stiffness()),
-      f_cap_(params.max_force_shells * law.f_max()),
+      f_max_(law.f_max()),
       params_(params),
       skin_(skin_voxel_mm, radius_mm) {
   validate_points(points_);
@@ -26,6 +26,7 @@ SpreadAttractiveForce::SpreadAttractiveForce(std::vector<AttractivePoint> points
 
 void SpreadAttractiveForce::assign(const particles::Positions& x) {
   const auto& skin = skin_.skin();
+  w_ = first_shell_counts(x, 1.3 * r0_);
   double outlier = params_.outlier_distance_mm;
   if (outlier <= 0 && x.cols() > 0) outlier = 0.5 * (x.rowwise().maxCoeff() - x.rowwise().minCoeff()).norm();
   const double sigma = params_.patch_sigma_r0 * r0_, radius = params_.patch_radius_r0 * r0_;
@@ -52,6 +53,26 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
         patch_[k].push_back({i, points_[k].confidence * std::exp(-d2 / (2 * sigma * sigma))});
     }
     st.influence_count = static_cast<int>(patch_[k].size());
+  }
+  // Points far off the surface compared with the others (median + 5 x 1.4826 MAD, and
+  // more than 2 r0) are not boundary data: e.g. a point deep inside the organ.
+  std::vector<double> off;
+  for (const auto& st : status_)
+    if (!st.rejected && st.epicentre >= 0) off.push_back(std::abs(st.d_min_mm - rho_));
+  if (off.size() >= 5) {
+    std::vector<double> sorted = off;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double median = sorted[sorted.size() / 2];
+    for (double& v : sorted) v = std::abs(v - median);
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double cut = std::max(2.0 * r0_, median + 5.0 * 1.4826 * sorted[sorted.size() / 2]);
+    for (size_t k = 0; k < status_.size(); ++k) {
+      PointStatus& st = status_[k];
+      if (!st.rejected && st.epicentre >= 0 && std::abs(st.d_min_mm - rho_) > cut) {
+        st.rejected = true;
+        patch_[k].clear();
+      }
+    }
   }
 }
 
@@ -83,8 +104,8 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
   for (int i = 0; i < n; ++i) {
     if (den_[i] == 0) continue;
     Eigen::Vector3d force = kappa_ * num_[i] / std::max(1.0, den_[i]);
-    const double mag = force.norm();
-    if (mag > f_cap_) force *= f_cap_ / mag;
+    const double mag = force.norm(), cap = 0.5 * std::max(1, w_[i]) * f_max_;  // W(i) F_max / 2
+    if (mag > cap) force *= cap / mag;
     f.col(i) += force;
     inflation += force.dot((state.x.col(i) - centroid).normalized());
   }

@@ -185,6 +185,12 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     // Global stage: volume-preserving affine map, the body re-made in its new shape.
     const fitting::SurfaceSamples samples = fitting::reference_surface(model.reference, 2);
     const fitting::GlobalMap map = fitting::fit_global_map(samples, points, {});
+    if (map.refused) {
+      throw TargetNotMetError(
+          "fit: the points ask for an implausible change of the whole organ (a stretch beyond 1.5x "
+          "or a bend beyond a quarter of its size); check that they belong to this organ and are "
+          "in the same patient coordinates");
+    }
     const fitting::AffineFit& affine = map.affine;
     if (model.skeleton) {
       m.remove(*model.skeleton);
@@ -231,7 +237,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   }
 
   Progress progress("fit", fo.max_steps);
-  out.fit = fitting::run_fit(m, state, opt, points, skin_of, fo,
+  out.fit = fitting::run_fit(m, state, opt, points, skin_of, status, fo,
                              [&](const fitting::HistoryRow& h) {
                                progress.update(h.step, fmt::format("residual {:.2f} mm", h.residual_mean_mm));
                              },

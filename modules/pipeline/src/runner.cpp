@@ -97,7 +97,12 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
   std::string not_converged;
   if (scene.has_section("fit") && model && points) {
     Stopwatch clock;
-    FitStageResult fit = run_fit_stage(scene, *model, *points);
+    FitStageResult fit;
+    try {
+      fit = run_fit_stage(scene, *model, *points);
+    } catch (const particles::StabilityError& e) {
+      throw TargetNotMetError(std::string("fit: the simulation could not continue stably: ") + e.what());
+    }
     record_stage("fit", clock.elapsed_s());
     run["fit"] = fit.fit_summary;
     run["model"]["skin_particles"] = fit.fit_summary["skin_particles"];

@@ -14,6 +14,15 @@ struct AttractivePoint {
   double confidence = 1.0;   ///< in (0, 1]: scales the point's force
 };
 
+/// W(i) for every particle: neighbours within `shell_mm` (the first shell), O(N).
+std::vector<int> first_shell_counts(const particles::Positions& x, double shell_mm);
+
+/// Scales the data force on each particle down to at most W(i) F_max / 2 (paper s.3.3:
+/// what a particle's neighbours can hold), so that however many points pull on one
+/// particle, it is not torn off. `touched` lists the particles that got data forces.
+void cap_by_cohesion(particles::Forces& data_force, const std::vector<int>& touched,
+                     const std::vector<int>& w, double f_max);
+
 /// Checks points on entry: finite coordinates, confidence in (0, 1]. Throws
 /// std::invalid_argument naming the first bad point (index from 0).
 void validate_points(const std::vector<AttractivePoint>& points);
@@ -53,7 +62,8 @@ struct PaperForceParams {
 ///  * F_max_k = min(W(e_k) F_max / 2, F_max_k) with W counting the first shell of
 ///    neighbours (within 1.3 r0), times the point's confidence;
 ///  * the sum of a point's forces is capped at total_force_factor F_max_k (the others
-///    are scaled down, the epicentre keeps its force), and points
+///    are scaled down, the epicentre keeps its force); the sum of all points' forces on
+///    one particle at W(i) F_max / 2 (many points on one particle); and points
 ///    farther than outlier_distance from the skin are rejected: a far outlier can
 ///    neither drag nor tear the body.
 /// The paper's damping -K_a v is the integrator's (IntegratorOptions::damping).
@@ -83,6 +93,9 @@ class PaperAttractiveForce : public particles::ForceTerm {
   std::vector<PointStatus> status_;
   std::vector<std::vector<int>> influence_;
   std::vector<double> k_;  // K_k of eq. 6
+  std::vector<int> w_;     // W(i) at the last assignment
+  particles::Forces g_;    // this term's forces, before the per-particle cap
+  std::vector<int> touched_;
 };
 
 }  // namespace organfit::fitting

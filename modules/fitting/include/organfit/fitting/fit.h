@@ -11,10 +11,11 @@
 namespace organfit::fitting {
 
 /// Data residual of each point (mm): distance from the point to the model surface,
-/// taken as | min over skin particles of |p - x_i|  -  rho |.
+/// taken as | min over skin particles of |p - x_i|  -  rho |. Rejected points (outliers)
+/// get NaN and are left out of the statistics.
 std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
                                    const particles::Positions& x, const std::vector<int>& skin,
-                                   double radius_mm);
+                                   double radius_mm, const std::vector<PointStatus>* status = nullptr);
 
 struct FitOptions {
   double residual_mean_tolerance_mm = 0.5;  ///< converged: mean residual at most this
@@ -57,7 +58,7 @@ FitResult run_fit(particles::Model& model, particles::State& state,
                   const particles::IntegratorOptions& integrator_options,
                   const std::vector<AttractivePoint>& points,
                   const std::function<const std::vector<int>&(const particles::Positions&)>& skin_of,
-                  const FitOptions& options,
+                  const std::vector<PointStatus>* status, const FitOptions& options,
                   const std::function<void(const HistoryRow&)>& on_row = nullptr,
                   const std::function<void(particles::State&)>& after_row = nullptr);
 

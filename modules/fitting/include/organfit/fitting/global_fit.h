@@ -22,6 +22,8 @@ struct AffineFitOptions {
   double point_to_point = 0.1;   ///< weight of the point-to-point term beside point-to-plane
   double regularisation = 1e-3;  ///< pull of A towards I, relative to the points' spread
   double shear_regularisation = 1e-3;  ///< pull of the shears towards none, likewise
+  double max_stretch = 1.5;  ///< a map stretching by more (or by less than 1/this) is refused
+  double max_shear_mm = 0.25;  ///< ... and one whose shears move any sample by more than this x the body's size
 };
 
 struct AffineFit {
@@ -71,13 +73,16 @@ struct GlobalMap {
   AffineFit affine;
   QuadraticShears shears;
   double rms_after_mm = 0;  ///< point-to-surface over the kept points
+  bool refused = false;     ///< the fitted map was implausible: identity used instead
   Eigen::Vector3d apply(const Eigen::Vector3d& p) const { return shears.apply(affine.a * p + affine.t); }
   Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
 };
 
 /// Fits the whole map jointly (Gauss-Newton, point-to-plane plus a small point-to-point
 /// term, the same outlier rule), starting from the affine fit; the shears are
-/// regularised towards none.
+/// regularised towards none. A map outside the plausible range (principal stretches
+/// beyond max_stretch, shears beyond max_shear_mm) is refused: points that can only be
+/// explained by crushing the organ are not data to follow globally.
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
                          const AffineFitOptions& options);
 

@@ -9,7 +9,7 @@
 // Gaussian weights w_ik = exp(-|x_i - x_e|^2 / (2 sigma^2)) (positions at assignment),
 // normalised where patches overlap (a partition of unity, so nearby points average
 // rather than add):
-//     F_i = kappa * sum_k w_ik r_k / max(1, sum_k w_ik),   |F_i| <= W F_max / 2.
+//     F_i = kappa * sum_k w_ik r_k / max(1, sum_k w_ik),   |F_i| <= W(i) F_max / 2.
 // Every force is proportional to the residuals, so it vanishes smoothly as the surface
 // reaches the points (no chatter). Far outliers are rejected as in the paper's method.
 // Holding the volume: the patches' net outward push sum_i F_i . n_i is subtracted evenly
@@ -27,7 +27,6 @@ struct SpreadForceParams {
   double patch_sigma_r0 = 1.5;      ///< Gaussian width of a patch, in r0
   double patch_radius_r0 = 3.5;     ///< bound of a patch, in r0
   double outlier_distance_mm = 0;   ///< reject points farther (0: half the model's diameter)
-  double max_force_shells = 6.0;    ///< per-particle cap in units of F_max (W/2 with W = 12)
   bool hold_volume = true;          ///< take the patches' net outward push back over the skin
 };
 
@@ -47,11 +46,12 @@ class SpreadAttractiveForce : public particles::ForceTerm {
  private:
   void assign(const particles::Positions& x);
   std::vector<AttractivePoint> points_;
-  double rho_, r0_, kappa_, f_cap_;
+  double rho_, r0_, kappa_, f_max_;
   SpreadForceParams params_;
   SkinDetector skin_;
   std::vector<PointStatus> status_;
   std::vector<std::vector<std::pair<int, double>>> patch_;  // (particle, weight) per point
+  std::vector<int> w_;  // W(i) at the last assignment
   std::vector<Eigen::Vector3d> num_;
   std::vector<double> den_;
 };
