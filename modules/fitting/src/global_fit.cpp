@@ -315,16 +315,21 @@ particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, 
                                         double a_nn_mm, const GlobalMap& map) {
   if (count <= 0) return particles::Positions(3, 0);
   const geometry::ImageGeometry& g = reference.geometry;
-  // Depth inside the reference body (distance to the nearest outside voxel).
-  std::vector<std::uint8_t> outside(reference.labels.size());
-  for (size_t i = 0; i < outside.size(); ++i) outside[i] = reference.labels[i] == 0;
+  // Signed depth in the reference body: distance to the nearest outside voxel inside,
+  // minus the distance to the body outside. Ranking sites by it selects a level set
+  // of the mapped body, which can sit a little outside it when the count asks so.
+  std::vector<std::uint8_t> outside(reference.labels.size()), inside_mask(reference.labels.size());
+  for (size_t i = 0; i < outside.size(); ++i) outside[i] = reference.labels[i] == 0, inside_mask[i] = !outside[i];
   const std::vector<double> depth2 = geometry::squared_distance_transform(outside, g);
+  const std::vector<double> away2 = geometry::squared_distance_transform(inside_mask, g);
+  const double off_grid = -std::numeric_limits<double>::infinity();
   auto depth_at = [&](const Eigen::Vector3d& q) {
     const Eigen::Vector3d idx = g.physical_to_index(q);
     const int i = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
               k = static_cast<int>(std::lround(idx.z()));
-    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) return 0.0;
-    return std::sqrt(depth2[g.linear_index(i, j, k)]);
+    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) return off_grid;
+    const long long v = g.linear_index(i, j, k);
+    return inside_mask[v] ? std::sqrt(depth2[v]) : -std::sqrt(away2[v]);
   };
   // Candidate sites: the lattice over the mapped box, centred on the mapped centroid.
   const geometry::Aabb box = g.bounds_mm();
@@ -345,14 +350,17 @@ particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, 
     mapped.min_mm = mapped.min_mm.cwiseMin(q);
     mapped.max_mm = mapped.max_mm.cwiseMax(q);
   }
+  mapped.min_mm.array() -= a_nn_mm;  // room for a level set just outside the body
+  mapped.max_mm.array() += a_nn_mm;
   const particles::Positions sites = particles::fcc_lattice_points(
       mapped, map.apply(centroid), a_nn_mm, [](const Eigen::Vector3d&) { return true; });
   std::vector<double> d(sites.cols());
   for (Eigen::Index s = 0; s < sites.cols(); ++s) d[s] = depth_at(map.inverse(sites.col(s)));
-  // Sites inside the mapped reference, deepest first (ties by index: deterministic).
+  // Sites by signed depth, deepest first (ties by index: deterministic); sites off the
+  // reference's grid are never taken.
   std::vector<int> idx;
   for (Eigen::Index s = 0; s < sites.cols(); ++s)
-    if (d[s] > 0) idx.push_back(static_cast<int>(s));
+    if (d[s] > off_grid) idx.push_back(static_cast<int>(s));
   std::stable_sort(idx.begin(), idx.end(), [&](int l, int r) { return d[l] > d[r]; });
   const int keep = std::min<int>(count, static_cast<int>(idx.size()));
   // One body: the largest group of the deepest `keep` sites (joined within 1.2 a_nn),

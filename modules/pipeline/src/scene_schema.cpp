@@ -84,7 +84,9 @@ config::Schema build_schema() {
       .number("total_force_factor", 3.0, "", 1.0, none, "a point's total force <= this x F_max_k")
       .number("outlier_distance_mm", 0.0, "mm", 0.0, none,
               "reject points farther than this from the model (0 = half its diameter)")
-      .number("skin_voxel_r0", 0.5, "r0", 0.0, none, "voxel size of skin detection (0.5 r0 = rho)", true);
+      .number("skin_voxel_r0", 0.5, "r0", 0.0, none, "voxel size of skin detection (0.5 r0 = rho)", true)
+      .number("max_global_stretch", 1.5, "", 1.0, 10.0,
+              "spread: refuse points that ask the whole organ to stretch more than this");
   return s;
 }
 
