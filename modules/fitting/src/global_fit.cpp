@@ -7,6 +7,7 @@
 #include <limits>
 #include <numeric>
 
+#include "organfit/fitting/robust.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/particles/diagnostics.h"
 #include "organfit/particles/lattice_fill.h"
@@ -74,6 +75,25 @@ SurfaceSamples reference_surface(const geometry::LabelVolume& reference, int str
   return s;
 }
 
+namespace {
+
+/// Weights by the outlier rule (robust.h, on the residuals r): outliers get none, the
+/// others their confidence. Returns the RMS of the kept residuals.
+double robust_weights(const std::vector<double>& r, const std::vector<AttractivePoint>& points,
+                      double mads, std::vector<double>& w) {
+  const double cut = outlier_cutoff(r, mads);
+  double sum = 0;
+  int kept = 0;
+  w.assign(r.size(), 0.0);
+  for (size_t k = 0; k < r.size(); ++k) {
+    w[k] = r[k] <= cut ? points[k].confidence : 0.0;
+    if (w[k] > 0) sum += r[k] * r[k], ++kept;
+  }
+  return std::sqrt(sum / std::max(1, kept));
+}
+
+}  // namespace
+
 AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
                                        const std::vector<AttractivePoint>& points,
                                        const AffineFitOptions& o) {
@@ -97,20 +117,7 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
       r[k] = std::sqrt((moved.colwise() - p.col(k)).colwise().squaredNorm().minCoeff(&j));
       match[k] = static_cast<int>(j);
     }
-    // Outliers: beyond median + outlier_mads * 1.4826 MAD get no weight.
-    std::vector<double> sorted = r;
-    std::nth_element(sorted.begin(), sorted.begin() + m / 2, sorted.end());
-    const double median = sorted[m / 2];
-    for (double& v : sorted) v = std::abs(v - median);
-    std::nth_element(sorted.begin(), sorted.begin() + m / 2, sorted.end());
-    const double cut = median + o.outlier_mads * 1.4826 * std::max(sorted[m / 2], 1e-6);
-    double sum = 0;
-    int kept = 0;
-    for (int k = 0; k < m; ++k) {
-      w[k] = r[k] <= cut ? points[k].confidence : 0.0;
-      if (w[k] > 0) sum += r[k] * r[k], ++kept;
-    }
-    return std::sqrt(sum / std::max(1, kept));
+    return robust_weights(r, points, o.outlier_mads, w);
   };
   fit.rms_before_mm = correspond(fit.a, fit.t);
   double previous = fit.rms_before_mm;
@@ -188,29 +195,6 @@ Eigen::Vector3d GlobalMap::inverse(const Eigen::Vector3d& q) const {
   return affine.a.inverse() * (shears.inverse(q) - affine.t);
 }
 
-namespace {
-
-/// Weights by the outlier rule: beyond median + mads * 1.4826 MAD of r get none.
-double robust_weights(const std::vector<double>& r, const std::vector<AttractivePoint>& points,
-                      double mads, std::vector<double>& w) {
-  const int m = static_cast<int>(r.size());
-  std::vector<double> sorted = r;
-  std::nth_element(sorted.begin(), sorted.begin() + m / 2, sorted.end());
-  const double median = sorted[m / 2];
-  for (double& v : sorted) v = std::abs(v - median);
-  std::nth_element(sorted.begin(), sorted.begin() + m / 2, sorted.end());
-  const double cut = median + mads * 1.4826 * std::max(sorted[m / 2], 1e-6);
-  double sum = 0;
-  int kept = 0;
-  w.assign(m, 0.0);
-  for (int k = 0; k < m; ++k) {
-    w[k] = r[k] <= cut ? points[k].confidence : 0.0;
-    if (w[k] > 0) sum += r[k] * r[k], ++kept;
-  }
-  return std::sqrt(sum / std::max(1, kept));
-}
-
-}  // namespace
 
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
                          const AffineFitOptions& o) {

@@ -1,5 +1,7 @@
 #include "organfit/fitting/spread_force.h"
 
+#include "organfit/fitting/robust.h"
+
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -60,12 +62,7 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
   for (const auto& st : status_)
     if (!st.rejected && st.epicentre >= 0) off.push_back(std::abs(st.d_min_mm - rho_));
   if (off.size() >= 5) {
-    std::vector<double> sorted = off;
-    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-    const double median = sorted[sorted.size() / 2];
-    for (double& v : sorted) v = std::abs(v - median);
-    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-    const double cut = std::max(2.0 * r0_, median + 5.0 * 1.4826 * sorted[sorted.size() / 2]);
+    const double cut = std::max(2.0 * r0_, outlier_cutoff(off, 5.0));
     for (size_t k = 0; k < status_.size(); ++k) {
       PointStatus& st = status_[k];
       if (!st.rejected && st.epicentre >= 0 && std::abs(st.d_min_mm - rho_) > cut) {
