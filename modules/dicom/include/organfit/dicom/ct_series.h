@@ -1,0 +1,56 @@
+#pragma once
+// Reading a planning CT series from a folder (GDCM), into plain types.
+//
+// The folder may hold several series and other objects (RTSTRUCT, RTDOSE, stray
+// files): the CT is picked by Modality, and by Series Instance UID or description when
+// there are several. Slices are sorted along the slice normal. Geometry is kept in
+// patient coordinates (DICOM LPS, mm) with its direction matrix:
+//   i (columns) along the first three Image Orientation cosines, spacing PixelSpacing[1];
+//   j (rows) along the last three, spacing PixelSpacing[0]; k along the normal.
+// Values are Hounsfield units: stored value * Rescale Slope + Rescale Intercept.
+//
+// Refused with a one-line InputError naming the folder and the defect: no CT, several
+// CT series and no choice, a missing slice, duplicate slice positions, irregular slice
+// spacing, gantry tilt, non-axial slices, slices whose size, pixel spacing or orientation
+// differ. Tolerated with a warning: files that are not DICOM, other modalities.
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "organfit/geometry/image_geometry.h"
+
+namespace organfit::dicom {
+
+/// Who and what the CT belongs to, copied into exported objects. Never logged.
+struct PatientStudy {
+  std::string patient_name, patient_id, patient_birth_date, patient_sex;
+  std::string study_instance_uid, study_id, study_date, study_time, study_description;
+  std::string accession_number, referring_physician_name;
+};
+
+struct CtSlice {
+  std::string sop_instance_uid;
+  std::string sop_class_uid;
+  Eigen::Vector3d position_mm;  ///< Image Position (Patient)
+  std::filesystem::path file;
+};
+
+struct CtSeries {
+  geometry::ImageGeometry geometry;
+  std::vector<float> hu;  ///< geometry.voxel_count() values, i fastest
+  std::string series_instance_uid, series_description, frame_of_reference_uid;
+  PatientStudy patient;
+  std::vector<CtSlice> slices;        ///< in k order
+  std::vector<std::string> warnings;  ///< tolerated defects, one line each
+};
+
+struct CtReadOptions {
+  std::string series_instance_uid;  ///< choose this series (empty: the only CT one)
+  std::string series_description;   ///< or the one with this description
+  double spacing_tolerance = 0.02;   ///< relative deviation of slice gaps still regular
+};
+
+/// Reads the CT series in `folder`. Throws InputError "FOLDER: reason" on bad input.
+CtSeries read_ct_series(const std::filesystem::path& folder, const CtReadOptions& options = {});
+
+}  // namespace organfit::dicom
