@@ -102,6 +102,25 @@ assert rows[0] == 'step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pc
 expect fit.literal_not_converged_is_exit_3 3 "fit did not converge" -- --quiet run "$src/pipelines/paper-prostate-literal.yaml" --out "$tmp/fit2"
 check fit.not_converged_still_writes_results python3 -c "
 import json; d = json.load(open('$tmp/fit2/run.json')); assert d['status'] == 'target_not_met' and not d['fit']['converged']"
+# real data: CT + structure set -> model -> fit (skipped where ../shared/data is absent)
+if [[ -d "$src/../shared/data/ct-sts-002" ]]; then
+  expect real.sts002_runs 0 "" -- --quiet run "$src/pipelines/real-sts-002.yaml" --out "$tmp/real"
+  check real.sts002_reports_organ_and_truth /usr/bin/python3 -c "
+import json; d = json.load(open('$tmp/real/run.json'))
+assert d['ct']['slices'] == 48 and abs(d['organ']['volume_cm3'] - 53.30) < 0.01
+assert d['organ']['matched_by_position'] == 16 and any('matched by position' in w for w in d['warnings'])
+assert d['truth']['recovery'] > 0.5 and abs(d['fit']['volume_change_pct']) < 1.0"
+  check real.no_patient_identifiers_in_outputs /usr/bin/python3 -c "
+import subprocess
+dump = subprocess.run(['gdcmdump', '$src/../shared/data/ct-sts-002/ct/000000.dcm'], capture_output=True, text=True).stdout
+ids = [l.split('[')[1].split(']')[0].strip() for l in dump.splitlines() if l.startswith(('(0010,0010)', '(0010,0020)')) and '[' in l]
+ids = [i for i in ids if len(i) > 2]
+text = open('$tmp/real/run.json').read() + open('$tmp/real/resolved.yaml').read()
+assert ids, 'no identifiers found to look for'
+assert not any(i in text for i in ids), ids"
+else
+  echo "skip real-data scene: $src/../shared/data is absent"
+fi
 printf 'x,y,z\n1,2,nan\n' > "$tmp/bad_points.csv"
 printf 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\npoints:\n  source: file\n  file: bad_points.csv\nfit:\n  method: paper\n' > "$tmp/nan_points.yaml"
 expect fit.nan_point_is_exit_2 2 "bad_points.csv:2: non-finite coordinate" -- --quiet run "$tmp/nan_points.yaml" --out "$tmp/fit3"

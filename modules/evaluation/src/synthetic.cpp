@@ -6,6 +6,7 @@
 namespace organfit::evaluation {
 
 bool Shape::inside(const Eigen::Vector3d& p) const {
+  if (mask) return mask->at_physical(p) == 1;
   const Eigen::Vector3d semi = 0.5 * size_mm;
   const Eigen::Vector3d q = p - centre_mm;
   if (kind == "box") return (q.cwiseAbs().array() <= semi.array()).all();
@@ -31,6 +32,28 @@ Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
   }
   if (!(size_mm.array() > 0).all()) throw std::invalid_argument("shape size must be > 0 mm");
   return Shape{kind, size_mm, centre_mm};
+}
+
+Shape make_mask_shape(std::shared_ptr<const geometry::LabelVolume> mask) {
+  const auto& g = mask->geometry;
+  Shape s;
+  s.kind = "mask";
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo, sum = Eigen::Vector3d::Zero();
+  long long n = 0;
+  const Eigen::Vector3d half = 0.5 * (g.direction * g.spacing_mm).cwiseAbs();
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        if (mask->at(i, j, k) != 1) continue;
+        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
+        lo = lo.cwiseMin(p - half), hi = hi.cwiseMax(p + half), sum += p, ++n;
+      }
+  if (n == 0) throw std::invalid_argument("the organ mask is empty");
+  s.mask = std::move(mask);
+  s.box = {lo, hi};
+  s.centre_mm = sum / static_cast<double>(n);
+  s.size_mm = hi - lo;
+  return s;
 }
 
 double shape_volume_mm3(const Shape& shape, double voxel_mm) {

@@ -38,17 +38,19 @@ particles::IntegratorOptions integrator_options_from(const config::Scene& scene,
   return opt;
 }
 
-ModelStageResult run_model_stage(const config::Scene& scene) {
+ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::Shape* organ) {
   const particles::CohesionParams cp = cohesion_params_from(scene);
   const particles::LennardJones law(cp);
   const double spacing = particles::fcc_equilibrium_spacing(law);
-  const Eigen::Vector3d size = scene.vec3("body", "size_mm");
-  const Eigen::Vector3d centre = scene.vec3("body", "centre_mm");
-  const evaluation::Shape shape = evaluation::make_shape(scene.text("body", "shape"), size, centre);
+  const evaluation::Shape shape =
+      organ ? *organ
+            : evaluation::make_shape(scene.text("body", "shape"), scene.vec3("body", "size_mm"),
+                                     scene.vec3("body", "centre_mm"));
+  const Eigen::Vector3d centre = shape.centre_mm;
   particles::Positions x = particles::fcc_lattice_points(
       shape.bounds(), centre, spacing, [&](const Eigen::Vector3d& p) { return shape.inside(p); });
   if (x.cols() < 2) {
-    scene.fail("body", "size_mm",
+    scene.fail(organ ? "model" : "body", organ ? "radius_mm" : "size_mm",
                fmt::format("the body holds {} particle(s) at radius {} mm: make it larger or the "
                            "particles smaller",
                            x.cols(), 0.5 * cp.r0_mm));

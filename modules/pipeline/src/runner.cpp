@@ -6,6 +6,7 @@
 #include <optional>
 #include <spdlog/spdlog.h>
 
+#include "organfit/dicom/structure_set.h"
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_stage.h"
 #include "organfit/support/atomic_file.h"
@@ -20,7 +21,7 @@ const char* version() { return ORGANFIT_VERSION; }
 
 const std::vector<StageInfo>& pipeline_stages() {
   static const std::vector<StageInfo> stages = {
-      {"ct", false},  {"organ", false},  {"model", true},  {"points", true},
+      {"ct", true},  {"organ", true},  {"model", true},  {"points", true},
       {"ultrasound", false}, {"fit", true}, {"export", false}, {"report", false}};
   return stages;
 }
@@ -68,10 +69,45 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
     if (!stage.available) skipped.push_back(stage.name);
   }
 
+  auto warn = [&](const std::string& w) {
+    spdlog::warn(w);
+    run["warnings"].push_back(w);
+  };
+  std::optional<dicom::CtSeries> ct;
+  if (scene.has_section("ct")) {
+    Stopwatch clock;
+    dicom::CtReadOptions o;
+    o.series_instance_uid = scene.text("ct", "series_uid");
+    o.series_description = scene.text("ct", "series_description");
+    ct = dicom::read_ct_series(scene.path("ct", "folder"), o);
+    record_stage("ct", clock.elapsed_s());
+    for (const auto& w : ct->warnings) warn(w);
+    const auto& g = ct->geometry;
+    run["ct"] = {{"slices", g.size[2]},
+                 {"size", {g.size[0], g.size[1], g.size[2]}},
+                 {"spacing_mm", {g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z()}}};
+    spdlog::info("ct: {} x {} x {} voxels of {:.3f} x {:.3f} x {:.3f} mm", g.size[0], g.size[1], g.size[2],
+                 g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z());
+  }
+  std::optional<evaluation::Shape> organ;
+  if (scene.has_section("organ") && ct) {
+    Stopwatch clock;
+    const auto file = scene.path("organ", "rtstruct");
+    const std::string roi = scene.text("organ", "roi");
+    dicom::RasterisedRoi r = dicom::rasterise_roi(dicom::read_rtstruct(file), roi, *ct, file.string());
+    for (const auto& w : r.warnings) warn(w);
+    const double volume_cm3 = r.mask.volume_mm3(1) / 1000.0;
+    if (volume_cm3 <= 0) scene.fail("organ", "roi", "the ROI '" + roi + "' covers no voxel of the CT");
+    run["organ"] = {{"roi", roi}, {"contours", r.contours}, {"matched_by_position", r.matched_by_position},
+                    {"volume_cm3", volume_cm3}};
+    spdlog::info("organ: ROI '{}', {} contours, {:.2f} cm3", roi, r.contours, volume_cm3);
+    organ = evaluation::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(r.mask)));
+    record_stage("organ", clock.elapsed_s());
+  }
   std::optional<ModelStageResult> model;
   if (scene.has_section("model")) {
     Stopwatch clock;
-    model = run_model_stage(scene);
+    model = run_model_stage(scene, organ ? &*organ : nullptr);
     record_stage("model", clock.elapsed_s());
     run["model"] = model->summary;
     spdlog::info("model: {} particles, relaxed in {} steps ({:.2f} s), skeleton {:.2f} s",

@@ -16,6 +16,15 @@ config::Schema build_schema() {
       .integer("seed", 1, 0, none, "seed of every random choice (same seed, same result)")
       .integer("threads", 0, 0, 256, "worker threads; 0 = all cores");
 
+  s.section("ct", "the planning CT: a DICOM folder (other objects in it are ignored)")
+      .input_path("folder", "folder holding the CT series")
+      .text("series_uid", "", "Series Instance UID to use when the folder holds several CT series")
+      .text("series_description", "", "or the Series Description to use");
+
+  s.section("organ", "the organ on the planning CT, imported from an RT Structure Set")
+      .input_path("rtstruct", "the RT Structure Set file")
+      .text("roi", std::nullopt, "name of the ROI to import (e.g. Prostate)");
+
   s.section("body", "an analytic organ shape, for scenes without CT")
       .choice("shape", "ellipsoid", {"ellipsoid", "box", "egg", "lung"},
               "shape: egg = prostate-like (narrower apex at -x), lung = ellipsoid with a notch")
@@ -112,16 +121,19 @@ void check_scene_rules(const config::Scene& scene) {
                              "the body together",
                              rmin, m, n));
     }
-    if (!scene.has_section("body")) {
-      scene.fail("model", "radius_mm", "the model needs a body to fill: add a 'body' section");
+    if (!scene.has_section("body") && !scene.has_section("organ")) {
+      scene.fail("model", "radius_mm", "the model needs a body to fill: add an 'organ' or a 'body' section");
     }
+  }
+  if (scene.has_section("organ") && !scene.has_section("ct")) {
+    scene.fail("organ", "roi", "an organ from a structure set needs the 'ct' it was drawn on");
   }
   if (scene.has_section("points")) {
     if (scene.text("points", "source") == "file" && !scene.is_given("points", "file")) {
       scene.fail("points", "source", "source is 'file' but points.file is not given");
     }
-    if (scene.text("points", "source") == "generate" && !scene.has_section("body")) {
-      scene.fail("points", "source", "generated points need the 'body' they are sampled from");
+    if (scene.text("points", "source") == "generate" && !scene.has_section("body") && !scene.has_section("organ")) {
+      scene.fail("points", "source", "generated points need the 'organ' or 'body' they are sampled from");
     }
   }
   if (scene.has_section("fit")) {

@@ -14,14 +14,22 @@
 
 namespace organfit::evaluation {
 
-/// An organ shape given by an inside test, in mm.
+/// An organ shape given by an inside test, in mm: analytic, or a label mask (an organ
+/// segmented or imported from CT).
 struct Shape {
-  std::string kind;                                    ///< "ellipsoid", "box", "egg", "lung"
+  std::string kind;                                    ///< "ellipsoid", "box", "egg", "lung", "mask"
   Eigen::Vector3d size_mm = Eigen::Vector3d::Ones();   ///< full extents (before the notch)
-  Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();
+  Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero(); ///< centre (a mask: its centroid)
+  std::shared_ptr<const geometry::LabelVolume> mask;   ///< kind "mask": label 1 is inside
+  geometry::Aabb box;                                  ///< kind "mask": bounds of its voxels
   bool inside(const Eigen::Vector3d& p) const;
-  geometry::Aabb bounds() const { return {centre_mm - 0.5 * size_mm, centre_mm + 0.5 * size_mm}; }
+  geometry::Aabb bounds() const {
+    return mask ? box : geometry::Aabb{centre_mm - 0.5 * size_mm, centre_mm + 0.5 * size_mm};
+  }
 };
+
+/// A shape from a mask (label 1). Throws std::invalid_argument when the mask is empty.
+Shape make_mask_shape(std::shared_ptr<const geometry::LabelVolume> mask);
 
 /// Makes a shape: "ellipsoid" and "box" as named; "egg" is an ellipsoid whose cross-
 /// section narrows linearly towards -x (a prostate's apex, 30% narrower at the tip);

@@ -27,7 +27,8 @@ struct ModelStageResult {
   nlohmann::json summary;  ///< run.json "model" block
 };
 
-/// Fills the scene's body with particles at the relaxed fcc spacing and relaxes them.
-ModelStageResult run_model_stage(const config::Scene& scene);
+/// Fills the organ (when given, e.g. imported from CT) or the scene's analytic body with
+/// particles at the relaxed fcc spacing and relaxes them.
+ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::Shape* organ = nullptr);
 
 }  // namespace organfit::pipeline
