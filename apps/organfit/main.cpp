@@ -10,6 +10,7 @@
 #include "organfit/evaluation/skeleton_benchmark.h"
 #include "organfit/pipeline/runner.h"
 #include "organfit/pipeline/scene_schema.h"
+#include "organfit/pipeline/segment_command.h"
 #include "organfit/support/error.h"
 #include "organfit/support/log.h"
 #include "organfit/support/progress.h"
@@ -39,6 +40,16 @@ int run_main(int argc, char** argv) {
   schema->add_flag("--json", schema_json, "As JSON");
 
   auto* version = app.add_subcommand("version", "Print the organfit version");
+
+  organfit::pipeline::SegmentRequest seg;
+  auto* segment = app.add_subcommand("segment", "An organ mask from a CT: imported from an RTSTRUCT or grown from a seed");
+  segment->add_option("--ct", seg.ct_folder, "Folder of the CT series")->required();
+  segment->add_option("--series-uid", seg.series_uid, "Series Instance UID when the folder holds several CT series");
+  segment->add_option("--rtstruct", seg.rtstruct, "RT Structure Set to import from");
+  segment->add_option("--roi", seg.roi, "ROI name in the structure set");
+  segment->add_option("--seed", seg.seed_mm, "Seed X,Y,Z in mm (patient LPS)")->delimiter(',')->expected(3);
+  segment->add_option("--hu", seg.hu_window, "HU window LOW,HIGH")->delimiter(',')->expected(2);
+  segment->add_option("-o,--out", seg.out, "Mask file (.nrrd, .mha, .nii, .nii.gz)")->required();
 
   auto* bench = app.add_subcommand("bench", "Benchmarks; print machine-readable JSON on stdout");
   bench->require_subcommand(1);
@@ -86,6 +97,10 @@ int run_main(int argc, char** argv) {
   } else if (*schema) {
     const auto& s = organfit::pipeline::scene_schema();
     std::cout << (schema_json ? s.to_json().dump(2) + "\n" : s.to_text());
+  } else if (*segment) {
+    const auto result = organfit::pipeline::run_segment(seg);
+    for (const auto& w : result.warnings) spdlog::warn(w);
+    std::cout << seg.out.string() << ": " << result.volume_cm3 << " cm3\n";
   } else if (*validate) {
     const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
     std::cout << scene_file << ": valid (" << scene.sections().size() << " sections)\n";

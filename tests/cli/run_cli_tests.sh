@@ -118,9 +118,17 @@ ids = [i for i in ids if len(i) > 2]
 text = open('$tmp/real/run.json').read() + open('$tmp/real/resolved.yaml').read()
 assert ids, 'no identifiers found to look for'
 assert not any(i in text for i in ids), ids"
+  expect segment.rtstruct_import 0 "matched by position" -- segment --ct "$src/../shared/data/ct-sts-002/ct" --rtstruct "$src/../shared/data/ct-sts-002/rtstruct.dcm" --roi GTV_Mass_CT --out "$tmp/gtv.nrrd"
+  check segment.prints_volume grep -q "gtv.nrrd: 53.29" "$tmp/out"
+  check segment.wrote_the_mask test -s "$tmp/gtv.nrrd"
+  expect segment.missing_roi 2 "no ROI named 'Prostate' (the structure set has 'GTV_Mass_CT')" -- segment --ct "$src/../shared/data/ct-sts-002/ct" --rtstruct "$src/../shared/data/ct-sts-002/rtstruct.dcm" --roi Prostate --out "$tmp/none.nrrd"
+  check segment.refusal_writes_nothing test ! -e "$tmp/none.nrrd"
+  expect segment.seed_outside_the_ct 2 "the seed (0.0, 0.0, -600.0) mm is outside the CT" -- segment --ct "$src/../shared/data/ct-sts-002/ct" --seed 0,0,-600 --hu 2000,3000 --out "$tmp/none.nrrd"
+  expect segment.seed_outside_window 2 "outside the window [2000, 3000]" -- segment --ct "$src/../shared/data/ct-sts-002/ct" --seed 80,130,-550 --hu 2000,3000 --out "$tmp/none.nrrd"
 else
   echo "skip real-data scene: $src/../shared/data is absent"
 fi
+expect segment.needs_one_source 2 "give either --rtstruct and --roi, or --seed and --hu" -- segment --ct /tmp --out "$tmp/x.nrrd"
 printf 'x,y,z\n1,2,nan\n' > "$tmp/bad_points.csv"
 printf 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\npoints:\n  source: file\n  file: bad_points.csv\nfit:\n  method: paper\n' > "$tmp/nan_points.yaml"
 expect fit.nan_point_is_exit_2 2 "bad_points.csv:2: non-finite coordinate" -- --quiet run "$tmp/nan_points.yaml" --out "$tmp/fit3"

@@ -1,0 +1,20 @@
+#pragma once
+// organfit's plain images <-> the bridge's plain (Eigen-free) images, and files.
+// Include this on the organfit side; ITK code includes plain_image.h only.
+#include <filesystem>
+
+#include "organfit/geometry/image_geometry.h"
+#include "organfit/itkbridge/plain_image.h"
+
+namespace organfit::itkbridge {
+
+PlainGeometry to_plain(const geometry::ImageGeometry& g);
+geometry::ImageGeometry from_plain(const PlainGeometry& g);
+PlainMask to_plain(const geometry::LabelVolume& labels);
+geometry::LabelVolume from_plain(const PlainMask& mask);
+
+/// write_mask / read_mask for a LabelVolume (geometry kept exactly).
+void write_label_volume(const std::filesystem::path& file, const geometry::LabelVolume& labels);
+geometry::LabelVolume read_label_volume(const std::filesystem::path& file);
+
+}  // namespace organfit::itkbridge

@@ -1,0 +1,39 @@
+#pragma once
+// Plain images for the ITK side of the bridge: no Eigen here.
+//
+// Why: ITK 5.2 bundles its own Eigen (3.3) and organfit uses the system's (3.4); both
+// use the same include guards, so a translation unit must never see both. ITK code in
+// organfit includes only this header; itk_images.h converts on the Eigen side.
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <vector>
+
+namespace organfit::itkbridge {
+
+struct PlainGeometry {
+  std::array<int, 3> size{0, 0, 0};
+  std::array<double, 3> spacing_mm{1, 1, 1};
+  std::array<double, 3> origin_mm{0, 0, 0};
+  std::array<double, 9> direction{1, 0, 0, 0, 1, 0, 0, 0, 1};  ///< row-major
+  size_t voxel_count() const { return static_cast<size_t>(size[0]) * size[1] * size[2]; }
+};
+
+struct PlainMask {
+  PlainGeometry geometry;
+  std::vector<std::uint8_t> labels;  ///< i fastest
+};
+
+struct PlainFloatImage {
+  PlainGeometry geometry;
+  std::vector<float> values;  ///< i fastest
+};
+
+/// Writes a mask; the format follows the extension (.nrrd, .nhdr, .mha, .mhd, .nii,
+/// .nii.gz). Written under a temporary name and renamed: whole or not at all. Throws
+/// InputError naming the file on an unknown extension or a failed write.
+void write_mask(const std::filesystem::path& file, const PlainMask& mask);
+/// Reads a mask (any image ITK reads, cast to 8 bits). Throws InputError naming the file.
+PlainMask read_mask(const std::filesystem::path& file);
+
+}  // namespace organfit::itkbridge

@@ -1,0 +1,134 @@
+// The ITK side of the bridge: no Eigen-based organfit header may be included here.
+#include "organfit/itkbridge/itk_conversions.h"
+
+#include <itkImageFileReader.h>
+#include <itkImageFileWriter.h>
+#include <itkMetaImageIOFactory.h>
+#include <itkNiftiImageIOFactory.h>
+#include <itkNrrdImageIOFactory.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstring>
+#include <mutex>
+
+#include "organfit/support/error.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::itkbridge {
+namespace {
+
+template <class Image>
+typename Image::Pointer allocate(const PlainGeometry& g) {
+  auto image = Image::New();
+  typename Image::RegionType region;
+  typename Image::SizeType size;
+  typename Image::SpacingType spacing;
+  typename Image::PointType origin;
+  typename Image::DirectionType direction;
+  for (unsigned d = 0; d < 3; ++d) {
+    size[d] = static_cast<itk::SizeValueType>(g.size[d]);
+    spacing[d] = g.spacing_mm[d];
+    origin[d] = g.origin_mm[d];
+    for (unsigned e = 0; e < 3; ++e) direction(d, e) = g.direction[3 * d + e];
+  }
+  region.SetSize(size);
+  image->SetRegions(region);
+  image->SetSpacing(spacing);
+  image->SetOrigin(origin);
+  image->SetDirection(direction);
+  image->Allocate();
+  return image;
+}
+
+template <class Image>
+PlainGeometry geometry_of(const Image* image) {
+  PlainGeometry g;
+  const auto size = image->GetLargestPossibleRegion().GetSize();
+  for (unsigned d = 0; d < 3; ++d) {
+    g.size[d] = static_cast<int>(size[d]);
+    g.spacing_mm[d] = image->GetSpacing()[d];
+    g.origin_mm[d] = image->GetOrigin()[d];
+    for (unsigned e = 0; e < 3; ++e) g.direction[3 * d + e] = image->GetDirection()(d, e);
+  }
+  return g;
+}
+
+/// The file formats organfit reads and writes, registered once (explicitly: no
+/// UseITK.cmake, see the CMakeLists).
+void register_formats() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    itk::NrrdImageIOFactory::RegisterOneFactory();
+    itk::MetaImageIOFactory::RegisterOneFactory();
+    itk::NiftiImageIOFactory::RegisterOneFactory();
+  });
+}
+
+bool ends_with(const std::string& s, const char* ext) {
+  const size_t n = std::strlen(ext);
+  return s.size() > n && s.compare(s.size() - n, n, ext) == 0;
+}
+
+}  // namespace
+
+FloatImage::Pointer to_itk(const PlainFloatImage& image) {
+  auto out = allocate<FloatImage>(image.geometry);
+  std::copy(image.values.begin(), image.values.end(), out->GetBufferPointer());
+  return out;
+}
+
+MaskImage::Pointer to_itk(const PlainMask& mask) {
+  auto out = allocate<MaskImage>(mask.geometry);
+  std::copy(mask.labels.begin(), mask.labels.end(), out->GetBufferPointer());
+  return out;
+}
+
+PlainMask to_plain(const MaskImage* image) {
+  PlainMask out;
+  out.geometry = geometry_of(image);
+  const unsigned char* p = image->GetBufferPointer();
+  out.labels.assign(p, p + out.geometry.voxel_count());
+  return out;
+}
+
+void write_mask(const fs::path& file, const PlainMask& mask) {
+  const std::string name = file.filename().string();
+  const char* known[] = {".nrrd", ".nhdr", ".mha", ".mhd", ".nii", ".nii.gz"};
+  if (std::none_of(std::begin(known), std::end(known), [&](const char* e) { return ends_with(name, e); }))
+    throw InputError(file.string() + ": unknown image format (use .nrrd, .nhdr, .mha, .mhd, .nii or .nii.gz)");
+  register_formats();
+  const auto dot = name.find('.');
+  const fs::path temp = file.parent_path() / (".tmp-" + std::to_string(getpid()) + "-" + name.substr(0, dot) + name.substr(dot));
+  auto writer = itk::ImageFileWriter<MaskImage>::New();
+  writer->SetFileName(temp.string());
+  writer->SetInput(to_itk(mask));
+  writer->SetUseCompression(true);
+  std::error_code ec;
+  try {
+    writer->Update();
+  } catch (const itk::ExceptionObject& e) {
+    fs::remove(temp, ec);
+    throw InputError(file.string() + ": cannot write the image");
+  }
+  fs::rename(temp, file, ec);
+  if (ec) {
+    fs::remove(temp, ec);
+    throw InputError(file.string() + ": cannot move into place: " + ec.message());
+  }
+}
+
+PlainMask read_mask(const fs::path& file) {
+  register_formats();
+  auto reader = itk::ImageFileReader<MaskImage>::New();
+  reader->SetFileName(file.string());
+  try {
+    reader->Update();
+  } catch (const itk::ExceptionObject& e) {
+    throw InputError(file.string() + ": cannot read as an image");
+  }
+  return to_plain(reader->GetOutput());
+}
+
+}  // namespace organfit::itkbridge

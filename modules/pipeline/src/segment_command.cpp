@@ -1,0 +1,39 @@
+#include "organfit/pipeline/segment_command.h"
+
+#include "organfit/dicom/structure_set.h"
+#include "organfit/itkbridge/itk_images.h"
+#include "organfit/segmentation/segment.h"
+#include "organfit/support/error.h"
+
+namespace organfit::pipeline {
+
+SegmentResult run_segment(const SegmentRequest& r) {
+  const bool import = !r.rtstruct.empty() || !r.roi.empty();
+  const bool grow = !r.seed_mm.empty() || !r.hu_window.empty();
+  if (import == grow) throw InputError("segment: give either --rtstruct and --roi, or --seed and --hu");
+  if (import && (r.rtstruct.empty() || r.roi.empty())) throw InputError("segment: --rtstruct and --roi go together");
+  if (grow && (r.seed_mm.size() != 3 || r.hu_window.size() != 2))
+    throw InputError("segment: --seed takes X,Y,Z (mm) and --hu takes LOW,HIGH");
+  dicom::CtReadOptions o;
+  o.series_instance_uid = r.series_uid;
+  const dicom::CtSeries ct = dicom::read_ct_series(r.ct_folder, o);
+  SegmentResult result;
+  result.warnings = ct.warnings;
+  geometry::LabelVolume mask;
+  if (import) {
+    dicom::RasterisedRoi roi = dicom::rasterise_roi(dicom::read_rtstruct(r.rtstruct), r.roi, ct, r.rtstruct.string());
+    result.warnings.insert(result.warnings.end(), roi.warnings.begin(), roi.warnings.end());
+    mask = std::move(roi.mask);
+  } else {
+    segmentation::SeedOptions s;
+    s.seed_mm = Eigen::Vector3d(r.seed_mm[0], r.seed_mm[1], r.seed_mm[2]);
+    s.hu_low = r.hu_window[0];
+    s.hu_high = r.hu_window[1];
+    mask = segmentation::segment_from_seed(ct.geometry, ct.hu, s);
+  }
+  result.volume_cm3 = mask.volume_mm3(1) / 1000.0;
+  itkbridge::write_label_volume(r.out, mask);
+  return result;
+}
+
+}  // namespace organfit::pipeline
