@@ -125,6 +125,18 @@ assert not any(i in text for i in ids), ids"
   check segment.refusal_writes_nothing test ! -e "$tmp/none.nrrd"
   expect segment.seed_outside_the_ct 2 "the seed (0.0, 0.0, -600.0) mm is outside the CT" -- segment --ct "$src/../shared/data/ct-sts-002/ct" --seed 0,0,-600 --hu 2000,3000 --out "$tmp/none.nrrd"
   expect segment.seed_outside_window 2 "outside the window [2000, 3000]" -- segment --ct "$src/../shared/data/ct-sts-002/ct" --seed 80,130,-550 --hu 2000,3000 --out "$tmp/none.nrrd"
+  # CT defects on copies (the inputs are only read): each exit 2, naming the defect
+  ct="$src/../shared/data/ct-sts-002/ct"
+  mkdir -p "$tmp/missing" "$tmp/dup" "$tmp/two"
+  for f in "$ct"/*.dcm; do [[ "$(basename "$f")" == 000020.dcm ]] || cp "$f" "$tmp/missing/"; done
+  cp "$ct"/*.dcm "$tmp/dup/" && cp "$ct/000010.dcm" "$tmp/dup/again.dcm"
+  for f in "$ct"/*.dcm; do cp "$f" "$tmp/two/a_$(basename "$f")"; done
+  for f in "$src/../shared/data/ct-sts-004/ct"/*.dcm; do cp "$f" "$tmp/two/b_$(basename "$f")"; done
+  before=$(cat "$ct"/*.dcm | md5sum)
+  for case in missing:"missing slice" dup:"duplicate slice position" two:"2 CT series; choose one"; do
+    expect "ct.defect_${case%%:*}" 2 "${case#*:}" -- segment --ct "$tmp/${case%%:*}" --seed 80,130,-550 --hu 0,100 --out "$tmp/none.nrrd"
+  done
+  check ct.inputs_unchanged test "$(cat "$ct"/*.dcm | md5sum)" = "$before"
 else
   echo "skip real-data scene: $src/../shared/data is absent"
 fi

@@ -5,6 +5,7 @@
 
 #include <cstdlib>
 #include <fstream>
+#include <map>
 
 #include "organfit/support/error.h"
 
@@ -120,6 +121,38 @@ TEST(StructureSet, AgreesWithPlastimatchRasterisationOnTheRealGtv) {
   const long ours = rasterise_roi(read_rtstruct(data("ct-sts-002/rtstruct.dcm")), "GTV_Mass_CT", ct, "rt").mask.count(1);
   EXPECT_NEAR(static_cast<double>(ours), static_cast<double>(theirs), 0.02 * theirs);
   std::cout << "GTV voxels: organfit " << ours << ", plastimatch " << theirs << "\n";
+}
+
+TEST(StructureSet, PlastimatchSynthFolderCtChosenByModalityRoisMatchPlastimatch) {
+  // CT, RTSTRUCT and RTDOSE in one folder, written by plastimatch itself.
+  if (std::system("command -v plastimatch > /dev/null 2>&1") != 0) GTEST_SKIP() << "plastimatch not installed";
+  const fs::path dir = fs::temp_directory_path() / ("organfit_psynth_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string cmd = "cd '" + dir.string() +
+                          "' && plastimatch synth --pattern lung --dim '64 64 48' --spacing '3 3 3' --output-dicom dcm"
+                          " > /dev/null 2>&1 && plastimatch convert --input dcm/rtss_*.dcm --referenced-ct dcm"
+                          " --output-ss-img ss.nrrd > /dev/null 2>&1 && plastimatch stats ss.nrrd > stats.txt 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  std::map<int, long> theirs;
+  std::ifstream in(dir / "stats.txt");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("S ", 0) == 0) theirs[std::stoi(line.substr(2))] = std::stol(line.substr(line.find("NVOX") + 4));
+  const CtSeries ct = read_ct_series(dir / "dcm");  // picked by modality among CT, RTSTRUCT, RTDOSE
+  EXPECT_EQ(ct.geometry.size[2], 48);
+  ASSERT_EQ(ct.warnings.size(), 1u);
+  EXPECT_NE(ct.warnings[0].find("2 DICOM object(s) that are not CT"), std::string::npos);
+  fs::path rt;
+  for (const auto& e : fs::directory_iterator(dir / "dcm"))
+    if (e.path().filename().string().rfind("rtss_", 0) == 0) rt = e.path();
+  const StructureSet s = read_rtstruct(rt);
+  const long body = rasterise_roi(s, "Body", ct, "rt").mask.count(1);
+  const long lung = rasterise_roi(s, "Lung", ct, "rt").mask.count(1);
+  fs::remove_all(dir);
+  ASSERT_GT(theirs[0], 0);
+  EXPECT_NEAR(static_cast<double>(body), static_cast<double>(theirs[0]), 0.02 * theirs[0]);
+  EXPECT_NEAR(static_cast<double>(lung), static_cast<double>(theirs[1]), 0.02 * theirs[1]);
 }
 
 TEST(StructureSet, ReadingSomethingElseIsRefused) {

@@ -115,6 +115,10 @@ ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::S
     spdlog::info("model: skeleton of {} nodes, {} edges", skeleton_nodes, term.skeleton().edges.size());
   }
   const Eigen::Vector3d extents = particles::principal_extents(result.state.x);
+  // The particles' body (balls closed by rho, as in the fit) against what they stand for.
+  const double body_volume = geometry::particle_body_volume_mm3(result.state.x, 0.5 * cp.r0_mm, 0.25 * cp.r0_mm,
+                                                                0.5 * cp.r0_mm);
+  const double reference_volume = result.reference.volume_mm3(1);
   result.summary = {
       {"particles", n},
       {"radius_mm", 0.5 * cp.r0_mm},
@@ -132,6 +136,9 @@ ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::S
       {"capped_moves", integ.stats().capped_moves},
       {"components", particles::connected_components(result.state.x, 1.5 * cp.r0_mm)},
       {"skeleton_nodes", skeleton_nodes},
+      {"body_volume_mm3", body_volume},
+      {"reference_volume_mm3", reference_volume},
+      {"volume_vs_reference_pct", 100.0 * (body_volume - reference_volume) / reference_volume},
       {"principal_extents_mm", {extents.x(), extents.y(), extents.z()}}};
   return result;
 }
