@@ -199,7 +199,8 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     skin_of = [&term](const particles::Positions&) -> const std::vector<int>& { return term.skin().skin(); };
     status = &term.status();
   } else {
-    // Global stage: volume-preserving affine map, the body re-made in its new shape.
+    // Global stage: a volume-preserving map of the whole organ (affine with det 1, then
+    // quadratic shears) fitted to the points; the body re-made in its mapped shape.
     const fitting::SurfaceSamples samples = fitting::reference_surface(model.reference, 2);
     fitting::AffineFitOptions global_options;
     global_options.max_stretch = scene.number("fit", "max_global_stretch");
@@ -222,12 +223,13 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     int count = state.size();
     int passes = 0;
     double settled_change_pct = 0;
-    for (; passes < 3; ++passes) {
+    while (passes < 3) {
+      ++passes;
       state = particles::State(fitting::refill_mapped_body(model.reference, count, model.lattice_spacing_mm, map));
       particles::relax(m, state, opt, 300, scene.number("fit", "kinetic_tolerance"));
       const double v = body_volume(state.x, rho);
       settled_change_pct = 100.0 * (v - v0) / v0;
-      spdlog::debug("fit: re-fill pass {}: {} particles asked, {} placed, settled volume {:+.2f}%", passes + 1,
+      spdlog::debug("fit: re-fill pass {}: {} particles asked, {} placed, settled volume {:+.2f}%", passes,
                     count, state.size(), settled_change_pct);
       if (std::abs(settled_change_pct) <= 0.25) break;
       count = static_cast<int>(std::lround(count * v0 / v));
@@ -238,7 +240,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
               {"principal_stretches", {stretches.x(), stretches.y(), stretches.z()}},
               {"translation_mm", {affine.t.x(), affine.t.y(), affine.t.z()}},
               {"shear_coefficients_per_mm", std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
-              {"refill_passes", passes + (passes < 3 ? 1 : 0)},
+              {"refill_passes", passes},
               {"particles_after_refill", state.size()},
               {"volume_change_after_settling_pct", settled_change_pct},
               {"wall_s", clock.elapsed_s()}};
