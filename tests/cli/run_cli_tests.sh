@@ -75,7 +75,7 @@ import json; d = json.load(open('$tmp/run1/run.json'))
 assert d['scene']['name'] == 'small' and d['status'] == 'ok'
 assert d['model']['particles'] > 50 and d['model']['components'] == 1
 assert d['stages'][0]['name'] == 'model' and d['stages'][0]['wall_s'] > 0
-assert 'export' in d['stages_not_built_yet'] and 'fit' not in d['stages_not_built_yet']"
+assert 'report' in d['stages_not_built_yet'] and 'fit' not in d['stages_not_built_yet'] and 'export' not in d['stages_not_built_yet']"
 expect run.resolved_yaml_is_a_valid_scene 0 "" -- validate "$tmp/run1/resolved.yaml"
 check run.no_temporary_files_left test -z "$(find "$tmp/run1" -name '.*tmp*')"
 expect run.scene_without_scene_section 0 "" -- --quiet run "$scenes/no-scene-section.yaml" --out "$tmp/run3"
@@ -110,12 +110,18 @@ import json; d = json.load(open('$tmp/real/run.json'))
 assert d['ct']['slices'] == 48 and abs(d['organ']['volume_cm3'] - 53.30) < 0.01
 assert d['organ']['matched_by_position'] == 16 and any('matched by position' in w for w in d['warnings'])
 assert d['truth']['recovery'] > 0.5 and abs(d['fit']['volume_change_pct']) < 1.0"
+  check real.exports_rtstruct_and_labels test -s "$tmp/real/gtv_fit_rtstruct.dcm" -a -s "$tmp/real/gtv_fit_labels.nrrd"
+  expect real.exported_rtstruct_reads_back 0 "" -- --quiet segment --ct "$src/../shared/data/ct-sts-002/ct" --rtstruct "$tmp/real/gtv_fit_rtstruct.dcm" --roi GTV_Mass_CT_fit --out "$tmp/back.nrrd"
+  check real.read_back_volume_equals_exported /usr/bin/python3 -c "
+import json, re; d = json.load(open('$tmp/real/run.json'))
+v = float(re.search(r': ([0-9.]+) cm3', open('$tmp/out').read()).group(1))
+assert abs(v - d['export']['volume_cm3']) < 1e-3 * v, (v, d['export'])"
   check real.no_patient_identifiers_in_outputs /usr/bin/python3 -c "
 import subprocess
 dump = subprocess.run(['gdcmdump', '$src/../shared/data/ct-sts-002/ct/000000.dcm'], capture_output=True, text=True).stdout
 ids = [l.split('[')[1].split(']')[0].strip() for l in dump.splitlines() if l.startswith(('(0010,0010)', '(0010,0020)')) and '[' in l]
 ids = [i for i in ids if len(i) > 2]
-text = open('$tmp/real/run.json').read() + open('$tmp/real/resolved.yaml').read()
+text = open('$tmp/real/run.json').read() + open('$tmp/real/resolved.yaml').read() + open('$tmp/real/history.csv').read()
 assert ids, 'no identifiers found to look for'
 assert not any(i in text for i in ids), ids"
   expect segment.rtstruct_import 0 "matched by position" -- segment --ct "$src/../shared/data/ct-sts-002/ct" --rtstruct "$src/../shared/data/ct-sts-002/rtstruct.dcm" --roi GTV_Mass_CT --out "$tmp/gtv.nrrd"

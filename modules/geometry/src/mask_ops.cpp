@@ -89,7 +89,8 @@ LabelVolume rasterize_balls(const Eigen::Matrix3Xd& centres, double radius_mm,
   LabelVolume mask(g);
   const double r2 = radius_mm * radius_mm;
   for (Eigen::Index c = 0; c < centres.cols(); ++c) {
-    const Eigen::Vector3d idx = (centres.col(c) - g.origin_mm).cwiseQuotient(g.spacing_mm);
+    // Index range of the ball (the direction is orthonormal: reach = radius / spacing).
+    const Eigen::Vector3d idx = g.physical_to_index(centres.col(c));
     int lo[3], hi[3];
     for (int d = 0; d < 3; ++d) {
       const double reach = radius_mm / g.spacing_mm[d];
@@ -99,7 +100,7 @@ LabelVolume rasterize_balls(const Eigen::Matrix3Xd& centres, double radius_mm,
     for (int k = lo[2]; k <= hi[2]; ++k)
       for (int j = lo[1]; j <= hi[1]; ++j)
         for (int i = lo[0]; i <= hi[0]; ++i) {
-          const Eigen::Vector3d p = g.origin_mm + g.spacing_mm.cwiseProduct(Eigen::Vector3d(i, j, k));
+          const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
           if ((p - centres.col(c)).squaredNorm() <= r2) mask.at(i, j, k) = 1;
         }
   }

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <random>
 
 namespace organfit::geometry {
@@ -42,6 +43,21 @@ TEST(MaskOps, BallVolumeAndSurfaceDistanceOfConcentricSpheres) {
   const SurfaceComparison same = compare_masks(a, a);
   EXPECT_EQ(same.msd_mm, 0.0);
   EXPECT_EQ(same.dice, 1.0);
+}
+
+TEST(MaskOps, BallsOnARotatedGridLandWhereThePhysicalBallIs) {
+  ImageGeometry g;
+  g.size = {30, 30, 30};
+  g.origin_mm = {5, -7, 3};
+  g.direction = Eigen::AngleAxisd(0.6, Eigen::Vector3d(1, 1, 0).normalized()).toRotationMatrix();
+  const Eigen::Vector3d centre = g.index_to_physical(Eigen::Vector3d(15, 12, 18));
+  const LabelVolume m = rasterize_balls(centre, 5.0, g);
+  EXPECT_EQ(m.at(15, 12, 18), 1);
+  EXPECT_NEAR(m.volume_mm3(1), 4.0 / 3 * M_PI * 125, 0.06 * 4.0 / 3 * M_PI * 125);
+  for (int k = 0; k < 30; ++k)
+    for (int j = 0; j < 30; ++j)
+      for (int i = 0; i < 30; ++i)
+        if (m.at(i, j, k)) EXPECT_LE((g.index_to_physical(Eigen::Vector3d(i, j, k)) - centre).norm(), 5.0 + 1e-9);
 }
 
 TEST(MaskOps, ClosingFillsTheGapsOfAPackingButNotItsOutline) {

@@ -3,10 +3,15 @@
 #include <fmt/format.h>
 #include <omp.h>
 
+#include <functional>
 #include <optional>
 #include <spdlog/spdlog.h>
 
+#include "organfit/dicom/rtstruct_writer.h"
 #include "organfit/dicom/structure_set.h"
+#include "organfit/geometry/mask_ops.h"
+#include "organfit/geometry/slice_contours.h"
+#include "organfit/itkbridge/itk_images.h"
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_stage.h"
 #include "organfit/support/atomic_file.h"
@@ -22,7 +27,7 @@ const char* version() { return ORGANFIT_VERSION; }
 const std::vector<StageInfo>& pipeline_stages() {
   static const std::vector<StageInfo> stages = {
       {"ct", true},  {"organ", true},  {"model", true},  {"points", true},
-      {"ultrasound", false}, {"fit", true}, {"export", false}, {"report", false}};
+      {"ultrasound", false}, {"fit", true}, {"export", true}, {"report", false}};
   return stages;
 }
 
@@ -164,6 +169,29 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
     not_converged = fit.not_converged_message;
     if (!not_converged.empty()) run["warnings"].push_back(not_converged);
   }
+  // Export: the (fitted) model on the planning CT's grid, as an RTSTRUCT and/or labels.
+  std::vector<std::string> exported;
+  std::function<void()> write_exports;
+  if (scene.has_section("export") && model && ct) {
+    Stopwatch clock;
+    const double rho = model->model->radius_mm();
+    geometry::LabelVolume mask = geometry::rasterize_balls(model->state.x, rho, ct->geometry);
+    geometry::close_mask(mask, rho);
+    std::string roi_name = scene.text("export", "roi_name");
+    if (roi_name.empty()) roi_name = (scene.has_section("organ") ? scene.text("organ", "roi") : "organ") + "_fit";
+    const auto contours = geometry::slice_contours(mask, 1);
+    run["export"] = {{"roi", roi_name}, {"contours", contours.size()}, {"volume_cm3", mask.volume_mm3(1) / 1000.0}};
+    const std::string rt = scene.text("export", "rtstruct"), labels = scene.text("export", "labels");
+    if (!rt.empty()) exported.push_back(rt);
+    if (!labels.empty()) exported.push_back(labels);
+    write_exports = [&, mask = std::move(mask), contours, roi_name, rt, labels]() {
+      if (!rt.empty()) dicom::write_rtstruct(out_dir / rt, *ct, {{roi_name, {0, 200, 255}, contours}});
+      if (!labels.empty()) itkbridge::write_label_volume(out_dir / labels, mask);
+    };
+    record_stage("export", clock.elapsed_s());
+    spdlog::info("export: ROI '{}', {} contours, {:.2f} cm3 on the CT grid", roi_name, contours.size(),
+                 run["export"]["volume_cm3"].get<double>());
+  }
   if (!skipped.empty()) {
     std::string list;
     for (const auto& s : skipped) list += (list.empty() ? "" : ", ") + s;
@@ -176,10 +204,12 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
   run["peak_memory_mib"] = peak_memory_mib();
   run["outputs"] = {"resolved.yaml", "run.json"};
   for (const auto& f : files) run["outputs"].push_back(f.first);
+  for (const auto& f : exported) run["outputs"].push_back(f);
   run["status"] = not_converged.empty() ? "ok" : "target_not_met";
   // Files are committed only now: a run that fails with an error leaves none. A fit
   // that did not converge still writes its results (run.json says so), then exits 3.
   for (const auto& f : files) write_file_atomically(out_dir / f.first, f.second);
+  if (write_exports) write_exports();
   write_file_atomically(out_dir / "resolved.yaml", scene.resolved_yaml());
   write_file_atomically(out_dir / "run.json", run.dump(2) + "\n");
   if (!not_converged.empty()) throw TargetNotMetError(not_converged);

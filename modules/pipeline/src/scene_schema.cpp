@@ -96,6 +96,10 @@ config::Schema build_schema() {
       .number("skin_voxel_r0", 0.5, "r0", 0.0, none, "voxel size of skin detection (0.5 r0 = rho)", true)
       .number("max_global_stretch", 1.5, "", 1.0, 10.0,
               "spread: refuse points that ask the whole organ to stretch more than this");
+  s.section("export", "what to write for the planning system, on the planning CT's grid")
+      .text("rtstruct", "", "DICOM RT Structure Set file name inside --out (empty: none)")
+      .text("labels", "", "label map file name inside --out: .nrrd, .mha, .nii(.gz) (empty: none)")
+      .text("roi_name", "", "name of the exported ROI (default: the organ's ROI name + _fit)");
   return s;
 }
 
@@ -134,6 +138,17 @@ void check_scene_rules(const config::Scene& scene) {
     }
     if (scene.text("points", "source") == "generate" && !scene.has_section("body") && !scene.has_section("organ")) {
       scene.fail("points", "source", "generated points need the 'organ' or 'body' they are sampled from");
+    }
+  }
+  if (scene.has_section("export")) {
+    if (!scene.has_section("ct")) scene.fail("export", "rtstruct", "export writes on the planning CT: add a 'ct' section");
+    if (!scene.has_section("model")) scene.fail("export", "rtstruct", "export needs a 'model' to export");
+    if (scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty())
+      scene.fail("export", "rtstruct", "the export section names nothing to write (rtstruct or labels)");
+    for (const char* key : {"rtstruct", "labels"}) {
+      const std::string& name = scene.text("export", key);
+      if (name.find('/') != std::string::npos || name == "." || name == "..")
+        scene.fail("export", key, "a file name inside --out, without folders");
     }
   }
   if (scene.has_section("fit")) {

@@ -1,0 +1,209 @@
+#include "organfit/dicom/rtstruct_writer.h"
+
+#include <fmt/format.h>
+#include <gdcmFileMetaInformation.h>
+#include <gdcmSequenceOfItems.h>
+#include <gdcmUIDGenerator.h>
+#include <gdcmWriter.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <ctime>
+#include <functional>
+
+#include "organfit/support/error.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::dicom {
+namespace {
+
+constexpr const char* kRtstructClass = "1.2.840.10008.5.1.4.1.1.481.3";
+constexpr const char* kCtImageClass = "1.2.840.10008.5.1.4.1.1.2";
+constexpr const char* kStudyComponentClass = "1.2.840.10008.3.1.2.3.1";  // Detached Study Management (retired, as used by TPS)
+
+/// Inserts a string element, padded to even length (UIDs with NUL, others with space).
+/// Patient and Study attributes are copied verbatim from the CT, even where the source
+/// breaks its VR (ct-sts-002's Study ID has 17 characters): a structure set must agree
+/// with its study (dcentvfy), and a cut value would not.
+void put(gdcm::DataSet& ds, uint16_t group, uint16_t element, const gdcm::VR& vr, std::string value) {
+  if (value.size() % 2) value.push_back(vr == gdcm::VR::UI ? '\0' : ' ');
+  gdcm::DataElement de(gdcm::Tag(group, element));
+  de.SetVR(vr);
+  de.SetByteValue(value.data(), static_cast<uint32_t>(value.size()));
+  ds.Replace(de);
+}
+
+gdcm::Item new_item() {
+  gdcm::Item item;
+  item.SetVLToUndefined();
+  return item;
+}
+
+void put_sequence(gdcm::DataSet& ds, uint16_t group, uint16_t element, const std::vector<gdcm::Item>& items) {
+  gdcm::SmartPointer<gdcm::SequenceOfItems> sq = new gdcm::SequenceOfItems();
+  sq->SetLengthToUndefined();
+  for (const auto& item : items) sq->AddItem(item);
+  gdcm::DataElement de(gdcm::Tag(group, element));
+  de.SetVR(gdcm::VR::SQ);
+  de.SetValue(*sq);
+  de.SetVLToUndefined();
+  ds.Replace(de);
+}
+
+std::string ds_number(double v) {  // DS: at most 16 characters
+  std::string s = fmt::format("{:.6g}", v);
+  if (s.size() > 16) s = fmt::format("{:.8e}", v).substr(0, 16);
+  return s;
+}
+
+}  // namespace
+
+void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<RtstructRoi>& rois,
+                    const RtstructWriteOptions& options) {
+  const std::string where = file.string();
+  // UIDs: new under one root per run, or derived deterministically (tests).
+  gdcm::UIDGenerator generator;
+  auto uid = [&](const std::string& what) -> std::string {
+    if (!options.fixed_uids_and_dates) return generator.Generate();
+    const size_t h = std::hash<std::string>{}(ct.series_instance_uid + "|" + what);
+    return fmt::format("1.2.826.0.1.3680043.2.1125.{}", h % 100000000000000ULL);
+  };
+  std::string date = "20000101", time = "000000";
+  if (!options.fixed_uids_and_dates) {
+    const std::time_t now = std::time(nullptr);
+    char d[16], t[16];
+    std::strftime(d, sizeof d, "%Y%m%d", std::localtime(&now));
+    std::strftime(t, sizeof t, "%H%M%S", std::localtime(&now));
+    date = d, time = t;
+  }
+  const std::string sop_uid = uid("sop"), series_uid = uid("series");
+
+  gdcm::Writer writer;
+  gdcm::DataSet& ds = writer.GetFile().GetDataSet();
+  using V = gdcm::VR;
+  // SOP Common, Patient, General Study, RT Series, General Equipment.
+  put(ds, 0x0008, 0x0005, V::CS, "ISO_IR 192");
+  put(ds, 0x0008, 0x0012, V::DA, date);
+  put(ds, 0x0008, 0x0013, V::TM, time);
+  put(ds, 0x0008, 0x0016, V::UI, kRtstructClass);
+  put(ds, 0x0008, 0x0018, V::UI, sop_uid);
+  put(ds, 0x0008, 0x0020, V::DA, ct.patient.study_date);
+  put(ds, 0x0008, 0x0030, V::TM, ct.patient.study_time);
+  put(ds, 0x0008, 0x0050, V::SH, ct.patient.accession_number);
+  put(ds, 0x0008, 0x0060, V::CS, "RTSTRUCT");
+  put(ds, 0x0008, 0x0070, V::LO, "organfit");
+  put(ds, 0x0008, 0x0090, V::PN, ct.patient.referring_physician_name);
+  put(ds, 0x0008, 0x1030, V::LO, ct.patient.study_description);
+  put(ds, 0x0008, 0x1070, V::PN, "");  // Operators' Name (RT Series, Type 2)
+  put(ds, 0x0008, 0x103e, V::LO, "organfit fitted structures");
+  put(ds, 0x0010, 0x0010, V::PN, ct.patient.patient_name);
+  put(ds, 0x0010, 0x0020, V::LO, ct.patient.patient_id);
+  put(ds, 0x0010, 0x0030, V::DA, ct.patient.patient_birth_date);
+  put(ds, 0x0010, 0x0040, V::CS, ct.patient.patient_sex);
+  put(ds, 0x0018, 0x1020, V::LO, "organfit");
+  put(ds, 0x0020, 0x000d, V::UI, ct.patient.study_instance_uid);
+  put(ds, 0x0020, 0x000e, V::UI, series_uid);
+  put(ds, 0x0020, 0x0010, V::SH, ct.patient.study_id);
+  put(ds, 0x0020, 0x0011, V::IS, "1");
+  put(ds, 0x0020, 0x0052, V::UI, ct.frame_of_reference_uid);  // Frame of Reference at the top level
+  put(ds, 0x0020, 0x1040, V::LO, "");                         // Position Reference Indicator (Type 2)
+  // Structure Set module.
+  put(ds, 0x3006, 0x0002, V::SH, options.label);
+  put(ds, 0x3006, 0x0008, V::DA, date);
+  put(ds, 0x3006, 0x0009, V::TM, time);
+
+  std::vector<gdcm::Item> contour_images;
+  for (const auto& slice : ct.slices) {
+    gdcm::Item item = new_item();
+    put(item.GetNestedDataSet(), 0x0008, 0x1150, V::UI, slice.sop_class_uid.empty() ? kCtImageClass : slice.sop_class_uid);
+    put(item.GetNestedDataSet(), 0x0008, 0x1155, V::UI, slice.sop_instance_uid);
+    contour_images.push_back(item);
+  }
+  gdcm::Item series_item = new_item();
+  put(series_item.GetNestedDataSet(), 0x0020, 0x000e, V::UI, ct.series_instance_uid);
+  put_sequence(series_item.GetNestedDataSet(), 0x3006, 0x0016, contour_images);
+  gdcm::Item study_item = new_item();
+  put(study_item.GetNestedDataSet(), 0x0008, 0x1150, V::UI, kStudyComponentClass);
+  put(study_item.GetNestedDataSet(), 0x0008, 0x1155, V::UI, ct.patient.study_instance_uid);
+  put_sequence(study_item.GetNestedDataSet(), 0x3006, 0x0014, {series_item});
+  gdcm::Item frame_item = new_item();
+  put(frame_item.GetNestedDataSet(), 0x0020, 0x0052, V::UI, ct.frame_of_reference_uid);
+  put_sequence(frame_item.GetNestedDataSet(), 0x3006, 0x0012, {study_item});
+  put_sequence(ds, 0x3006, 0x0010, {frame_item});
+
+  std::vector<gdcm::Item> roi_items, contour_items, observation_items;
+  for (size_t r = 0; r < rois.size(); ++r) {
+    const RtstructRoi& roi = rois[r];
+    const std::string number = std::to_string(r + 1);
+    gdcm::Item roi_item = new_item();
+    gdcm::DataSet& rds = roi_item.GetNestedDataSet();
+    put(rds, 0x3006, 0x0022, V::IS, number);
+    put(rds, 0x3006, 0x0024, V::UI, ct.frame_of_reference_uid);
+    put(rds, 0x3006, 0x0026, V::LO, roi.name);
+    put(rds, 0x3006, 0x0036, V::CS, "AUTOMATIC");
+    roi_items.push_back(roi_item);
+
+    std::vector<gdcm::Item> contours;
+    for (size_t c = 0; c < roi.contours.size(); ++c) {
+      const auto& contour = roi.contours[c];
+      if (contour.k < 0 || contour.k >= static_cast<int>(ct.slices.size()))
+        throw InputError(fmt::format("{}: contour {} of ROI '{}' is on no slice of the CT", where, c + 1, roi.name));
+      gdcm::Item item = new_item();
+      gdcm::DataSet& cds = item.GetNestedDataSet();
+      gdcm::Item image = new_item();
+      const CtSlice& slice = ct.slices[static_cast<size_t>(contour.k)];
+      put(image.GetNestedDataSet(), 0x0008, 0x1150, V::UI, slice.sop_class_uid.empty() ? kCtImageClass : slice.sop_class_uid);
+      put(image.GetNestedDataSet(), 0x0008, 0x1155, V::UI, slice.sop_instance_uid);
+      put_sequence(cds, 0x3006, 0x0016, {image});
+      put(cds, 0x3006, 0x0042, V::CS, "CLOSED_PLANAR");
+      put(cds, 0x3006, 0x0046, V::IS, std::to_string(contour.points_mm.size()));
+      put(cds, 0x3006, 0x0048, V::IS, std::to_string(c + 1));
+      std::string data;
+      for (const auto& p : contour.points_mm)
+        for (int d = 0; d < 3; ++d) data += (data.empty() ? "" : "\\") + ds_number(p[d]);
+      if (data.size() > 65534)
+        throw InputError(fmt::format("{}: contour {} of ROI '{}' needs {} bytes, over the DICOM limit of 65,534",
+                                     where, c + 1, roi.name, data.size()));
+      put(cds, 0x3006, 0x0050, V::DS, data);
+      contours.push_back(item);
+    }
+    gdcm::Item contour_item = new_item();
+    gdcm::DataSet& ods = contour_item.GetNestedDataSet();
+    put(ods, 0x3006, 0x002a, V::IS, fmt::format("{}\\{}\\{}", roi.colour[0], roi.colour[1], roi.colour[2]));
+    put_sequence(ods, 0x3006, 0x0040, contours);
+    put(ods, 0x3006, 0x0084, V::IS, number);
+    contour_items.push_back(contour_item);
+
+    gdcm::Item observation = new_item();
+    gdcm::DataSet& obs = observation.GetNestedDataSet();
+    put(obs, 0x3006, 0x0082, V::IS, number);
+    put(obs, 0x3006, 0x0084, V::IS, number);
+    put(obs, 0x3006, 0x00a4, V::CS, "ORGAN");
+    put(obs, 0x3006, 0x00a6, V::PN, "");
+    observation_items.push_back(observation);
+  }
+  put_sequence(ds, 0x3006, 0x0020, roi_items);
+  put_sequence(ds, 0x3006, 0x0039, contour_items);
+  put_sequence(ds, 0x3006, 0x0080, observation_items);
+  // RT Series / Approval.
+  put(ds, 0x300e, 0x0002, V::CS, "UNAPPROVED");
+
+  gdcm::FileMetaInformation& meta = writer.GetFile().GetHeader();
+  meta.SetDataSetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
+  meta.SetSourceApplicationEntityTitle("ORGANFIT");
+  const fs::path temp = file.parent_path() / (".tmp-" + std::to_string(getpid()) + "-" + file.filename().string());
+  writer.SetFileName(temp.string().c_str());
+  std::error_code ec;
+  if (!writer.Write()) {
+    fs::remove(temp, ec);
+    throw InputError(where + ": cannot write the structure set");
+  }
+  fs::rename(temp, file, ec);
+  if (ec) {
+    fs::remove(temp, ec);
+    throw InputError(where + ": cannot move into place: " + ec.message());
+  }
+}
+
+}  // namespace organfit::dicom
