@@ -111,6 +111,10 @@ assert d['ct']['slices'] == 48 and abs(d['organ']['volume_cm3'] - 53.30) < 0.01
 assert d['organ']['matched_by_position'] == 16 and any('matched by position' in w for w in d['warnings'])
 assert d['truth']['recovery'] > 0.5 and abs(d['fit']['volume_change_pct']) < 1.0"
   check real.exports_rtstruct_and_labels test -s "$tmp/real/gtv_fit_rtstruct.dcm" -a -s "$tmp/real/gtv_fit_labels.nrrd"
+  check real.mesh_is_watertight_outward_and_holds_the_volume /usr/bin/python3 -c "
+import json; e = json.load(open('$tmp/real/run.json'))['export']; m = e['mesh']
+assert m['boundary_edges'] == 0 and m['non_manifold_edges'] == 0 and m['outward'], m
+assert abs(m['enclosed_volume_mm3'] - e['model_volume_mm3']) < 0.03 * e['model_volume_mm3'], e"
   expect real.exported_rtstruct_reads_back 0 "" -- --quiet segment --ct "$src/../shared/data/ct-sts-002/ct" --rtstruct "$tmp/real/gtv_fit_rtstruct.dcm" --roi GTV_Mass_CT_fit --out "$tmp/back.nrrd"
   check real.read_back_volume_equals_exported /usr/bin/python3 -c "
 import json, re; d = json.load(open('$tmp/real/run.json'))

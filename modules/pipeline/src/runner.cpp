@@ -12,6 +12,7 @@
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/slice_contours.h"
 #include "organfit/itkbridge/itk_images.h"
+#include "organfit/meshing/surface.h"
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_stage.h"
 #include "organfit/support/atomic_file.h"
@@ -169,28 +170,56 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
     not_converged = fit.not_converged_message;
     if (!not_converged.empty()) run["warnings"].push_back(not_converged);
   }
-  // Export: the (fitted) model on the planning CT's grid, as an RTSTRUCT and/or labels.
+  // Export: the (fitted) model on the planning CT's grid (RTSTRUCT, labels), and its
+  // surface from the particles themselves (a mesh).
   std::vector<std::string> exported;
-  std::function<void()> write_exports;
-  if (scene.has_section("export") && model && ct) {
+  std::vector<std::function<void()>> writes;
+  if (scene.has_section("export") && model) {
     Stopwatch clock;
     const double rho = model->model->radius_mm();
-    geometry::LabelVolume mask = geometry::rasterize_balls(model->state.x, rho, ct->geometry);
-    geometry::close_mask(mask, rho);
-    std::string roi_name = scene.text("export", "roi_name");
-    if (roi_name.empty()) roi_name = (scene.has_section("organ") ? scene.text("organ", "roi") : "organ") + "_fit";
-    const auto contours = geometry::slice_contours(mask, 1);
-    run["export"] = {{"roi", roi_name}, {"contours", contours.size()}, {"volume_cm3", mask.volume_mm3(1) / 1000.0}};
-    const std::string rt = scene.text("export", "rtstruct"), labels = scene.text("export", "labels");
-    if (!rt.empty()) exported.push_back(rt);
-    if (!labels.empty()) exported.push_back(labels);
-    write_exports = [&, mask = std::move(mask), contours, roi_name, rt, labels]() {
-      if (!rt.empty()) dicom::write_rtstruct(out_dir / rt, *ct, {{roi_name, {0, 200, 255}, contours}});
-      if (!labels.empty()) itkbridge::write_label_volume(out_dir / labels, mask);
-    };
+    const std::string rt = scene.text("export", "rtstruct"), labels = scene.text("export", "labels"),
+                      mesh = scene.text("export", "mesh");
+    run["export"] = nlohmann::json::object();
+    if (ct && (!rt.empty() || !labels.empty())) {
+      auto mask = std::make_shared<geometry::LabelVolume>(geometry::rasterize_balls(model->state.x, rho, ct->geometry));
+      geometry::close_mask(*mask, rho);
+      std::string roi_name = scene.text("export", "roi_name");
+      if (roi_name.empty()) roi_name = (scene.has_section("organ") ? scene.text("organ", "roi") : "organ") + "_fit";
+      auto contours = std::make_shared<std::vector<geometry::SliceContour>>(geometry::slice_contours(*mask, 1));
+      run["export"]["roi"] = roi_name;
+      run["export"]["contours"] = contours->size();
+      run["export"]["volume_on_ct_grid_cm3"] = mask->volume_mm3(1) / 1000.0;
+      if (!rt.empty()) {
+        exported.push_back(rt);
+        writes.push_back([&, contours, roi_name, rt] {
+          dicom::write_rtstruct(out_dir / rt, *ct, {{roi_name, {0, 200, 255}, *contours}});
+        });
+      }
+      if (!labels.empty()) {
+        exported.push_back(labels);
+        writes.push_back([&, mask, labels] { itkbridge::write_label_volume(out_dir / labels, *mask); });
+      }
+    }
+    if (!mesh.empty()) {
+      // The particles' body on a fine grid (balls closed by rho, voxels of rho/2).
+      const geometry::Aabb box{model->state.x.rowwise().minCoeff(), model->state.x.rowwise().maxCoeff()};
+      const geometry::ImageGeometry fine = geometry::grid_covering(box, 0.5 * rho, 2 * rho + rho);
+      auto body = std::make_shared<geometry::LabelVolume>(geometry::rasterize_balls(model->state.x, rho, fine));
+      geometry::close_mask(*body, rho);
+      exported.push_back(mesh);
+      run["export"]["model_volume_mm3"] = body->volume_mm3(1);
+      writes.push_back([&, body, mesh] {
+        const meshing::SurfaceReport r = meshing::write_surface(*body, out_dir / mesh);
+        run["export"]["mesh"] = {{"file", mesh},
+                                 {"triangles", r.triangles},
+                                 {"boundary_edges", r.boundary_edges},
+                                 {"non_manifold_edges", r.non_manifold_edges},
+                                 {"outward", r.outward},
+                                 {"enclosed_volume_mm3", r.enclosed_volume_mm3},
+                                 {"area_mm2", r.area_mm2}};
+      });
+    }
     record_stage("export", clock.elapsed_s());
-    spdlog::info("export: ROI '{}', {} contours, {:.2f} cm3 on the CT grid", roi_name, contours.size(),
-                 run["export"]["volume_cm3"].get<double>());
   }
   if (!skipped.empty()) {
     std::string list;
@@ -209,7 +238,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
   // Files are committed only now: a run that fails with an error leaves none. A fit
   // that did not converge still writes its results (run.json says so), then exits 3.
   for (const auto& f : files) write_file_atomically(out_dir / f.first, f.second);
-  if (write_exports) write_exports();
+  for (const auto& write : writes) write();  // each atomic; the mesh adds its report to run.json
   write_file_atomically(out_dir / "resolved.yaml", scene.resolved_yaml());
   write_file_atomically(out_dir / "run.json", run.dump(2) + "\n");
   if (!not_converged.empty()) throw TargetNotMetError(not_converged);

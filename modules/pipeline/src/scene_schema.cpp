@@ -99,6 +99,7 @@ config::Schema build_schema() {
   s.section("export", "what to write for the planning system, on the planning CT's grid")
       .text("rtstruct", "", "DICOM RT Structure Set file name inside --out (empty: none)")
       .text("labels", "", "label map file name inside --out: .nrrd, .mha, .nii(.gz) (empty: none)")
+      .text("mesh", "", "surface mesh file name inside --out: .stl, .vtp, .ply, .obj (empty: none)")
       .text("roi_name", "", "name of the exported ROI (default: the organ's ROI name + _fit)");
   return s;
 }
@@ -141,11 +142,13 @@ void check_scene_rules(const config::Scene& scene) {
     }
   }
   if (scene.has_section("export")) {
-    if (!scene.has_section("ct")) scene.fail("export", "rtstruct", "export writes on the planning CT: add a 'ct' section");
+    if (!scene.has_section("ct") && !(scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty()))
+      scene.fail("export", "rtstruct", "an RTSTRUCT or label map is written on the planning CT: add a 'ct' section");
     if (!scene.has_section("model")) scene.fail("export", "rtstruct", "export needs a 'model' to export");
-    if (scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty())
-      scene.fail("export", "rtstruct", "the export section names nothing to write (rtstruct or labels)");
-    for (const char* key : {"rtstruct", "labels"}) {
+    if (scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty() &&
+        scene.text("export", "mesh").empty())
+      scene.fail("export", "rtstruct", "the export section names nothing to write (rtstruct, labels or mesh)");
+    for (const char* key : {"rtstruct", "labels", "mesh"}) {
       const std::string& name = scene.text("export", key);
       if (name.find('/') != std::string::npos || name == "." || name == "..")
         scene.fail("export", key, "a file name inside --out, without folders");

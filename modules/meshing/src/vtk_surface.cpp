@@ -1,0 +1,171 @@
+// VTK translation unit: plain inputs only.
+#include <unistd.h>
+#include <vtkCellArray.h>
+#include <vtkFeatureEdges.h>
+#include <vtkFlyingEdges3D.h>
+#include <vtkImageData.h>
+#include <vtkMassProperties.h>
+#include <vtkMatrix3x3.h>
+#include <vtkNew.h>
+#include <vtkOBJWriter.h>
+#include <vtkPLYWriter.h>
+#include <vtkPolyData.h>
+#include <vtkPolyDataNormals.h>
+#include <vtkSTLWriter.h>
+#include <vtkTriangleFilter.h>
+#include <vtkUnsignedCharArray.h>
+#include <vtkPointData.h>
+#include <vtkWindowedSincPolyDataFilter.h>
+#include <vtkXMLPolyDataWriter.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "organfit/meshing/plain_mesh.h"
+#include "organfit/support/error.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::meshing {
+namespace {
+
+bool ends_with(const std::string& s, const std::string& e) {
+  return s.size() > e.size() && s.compare(s.size() - e.size(), e.size(), e) == 0;
+}
+
+/// Signed volume by the divergence theorem: positive when normals point outward.
+double signed_volume(vtkPolyData* poly) {
+  double v = 0;
+  vtkCellArray* polys = poly->GetPolys();
+  vtkIdType n = 0;
+  const vtkIdType* ids = nullptr;
+  polys->InitTraversal();
+  while (polys->GetNextCell(n, ids)) {
+    if (n != 3) continue;
+    double a[3], b[3], c[3];
+    poly->GetPoint(ids[0], a);
+    poly->GetPoint(ids[1], b);
+    poly->GetPoint(ids[2], c);
+    v += (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])) / 6.0;
+  }
+  return v;
+}
+
+}  // namespace
+
+PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file) {
+  const bool stl = ends_with(file, ".stl"), vtp = ends_with(file, ".vtp"), ply = ends_with(file, ".ply"),
+             obj = ends_with(file, ".obj");
+  if (!stl && !vtp && !ply && !obj) throw InputError(file + ": unknown mesh format (use .stl, .vtp, .ply or .obj)");
+  // Pad by one empty voxel all round so the surface closes at the grid border.
+  const int nx = m.size[0] + 2, ny = m.size[1] + 2, nz = m.size[2] + 2;
+  vtkNew<vtkImageData> image;
+  image->SetDimensions(nx, ny, nz);
+  image->SetSpacing(m.spacing_mm.data());
+  double origin[3];
+  for (int d = 0; d < 3; ++d) {  // origin of the padded grid: one voxel back along each axis
+    origin[d] = m.origin_mm[d];
+    for (int e = 0; e < 3; ++e) origin[d] -= m.direction[3 * d + e] * m.spacing_mm[e];
+  }
+  image->SetOrigin(origin);
+  vtkNew<vtkMatrix3x3> direction;
+  for (int d = 0; d < 3; ++d)
+    for (int e = 0; e < 3; ++e) direction->SetElement(d, e, m.direction[3 * d + e]);
+  image->SetDirectionMatrix(direction);
+  vtkNew<vtkUnsignedCharArray> scalars;
+  scalars->SetNumberOfTuples(static_cast<vtkIdType>(nx) * ny * nz);
+  scalars->FillValue(0);
+  long long inside = 0;
+  for (int k = 0; k < m.size[2]; ++k)
+    for (int j = 0; j < m.size[1]; ++j)
+      for (int i = 0; i < m.size[0]; ++i) {
+        const unsigned char v = m.labels[i + static_cast<size_t>(m.size[0]) * (j + static_cast<size_t>(m.size[1]) * k)] == 1;
+        inside += v;
+        scalars->SetValue((i + 1) + static_cast<vtkIdType>(nx) * ((j + 1) + static_cast<vtkIdType>(ny) * (k + 1)), v);
+      }
+  if (inside == 0) throw InputError(file + ": the organ mask is empty, no surface to write");
+  image->GetPointData()->SetScalars(scalars);
+
+  vtkNew<vtkFlyingEdges3D> contour;
+  contour->SetInputData(image);
+  contour->SetValue(0, 0.5);
+  contour->ComputeNormalsOff();
+  vtkNew<vtkWindowedSincPolyDataFilter> smooth;
+  smooth->SetInputConnection(contour->GetOutputPort());
+  smooth->SetNumberOfIterations(20);
+  smooth->SetPassBand(0.1);
+  smooth->NonManifoldSmoothingOn();
+  smooth->NormalizeCoordinatesOn();
+  smooth->BoundarySmoothingOff();
+  smooth->FeatureEdgeSmoothingOff();
+  vtkNew<vtkPolyDataNormals> normals;
+  normals->SetInputConnection(smooth->GetOutputPort());
+  normals->ConsistencyOn();
+  normals->AutoOrientNormalsOn();
+  normals->SplittingOff();
+  vtkNew<vtkTriangleFilter> triangles;
+  triangles->SetInputConnection(normals->GetOutputPort());
+  triangles->Update();
+  vtkPolyData* surface = triangles->GetOutput();
+
+  PlainSurfaceReport report;
+  report.points = surface->GetNumberOfPoints();
+  report.triangles = surface->GetNumberOfPolys();
+  vtkNew<vtkFeatureEdges> edges;
+  edges->SetInputData(surface);
+  edges->BoundaryEdgesOn();
+  edges->NonManifoldEdgesOff();
+  edges->FeatureEdgesOff();
+  edges->ManifoldEdgesOff();
+  edges->Update();
+  report.boundary_edges = edges->GetOutput()->GetNumberOfLines();
+  edges->BoundaryEdgesOff();
+  edges->NonManifoldEdgesOn();
+  edges->Update();
+  report.non_manifold_edges = edges->GetOutput()->GetNumberOfLines();
+  vtkNew<vtkMassProperties> mass;
+  mass->SetInputData(surface);
+  mass->Update();
+  report.enclosed_volume_mm3 = mass->GetVolume();
+  report.area_mm2 = mass->GetSurfaceArea();
+  report.signed_volume_mm3 = signed_volume(surface);
+
+  const fs::path final_path(file);
+  const fs::path temp = final_path.parent_path() / (".tmp-" + std::to_string(getpid()) + "-" + final_path.filename().string());
+  int ok = 0;
+  if (stl) {
+    vtkNew<vtkSTLWriter> w;
+    w->SetInputData(surface);
+    w->SetFileTypeToBinary();
+    w->SetFileName(temp.c_str());
+    ok = w->Write();
+  } else if (vtp) {
+    vtkNew<vtkXMLPolyDataWriter> w;
+    w->SetInputData(surface);
+    w->SetFileName(temp.c_str());
+    ok = w->Write();
+  } else if (ply) {
+    vtkNew<vtkPLYWriter> w;
+    w->SetInputData(surface);
+    w->SetFileName(temp.c_str());
+    ok = w->Write();
+  } else {
+    vtkNew<vtkOBJWriter> w;
+    w->SetInputData(surface);
+    w->SetFileName(temp.c_str());
+    ok = w->Write();
+  }
+  std::error_code ec;
+  if (!ok || !fs::exists(temp)) {
+    fs::remove(temp, ec);
+    throw InputError(file + ": cannot write the mesh");
+  }
+  fs::rename(temp, final_path, ec);
+  if (ec) {
+    fs::remove(temp, ec);
+    throw InputError(file + ": cannot move into place: " + ec.message());
+  }
+  return report;
+}
+
+}  // namespace organfit::meshing
