@@ -119,7 +119,7 @@ assert abs(m['enclosed_volume_mm3'] - e['model_volume_mm3']) < 0.03 * e['model_v
   check real.read_back_volume_equals_exported /usr/bin/python3 -c "
 import json, re; d = json.load(open('$tmp/real/run.json'))
 v = float(re.search(r': ([0-9.]+) cm3', open('$tmp/out').read()).group(1))
-assert abs(v - d['export']['volume_cm3']) < 1e-3 * v, (v, d['export'])"
+assert abs(v - d['export']['volume_on_ct_grid_cm3']) < 1e-3 * v, (v, d['export'])"
   check real.no_patient_identifiers_in_outputs /usr/bin/python3 -c "
 import subprocess
 dump = subprocess.run(['gdcmdump', '$src/../shared/data/ct-sts-002/ct/000000.dcm'], capture_output=True, text=True).stdout
