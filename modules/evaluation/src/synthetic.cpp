@@ -135,8 +135,7 @@ geometry::SurfaceComparison compare_with_body(const Eigen::Matrix3Xd& particles,
     box.max_mm = box.max_mm.cwiseMax(particles.rowwise().maxCoeff());
   }
   const geometry::ImageGeometry g = geometry::grid_covering(box, voxel_mm, 2 * radius_mm + 2 * voxel_mm);
-  geometry::LabelVolume model = geometry::rasterize_balls(particles, radius_mm, g);
-  geometry::close_mask(model, radius_mm);
+  const geometry::LabelVolume model = geometry::closed_body_on_grid(particles, radius_mm, radius_mm, g);
   geometry::LabelVolume truth(g);
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)

@@ -117,6 +117,37 @@ void close_mask(LabelVolume& mask, double radius_mm) {
   for (size_t i = 0; i < outside.size(); ++i) mask.labels[i] = to_outside[i] > r2;
 }
 
+LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm, double closing_mm,
+                                const ImageGeometry& grid) {
+  LabelVolume out(grid);
+  if (centres.cols() == 0) return out;
+  // Index box of the balls grown by the closing (and a voxel), clamped to the grid.
+  const double reach = radius_mm + closing_mm;
+  int lo[3] = {grid.size[0], grid.size[1], grid.size[2]}, hi[3] = {-1, -1, -1};
+  for (Eigen::Index c = 0; c < centres.cols(); ++c) {
+    const Eigen::Vector3d idx = grid.physical_to_index(centres.col(c));
+    for (int d = 0; d < 3; ++d) {
+      const double r = reach / grid.spacing_mm[d] + 1;
+      lo[d] = std::min(lo[d], static_cast<int>(std::floor(idx[d] - r)));
+      hi[d] = std::max(hi[d], static_cast<int>(std::ceil(idx[d] + r)));
+    }
+  }
+  for (int d = 0; d < 3; ++d) {
+    lo[d] = std::max(0, lo[d]);
+    hi[d] = std::min(grid.size[d] - 1, hi[d]);
+    if (lo[d] > hi[d]) return out;  // entirely off the grid
+  }
+  ImageGeometry sub = grid;
+  for (int d = 0; d < 3; ++d) sub.size[d] = hi[d] - lo[d] + 1;
+  sub.origin_mm = grid.index_to_physical(Eigen::Vector3d(lo[0], lo[1], lo[2]));
+  LabelVolume part = rasterize_balls(centres, radius_mm, sub);
+  close_mask(part, closing_mm);
+  for (int k = 0; k < sub.size[2]; ++k)
+    for (int j = 0; j < sub.size[1]; ++j)
+      for (int i = 0; i < sub.size[0]; ++i) out.at(lo[0] + i, lo[1] + j, lo[2] + k) = part.at(i, j, k);
+  return out;
+}
+
 std::vector<std::uint8_t> surface_of(const LabelVolume& mask) {
   const auto& g = mask.geometry;
   std::vector<std::uint8_t> s(mask.labels.size(), 0);
@@ -173,10 +204,8 @@ Aabb bounds_of(const Eigen::Matrix3Xd& x) {
 double particle_body_volume_mm3(const Eigen::Matrix3Xd& centres, double radius_mm, double voxel_mm,
                                 double closing_mm) {
   if (centres.cols() == 0) return 0.0;
-  LabelVolume m = rasterize_balls(
-      centres, radius_mm, grid_covering(bounds_of(centres), voxel_mm, radius_mm + closing_mm + 2 * voxel_mm));
-  close_mask(m, closing_mm);
-  return m.volume_mm3(1);
+  const ImageGeometry g = grid_covering(bounds_of(centres), voxel_mm, radius_mm + closing_mm + 2 * voxel_mm);
+  return closed_body_on_grid(centres, radius_mm, closing_mm, g).volume_mm3(1);
 }
 
 SurfaceComparison compare_particle_bodies(const Eigen::Matrix3Xd& a, const Eigen::Matrix3Xd& b,
@@ -186,10 +215,7 @@ SurfaceComparison compare_particle_bodies(const Eigen::Matrix3Xd& a, const Eigen
   box.min_mm = box.min_mm.cwiseMin(bb.min_mm);
   box.max_mm = box.max_mm.cwiseMax(bb.max_mm);
   const ImageGeometry g = grid_covering(box, voxel_mm, radius_mm + closing_mm + 2 * voxel_mm);
-  LabelVolume ma = rasterize_balls(a, radius_mm, g), mb = rasterize_balls(b, radius_mm, g);
-  close_mask(ma, closing_mm);
-  close_mask(mb, closing_mm);
-  return compare_masks(ma, mb);
+  return compare_masks(closed_body_on_grid(a, radius_mm, closing_mm, g), closed_body_on_grid(b, radius_mm, closing_mm, g));
 }
 
 }  // namespace organfit::geometry

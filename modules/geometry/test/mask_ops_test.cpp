@@ -60,6 +60,24 @@ TEST(MaskOps, BallsOnARotatedGridLandWhereThePhysicalBallIs) {
         if (m.at(i, j, k)) EXPECT_LE((g.index_to_physical(Eigen::Vector3d(i, j, k)) - centre).norm(), 5.0 + 1e-9);
 }
 
+TEST(MaskOps, ClosedBodyOnALargeGridEqualsClosingTheWholeGrid) {
+  ImageGeometry g;
+  g.size = {80, 70, 30};
+  g.spacing_mm = {0.7, 0.7, 2.0};
+  g.origin_mm = {-30, -20, -10};
+  Eigen::Matrix3Xd c(3, 27);
+  int n = 0;
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) c.col(n++) = Eigen::Vector3d(2.0 * i, 2.0 * j, 2.0 * k + 20);
+  LabelVolume whole = rasterize_balls(c, 1.0, g);
+  close_mask(whole, 1.0);
+  const LabelVolume cropped = closed_body_on_grid(c, 1.0, 1.0, g);
+  EXPECT_GT(whole.count(1), 0);
+  EXPECT_EQ(cropped.labels, whole.labels);
+  EXPECT_EQ(closed_body_on_grid(Eigen::Matrix3Xd::Constant(3, 1, 1e4), 1.0, 1.0, g).count(1), 0);  // off the grid
+}
+
 TEST(MaskOps, ClosingFillsTheGapsOfAPackingButNotItsOutline) {
   // A simple cubic packing of touching balls of radius 1 (spacing 2) over a 20 mm cube:
   // the union of balls is ~52% of the cube; closed, it is the cube to within a shell.

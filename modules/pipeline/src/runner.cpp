@@ -181,8 +181,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
                       mesh = scene.text("export", "mesh");
     run["export"] = nlohmann::json::object();
     if (ct && (!rt.empty() || !labels.empty())) {
-      auto mask = std::make_shared<geometry::LabelVolume>(geometry::rasterize_balls(model->state.x, rho, ct->geometry));
-      geometry::close_mask(*mask, rho);
+      auto mask = std::make_shared<geometry::LabelVolume>(geometry::closed_body_on_grid(model->state.x, rho, rho, ct->geometry));
       std::string roi_name = scene.text("export", "roi_name");
       if (roi_name.empty()) roi_name = (scene.has_section("organ") ? scene.text("organ", "roi") : "organ") + "_fit";
       auto contours = std::make_shared<std::vector<geometry::SliceContour>>(geometry::slice_contours(*mask, 1));
@@ -204,8 +203,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
       // The particles' body on a fine grid (balls closed by rho, voxels of rho/2).
       const geometry::Aabb box{model->state.x.rowwise().minCoeff(), model->state.x.rowwise().maxCoeff()};
       const geometry::ImageGeometry fine = geometry::grid_covering(box, 0.5 * rho, 2 * rho + rho);
-      auto body = std::make_shared<geometry::LabelVolume>(geometry::rasterize_balls(model->state.x, rho, fine));
-      geometry::close_mask(*body, rho);
+      auto body = std::make_shared<geometry::LabelVolume>(geometry::closed_body_on_grid(model->state.x, rho, rho, fine));
       exported.push_back(mesh);
       run["export"]["model_volume_mm3"] = body->volume_mm3(1);
       writes.push_back([&, body, mesh] {

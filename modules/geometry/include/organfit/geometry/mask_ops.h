@@ -37,6 +37,13 @@ LabelVolume rasterize_balls(const Eigen::Matrix3Xd& centres, double radius_mm,
 /// Morphological closing by a ball of `radius_mm` (dilate then erode), in place.
 void close_mask(LabelVolume& mask, double radius_mm);
 
+/// The closed body of a particle set on `grid`: balls of `radius_mm` closed by
+/// `closing_mm` (the definition above). Computed on the part of the grid the balls and
+/// the closing can reach, then placed on the whole grid: a large CT costs no more than
+/// the organ's box. Label 1 inside.
+LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm, double closing_mm,
+                                const ImageGeometry& grid);
+
 /// The surface voxels of a mask (label != 0 with a face neighbour outside or off-grid).
 std::vector<std::uint8_t> surface_of(const LabelVolume& mask);
 
