@@ -12,6 +12,7 @@
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/pipeline/segment_command.h"
 #include "organfit/support/error.h"
+#include "organfit/support/interrupt.h"
 #include "organfit/support/log.h"
 #include "organfit/support/progress.h"
 
@@ -87,6 +88,7 @@ int run_main(int argc, char** argv) {
     return static_cast<int>(ExitCode::kBadInput);
   }
 
+  organfit::install_interrupt_handlers();
   organfit::setup_logging(quiet     ? organfit::Verbosity::kQuiet
                           : verbose ? organfit::Verbosity::kVerbose
                                     : organfit::Verbosity::kNormal);

@@ -156,5 +156,20 @@ printf 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\npoints:\n  sou
 expect fit.nan_point_is_exit_2 2 "bad_points.csv:2: non-finite coordinate" -- --quiet run "$tmp/nan_points.yaml" --out "$tmp/fit3"
 check fit.nan_point_leaves_no_outputs test ! -e "$tmp/fit3/run.json"
 
+# SIGINT during a fit: stops within a second, exit 130, no final-named output, no temporary
+printf 'scene:\n  name: long\nbody:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\npoints:\n  count: 10000\nfit:\n  method: paper\n  max_wall_s: 60\n' > "$tmp/long.yaml"
+"$bin" --quiet run "$tmp/long.yaml" --out "$tmp/interrupted" > /dev/null 2> "$tmp/err" &
+pid=$!
+sleep 1.5
+start=$(date +%s%N)
+kill -INT $pid
+wait $pid
+code=$?
+took_ms=$(( ($(date +%s%N) - start) / 1000000 ))
+check interrupt.exit_130 test $code -eq 130
+check interrupt.within_a_second test $took_ms -lt 1000
+check interrupt.no_outputs_left test -z "$(ls -A "$tmp/interrupted" 2>/dev/null)"
+check interrupt.says_so grep -q "interrupted" "$tmp/err"
+
 echo "$passed passed, $failed failed"
 [[ $failed -eq 0 ]]

@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "organfit/support/error.h"
+#include "organfit/support/interrupt.h"
 
 namespace fs = std::filesystem;
 
@@ -209,6 +210,7 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   const size_t per_slice = static_cast<size_t>(first.rows) * first.columns;
   series.hu.resize(per_slice * slices.size());
   for (size_t s = 0; s < slices.size(); ++s) {
+    throw_if_interrupted();
     const std::string name = fs::path(slices[s].file).filename().string();
     gdcm::ImageReader reader;
     reader.SetFileName(slices[s].file.c_str());

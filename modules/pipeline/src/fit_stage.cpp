@@ -13,6 +13,7 @@
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/particles/diagnostics.h"
 #include "organfit/support/error.h"
+#include "organfit/support/interrupt.h"
 #include "organfit/support/progress.h"
 #include "organfit/support/resources.h"
 
@@ -263,6 +264,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   Progress progress("fit", fo.max_steps);
   out.fit = fitting::run_fit(m, state, opt, points, skin_of, status, fo,
                              [&](const fitting::HistoryRow& h) {
+                               throw_if_interrupted();
                                progress.update(h.step, fmt::format("residual {:.2f} mm", h.residual_mean_mm));
                              },
                              after_row);

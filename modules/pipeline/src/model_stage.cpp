@@ -9,6 +9,7 @@
 #include "organfit/particles/lattice_fill.h"
 #include "organfit/particles/skeleton.h"
 #include "organfit/support/error.h"
+#include "organfit/support/interrupt.h"
 #include "organfit/support/progress.h"
 #include "organfit/support/resources.h"
 
@@ -87,6 +88,7 @@ ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::S
   bool settled = max_steps == 0;
   if (max_steps > 0) {
     integ.run(result.state, max_steps, [&](long long step) {
+      throw_if_interrupted();
       steps = step;
       if (step % 10 != 0) return true;
       ke = integ.kinetic_energy(result.state) / n;
