@@ -17,7 +17,9 @@ if(ORGANFIT_SANITIZE)
   add_compile_options(-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
                       -fsanitize-recover=pointer-overflow)
   add_link_options(-fsanitize=address,undefined)
-  set(ORGANFIT_SANITIZER_ENV
-      "UBSAN_OPTIONS=suppressions=${PROJECT_SOURCE_DIR}/tests/sanitizers/ubsan.supp:print_stacktrace=1:halt_on_error=1"
-      "ASAN_OPTIONS=detect_leaks=0")
+  # Default options and suppressions, linked directly into every test binary and the app
+  # (an OBJECT library's objects reach only targets that link it directly).
+  add_library(organfit_sanitizer_defaults OBJECT ${PROJECT_SOURCE_DIR}/tests/sanitizers/sanitizer_defaults.cpp)
+  target_compile_definitions(organfit_sanitizer_defaults PRIVATE
+    ORGANFIT_UBSAN_SUPPRESSIONS="${PROJECT_SOURCE_DIR}/tests/sanitizers/ubsan.supp")
 endif()

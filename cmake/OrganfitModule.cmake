@@ -19,10 +19,13 @@ function(organfit_module NAME)
   if(ORGANFIT_BUILD_TESTS AND test_sources)
     add_executable(${NAME}_tests ${test_sources})
     target_link_libraries(${NAME}_tests PRIVATE ${target} ${ARG_TEST_DEPS} GTest::gtest_main organfit_warnings)
+    if(TARGET organfit_sanitizer_defaults)
+      target_link_libraries(${NAME}_tests PRIVATE organfit_sanitizer_defaults)
+    endif()
     target_compile_definitions(${NAME}_tests PRIVATE
       ORGANFIT_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
       ORGANFIT_SHARED_DATA_DIR="${ORGANFIT_SHARED_DATA_DIR}")
     gtest_discover_tests(${NAME}_tests TEST_PREFIX "${NAME}." DISCOVERY_TIMEOUT 60
-                         PROPERTIES LABELS ${NAME} ENVIRONMENT "${ORGANFIT_SANITIZER_ENV}")
+                         PROPERTIES LABELS ${NAME})
   endif()
 endfunction()
