@@ -14,6 +14,7 @@
 #include <map>
 #include <sstream>
 
+#include "dicom_values.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
 
@@ -35,19 +36,7 @@ std::string trimmed(const char* v) {
   return b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
 }
 
-std::vector<double> numbers(const std::string& s) {
-  std::vector<double> out;
-  std::stringstream ss(s);
-  std::string item;
-  while (std::getline(ss, item, '\\')) {
-    try {
-      out.push_back(std::stod(item));
-    } catch (const std::exception&) {
-      out.push_back(std::nan(""));
-    }
-  }
-  return out;
-}
+using detail::numbers;
 
 struct Header {
   std::string file, series_uid, description, sop_uid, sop_class, frame_of_reference;

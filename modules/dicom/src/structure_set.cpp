@@ -10,6 +10,7 @@
 #include <map>
 #include <sstream>
 
+#include "dicom_values.h"
 #include "organfit/support/error.h"
 
 namespace fs = std::filesystem;
@@ -35,19 +36,7 @@ gdcm::SmartPointer<gdcm::SequenceOfItems> sequence(const gdcm::DataSet& ds, uint
   return ds.GetDataElement(tag).GetValueAsSQ();
 }
 
-std::vector<double> numbers(const std::string& s) {
-  std::vector<double> out;
-  std::stringstream ss(s);
-  std::string item;
-  while (std::getline(ss, item, '\\')) {
-    try {
-      out.push_back(std::stod(item));
-    } catch (const std::exception&) {
-      out.push_back(std::nan(""));
-    }
-  }
-  return out;
-}
+using detail::numbers;
 
 }  // namespace
 
