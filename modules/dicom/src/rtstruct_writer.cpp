@@ -5,12 +5,12 @@
 #include <gdcmSequenceOfItems.h>
 #include <gdcmUIDGenerator.h>
 #include <gdcmWriter.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <ctime>
 #include <functional>
 
+#include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 
 namespace fs = std::filesystem;
@@ -192,18 +192,10 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
   gdcm::FileMetaInformation& meta = writer.GetFile().GetHeader();
   meta.SetDataSetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
   meta.SetSourceApplicationEntityTitle("ORGANFIT");
-  const fs::path temp = file.parent_path() / (".tmp-" + std::to_string(getpid()) + "-" + file.filename().string());
-  writer.SetFileName(temp.string().c_str());
-  std::error_code ec;
-  if (!writer.Write()) {
-    fs::remove(temp, ec);
-    throw InputError(where + ": cannot write the structure set");
-  }
-  fs::rename(temp, file, ec);
-  if (ec) {
-    fs::remove(temp, ec);
-    throw InputError(where + ": cannot move into place: " + ec.message());
-  }
+  TempPath temp(file);
+  writer.SetFileName(temp.path().string().c_str());
+  if (!writer.Write()) throw InputError(where + ": cannot write the structure set");
+  temp.commit();
 }
 
 }  // namespace organfit::dicom

@@ -6,12 +6,12 @@
 #include <itkMetaImageIOFactory.h>
 #include <itkNiftiImageIOFactory.h>
 #include <itkNrrdImageIOFactory.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cstring>
 #include <mutex>
 
+#include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 
 namespace fs = std::filesystem;
@@ -99,24 +99,17 @@ void write_mask(const fs::path& file, const PlainMask& mask) {
   if (std::none_of(std::begin(known), std::end(known), [&](const char* e) { return ends_with(name, e); }))
     throw InputError(file.string() + ": unknown image format (use .nrrd, .nhdr, .mha, .mhd, .nii or .nii.gz)");
   register_formats();
-  const auto dot = name.find('.');
-  const fs::path temp = file.parent_path() / (".tmp-" + std::to_string(getpid()) + "-" + name.substr(0, dot) + name.substr(dot));
+  TempPath temp(file);
   auto writer = itk::ImageFileWriter<MaskImage>::New();
-  writer->SetFileName(temp.string());
+  writer->SetFileName(temp.path().string());
   writer->SetInput(to_itk(mask));
   writer->SetUseCompression(true);
-  std::error_code ec;
   try {
     writer->Update();
   } catch (const itk::ExceptionObject& e) {
-    fs::remove(temp, ec);
     throw InputError(file.string() + ": cannot write the image");
   }
-  fs::rename(temp, file, ec);
-  if (ec) {
-    fs::remove(temp, ec);
-    throw InputError(file.string() + ": cannot move into place: " + ec.message());
-  }
+  temp.commit();
 }
 
 PlainMask read_mask(const fs::path& file) {

@@ -1,5 +1,4 @@
 // VTK translation unit: plain inputs only.
-#include <unistd.h>
 #include <vtkCellArray.h>
 #include <vtkFeatureEdges.h>
 #include <vtkFlyingEdges3D.h>
@@ -22,6 +21,7 @@
 #include <filesystem>
 
 #include "organfit/meshing/plain_mesh.h"
+#include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 
 namespace fs = std::filesystem;
@@ -130,41 +130,33 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
   report.area_mm2 = mass->GetSurfaceArea();
   report.signed_volume_mm3 = signed_volume(surface);
 
-  const fs::path final_path(file);
-  const fs::path temp = final_path.parent_path() / (".tmp-" + std::to_string(getpid()) + "-" + final_path.filename().string());
+  TempPath temp(file);
+  const std::string name = temp.path().string();
   int ok = 0;
   if (stl) {
     vtkNew<vtkSTLWriter> w;
     w->SetInputData(surface);
     w->SetFileTypeToBinary();
-    w->SetFileName(temp.c_str());
+    w->SetFileName(name.c_str());
     ok = w->Write();
   } else if (vtp) {
     vtkNew<vtkXMLPolyDataWriter> w;
     w->SetInputData(surface);
-    w->SetFileName(temp.c_str());
+    w->SetFileName(name.c_str());
     ok = w->Write();
   } else if (ply) {
     vtkNew<vtkPLYWriter> w;
     w->SetInputData(surface);
-    w->SetFileName(temp.c_str());
+    w->SetFileName(name.c_str());
     ok = w->Write();
   } else {
     vtkNew<vtkOBJWriter> w;
     w->SetInputData(surface);
-    w->SetFileName(temp.c_str());
+    w->SetFileName(name.c_str());
     ok = w->Write();
   }
-  std::error_code ec;
-  if (!ok || !fs::exists(temp)) {
-    fs::remove(temp, ec);
-    throw InputError(file + ": cannot write the mesh");
-  }
-  fs::rename(temp, final_path, ec);
-  if (ec) {
-    fs::remove(temp, ec);
-    throw InputError(file + ": cannot move into place: " + ec.message());
-  }
+  if (!ok || !fs::exists(temp.path())) throw InputError(file + ": cannot write the mesh");
+  temp.commit();
   return report;
 }
 

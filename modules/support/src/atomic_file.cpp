@@ -44,6 +44,25 @@ void AtomicFile::commit() {
   committed_ = true;
 }
 
+TempPath::TempPath(std::filesystem::path final_path)
+    : final_path_(std::move(final_path)),
+      temp_path_(final_path_.parent_path() /
+                 fmt::format(".tmp-{}-{}", static_cast<long>(getpid()), final_path_.filename().string())) {}
+
+TempPath::~TempPath() {
+  if (!committed_) {
+    std::error_code ec;
+    std::filesystem::remove(temp_path_, ec);
+  }
+}
+
+void TempPath::commit() {
+  std::error_code ec;
+  std::filesystem::rename(temp_path_, final_path_, ec);
+  if (ec) throw InputError(final_path_.string() + ": cannot move into place: " + ec.message());
+  committed_ = true;
+}
+
 void write_file_atomically(const std::filesystem::path& path, const std::string& content) {
   AtomicFile file(path);
   file.stream() << content;

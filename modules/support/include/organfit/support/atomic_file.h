@@ -34,6 +34,26 @@ class AtomicFile {
   bool committed_ = false;
 };
 
+/// The same for writers that take a file name (ITK, VTK, GDCM): they write to path(),
+/// a temporary name beside the final one that keeps its extension (formats are chosen by
+/// extension); commit() renames it into place. Destroyed uncommitted, the temporary is
+/// removed.
+class TempPath {
+ public:
+  explicit TempPath(std::filesystem::path final_path);
+  ~TempPath();
+  TempPath(const TempPath&) = delete;
+  TempPath& operator=(const TempPath&) = delete;
+
+  const std::filesystem::path& path() const { return temp_path_; }
+  /// Renames into place; throws InputError "FILE: cannot move into place: ..." on failure.
+  void commit();
+
+ private:
+  std::filesystem::path final_path_, temp_path_;
+  bool committed_ = false;
+};
+
 /// Writes `content` to `path` atomically.
 void write_file_atomically(const std::filesystem::path& path, const std::string& content);
 
