@@ -66,14 +66,6 @@ PaperAttractiveForce::PaperAttractiveForce(std::vector<AttractivePoint> points,
   k_.assign(points_.size(), 0.0);
 }
 
-int PaperAttractiveForce::first_shell_count(const particles::Positions& x, int i) const {
-  const double shell2 = std::pow(params_.first_shell_r0 * r0_, 2);
-  int w = 0;
-  for (int j = 0; j < x.cols(); ++j)
-    if (j != i && (x.col(j) - x.col(i)).squaredNorm() < shell2) ++w;
-  return w;
-}
-
 void PaperAttractiveForce::assign(const particles::Positions& x) {
   const auto& skin = skin_.skin();
   w_ = first_shell_counts(x, params_.first_shell_r0 * r0_);

@@ -38,7 +38,11 @@ TEST_F(PaperForceTest, EpicentreReceivesExactlyFMaxKTowardsThePoint) {
   const Forces f = forces_of(term);
   const PointStatus& st = term.status()[0];
   ASSERT_GE(st.epicentre, 0);
-  const int w = term.first_shell_count(state_.x, st.epicentre);
+  // W of the epicentre by brute force: the reference for the O(N) count the force uses.
+  int w = 0;
+  for (int j = 0; j < state_.size(); ++j)
+    if (j != st.epicentre && (state_.x.col(j) - state_.x.col(st.epicentre)).norm() < 1.3 * params_.r0_mm) ++w;
+  EXPECT_EQ(w, first_shell_counts(state_.x, 1.3 * params_.r0_mm)[st.epicentre]);
   EXPECT_GE(w, 5);
   EXPECT_LE(w, 12);
   EXPECT_NEAR(st.f_max_k, 0.5 * w * law_->f_max(), 1e-12);
@@ -56,12 +60,13 @@ TEST_F(PaperForceTest, OthersFallOffAsTheRatioToThePowerAlphaMinusOne) {
   const Forces f = forces_of(term);
   const PointStatus& st = term.status()[0];
   ASSERT_GT(st.influence_count, 3);
+  const std::vector<int> shells = first_shell_counts(state_.x, 1.3 * params_.r0_mm);
   int checked = 0, capped = 0;
   for (int i = 0; i < state_.size(); ++i) {
     if (i == st.epicentre || f.col(i).norm() == 0) continue;
     const double r = (p - state_.x.col(i)).norm();
     // Eq. 5's fall-off, capped by what the particle's own neighbours hold (W(i) F_max / 2).
-    const double cap = 0.5 * term.first_shell_count(state_.x, i) * law_->f_max();
+    const double cap = 0.5 * shells[i] * law_->f_max();
     const double expected = std::min(cap, st.f_max_k * std::pow((st.d_min_mm - rho()) / (r - rho()), 2.0));
     EXPECT_NEAR(f.col(i).norm(), expected, 1e-9 * st.f_max_k) << i;
     EXPECT_LT(f.col(i).norm(), st.f_max_k);

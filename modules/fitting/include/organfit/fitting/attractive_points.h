@@ -81,8 +81,6 @@ class PaperAttractiveForce : public particles::ForceTerm {
   const std::vector<PointStatus>& status() const { return status_; }
   const SkinDetector& skin() const { return skin_; }
   double f_max() const { return f_max_; }
-  /// W(i): neighbours of particle i within first_shell_r0 r0 (for tests).
-  int first_shell_count(const particles::Positions& x, int i) const;
 
  private:
   void assign(const particles::Positions& x);
