@@ -35,6 +35,20 @@ void cap_by_cohesion(particles::Forces& g, const std::vector<int>& touched, cons
   }
 }
 
+std::pair<int, double> nearest_particle(const particles::Positions& x, const std::vector<int>& candidates,
+                                        const Eigen::Vector3d& p_mm) {
+  std::pair<int, double> best{-1, std::numeric_limits<double>::infinity()};
+  for (int i : candidates) {
+    const double d = (x.col(i) - p_mm).squaredNorm();
+    if (d < best.second) best = {i, d};
+  }
+  return best;
+}
+
+double default_outlier_distance(const particles::Positions& x) {
+  return x.cols() > 0 ? 0.5 * (x.rowwise().maxCoeff() - x.rowwise().minCoeff()).norm() : 0.0;
+}
+
 void validate_points(const std::vector<AttractivePoint>& points) {
   for (size_t k = 0; k < points.size(); ++k) {
     if (!points[k].p_mm.allFinite()) {
@@ -70,20 +84,16 @@ void PaperAttractiveForce::assign(const particles::Positions& x) {
   const auto& skin = skin_.skin();
   w_ = first_shell_counts(x, params_.first_shell_r0 * r0_);
   // Default outlier distance: half the model's diameter.
-  double outlier = params_.outlier_distance_mm;
-  if (outlier <= 0 && x.cols() > 0) outlier = 0.5 * (x.rowwise().maxCoeff() - x.rowwise().minCoeff()).norm();
+  const double outlier = params_.outlier_distance_mm > 0 ? params_.outlier_distance_mm : default_outlier_distance(x);
   for (size_t k = 0; k < points_.size(); ++k) {
     PointStatus& st = status_[k];
     st = PointStatus{};
     influence_[k].clear();
     const Eigen::Vector3d& p = points_[k].p_mm;
-    double best = std::numeric_limits<double>::infinity();
-    for (int i : skin) {
-      const double d = (x.col(i) - p).squaredNorm();
-      if (d < best) best = d, st.epicentre = i;
-    }
+    const auto [epicentre, d2] = nearest_particle(x, skin, p);
+    st.epicentre = epicentre;
     if (st.epicentre < 0) continue;
-    st.d_min_mm = std::sqrt(best);
+    st.d_min_mm = std::sqrt(d2);
     st.inside_model = skin_.inside(p);
     if (!st.inside_model && st.d_min_mm - rho_ > outlier) {
       st.rejected = true;

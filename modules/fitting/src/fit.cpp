@@ -16,9 +16,8 @@ std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
       out[k] = std::numeric_limits<double>::quiet_NaN();
       continue;
     }
-    double best = std::numeric_limits<double>::infinity();
-    for (int i : skin) best = std::min(best, (x.col(i) - points[k].p_mm).squaredNorm());
-    if (std::isfinite(best)) out[k] = std::abs(std::sqrt(best) - radius_mm);
+    const double d2 = nearest_particle(x, skin, points[k].p_mm).second;
+    if (std::isfinite(d2)) out[k] = std::abs(std::sqrt(d2) - radius_mm);
   }
   return out;
 }

@@ -29,20 +29,16 @@ SpreadAttractiveForce::SpreadAttractiveForce(std::vector<AttractivePoint> points
 void SpreadAttractiveForce::assign(const particles::Positions& x) {
   const auto& skin = skin_.skin();
   w_ = first_shell_counts(x, 1.3 * r0_);
-  double outlier = params_.outlier_distance_mm;
-  if (outlier <= 0 && x.cols() > 0) outlier = 0.5 * (x.rowwise().maxCoeff() - x.rowwise().minCoeff()).norm();
+  const double outlier = params_.outlier_distance_mm > 0 ? params_.outlier_distance_mm : default_outlier_distance(x);
   const double sigma = params_.patch_sigma_r0 * r0_, radius = params_.patch_radius_r0 * r0_;
   for (size_t k = 0; k < points_.size(); ++k) {
     PointStatus& st = status_[k];
     st = PointStatus{};
     patch_[k].clear();
-    double best = std::numeric_limits<double>::infinity();
-    for (int i : skin) {
-      const double d = (x.col(i) - points_[k].p_mm).squaredNorm();
-      if (d < best) best = d, st.epicentre = i;
-    }
+    const auto [epicentre, d2] = nearest_particle(x, skin, points_[k].p_mm);
+    st.epicentre = epicentre;
     if (st.epicentre < 0) continue;
-    st.d_min_mm = std::sqrt(best);
+    st.d_min_mm = std::sqrt(d2);
     st.inside_model = skin_.inside(points_[k].p_mm);
     if (!st.inside_model && st.d_min_mm - rho_ > outlier) {
       st.rejected = true;

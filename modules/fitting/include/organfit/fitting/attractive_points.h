@@ -2,6 +2,7 @@
 // Attractive points (ultrasound data) and the paper's force towards them (s.3.2-3.3,
 // eq. 5-6; METHOD.md s.5 and s.8).
 #include <Eigen/Core>
+#include <utility>
 #include <vector>
 
 #include "organfit/fitting/skin.h"
@@ -22,6 +23,15 @@ std::vector<int> first_shell_counts(const particles::Positions& x, double shell_
 /// particle, it is not torn off. `touched` lists the particles that got data forces.
 void cap_by_cohesion(particles::Forces& data_force, const std::vector<int>& touched,
                      const std::vector<int>& w, double f_max);
+
+/// The particle among `candidates` nearest to `p_mm`, and its squared distance (mm^2);
+/// ties go to the first. {-1, infinity} when there are no candidates.
+std::pair<int, double> nearest_particle(const particles::Positions& x, const std::vector<int>& candidates,
+                                        const Eigen::Vector3d& p_mm);
+
+/// Points farther than this from the skin are outliers unless a distance is given:
+/// half the model's diameter (mm).
+double default_outlier_distance(const particles::Positions& x);
 
 /// Checks points on entry: finite coordinates, confidence in (0, 1]. Throws
 /// std::invalid_argument naming the first bad point (index from 0).
