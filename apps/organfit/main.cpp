@@ -11,6 +11,7 @@
 #include "organfit/pipeline/runner.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/pipeline/segment_command.h"
+#include "organfit/pipeline/synth_command.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
 #include "organfit/support/log.h"
@@ -51,6 +52,21 @@ int run_main(int argc, char** argv) {
   segment->add_option("--seed", seg.seed_mm, "Seed X,Y,Z in mm (patient LPS)")->delimiter(',')->expected(3);
   segment->add_option("--hu", seg.hu_window, "HU window LOW,HIGH")->delimiter(',')->expected(2);
   segment->add_option("-o,--out", seg.out, "Mask file (.nrrd, .mha, .nii, .nii.gz)")->required();
+
+  auto* synth = app.add_subcommand("synth", "Synthetic scans with known anatomy");
+  synth->require_subcommand(1);
+  organfit::phantom::PelvisOptions pelvis;
+  std::string synth_out;
+  auto* synth_pelvis = synth->add_subcommand(
+      "pelvis", "A pelvis phantom: DIR/ct/ (DICOM CT), DIR/rtstruct.dcm (true organs), DIR/labels.nrrd");
+  synth_pelvis->add_option("-o,--out", synth_out, "Output folder (created; must be empty)")->required();
+  synth_pelvis->add_option("--seed", pelvis.seed, "Seed of the noise (same seed, same files)");
+  synth_pelvis->add_option("--columns", pelvis.columns, "Voxels along x")->check(CLI::Range(8, 2048));
+  synth_pelvis->add_option("--rows", pelvis.rows, "Voxels along y")->check(CLI::Range(8, 2048));
+  synth_pelvis->add_option("--slices", pelvis.slices, "Slices along z, centred on the prostate")->check(CLI::Range(8, 2000));
+  synth_pelvis->add_option("--pixel-mm", pelvis.pixel_mm, "In-plane spacing (mm)")->check(CLI::Range(0.1, 10.0));
+  synth_pelvis->add_option("--slice-mm", pelvis.slice_mm, "Slice spacing (mm)")->check(CLI::Range(0.1, 20.0));
+  synth_pelvis->add_option("--noise-hu", pelvis.noise_hu, "Noise standard deviation (HU)")->check(CLI::Range(0.0, 500.0));
 
   auto* bench = app.add_subcommand("bench", "Benchmarks; print machine-readable JSON on stdout");
   bench->require_subcommand(1);
@@ -103,6 +119,11 @@ int run_main(int argc, char** argv) {
     const auto result = organfit::pipeline::run_segment(seg);
     for (const auto& w : result.warnings) spdlog::warn(w);
     std::cout << seg.out.string() << ": " << result.volume_cm3 << " cm3\n";
+  } else if (*synth_pelvis) {
+    const auto result = organfit::pipeline::run_synth_pelvis(synth_out, pelvis);
+    if (result.clipped_voxels > 0) spdlog::warn("{} voxel(s) outside the 12-bit HU range were clipped", result.clipped_voxels);
+    std::cout << synth_out << ": pelvis phantom, " << result.slices << " slices, prostate "
+              << result.prostate_volume_cm3 << " cm3\n";
   } else if (*validate) {
     const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
     std::cout << scene_file << ": valid (" << scene.sections().size() << " sections)\n";

@@ -156,6 +156,22 @@ printf 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\npoints:\n  sou
 expect fit.nan_point_is_exit_2 2 "bad_points.csv:2: non-finite coordinate" -- --quiet run "$tmp/nan_points.yaml" --out "$tmp/fit3"
 check fit.nan_point_leaves_no_outputs test ! -e "$tmp/fit3/run.json"
 
+# synth pelvis: a DICOM CT and structure set that dicom3tools accept, byte-reproducible
+expect synth.pelvis 0 "" -- --quiet synth pelvis --out "$tmp/pelvis" --columns 128 --rows 128 --pixel-mm 3.2 --slices 24 --slice-mm 5
+check synth.prints_prostate_volume grep -qE "prostate 3[0-9.]* cm3" "$tmp/out"
+check synth.wrote_ct_rtstruct_labels test -s "$tmp/pelvis/ct/CT0024.dcm" -a -s "$tmp/pelvis/rtstruct.dcm" -a -s "$tmp/pelvis/labels.nrrd" -a -s "$tmp/pelvis/phantom.json"
+if command -v dciodvfy > /dev/null; then
+  check synth.dciodvfy_no_errors_on_ct_slices bash -c "for f in '$tmp/pelvis/ct/CT0001.dcm' '$tmp/pelvis/ct/CT0012.dcm' '$tmp/pelvis/ct/CT0024.dcm'; do dciodvfy \"\$f\" 2>&1 | grep -q '^Error' && exit 1; done; exit 0"
+  check synth.dciodvfy_no_errors_on_rtstruct bash -c "! dciodvfy '$tmp/pelvis/rtstruct.dcm' 2>&1 | grep -q '^Error'"
+  check synth.dcentvfy_consistent bash -c "! dcentvfy '$tmp/pelvis/ct/'*.dcm '$tmp/pelvis/rtstruct.dcm' 2>&1 | grep -qE '^(Error|Warning)'"
+else
+  echo "skip synth.dciodvfy: dicom3tools not installed (scripts/setup.sh installs it)"
+fi
+expect synth.same_seed_again 0 "" -- --quiet synth pelvis --out "$tmp/pelvis2" --columns 128 --rows 128 --pixel-mm 3.2 --slices 24 --slice-mm 5
+check synth.same_seed_same_bytes bash -c "cd '$tmp' && diff -r pelvis pelvis2 > /dev/null"
+expect synth.refuses_a_non_empty_folder 2 "exists and is not an empty folder" -- synth pelvis --out "$tmp/pelvis"
+expect segment.phantom_prostate_from_its_rtstruct 0 "" -- --quiet segment --ct "$tmp/pelvis/ct" --rtstruct "$tmp/pelvis/rtstruct.dcm" --roi Prostate --out "$tmp/pelvis_prostate.nrrd"
+
 # SIGINT during a fit: stops within a second, exit 130, no final-named output, no temporary
 printf 'scene:\n  name: long\nbody:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\npoints:\n  count: 10000\nfit:\n  method: paper\n  max_wall_s: 60\n' > "$tmp/long.yaml"
 "$bin" --quiet run "$tmp/long.yaml" --out "$tmp/interrupted" > /dev/null 2> "$tmp/err" &

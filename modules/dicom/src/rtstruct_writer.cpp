@@ -2,14 +2,9 @@
 
 #include <fmt/format.h>
 #include <gdcmFileMetaInformation.h>
-#include <gdcmSequenceOfItems.h>
-#include <gdcmUIDGenerator.h>
 #include <gdcmWriter.h>
 
-#include <chrono>
-#include <ctime>
-#include <functional>
-
+#include "dicom_writing.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 
@@ -22,40 +17,10 @@ constexpr const char* kRtstructClass = "1.2.840.10008.5.1.4.1.1.481.3";
 constexpr const char* kCtImageClass = "1.2.840.10008.5.1.4.1.1.2";
 constexpr const char* kStudyComponentClass = "1.2.840.10008.3.1.2.3.1";  // Detached Study Management (retired, as used by TPS)
 
-/// Inserts a string element, padded to even length (UIDs with NUL, others with space).
-/// Patient and Study attributes are copied verbatim from the CT, even where the source
-/// breaks its VR (ct-sts-002's Study ID has 17 characters): a structure set must agree
-/// with its study (dcentvfy), and a cut value would not.
-void put(gdcm::DataSet& ds, uint16_t group, uint16_t element, const gdcm::VR& vr, std::string value) {
-  if (value.size() % 2) value.push_back(vr == gdcm::VR::UI ? '\0' : ' ');
-  gdcm::DataElement de(gdcm::Tag(group, element));
-  de.SetVR(vr);
-  de.SetByteValue(value.data(), static_cast<uint32_t>(value.size()));
-  ds.Replace(de);
-}
-
-gdcm::Item new_item() {
-  gdcm::Item item;
-  item.SetVLToUndefined();
-  return item;
-}
-
-void put_sequence(gdcm::DataSet& ds, uint16_t group, uint16_t element, const std::vector<gdcm::Item>& items) {
-  gdcm::SmartPointer<gdcm::SequenceOfItems> sq = new gdcm::SequenceOfItems();
-  sq->SetLengthToUndefined();
-  for (const auto& item : items) sq->AddItem(item);
-  gdcm::DataElement de(gdcm::Tag(group, element));
-  de.SetVR(gdcm::VR::SQ);
-  de.SetValue(*sq);
-  de.SetVLToUndefined();
-  ds.Replace(de);
-}
-
-std::string ds_number(double v) {  // DS: at most 16 characters
-  std::string s = fmt::format("{:.6g}", v);
-  if (s.size() > 16) s = fmt::format("{:.8e}", v).substr(0, 16);
-  return s;
-}
+using detail::ds_number;
+using detail::new_item;
+using detail::put;
+using detail::put_sequence;
 
 }  // namespace
 
@@ -63,20 +28,9 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
                     const RtstructWriteOptions& options) {
   const std::string where = file.string();
   // UIDs: new under one root per run, or derived deterministically (tests).
-  gdcm::UIDGenerator generator;
-  auto uid = [&](const std::string& what) -> std::string {
-    if (!options.fixed_uids_and_dates) return generator.Generate();
-    const size_t h = std::hash<std::string>{}(ct.series_instance_uid + "|" + what);
-    return fmt::format("1.2.826.0.1.3680043.2.1125.{}", h % 100000000000000ULL);
-  };
-  std::string date = "20000101", time = "000000";
-  if (!options.fixed_uids_and_dates) {
-    const std::time_t now = std::time(nullptr);
-    char d[16], t[16];
-    std::strftime(d, sizeof d, "%Y%m%d", std::localtime(&now));
-    std::strftime(t, sizeof t, "%H%M%S", std::localtime(&now));
-    date = d, time = t;
-  }
+  const bool fixed = options.fixed_uids_and_dates;
+  auto uid = [&](const std::string& what) { return detail::make_uid(fixed, ct.series_instance_uid + "|" + what); };
+  const std::string date = detail::today_da(fixed), time = detail::now_tm(fixed);
   const std::string sop_uid = uid("sop"), series_uid = uid("series");
 
   gdcm::Writer writer;
@@ -179,7 +133,7 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
     gdcm::DataSet& obs = observation.GetNestedDataSet();
     put(obs, 0x3006, 0x0082, V::IS, number);
     put(obs, 0x3006, 0x0084, V::IS, number);
-    put(obs, 0x3006, 0x00a4, V::CS, "ORGAN");
+    put(obs, 0x3006, 0x00a4, V::CS, roi.interpreted_type);
     put(obs, 0x3006, 0x00a6, V::PN, "");
     observation_items.push_back(observation);
   }

@@ -52,7 +52,7 @@ TempPath::TempPath(std::filesystem::path final_path)
 TempPath::~TempPath() {
   if (!committed_) {
     std::error_code ec;
-    std::filesystem::remove(temp_path_, ec);
+    std::filesystem::remove_all(temp_path_, ec);  // a folder too (a CT series is written whole)
   }
 }
 

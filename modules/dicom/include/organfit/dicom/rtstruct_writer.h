@@ -14,6 +14,7 @@ struct RtstructRoi {
   std::string name;                             ///< e.g. Prostate_fit
   std::array<int, 3> colour{255, 128, 0};
   std::vector<geometry::SliceContour> contours;  ///< on the CT's slices (k indexes ct.slices)
+  std::string interpreted_type = "ORGAN";       ///< RT ROI Interpreted Type: ORGAN, EXTERNAL, GTV, ...
 };
 
 struct RtstructWriteOptions {

@@ -37,7 +37,7 @@ class AtomicFile {
 /// The same for writers that take a file name (ITK, VTK, GDCM): they write to path(),
 /// a temporary name beside the final one that keeps its extension (formats are chosen by
 /// extension); commit() renames it into place. Destroyed uncommitted, the temporary is
-/// removed.
+/// removed. It may also be a folder written file by file (a DICOM series).
 class TempPath {
  public:
   explicit TempPath(std::filesystem::path final_path);

@@ -1,0 +1,67 @@
+#include "dicom_writing.h"
+
+#include <fmt/format.h>
+#include <gdcmSequenceOfItems.h>
+#include <gdcmUIDGenerator.h>
+
+#include <ctime>
+#include <functional>
+
+namespace organfit::dicom::detail {
+
+void put(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const gdcm::VR& vr, std::string value) {
+  if (value.size() % 2) value.push_back(vr == gdcm::VR::UI ? '\0' : ' ');
+  gdcm::DataElement de(gdcm::Tag(group, element));
+  de.SetVR(vr);
+  de.SetByteValue(value.data(), static_cast<uint32_t>(value.size()));
+  ds.Replace(de);
+}
+
+gdcm::Item new_item() {
+  gdcm::Item item;
+  item.SetVLToUndefined();
+  return item;
+}
+
+void put_sequence(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const std::vector<gdcm::Item>& items) {
+  gdcm::SmartPointer<gdcm::SequenceOfItems> sq = new gdcm::SequenceOfItems();
+  sq->SetLengthToUndefined();
+  for (const auto& item : items) sq->AddItem(item);
+  gdcm::DataElement de(gdcm::Tag(group, element));
+  de.SetVR(gdcm::VR::SQ);
+  de.SetValue(*sq);
+  de.SetVLToUndefined();
+  ds.Replace(de);
+}
+
+std::string ds_number(double v) {
+  if (v == 0) v = 0;  // no "-0"
+  std::string s = fmt::format("{:.6g}", v);
+  if (s.size() > 16) s = fmt::format("{:.8e}", v).substr(0, 16);
+  return s;
+}
+
+namespace {
+std::string local_time(const char* format) {
+  const std::time_t now = std::time(nullptr);
+  std::tm parts{};
+  localtime_r(&now, &parts);
+  char text[32];
+  std::strftime(text, sizeof text, format, &parts);
+  return text;
+}
+}  // namespace
+
+std::string today_da(bool fixed) { return fixed ? "20000101" : local_time("%Y%m%d"); }
+std::string now_tm(bool fixed) { return fixed ? "000000" : local_time("%H%M%S"); }
+
+std::string make_uid(bool fixed, const std::string& key) {
+  if (!fixed) {
+    gdcm::UIDGenerator generator;
+    return generator.Generate();
+  }
+  const size_t h = std::hash<std::string>{}(key);
+  return fmt::format("1.2.826.0.1.3680043.2.1125.{}", h % 100000000000000ULL);
+}
+
+}  // namespace organfit::dicom::detail

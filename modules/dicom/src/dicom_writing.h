@@ -1,0 +1,35 @@
+#pragma once
+// Building DICOM data sets with GDCM, for this module's writers only.
+#include <gdcmDataSet.h>
+#include <gdcmItem.h>
+#include <gdcmVR.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace organfit::dicom::detail {
+
+/// Inserts (or replaces) a string element, padded to even length (UIDs with NUL, other
+/// VRs with a space). The value is written as given: callers copy source attributes
+/// verbatim (see rtstruct_writer.cpp for why).
+void put(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const gdcm::VR& vr, std::string value);
+
+/// An item of undefined length, ready for a nested data set.
+gdcm::Item new_item();
+
+/// Inserts a sequence (undefined length) of `items`.
+void put_sequence(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const std::vector<gdcm::Item>& items);
+
+/// A Decimal String value: at most 16 characters.
+std::string ds_number(double v);
+
+/// Today's date (DA) and time (TM), local time; or 20000101 / 000000 when `fixed`.
+std::string today_da(bool fixed);
+std::string now_tm(bool fixed);
+
+/// A new UID under GDCM's root; or, when `fixed`, one derived from `key` (tests and
+/// deterministic phantoms: same key, same UID).
+std::string make_uid(bool fixed, const std::string& key);
+
+}  // namespace organfit::dicom::detail
