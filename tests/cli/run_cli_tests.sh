@@ -172,6 +172,21 @@ check synth.same_seed_same_bytes bash -c "cd '$tmp' && diff -r pelvis pelvis2 > 
 expect synth.refuses_a_non_empty_folder 2 "exists and is not an empty folder" -- synth pelvis --out "$tmp/pelvis"
 expect segment.phantom_prostate_from_its_rtstruct 0 "" -- --quiet segment --ct "$tmp/pelvis/ct" --rtstruct "$tmp/pelvis/rtstruct.dcm" --roi Prostate --out "$tmp/pelvis_prostate.nrrd"
 
+# the default scene: phantom -> prostate -> model -> points -> fit -> RTSTRUCT + STL
+expect default.runs 0 "" -- --quiet run "$src/pipelines/default.yaml" --out "$tmp/default"
+check default.writes_phantom_rtstruct_stl test -s "$tmp/default/phantom/rtstruct.dcm" -a -s "$tmp/default/prostate_fit_rtstruct.dcm" -a -s "$tmp/default/prostate_fit.stl"
+check default.fit_converges_with_truth /usr/bin/python3 -c "
+import json; d = json.load(open('$tmp/default/run.json'))
+assert [s['name'] for s in d['stages']][:4] == ['phantom', 'ct', 'organ', 'model'], d['stages']
+assert abs(d['organ']['volume_cm3'] - 35.0) < 1.0 and d['model']['skeleton_from'] == 'organ mask'
+assert d['fit']['converged'] and abs(d['fit']['volume_change_pct']) < 1.0 and d['truth']['recovery'] > 0.5, d['truth']"
+expect default.fitted_rtstruct_reads_back 0 "" -- --quiet segment --ct "$tmp/default/phantom/ct" --rtstruct "$tmp/default/prostate_fit_rtstruct.dcm" --roi Prostate_fit --out "$tmp/default_back.nrrd"
+expect phantom.organ_from_a_seed 0 "" -- --quiet run "$src/tests/scenes/phantom-seed.yaml" --out "$tmp/pseed"
+check phantom.seeded_organ_volume_near_truth /usr/bin/python3 -c "
+import json; d = json.load(open('$tmp/pseed/run.json'))
+assert d['organ']['source'] == 'seed' and 28 < d['organ']['volume_cm3'] < 40, d['organ']"
+expect validate.organ_seed_without_seed 2 "organ.seed_mm: source is 'seed' but organ.seed_mm is not given" -- validate "$scenes/bad-organ-seed-without-seed.yaml"
+
 # SIGINT during a fit: stops within a second, exit 130, no final-named output, no temporary
 printf 'scene:\n  name: long\nbody:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\npoints:\n  count: 10000\nfit:\n  method: paper\n  max_wall_s: 60\n' > "$tmp/long.yaml"
 "$bin" --quiet run "$tmp/long.yaml" --out "$tmp/interrupted" > /dev/null 2> "$tmp/err" &

@@ -8,6 +8,7 @@
 #include <set>
 #include <stdexcept>
 
+#include "organfit/geometry/image_geometry.h"
 #include "organfit/particles/neighbour_list.h"
 
 namespace organfit::particles {
@@ -39,32 +40,26 @@ Eigen::Matrix3d closest_rotation(const Eigen::Matrix3d& a) {
 
 }  // namespace
 
-Skeleton medial_skeleton(const Positions& rest, double a_nn_mm, double node_spacing_mm) {
-  if (!(a_nn_mm > 0) || !(node_spacing_mm > 0)) {
-    throw std::invalid_argument("skeleton: lattice spacing and node spacing must be > 0 mm");
-  }
+namespace {
+
+/// The medial nodes of a body given as sample points (particles or voxel centres):
+/// `graph` joins each point to its close neighbours, `surface` marks the points on the
+/// body's surface, `min_lambda_mm` is the sampling's own scale (see below).
+Skeleton medial_nodes(const Positions& rest, const std::vector<std::vector<int>>& graph,
+                      const std::vector<char>& surface_flags, double min_lambda_mm, double node_spacing_mm,
+                      double cell_mm) {
   const int n = static_cast<int>(rest.cols());
   Skeleton skeleton;
-  if (n == 0) {
-    skeleton.nodes_mm.resize(3, 0);
-    return skeleton;
-  }
-  // Neighbour graph of the first shell; surface = incomplete first shell.
-  std::vector<std::vector<std::pair<int, double>>> graph(n);
-  for_each_close_pair(rest, 1.2 * a_nn_mm, [&](int i, int j, double r) {
-    graph[i].push_back({j, r});
-    graph[j].push_back({i, r});
-  });
   // Depth and feature: the Euclidean distance to, and index of, the nearest surface
-  // particle (exact, by a grid search over surface particles; a graph distance through
-  // the lattice is anisotropic and frays the medial axis).
+  // point (exact, by a grid search over surface points; a graph distance through the
+  // lattice is anisotropic and frays the medial axis).
   std::vector<int> surface;
   for (int i = 0; i < n; ++i)
-    if (graph[i].size() < 12) surface.push_back(i);
+    if (surface_flags[i]) surface.push_back(i);
   std::vector<double> depth(n, 0.0);
   std::vector<int> feature(n, -1);
   if (!surface.empty()) {
-    const double cell = a_nn_mm;
+    const double cell = cell_mm;
     const Eigen::Vector3d lo = rest.rowwise().minCoeff();
     const Eigen::Vector3d hi = rest.rowwise().maxCoeff();
     const Eigen::Vector3i dims = ((hi - lo) / cell).array().floor().cast<int>() + 1;
@@ -99,18 +94,18 @@ Skeleton medial_skeleton(const Positions& rest, double a_nn_mm, double node_spac
     }
   }
   // Medial: the lambda-medial axis (Chazal & Lieutier 2005), stable under surface noise.
-  // A particle is medial when its own nearest surface particle and a neighbour's lie
-  // at least 2 lambda apart (the two sides of the body meet here). lambda is a fixed
-  // fraction of the body's largest depth: a depth-relative threshold lets the faceted
-  // lattice surface grow spurious branches near the surface. It is at least 2 a_nn: a
-  // particle one layer deep is equidistant from several surface particles, and
-  // neighbours picking different ones have features up to a + 1.2 a + a apart.
+  // A point is medial when its own nearest surface point and a neighbour's lie at least
+  // 2 lambda apart (the two sides of the body meet here). lambda is a fixed fraction of
+  // the body's largest depth: a depth-relative threshold lets a faceted surface grow
+  // spurious branches near the surface. It is at least `min_lambda_mm`: a point one
+  // layer deep is equidistant from several surface points, and neighbours picking
+  // different ones have features a few sample spacings apart.
   const double max_depth = *std::max_element(depth.begin(), depth.end());
-  const double lambda = std::max(2.0 * a_nn_mm, 0.4 * max_depth);
+  const double lambda = std::max(min_lambda_mm, 0.4 * max_depth);
   std::vector<char> medial(n, 0);
   for (int i = 0; i < n; ++i) {
     if (feature[i] < 0) continue;
-    for (const auto& [j, r] : graph[i]) {
+    for (int j : graph[i]) {
       if (feature[j] >= 0 && (rest.col(feature[i]) - rest.col(feature[j])).norm() >= 2 * lambda) {
         medial[i] = 1;
         break;
@@ -120,10 +115,10 @@ Skeleton medial_skeleton(const Positions& rest, double a_nn_mm, double node_spac
   std::vector<int> candidates;
   for (int i = 0; i < n; ++i)
     if (medial[i]) candidates.push_back(i);
-  if (candidates.empty()) {  // too thin for a medial axis: one node at the deepest particle
+  if (candidates.empty()) {  // too thin for a medial axis: one node at the deepest point
     candidates.push_back(static_cast<int>(std::max_element(depth.begin(), depth.end()) - depth.begin()));
   }
-  // Farthest-point sampling, starting from the deepest ridge particle (lowest index on ties).
+  // Farthest-point sampling, starting from the deepest ridge point (lowest index on ties).
   std::vector<int> chosen;
   int start = candidates.front();
   for (int c : candidates)
@@ -143,6 +138,61 @@ Skeleton medial_skeleton(const Positions& rest, double a_nn_mm, double node_spac
   skeleton.nodes_mm.resize(3, static_cast<Eigen::Index>(chosen.size()));
   for (size_t k = 0; k < chosen.size(); ++k) skeleton.nodes_mm.col(k) = rest.col(chosen[k]);
   return skeleton;
+}
+
+}  // namespace
+
+Skeleton medial_skeleton(const Positions& rest, double a_nn_mm, double node_spacing_mm) {
+  if (!(a_nn_mm > 0) || !(node_spacing_mm > 0)) {
+    throw std::invalid_argument("skeleton: lattice spacing and node spacing must be > 0 mm");
+  }
+  const int n = static_cast<int>(rest.cols());
+  if (n == 0) {
+    Skeleton empty;
+    empty.nodes_mm.resize(3, 0);
+    return empty;
+  }
+  // Neighbour graph of the first shell; surface = incomplete first shell (fcc bulk: 12).
+  std::vector<std::vector<int>> graph(n);
+  for_each_close_pair(rest, 1.2 * a_nn_mm, [&](int i, int j, double) {
+    graph[i].push_back(j);
+    graph[j].push_back(i);
+  });
+  std::vector<char> surface(n, 0);
+  for (int i = 0; i < n; ++i) surface[i] = graph[i].size() < 12;
+  // Neighbours may pick features up to a + 1.2 a + a apart: lambda >= 2 a.
+  return medial_nodes(rest, graph, surface, 2.0 * a_nn_mm, node_spacing_mm, a_nn_mm);
+}
+
+Skeleton medial_skeleton(const geometry::LabelVolume& mask, double node_spacing_mm) {
+  if (!(node_spacing_mm > 0)) throw std::invalid_argument("skeleton: node spacing must be > 0 mm");
+  const auto& g = mask.geometry;
+  std::vector<long long> voxel;  // inside voxels, in index order
+  std::vector<int> index_of(mask.labels.size(), -1);
+  for (long long v = 0; v < g.voxel_count(); ++v)
+    if (mask.labels[static_cast<size_t>(v)]) index_of[static_cast<size_t>(v)] = static_cast<int>(voxel.size()), voxel.push_back(v);
+  const int n = static_cast<int>(voxel.size());
+  if (n == 0) throw std::invalid_argument("skeleton: the mask is empty");
+  Positions rest(3, n);
+  std::vector<std::vector<int>> graph(n);
+  std::vector<char> surface(n, 0);
+  const long long sx = g.size[0], sxy = sx * g.size[1];
+  for (int a = 0; a < n; ++a) {
+    const long long v = voxel[a];
+    const int i = static_cast<int>(v % sx), j = static_cast<int>((v / sx) % g.size[1]), k = static_cast<int>(v / sxy);
+    rest.col(a) = g.index_to_physical(Eigen::Vector3d(i, j, k));
+    const int idx[3] = {i, j, k};
+    const long long stride[3] = {1, sx, sxy};
+    for (int d = 0; d < 3; ++d)
+      for (int s = -1; s <= 1; s += 2) {
+        const int at = idx[d] + s;
+        const int b = (at < 0 || at >= g.size[d]) ? -1 : index_of[static_cast<size_t>(v + s * stride[d])];
+        if (b < 0) surface[a] = 1;  // a face neighbour outside (or off the grid)
+        else graph[a].push_back(b);
+      }
+  }
+  const double voxel_mm = g.spacing_mm.maxCoeff();
+  return medial_nodes(rest, graph, surface, 2.0 * voxel_mm, node_spacing_mm, voxel_mm);
 }
 
 SkeletonForce::SkeletonForce(const Skeleton& skeleton, const Positions& rest,

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <cmath>
 #include <random>
 
 #include "organfit/particles/lattice_fill.h"
@@ -37,6 +38,32 @@ TEST(MedialSkeleton, NodesLieAlongTheLongAxisOfAnEllipsoid) {
   // The medial axis of this spheroid spans |x| <= 20 - 8^2/20 = 16.8 mm.
   EXPECT_GT(max_x - min_x, 18.0);
   EXPECT_LT(max_x - min_x, 34.0);
+}
+
+TEST(MedialSkeleton, FromAMaskNodesLieAlongTheLongAxisOfAnEllipsoid) {
+  // The same spheroid as a segmentation on an anisotropic CT-like grid (1 x 1 x 2 mm).
+  geometry::ImageGeometry g;
+  g.size = {50, 26, 14};
+  g.spacing_mm = Eigen::Vector3d(1, 1, 2);
+  g.origin_mm = Eigen::Vector3d(1 - 24.5, 2 - 12.5, 3 - 13);
+  geometry::LabelVolume mask(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k)) - Eigen::Vector3d(1, 2, 3);
+        mask.at(i, j, k) = std::pow(p.x() / 20, 2) + std::pow(p.y() / 8, 2) + std::pow(p.z() / 8, 2) < 1;
+      }
+  const Skeleton s = medial_skeleton(mask, 6.0);
+  ASSERT_GE(s.node_count(), 3);
+  double min_x = 1e9, max_x = -1e9;
+  for (int k = 0; k < s.node_count(); ++k) {
+    const Eigen::Vector3d n = s.nodes_mm.col(k) - Eigen::Vector3d(1, 2, 3);
+    EXPECT_LT(std::hypot(n.y(), n.z()), 4.0) << "node " << k << " off the axis: " << n.transpose();
+    min_x = std::min(min_x, n.x()), max_x = std::max(max_x, n.x());
+  }
+  EXPECT_GT(max_x - min_x, 18.0);  // the medial axis spans |x| <= 16.8 mm
+  EXPECT_LT(max_x - min_x, 34.0);
+  EXPECT_THROW(medial_skeleton(geometry::LabelVolume(g), 6.0), std::invalid_argument);  // empty
 }
 
 TEST(MedialSkeleton, ABodyTooThinForAnAxisGetsOneNode) {

@@ -103,9 +103,16 @@ ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::S
   // The skeleton is built on the relaxed body, which becomes its rest shape.
   Stopwatch skeleton_clock;
   int skeleton_nodes = 0;
+  std::string skeleton_source = "none";
   if (scene.flag("model", "skeleton")) {
-    const particles::Skeleton skeleton = particles::medial_skeleton(
-        result.state.x, spacing, scene.number("model", "skeleton_node_spacing_r0") * cp.r0_mm);
+    // From the organ's mask when there is one (the CT stage's segmentation: the organ's
+    // own medial axis), else from the particles.
+    const double node_spacing_mm = scene.number("model", "skeleton_node_spacing_r0") * cp.r0_mm;
+    const bool from_mask = organ && organ->mask;
+    skeleton_source = from_mask ? "organ mask" : "particles";
+    const particles::Skeleton skeleton = from_mask
+                                             ? particles::medial_skeleton(*organ->mask, node_spacing_mm)
+                                             : particles::medial_skeleton(result.state.x, spacing, node_spacing_mm);
     particles::SkeletonParams sp;
     sp.stiffness = scene.number("model", "skeleton_stiffness") * law.stiffness();
     sp.overlap_mm = scene.number("model", "skeleton_overlap_r0") * cp.r0_mm;
@@ -114,7 +121,8 @@ ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::S
     result.skeleton = &term;
     result.skeleton_params = sp;
     skeleton_nodes = term.skeleton().node_count();
-    spdlog::info("model: skeleton of {} nodes, {} edges", skeleton_nodes, term.skeleton().edges.size());
+    spdlog::info("model: skeleton of {} nodes, {} edges (from the {})", skeleton_nodes, term.skeleton().edges.size(),
+                 skeleton_source);
   }
   const Eigen::Vector3d extents = particles::principal_extents(result.state.x);
   // The particles' body (balls closed by rho, as in the fit) against what they stand for.
@@ -138,6 +146,7 @@ ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::S
       {"capped_moves", integ.stats().capped_moves},
       {"components", particles::connected_components(result.state.x, 1.5 * cp.r0_mm)},
       {"skeleton_nodes", skeleton_nodes},
+      {"skeleton_from", skeleton_source},
       {"body_volume_mm3", body_volume},
       {"reference_volume_mm3", reference_volume},
       {"volume_vs_reference_pct", 100.0 * (body_volume - reference_volume) / reference_volume},

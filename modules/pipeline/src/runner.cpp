@@ -15,6 +15,8 @@
 #include "organfit/meshing/surface.h"
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_stage.h"
+#include "organfit/pipeline/synth_command.h"
+#include "organfit/segmentation/segment.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 #include "organfit/support/resources.h"
@@ -27,7 +29,7 @@ const char* version() { return ORGANFIT_VERSION; }
 
 const std::vector<StageInfo>& pipeline_stages() {
   static const std::vector<StageInfo> stages = {
-      {"ct", true},  {"organ", true},  {"model", true},  {"points", true},
+      {"phantom", true}, {"ct", true},  {"organ", true},  {"model", true},  {"points", true},
       {"ultrasound", false}, {"fit", true}, {"export", true}, {"report", false}};
   return stages;
 }
@@ -79,13 +81,42 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
     spdlog::warn(w);
     run["warnings"].push_back(w);
   };
+  // A phantom is written as DICOM and read back like any planning CT.
+  fs::path ct_folder, phantom_rtstruct;
+  if (scene.has_section("phantom")) {
+    Stopwatch clock;
+    phantom::PelvisOptions p;
+    p.seed = static_cast<std::uint64_t>(scene.integer("phantom", "seed"));
+    p.columns = static_cast<int>(scene.integer("phantom", "columns"));
+    p.rows = static_cast<int>(scene.integer("phantom", "rows"));
+    p.slices = static_cast<int>(scene.integer("phantom", "slices"));
+    p.pixel_mm = scene.number("phantom", "pixel_mm");
+    p.slice_mm = scene.number("phantom", "slice_mm");
+    p.noise_hu = scene.number("phantom", "noise_hu");
+    const fs::path folder = out_dir / "phantom";
+    std::error_code ec;
+    fs::remove_all(folder, ec);  // a phantom of an earlier run in this --out
+    const SynthResult made = run_synth_pelvis(folder, p);
+    ct_folder = folder / "ct";
+    phantom_rtstruct = folder / "rtstruct.dcm";
+    run["phantom"] = {{"kind", scene.text("phantom", "kind")},
+                      {"folder", "phantom"},
+                      {"true_prostate_volume_cm3", made.prostate_volume_cm3}};
+    run["outputs"].push_back("phantom/");
+    spdlog::info("phantom: pelvis, {} slices, true prostate {:.2f} cm3, in {}", made.slices,
+                 made.prostate_volume_cm3, folder.string());
+    record_stage("phantom", clock.elapsed_s());
+  }
   std::optional<dicom::CtSeries> ct;
-  if (scene.has_section("ct")) {
+  if (scene.has_section("ct") || !ct_folder.empty()) {
     Stopwatch clock;
     dicom::CtReadOptions o;
-    o.series_instance_uid = scene.text("ct", "series_uid");
-    o.series_description = scene.text("ct", "series_description");
-    ct = dicom::read_ct_series(scene.path("ct", "folder"), o);
+    if (scene.has_section("ct")) {
+      o.series_instance_uid = scene.text("ct", "series_uid");
+      o.series_description = scene.text("ct", "series_description");
+      ct_folder = scene.path("ct", "folder");
+    }
+    ct = dicom::read_ct_series(ct_folder, o);
     record_stage("ct", clock.elapsed_s());
     for (const auto& w : ct->warnings) warn(w);
     const auto& g = ct->geometry;
@@ -98,16 +129,32 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
   std::optional<evaluation::Shape> organ;
   if (scene.has_section("organ") && ct) {
     Stopwatch clock;
-    const auto file = scene.path("organ", "rtstruct");
     const std::string roi = scene.text("organ", "roi");
-    dicom::RasterisedRoi r = dicom::rasterise_roi(dicom::read_rtstruct(file), roi, *ct, file.string());
-    for (const auto& w : r.warnings) warn(w);
-    const double volume_cm3 = r.mask.volume_mm3(1) / 1000.0;
-    if (volume_cm3 <= 0) scene.fail("organ", "roi", "the ROI '" + roi + "' covers no voxel of the CT");
-    run["organ"] = {{"roi", roi}, {"contours", r.contours}, {"matched_by_position", r.matched_by_position},
-                    {"volume_cm3", volume_cm3}};
-    spdlog::info("organ: ROI '{}', {} contours, {:.2f} cm3", roi, r.contours, volume_cm3);
-    organ = evaluation::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(r.mask)));
+    geometry::LabelVolume mask;
+    if (scene.text("organ", "source") == "seed") {
+      segmentation::SeedOptions s;
+      s.seed_mm = scene.vec3("organ", "seed_mm");
+      s.hu_low = scene.number("organ", "hu_low");
+      s.hu_high = scene.number("organ", "hu_high");
+      s.smoothing_iterations = static_cast<int>(scene.integer("organ", "smoothing_iterations"));
+      s.opening_radius_voxels = static_cast<int>(scene.integer("organ", "opening_radius_voxels"));
+      mask = segmentation::segment_from_seed(ct->geometry, ct->hu, s);
+      run["organ"] = {{"roi", roi}, {"source", "seed"}, {"volume_cm3", mask.volume_mm3(1) / 1000.0}};
+      spdlog::info("organ: '{}' grown from the seed, {:.2f} cm3", roi, mask.volume_mm3(1) / 1000.0);
+    } else {
+      const fs::path file = scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct") : phantom_rtstruct;
+      dicom::RasterisedRoi r = dicom::rasterise_roi(dicom::read_rtstruct(file), roi, *ct, file.string());
+      for (const auto& w : r.warnings) warn(w);
+      run["organ"] = {{"roi", roi},
+                      {"source", "rtstruct"},
+                      {"contours", r.contours},
+                      {"matched_by_position", r.matched_by_position},
+                      {"volume_cm3", r.mask.volume_mm3(1) / 1000.0}};
+      spdlog::info("organ: ROI '{}', {} contours, {:.2f} cm3", roi, r.contours, r.mask.volume_mm3(1) / 1000.0);
+      mask = std::move(r.mask);
+    }
+    if (mask.count(1) == 0) scene.fail("organ", "roi", "the organ '" + roi + "' covers no voxel of the CT");
+    organ = evaluation::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(mask)));
     record_stage("organ", clock.elapsed_s());
   }
   std::optional<ModelStageResult> model;

@@ -16,14 +16,31 @@ config::Schema build_schema() {
       .integer("seed", 1, 0, none, "seed of every random choice (same seed, same result)")
       .integer("threads", 0, 0, 256, "worker threads; 0 = all cores");
 
+  s.section("phantom", "a synthetic planning CT with known organs, written to OUT/phantom/ and read as the CT")
+      .choice("kind", "pelvis", {"pelvis"}, "pelvis: body, bones, bladder, rectum, a 35 cm3 prostate")
+      .integer("seed", 1, 0, none, "seed of the CT noise (the anatomy is fixed)")
+      .integer("columns", 320, 8, 2048, "voxels along x")
+      .integer("rows", 320, 8, 2048, "voxels along y")
+      .integer("slices", 56, 8, 2000, "slices along z, centred on the prostate")
+      .number("pixel_mm", 1.25, "mm", 0.1, 10.0, "in-plane voxel spacing")
+      .number("slice_mm", 2.5, "mm", 0.1, 20.0, "slice spacing and thickness")
+      .number("noise_hu", 12.0, "HU", 0.0, 500.0, "standard deviation of the CT noise");
+
   s.section("ct", "the planning CT: a DICOM folder (other objects in it are ignored)")
       .input_path("folder", "folder holding the CT series")
       .text("series_uid", "", "Series Instance UID to use when the folder holds several CT series")
       .text("series_description", "", "or the Series Description to use");
 
-  s.section("organ", "the organ on the planning CT, imported from an RT Structure Set")
-      .input_path("rtstruct", "the RT Structure Set file")
-      .text("roi", std::nullopt, "name of the ROI to import (e.g. Prostate)");
+  s.section("organ", "the organ on the planning CT: imported from an RT Structure Set, or grown from a seed")
+      .choice("source", "rtstruct", {"rtstruct", "seed"},
+              "rtstruct: a physician's contour (organ.rtstruct, organ.roi); seed: region growing from organ.seed_mm")
+      .input_path("rtstruct", "the RT Structure Set file (default with a phantom: its true structures)", false)
+      .text("roi", std::nullopt, "the organ's ROI name: the one imported, or the name given to the segmented organ")
+      .vec3("seed_mm", Vector3d(0, 0, 0), "mm", none, "seed inside the organ, patient coordinates (source: seed)")
+      .number("hu_low", 20.0, "HU", -1024.0, 3071.0, "lowest HU grown into (source: seed)")
+      .number("hu_high", 80.0, "HU", -1024.0, 3071.0, "highest HU grown into (source: seed)")
+      .integer("smoothing_iterations", 5, 0, 100, "curvature-flow iterations before growing (source: seed)")
+      .integer("opening_radius_voxels", 1, 0, 10, "morphological opening that cuts thin leaks (source: seed)");
 
   s.section("body", "an analytic organ shape, for scenes without CT")
       .choice("shape", "ellipsoid", {"ellipsoid", "box", "egg", "lung"},
@@ -130,8 +147,18 @@ void check_scene_rules(const config::Scene& scene) {
       scene.fail("model", "radius_mm", "the model needs a body to fill: add an 'organ' or a 'body' section");
     }
   }
-  if (scene.has_section("organ") && !scene.has_section("ct")) {
-    scene.fail("organ", "roi", "an organ from a structure set needs the 'ct' it was drawn on");
+  if (scene.has_section("phantom") && scene.has_section("ct"))
+    scene.fail("phantom", "kind", "a scene has either a 'phantom' or a 'ct' section: the phantom is the CT");
+  const bool has_ct = scene.has_section("ct") || scene.has_section("phantom");
+  if (scene.has_section("organ")) {
+    if (!has_ct) scene.fail("organ", "roi", "an organ needs the 'ct' (or 'phantom') it is on");
+    const bool seeded = scene.text("organ", "source") == "seed";
+    if (!seeded && !scene.is_given("organ", "rtstruct") && !scene.has_section("phantom"))
+      scene.fail("organ", "rtstruct", "source is 'rtstruct' but organ.rtstruct is not given");
+    if (seeded && !scene.is_given("organ", "seed_mm"))
+      scene.fail("organ", "seed_mm", "source is 'seed' but organ.seed_mm is not given");
+    if (seeded && scene.number("organ", "hu_low") >= scene.number("organ", "hu_high"))
+      scene.fail("organ", "hu_high", "must exceed organ.hu_low");
   }
   if (scene.has_section("points")) {
     if (scene.text("points", "source") == "file" && !scene.is_given("points", "file")) {
@@ -142,7 +169,7 @@ void check_scene_rules(const config::Scene& scene) {
     }
   }
   if (scene.has_section("export")) {
-    if (!scene.has_section("ct") && !(scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty()))
+    if (!has_ct && !(scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty()))
       scene.fail("export", "rtstruct", "an RTSTRUCT or label map is written on the planning CT: add a 'ct' section");
     if (!scene.has_section("model")) scene.fail("export", "rtstruct", "export needs a 'model' to export");
     if (scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty() &&

@@ -20,7 +20,8 @@ struct Shape {
   std::string kind;                                    ///< "ellipsoid", "box", "egg", "lung", "mask"
   Eigen::Vector3d size_mm = Eigen::Vector3d::Ones();   ///< full extents (before the notch)
   Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero(); ///< centre (a mask: its centroid)
-  std::shared_ptr<const geometry::LabelVolume> mask;   ///< kind "mask": label 1 is inside
+  std::shared_ptr<const geometry::LabelVolume> mask;   ///< kind "mask": label 1 is inside (surface:
+                                                       ///< 0.5 level of its trilinear interpolation)
   geometry::Aabb box;                                  ///< kind "mask": bounds of its voxels
   bool inside(const Eigen::Vector3d& p) const;
   geometry::Aabb bounds() const {

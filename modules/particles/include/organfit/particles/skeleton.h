@@ -30,6 +30,7 @@
 #include <utility>
 #include <vector>
 
+#include "organfit/geometry/image_geometry.h"
 #include "organfit/particles/model.h"
 
 namespace organfit::particles {
@@ -48,6 +49,14 @@ struct Skeleton {
 /// particle, for bodies too thin to have a medial axis). Edges are left empty
 /// (SkeletonForce fills them).
 Skeleton medial_skeleton(const Positions& rest, double a_nn_mm, double node_spacing_mm);
+
+/// The same from a segmentation (label != 0 inside; the CT stage's organ mask): voxel
+/// centres stand for the particles, face neighbours for the first shell, voxels with a
+/// face neighbour outside for the surface, and lambda is at least two voxels. A mask's
+/// surface is the organ's own, not a particle lattice's, so its medial axis does not
+/// depend on how the body was filled. Throws std::invalid_argument on an empty mask or a
+/// non-positive node spacing.
+Skeleton medial_skeleton(const geometry::LabelVolume& mask, double node_spacing_mm);
 
 struct SkeletonParams {
   double stiffness = 1.0;   ///< k_s (energy / mm^2): pull of a particle towards its goal
