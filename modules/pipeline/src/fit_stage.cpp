@@ -153,7 +153,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   }
   const double v0 = body_volume(start, rho);
 
-  particles::IntegratorOptions opt = integrator_options_from(scene, m);
+  particles::IntegratorOptions opt = integrator_options_from(model.settings, m);
   opt.damping = scene.number("fit", "damping_ratio") * 2.0 * std::sqrt(law.stiffness() * m.mass());
 
   // The residual floor: a point exactly on the model's own surface is not at zero
@@ -245,9 +245,9 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
               {"particles_after_refill", state.size()},
               {"volume_change_after_settling_pct", settled_change_pct},
               {"wall_s", clock.elapsed_s()}};
-    if (scene.flag("model", "skeleton")) {
-      const particles::Skeleton sk = particles::medial_skeleton(
-          state.x, model.lattice_spacing_mm, scene.number("model", "skeleton_node_spacing_r0") * law.r0());
+    if (model.settings.skeleton) {
+      const particles::Skeleton sk =
+          particles::medial_skeleton(state.x, model.lattice_spacing_mm, model.skeleton_node_spacing_mm);
       model.skeleton = &m.add(std::make_unique<particles::SkeletonForce>(sk, state.x, model.skeleton_params));
     }
     // Local stage: smooth patches; the skeleton's rest shape follows the fit (it keeps

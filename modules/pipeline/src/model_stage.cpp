@@ -15,32 +15,127 @@
 
 namespace organfit::pipeline {
 
-particles::CohesionParams cohesion_params_from(const config::Scene& scene) {
+ModelSettings model_settings_from(const config::Scene& scene) {
+  ModelSettings s;
+  s.radius_mm = scene.number("model", "radius_mm");
+  s.cohesion_energy = scene.number("model", "cohesion_energy");
+  s.exponent_m = static_cast<int>(scene.integer("model", "exponent_m"));
+  s.exponent_n = static_cast<int>(scene.integer("model", "exponent_n"));
+  s.cutoff_r0 = scene.number("model", "cutoff_r0");
+  s.floor_r0 = scene.number("model", "floor_r0");
+  s.mass = scene.number("model", "mass");
+  s.damping_ratio = scene.number("model", "damping_ratio");
+  s.pair_damping = scene.number("model", "pair_damping");
+  s.neighbour_skin_r0 = scene.number("model", "neighbour_skin_r0");
+  s.time_step_fraction = scene.number("model", "time_step_fraction");
+  s.relax_steps = scene.integer("model", "relax_steps");
+  s.relax_tolerance = scene.number("model", "relax_tolerance");
+  s.skeleton = scene.flag("model", "skeleton");
+  s.skeleton_stiffness = scene.number("model", "skeleton_stiffness");
+  s.skeleton_node_spacing_r0 = scene.number("model", "skeleton_node_spacing_r0");
+  s.skeleton_overlap_r0 = scene.number("model", "skeleton_overlap_r0");
+  s.seed = static_cast<std::uint64_t>(scene.integer("scene", "seed"));
+  return s;
+}
+
+// One list of the settings' keys, for both directions of the JSON conversion.
+template <class Settings, class Visit>
+void visit_settings(Settings& s, Visit&& visit) {
+  visit("radius_mm", s.radius_mm);
+  visit("cohesion_energy", s.cohesion_energy);
+  visit("exponent_m", s.exponent_m);
+  visit("exponent_n", s.exponent_n);
+  visit("cutoff_r0", s.cutoff_r0);
+  visit("floor_r0", s.floor_r0);
+  visit("mass", s.mass);
+  visit("damping_ratio", s.damping_ratio);
+  visit("pair_damping", s.pair_damping);
+  visit("neighbour_skin_r0", s.neighbour_skin_r0);
+  visit("time_step_fraction", s.time_step_fraction);
+  visit("relax_steps", s.relax_steps);
+  visit("relax_tolerance", s.relax_tolerance);
+  visit("skeleton", s.skeleton);
+  visit("skeleton_stiffness", s.skeleton_stiffness);
+  visit("skeleton_node_spacing_r0", s.skeleton_node_spacing_r0);
+  visit("skeleton_overlap_r0", s.skeleton_overlap_r0);
+  visit("seed", s.seed);
+}
+
+nlohmann::json to_json(const ModelSettings& s) {
+  nlohmann::json j = nlohmann::json::object();
+  visit_settings(s, [&](const char* key, const auto& value) { j[key] = value; });
+  return j;
+}
+
+ModelSettings model_settings_from_json(const nlohmann::json& j, const std::string& where) {
+  ModelSettings s;
+  visit_settings(s, [&](const char* key, auto& value) {
+    using T = std::decay_t<decltype(value)>;
+    const auto it = j.find(key);
+    const bool ok = it != j.end() && (std::is_same_v<T, bool> ? it->is_boolean()
+                                      : std::is_floating_point_v<T> ? it->is_number()
+                                                                     : it->is_number_integer());
+    if (!ok) throw InputError(fmt::format("{}: model setting '{}' is missing or not a {}", where, key,
+                                          std::is_same_v<T, bool> ? "true/false" : "number"));
+    value = it->template get<T>();
+  });
+  return s;
+}
+
+particles::CohesionParams cohesion_params_from(const ModelSettings& s) {
   particles::CohesionParams p;
-  p.E0 = scene.number("model", "cohesion_energy");
-  p.r0_mm = 2.0 * scene.number("model", "radius_mm");
-  p.m = static_cast<int>(scene.integer("model", "exponent_m"));
-  p.n = static_cast<int>(scene.integer("model", "exponent_n"));
-  p.cutoff_r0 = scene.number("model", "cutoff_r0");
-  p.floor_r0 = scene.number("model", "floor_r0");
+  p.E0 = s.cohesion_energy;
+  p.r0_mm = 2.0 * s.radius_mm;
+  p.m = s.exponent_m;
+  p.n = s.exponent_n;
+  p.cutoff_r0 = s.cutoff_r0;
+  p.floor_r0 = s.floor_r0;
   return p;
 }
 
-particles::IntegratorOptions integrator_options_from(const config::Scene& scene,
-                                                     const particles::Model& model) {
+particles::IntegratorOptions integrator_options_from(const ModelSettings& s, const particles::Model& model) {
   particles::IntegratorOptions opt;
-  opt.time_step_fraction = scene.number("model", "time_step_fraction");
-  opt.damping = scene.number("model", "damping_ratio") * 2.0 *
-                std::sqrt(model.stiffness() * model.mass());
+  opt.time_step_fraction = s.time_step_fraction;
+  opt.damping = s.damping_ratio * 2.0 * std::sqrt(model.stiffness() * model.mass());
   opt.length_scale_mm = 2.0 * model.radius_mm();
   // No particle may carry more than 5 well depths of kinetic energy (see IntegratorOptions).
-  opt.max_speed_mm_s = std::sqrt(2.0 * 5.0 * scene.number("model", "cohesion_energy") / model.mass());
-  opt.seed = static_cast<std::uint64_t>(scene.integer("scene", "seed"));
+  opt.max_speed_mm_s = std::sqrt(2.0 * 5.0 * s.cohesion_energy / model.mass());
+  opt.seed = s.seed;
   return opt;
 }
 
+geometry::LabelVolume reference_body(const evaluation::Shape& shape, double r0_mm) {
+  const geometry::ImageGeometry g = geometry::grid_covering(shape.bounds(), 0.25 * r0_mm, 0.5 * r0_mm);
+  geometry::LabelVolume reference(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) reference.at(i, j, k) = shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  return reference;
+}
+
+void build_model_terms(ModelStageResult& result, const particles::Skeleton* skeleton) {
+  const ModelSettings& s = result.settings;
+  const particles::CohesionParams cp = cohesion_params_from(s);
+  const particles::LennardJones law(cp);
+  result.cohesion = cp;
+  result.model = std::make_unique<particles::Model>(result.state.size(), s.mass, 0.5 * cp.r0_mm);
+  result.model->add(
+      std::make_unique<particles::CohesionForce>(law, s.neighbour_skin_r0 * cp.r0_mm, s.pair_damping));
+  result.skeleton_node_spacing_mm = s.skeleton_node_spacing_r0 * cp.r0_mm;
+  result.skeleton_params.stiffness = s.skeleton_stiffness * law.stiffness();
+  result.skeleton_params.overlap_mm = s.skeleton_overlap_r0 * cp.r0_mm;
+  result.skeleton = nullptr;
+  if (skeleton && skeleton->node_count() > 0) add_skeleton_term(result, *skeleton);
+}
+
+void add_skeleton_term(ModelStageResult& result, const particles::Skeleton& skeleton) {
+  result.skeleton = &result.model->add(
+      std::make_unique<particles::SkeletonForce>(skeleton, result.state.x, result.skeleton_params));
+}
+
 ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::Shape* organ) {
-  const particles::CohesionParams cp = cohesion_params_from(scene);
+  const ModelSettings settings = model_settings_from(scene);
+  const particles::CohesionParams cp = cohesion_params_from(settings);
   const particles::LennardJones law(cp);
   const double spacing = particles::fcc_equilibrium_spacing(law);
   const evaluation::Shape shape =
@@ -57,29 +152,19 @@ ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::S
                            x.cols(), 0.5 * cp.r0_mm));
   }
   ModelStageResult result;
+  result.settings = settings;
   result.shape = shape;
-  {  // the reference body: what the particles stand for, kept for re-filling after a fit
-    const geometry::ImageGeometry g = geometry::grid_covering(shape.bounds(), 0.25 * cp.r0_mm, 0.5 * cp.r0_mm);
-    result.reference = geometry::LabelVolume(g);
-    for (int k = 0; k < g.size[2]; ++k)
-      for (int j = 0; j < g.size[1]; ++j)
-        for (int i = 0; i < g.size[0]; ++i)
-          result.reference.at(i, j, k) = shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
-  }
+  result.reference = reference_body(shape, cp.r0_mm);  // what the particles stand for, for re-filling
   result.lattice_spacing_mm = spacing;
-  result.cohesion = cp;
   result.state = particles::State(std::move(x));
   const int n = result.state.size();
-  result.model = std::make_unique<particles::Model>(n, scene.number("model", "mass"), 0.5 * cp.r0_mm);
-  result.model->add(std::make_unique<particles::CohesionForce>(
-      law, scene.number("model", "neighbour_skin_r0") * cp.r0_mm,
-      scene.number("model", "pair_damping")));
-  const particles::IntegratorOptions opt = integrator_options_from(scene, *result.model);
+  build_model_terms(result, nullptr);
+  const particles::IntegratorOptions opt = integrator_options_from(settings, *result.model);
 
   spdlog::info("model: {} particles on an fcc lattice at {:.4f} mm ({:.4f} r0), relaxing", n,
                spacing, spacing / cp.r0_mm);
-  const long long max_steps = scene.integer("model", "relax_steps");
-  const double tol = scene.number("model", "relax_tolerance");
+  const long long max_steps = settings.relax_steps;
+  const double tol = settings.relax_tolerance;
   Stopwatch clock;
   particles::Integrator integ(*result.model, opt);
   Progress progress("relax", max_steps);
@@ -104,25 +189,19 @@ ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::S
   Stopwatch skeleton_clock;
   int skeleton_nodes = 0;
   std::string skeleton_source = "none";
-  if (scene.flag("model", "skeleton")) {
+  if (settings.skeleton) {
     // From the organ's mask when there is one (the CT stage's segmentation: the organ's
     // own medial axis), else from the particles.
-    const double node_spacing_mm = scene.number("model", "skeleton_node_spacing_r0") * cp.r0_mm;
+    const double node_spacing_mm = settings.skeleton_node_spacing_r0 * cp.r0_mm;
     const bool from_mask = organ && organ->mask;
     skeleton_source = from_mask ? "organ mask" : "particles";
     const particles::Skeleton skeleton = from_mask
                                              ? particles::medial_skeleton(*organ->mask, node_spacing_mm)
                                              : particles::medial_skeleton(result.state.x, spacing, node_spacing_mm);
-    particles::SkeletonParams sp;
-    sp.stiffness = scene.number("model", "skeleton_stiffness") * law.stiffness();
-    sp.overlap_mm = scene.number("model", "skeleton_overlap_r0") * cp.r0_mm;
-    auto& term = result.model->add(
-        std::make_unique<particles::SkeletonForce>(skeleton, result.state.x, sp));
-    result.skeleton = &term;
-    result.skeleton_params = sp;
-    skeleton_nodes = term.skeleton().node_count();
-    spdlog::info("model: skeleton of {} nodes, {} edges (from the {})", skeleton_nodes, term.skeleton().edges.size(),
-                 skeleton_source);
+    add_skeleton_term(result, skeleton);  // the relaxed body becomes the skeleton's rest shape
+    skeleton_nodes = result.skeleton->skeleton().node_count();
+    spdlog::info("model: skeleton of {} nodes, {} edges (from the {})", skeleton_nodes,
+                 result.skeleton->skeleton().edges.size(), skeleton_source);
   }
   const Eigen::Vector3d extents = particles::principal_extents(result.state.x);
   // The particles' body (balls closed by rho, as in the fit) against what they stand for.

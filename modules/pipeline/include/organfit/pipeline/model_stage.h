@@ -1,6 +1,8 @@
 #pragma once
 // The model stage: fill the organ with particles and relax them (physics core).
 #include <nlohmann/json.hpp>
+#include <cstdint>
+#include <memory>
 
 #include "organfit/config/scene.h"
 #include "organfit/evaluation/synthetic.h"
@@ -10,12 +12,31 @@
 
 namespace organfit::pipeline {
 
-/// Cohesion law and integrator settings from the scene's `model` section.
-particles::CohesionParams cohesion_params_from(const config::Scene& scene);
-particles::IntegratorOptions integrator_options_from(const config::Scene& scene,
-                                                     const particles::Model& model);
+/// The scene's `model` section as plain values (keys and meanings: scene_schema.cpp),
+/// so that a saved planning model carries the settings it was built with.
+struct ModelSettings {
+  double radius_mm = 0, cohesion_energy = 0;
+  int exponent_m = 0, exponent_n = 0;
+  double cutoff_r0 = 0, floor_r0 = 0, mass = 0, damping_ratio = 0, pair_damping = 0;
+  double neighbour_skin_r0 = 0, time_step_fraction = 0;
+  long long relax_steps = 0;
+  double relax_tolerance = 0;
+  bool skeleton = false;
+  double skeleton_stiffness = 0, skeleton_node_spacing_r0 = 0, skeleton_overlap_r0 = 0;
+  std::uint64_t seed = 0;  ///< the scene's seed (thermostat noise)
+};
+ModelSettings model_settings_from(const config::Scene& scene);
+/// As JSON, with the scene's key names; and back (throws InputError naming `where` and
+/// the key when one is missing or of the wrong type).
+nlohmann::json to_json(const ModelSettings& s);
+ModelSettings model_settings_from_json(const nlohmann::json& j, const std::string& where);
+
+/// Cohesion law and integrator settings of a model.
+particles::CohesionParams cohesion_params_from(const ModelSettings& s);
+particles::IntegratorOptions integrator_options_from(const ModelSettings& s, const particles::Model& model);
 
 struct ModelStageResult {
+  ModelSettings settings;
   particles::State state;
   std::unique_ptr<particles::Model> model;
   evaluation::Shape shape;               ///< the body that was filled
@@ -24,11 +45,23 @@ struct ModelStageResult {
   particles::CohesionParams cohesion;
   particles::SkeletonForce* skeleton = nullptr;  ///< owned by `model`; null without skeleton
   particles::SkeletonParams skeleton_params;
+  double skeleton_node_spacing_mm = 0;
   nlohmann::json summary;  ///< run.json "model" block
 };
 
 /// Fills the organ (when given, e.g. imported from CT) or the scene's analytic body with
 /// particles at the relaxed fcc spacing and relaxes them.
 ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::Shape* organ = nullptr);
+
+/// The model's force terms (cohesion, and the skeleton when `skeleton` has nodes) around
+/// given positions: what run_model_stage builds, and what loading a saved model rebuilds.
+/// Fills result.model, result.skeleton, result.skeleton_params and
+/// result.skeleton_node_spacing_mm from result.settings and result.state.
+void build_model_terms(ModelStageResult& result, const particles::Skeleton* skeleton);
+/// Ties result.state's current positions (the rest shape) to `skeleton`.
+void add_skeleton_term(ModelStageResult& result, const particles::Skeleton& skeleton);
+
+/// The reference body of a shape: a mask on a grid of r0/4 covering it.
+geometry::LabelVolume reference_body(const evaluation::Shape& shape, double r0_mm);
 
 }  // namespace organfit::pipeline
