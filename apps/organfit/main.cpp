@@ -8,6 +8,7 @@
 
 #include "organfit/evaluation/cohesion_benchmark.h"
 #include "organfit/evaluation/skeleton_benchmark.h"
+#include "organfit/pipeline/export_command.h"
 #include "organfit/pipeline/runner.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/pipeline/segment_command.h"
@@ -52,6 +53,16 @@ int run_main(int argc, char** argv) {
   segment->add_option("--seed", seg.seed_mm, "Seed X,Y,Z in mm (patient LPS)")->delimiter(',')->expected(3);
   segment->add_option("--hu", seg.hu_window, "HU window LOW,HIGH")->delimiter(',')->expected(2);
   segment->add_option("-o,--out", seg.out, "Mask file (.nrrd, .mha, .nii, .nii.gz)")->required();
+
+  organfit::pipeline::ExportCommand exp;
+  auto* export_cmd = app.add_subcommand("export", "Write a saved model for the planning system: RTSTRUCT, label map, mesh");
+  export_cmd->add_option("--model", exp.model, "Model file (a scene's export.model)")->required();
+  export_cmd->add_option("--ct", exp.ct, "Planning CT folder (default: the one the model was built on)");
+  export_cmd->add_option("--rtstruct", exp.rtstruct, "RT Structure Set to write (.dcm)");
+  export_cmd->add_option("--labels", exp.labels, "Label map to write (.nrrd, .mha, .nii, .nii.gz)");
+  export_cmd->add_option("--mesh", exp.mesh, "Surface mesh to write (.stl, .vtp, .ply, .obj)");
+  export_cmd->add_option("--roi-name", exp.roi_name, "Name of the exported ROI (default: the organ's name + _fit)");
+  export_cmd->add_option("--copy-rois-from", exp.copy_rois_from, "RT Structure Set whose other ROIs are copied alongside");
 
   auto* synth = app.add_subcommand("synth", "Synthetic scans with known anatomy");
   synth->require_subcommand(1);
@@ -119,6 +130,9 @@ int run_main(int argc, char** argv) {
     const auto result = organfit::pipeline::run_segment(seg);
     for (const auto& w : result.warnings) spdlog::warn(w);
     std::cout << seg.out.string() << ": " << result.volume_cm3 << " cm3\n";
+  } else if (*export_cmd) {
+    const auto summary = organfit::pipeline::run_export_command(exp);
+    std::cout << summary.dump() << "\n";
   } else if (*synth_pelvis) {
     const auto result = organfit::pipeline::run_synth_pelvis(synth_out, pelvis);
     if (result.clipped_voxels > 0) spdlog::warn("{} voxel(s) outside the 12-bit HU range were clipped", result.clipped_voxels);

@@ -187,6 +187,35 @@ import json; d = json.load(open('$tmp/pseed/run.json'))
 assert d['organ']['source'] == 'seed' and 28 < d['organ']['volume_cm3'] < 40, d['organ']"
 expect validate.organ_seed_without_seed 2 "organ.seed_mm: source is 'seed' but organ.seed_mm is not given" -- validate "$scenes/bad-organ-seed-without-seed.yaml"
 
+# planning once, sessions many: the session starts from the saved model and skips the CT
+mkdir -p "$tmp/wf/pipelines" && cp "$src/pipelines/prostate-planning.yaml" "$src/pipelines/prostate-session.yaml" "$tmp/wf/pipelines/"
+sed -i 's/^  kind: pelvis/  kind: pelvis\n  columns: 160\n  rows: 160\n  pixel_mm: 2.5/' "$tmp/wf/pipelines/prostate-planning.yaml"
+expect workflow.planning 0 "" -- --quiet run "$tmp/wf/pipelines/prostate-planning.yaml" --out "$tmp/wf/out/prostate-planning"
+check workflow.planning_saved_the_model test -s "$tmp/wf/out/prostate-planning/prostate_model.json"
+expect workflow.session 0 "" -- --quiet run "$tmp/wf/pipelines/prostate-session.yaml" --out "$tmp/wf/out/prostate-session"
+check workflow.session_skipped_the_ct_stages_and_was_faster /usr/bin/python3 -c "
+import json; d = json.load(open('$tmp/wf/out/prostate-session/run.json'))
+names = [s['name'] for s in d['stages']]
+assert names[0] == 'planning_model' and not any(n in names for n in ['phantom', 'organ', 'model']), names
+t = d['timing']; assert t['update_s'] < t['planning_modelling_s'], t
+assert d['fit']['converged'] and d['model']['from_planning_model'] == 'prostate_model.json'"
+check workflow.session_rtstruct_on_the_planning_ct test -s "$tmp/wf/out/prostate-session/prostate_session_rtstruct.dcm"
+expect workflow.session_rtstruct_reads_back 0 "" -- --quiet segment --ct "$tmp/wf/out/prostate-planning/phantom/ct" --rtstruct "$tmp/wf/out/prostate-session/prostate_session_rtstruct.dcm" --roi Prostate_fit --out "$tmp/wf/back.nrrd"
+expect export.from_a_model 0 "" -- --quiet export --model "$tmp/wf/out/prostate-planning/prostate_model.json" --rtstruct "$tmp/wf/e.dcm" --labels "$tmp/wf/e.nrrd" --mesh "$tmp/wf/e.stl" --copy-rois-from "$tmp/wf/out/prostate-planning/phantom/rtstruct.dcm"
+check export.summary_lists_copied_rois_and_a_watertight_mesh /usr/bin/python3 -c "
+import json; d = json.loads(open('$tmp/out').read())
+assert d['roi'] == 'Prostate_fit' and 'Bladder' in d['copied_rois'] and 'Prostate' not in d['copied_rois'], d
+assert d['mesh']['boundary_edges'] == 0 and d['mesh']['non_manifold_edges'] == 0 and d['mesh']['outward']"
+check export.wrote_the_three_files test -s "$tmp/wf/e.dcm" -a -s "$tmp/wf/e.nrrd" -a -s "$tmp/wf/e.stl"
+expect export.needs_an_output 2 "name at least one output" -- export --model "$tmp/wf/out/prostate-planning/prostate_model.json"
+expect export.not_a_model 2 "not an organfit model" -- export --model "$scenes/small-model.yaml" --mesh "$tmp/wf/x.stl"
+check export.refusal_writes_nothing test ! -e "$tmp/wf/x.stl"
+if [[ -d "$src/../shared/data/ct-sts-002" ]]; then
+  expect export.another_ct_is_refused 2 "not the model's" -- export --model "$tmp/wf/out/prostate-planning/prostate_model.json" --ct "$src/../shared/data/ct-sts-002/ct" --rtstruct "$tmp/wf/y.dcm"
+  check export.refused_ct_writes_nothing test ! -e "$tmp/wf/y.dcm"
+fi
+expect validate.session_with_a_model_section 2 "a session starts from planning.model: it has no 'model' section" -- validate "$scenes/bad-session-with-model.yaml"
+
 # SIGINT during a fit: stops within a second, exit 130, no final-named output, no temporary
 printf 'scene:\n  name: long\nbody:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\npoints:\n  count: 10000\nfit:\n  method: paper\n  max_wall_s: 60\n' > "$tmp/long.yaml"
 "$bin" --quiet run "$tmp/long.yaml" --out "$tmp/interrupted" > /dev/null 2> "$tmp/err" &

@@ -255,7 +255,8 @@ int Scene::line_of(const std::string& s, const std::string& n) const {
 }
 
 void Scene::fail(const std::string& s, const std::string& n, const std::string& reason) const {
-  throw InputError(fmt::format("{}:{}: {}.{}: {}", file_.string(), line_of(s, n), s, n, reason));
+  // An empty key: the rule is about the whole section.
+  throw InputError(fmt::format("{}:{}: {}{}{}: {}", file_.string(), line_of(s, n), s, n.empty() ? "" : ".", n, reason));
 }
 
 std::string Scene::resolved_yaml() const {

@@ -95,7 +95,7 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
     put(rds, 0x3006, 0x0022, V::IS, number);
     put(rds, 0x3006, 0x0024, V::UI, ct.frame_of_reference_uid);
     put(rds, 0x3006, 0x0026, V::LO, roi.name);
-    put(rds, 0x3006, 0x0036, V::CS, "AUTOMATIC");
+    put(rds, 0x3006, 0x0036, V::CS, roi.generation_algorithm);
     roi_items.push_back(roi_item);
 
     std::vector<gdcm::Item> contours;

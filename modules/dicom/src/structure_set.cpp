@@ -94,6 +94,55 @@ StructureSet read_rtstruct(const fs::path& file) {
   return rtss;
 }
 
+namespace {
+
+/// The CT slice a contour lies on: the one its Referenced SOP Instance UID names, else
+/// the slice at its mean position along the normal (within a tenth of the slice gap);
+/// -1 when none.
+int slice_of_contour(const Contour& contour, const CtSeries& ct, const std::map<std::string, int>& slice_of_uid,
+                     bool& by_position) {
+  by_position = false;
+  const auto it = slice_of_uid.find(contour.referenced_sop_instance_uid);
+  if (it != slice_of_uid.end()) return it->second;
+  if (contour.points_mm.empty()) return -1;
+  double k_sum = 0;
+  for (const auto& p : contour.points_mm) k_sum += ct.geometry.physical_to_index(p).z();
+  const double k = k_sum / static_cast<double>(contour.points_mm.size());
+  const long nearest = std::lround(k);
+  if (!std::isfinite(k) || nearest < 0 || nearest >= ct.geometry.size[2] || std::abs(k - nearest) > 0.1) return -1;
+  by_position = true;
+  return static_cast<int>(nearest);
+}
+
+std::map<std::string, int> slices_by_uid(const CtSeries& ct) {
+  std::map<std::string, int> slice_of_uid;
+  for (size_t s = 0; s < ct.slices.size(); ++s) slice_of_uid[ct.slices[s].sop_instance_uid] = static_cast<int>(s);
+  return slice_of_uid;
+}
+
+}  // namespace
+
+RoiOnSlices roi_on_slices(const Roi& roi, const CtSeries& ct) {
+  RoiOnSlices out;
+  const auto slice_of_uid = slices_by_uid(ct);
+  for (const auto& contour : roi.contours) {
+    bool by_position = false;
+    const int k = contour.geometric_type == "CLOSED_PLANAR" && contour.points_mm.size() >= 3
+                      ? slice_of_contour(contour, ct, slice_of_uid, by_position)
+                      : -1;
+    if (k < 0) {
+      ++out.skipped;
+      continue;
+    }
+    out.matched_by_position += by_position;
+    geometry::SliceContour c;
+    c.k = k;
+    c.points_mm = contour.points_mm;
+    out.contours.push_back(std::move(c));
+  }
+  return out;
+}
+
 RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, const CtSeries& ct,
                             const std::string& source) {
   auto fail = [&](const std::string& why) { throw InputError(source + ": " + why); };
@@ -111,8 +160,7 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
   const geometry::ImageGeometry& g = ct.geometry;
   RasterisedRoi out;
   out.mask = geometry::LabelVolume(g);
-  std::map<std::string, int> slice_of_uid;
-  for (size_t s = 0; s < ct.slices.size(); ++s) slice_of_uid[ct.slices[s].sop_instance_uid] = static_cast<int>(s);
+  const auto slice_of_uid = slices_by_uid(ct);
 
   // Group each contour's polygon (in continuous i, j index) under its slice.
   std::vector<std::vector<std::vector<Eigen::Vector2d>>> polygons(g.size[2]);
@@ -124,26 +172,17 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
                        contour.geometric_type.empty() ? "of no type" : contour.geometric_type));
     if (contour.points_mm.size() < 3) fail(fmt::format("{} has {} point(s), fewer than 3", which, contour.points_mm.size()));
     std::vector<Eigen::Vector2d> poly;
-    double k_sum = 0;
     for (const auto& p : contour.points_mm) {
       if (!p.allFinite()) fail(which + " has a non-finite coordinate");
       const Eigen::Vector3d idx = g.physical_to_index(p);
       poly.emplace_back(idx.x(), idx.y());
-      k_sum += idx.z();
     }
-    int slice = -1;
-    auto it = slice_of_uid.find(contour.referenced_sop_instance_uid);
-    if (it != slice_of_uid.end()) {
-      slice = it->second;
-    } else {
-      const double k = k_sum / contour.points_mm.size();
-      const long nearest = std::lround(k);
-      if (nearest < 0 || nearest >= g.size[2] || std::abs(k - nearest) > 0.1)
-        fail(fmt::format("{} lies on no slice of the CT (at {:.2f} mm along the slice normal)", which,
-                         g.direction.col(2).dot(contour.points_mm.front())));
-      slice = static_cast<int>(nearest);
-      ++out.matched_by_position;
-    }
+    bool by_position = false;
+    const int slice = slice_of_contour(contour, ct, slice_of_uid, by_position);
+    if (slice < 0)
+      fail(fmt::format("{} lies on no slice of the CT (at {:.2f} mm along the slice normal)", which,
+                       g.direction.col(2).dot(contour.points_mm.front())));
+    if (by_position) ++out.matched_by_position;
     const auto [xmin, xmax] = std::minmax_element(poly.begin(), poly.end(), [](auto& a, auto& b) { return a.x() < b.x(); });
     const auto [ymin, ymax] = std::minmax_element(poly.begin(), poly.end(), [](auto& a, auto& b) { return a.y() < b.y(); });
     if (xmax->x() < -0.5 || ymax->y() < -0.5 || xmin->x() > g.size[0] - 0.5 || ymin->y() > g.size[1] - 0.5)

@@ -16,6 +16,9 @@ config::Schema build_schema() {
       .integer("seed", 1, 0, none, "seed of every random choice (same seed, same result)")
       .integer("threads", 0, 0, 256, "worker threads; 0 = all cores");
 
+  s.section("planning", "start from a saved planning model instead of building one (a session)")
+      .input_path("model", "model file written by a planning scene's export.model");
+
   s.section("phantom", "a synthetic planning CT with known organs, written to OUT/phantom/ and read as the CT")
       .choice("kind", "pelvis", {"pelvis"}, "pelvis: body, bones, bladder, rectum, a 35 cm3 prostate")
       .integer("seed", 1, 0, none, "seed of the CT noise (the anatomy is fixed)")
@@ -117,7 +120,10 @@ config::Schema build_schema() {
       .text("rtstruct", "", "DICOM RT Structure Set file name inside --out (empty: none)")
       .text("labels", "", "label map file name inside --out: .nrrd, .mha, .nii(.gz) (empty: none)")
       .text("mesh", "", "surface mesh file name inside --out: .stl, .vtp, .ply, .obj (empty: none)")
-      .text("roi_name", "", "name of the exported ROI (default: the organ's ROI name + _fit)");
+      .text("roi_name", "", "name of the exported ROI (default: the organ's ROI name + _fit)")
+      .flag("copy_other_rois", false, "copy the input structure set's other ROIs into the exported one")
+      .text("model", "", "model file name inside --out (empty: none): the model as built, or as fitted, "
+                         "for session scenes (planning.model) and organfit export");
   return s;
 }
 
@@ -129,6 +135,11 @@ const config::Schema& scene_schema() {
 }
 
 void check_scene_rules(const config::Scene& scene) {
+  if (scene.has_section("planning")) {
+    for (const char* section : {"phantom", "organ", "body", "model"})
+      if (scene.has_section(section))
+        scene.fail(section, "", fmt::format("a session starts from planning.model: it has no '{}' section", section));
+  }
   if (scene.has_section("model")) {
     const auto m = scene.integer("model", "exponent_m");
     const auto n = scene.integer("model", "exponent_n");
@@ -147,6 +158,7 @@ void check_scene_rules(const config::Scene& scene) {
       scene.fail("model", "radius_mm", "the model needs a body to fill: add an 'organ' or a 'body' section");
     }
   }
+  const bool has_model = scene.has_section("model") || scene.has_section("planning");
   if (scene.has_section("phantom") && scene.has_section("ct"))
     scene.fail("phantom", "kind", "a scene has either a 'phantom' or a 'ct' section: the phantom is the CT");
   const bool has_ct = scene.has_section("ct") || scene.has_section("phantom");
@@ -164,25 +176,31 @@ void check_scene_rules(const config::Scene& scene) {
     if (scene.text("points", "source") == "file" && !scene.is_given("points", "file")) {
       scene.fail("points", "source", "source is 'file' but points.file is not given");
     }
-    if (scene.text("points", "source") == "generate" && !scene.has_section("body") && !scene.has_section("organ")) {
+    if (scene.text("points", "source") == "generate" && !scene.has_section("body") && !scene.has_section("organ") &&
+        !scene.has_section("planning")) {
       scene.fail("points", "source", "generated points need the 'organ' or 'body' they are sampled from");
     }
   }
   if (scene.has_section("export")) {
-    if (!has_ct && !(scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty()))
+    // A session finds its planning CT through the model file.
+    if (!has_ct && !scene.has_section("planning") &&
+        !(scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty()))
       scene.fail("export", "rtstruct", "an RTSTRUCT or label map is written on the planning CT: add a 'ct' section");
-    if (!scene.has_section("model")) scene.fail("export", "rtstruct", "export needs a 'model' to export");
+    if (!has_model) scene.fail("export", "rtstruct", "export needs a 'model' (or 'planning') to export");
     if (scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty() &&
-        scene.text("export", "mesh").empty())
-      scene.fail("export", "rtstruct", "the export section names nothing to write (rtstruct, labels or mesh)");
-    for (const char* key : {"rtstruct", "labels", "mesh"}) {
+        scene.text("export", "mesh").empty() && scene.text("export", "model").empty())
+      scene.fail("export", "rtstruct", "the export section names nothing to write (rtstruct, labels, mesh or model)");
+    if (scene.flag("export", "copy_other_rois") &&
+        !(scene.has_section("organ") && scene.text("organ", "source") == "rtstruct"))
+      scene.fail("export", "copy_other_rois", "copies from the organ's structure set: needs organ.source rtstruct");
+    for (const char* key : {"rtstruct", "labels", "mesh", "model"}) {
       const std::string& name = scene.text("export", key);
       if (name.find('/') != std::string::npos || name == "." || name == "..")
         scene.fail("export", key, "a file name inside --out, without folders");
     }
   }
   if (scene.has_section("fit")) {
-    if (!scene.has_section("model")) scene.fail("fit", "method", "a fit needs a 'model' section");
+    if (!has_model) scene.fail("fit", "method", "a fit needs a 'model' (or 'planning') section");
     if (!scene.has_section("points")) scene.fail("fit", "method", "a fit needs a 'points' section");
   }
 }

@@ -14,7 +14,8 @@ struct RtstructRoi {
   std::string name;                             ///< e.g. Prostate_fit
   std::array<int, 3> colour{255, 128, 0};
   std::vector<geometry::SliceContour> contours;  ///< on the CT's slices (k indexes ct.slices)
-  std::string interpreted_type = "ORGAN";       ///< RT ROI Interpreted Type: ORGAN, EXTERNAL, GTV, ...
+  std::string interpreted_type = "ORGAN";          ///< RT ROI Interpreted Type: ORGAN, EXTERNAL, GTV, ...
+  std::string generation_algorithm = "AUTOMATIC";  ///< ROI Generation Algorithm (empty: unknown, e.g. copied)
 };
 
 struct RtstructWriteOptions {

@@ -9,6 +9,7 @@
 
 #include "organfit/dicom/ct_series.h"
 #include "organfit/geometry/image_geometry.h"
+#include "organfit/geometry/slice_contours.h"
 
 namespace organfit::dicom {
 
@@ -51,5 +52,16 @@ struct RasterisedRoi {
 /// that is open or has fewer than 3 points, or that lies on no slice or outside the image.
 RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, const CtSeries& ct,
                             const std::string& source);
+
+/// An ROI's contours placed on the CT's slices (for copying them into a structure set we
+/// write): each CLOSED_PLANAR contour on the slice its reference names, or, when that is
+/// not a slice of the CT, on the slice at its position (as rasterise_roi does). Contours
+/// of other types or on no slice are skipped and counted.
+struct RoiOnSlices {
+  std::vector<geometry::SliceContour> contours;
+  int skipped = 0;
+  int matched_by_position = 0;
+};
+RoiOnSlices roi_on_slices(const Roi& roi, const CtSeries& ct);
 
 }  // namespace organfit::dicom

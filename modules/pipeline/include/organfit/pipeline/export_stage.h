@@ -1,0 +1,50 @@
+#pragma once
+// The export stage: a (fitted) particle model written for the planning system.
+//   rtstruct  a DICOM RT Structure Set on the planning CT: the model's body (balls of
+//             rho closed by rho) on the CT grid, contoured slice by slice; optionally the
+//             input structure set's other ROIs copied alongside
+//   labels    the same mask as a label map (NRRD, MHA, NIfTI) with the CT's geometry
+//   mesh      the body's surface (STL, VTP, PLY, OBJ), independent of the CT grid
+// Everything is computed first; files are written only by commit(), each atomically,
+// so a failure leaves no partial output.
+#include <filesystem>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "organfit/dicom/ct_series.h"
+#include "organfit/dicom/structure_set.h"
+#include "organfit/particles/state.h"
+
+namespace organfit::pipeline {
+
+struct ExportRequest {
+  std::filesystem::path rtstruct, labels, mesh;  ///< empty: not written
+  std::string roi_name;                          ///< the fitted organ's ROI
+  /// ROIs to copy into the RT Structure Set beside the fitted one (from the input one).
+  const dicom::StructureSet* copy_rois_from = nullptr;
+  std::string skip_roi;  ///< not copied (the organ the fit replaces is kept under its own name)
+};
+
+class PendingExport {
+ public:
+  nlohmann::json summary;               ///< run.json "export"; the mesh adds its report on commit
+  std::vector<std::string> files;       ///< what commit() will write
+  std::vector<std::string> warnings;
+  /// Writes the files. Throws InputError naming a file that cannot be written.
+  void commit();
+
+ private:
+  friend PendingExport prepare_export(const particles::Positions&, double, const dicom::CtSeries*,
+                                      const ExportRequest&);
+  std::vector<std::function<void(nlohmann::json& summary)>> writes_;
+};
+
+/// Computes the exports of particles `x` of radius `rho_mm`. `ct` is needed for the
+/// RT Structure Set and the label map (InputError otherwise).
+PendingExport prepare_export(const particles::Positions& x, double rho_mm, const dicom::CtSeries* ct,
+                             const ExportRequest& request);
+
+}  // namespace organfit::pipeline

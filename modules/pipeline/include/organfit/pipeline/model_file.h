@@ -1,0 +1,45 @@
+#pragma once
+// The planning model on disk: built once from the planning CT, loaded by each session.
+//
+// One JSON file (`format: organfit-model`, `format_version: 1`) holding everything a
+// session and an export need and nothing that identifies the patient:
+//   settings      the model section it was built with (ModelSettings, scene key names)
+//   organ         its name (the ROI) and volume
+//   shape         what the particles stand for: an analytic body, or the organ's mask
+//                 (cropped to the organ, run-length encoded) on the CT grid
+//   lattice_spacing_mm, positions_mm (x0, y0, z0, x1, ...), skeleton nodes
+//   ct            the planning CT's folder, Series Instance UID and Frame of Reference
+//                 UID (export re-reads the CT there and checks the UIDs)
+//   provenance    organfit version, scene, date, and the planning run's stage times
+// Positions are written with full double precision: a loaded model is the saved one.
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+
+#include "organfit/pipeline/model_stage.h"
+
+namespace organfit::pipeline {
+
+struct CtReference {
+  std::string folder;  ///< absolute path when saved
+  std::string series_instance_uid, frame_of_reference_uid;
+};
+
+struct SavedModel {
+  ModelStageResult model;        ///< state, force terms (cohesion, skeleton), shape, reference
+  std::string organ_name;        ///< e.g. Prostate
+  std::optional<CtReference> ct;
+  nlohmann::json provenance;
+};
+
+/// Writes the model (atomically). `organ_name` names the organ for exports.
+void save_model(const std::filesystem::path& file, const ModelStageResult& model, const std::string& organ_name,
+                const std::optional<CtReference>& ct, const nlohmann::json& provenance);
+
+/// Reads a model file and rebuilds its force terms. Throws InputError "FILE: reason" on
+/// a file that is not an organfit model, of another format version, or inconsistent
+/// (counts, non-finite positions, bad settings).
+SavedModel load_model(const std::filesystem::path& file);
+
+}  // namespace organfit::pipeline

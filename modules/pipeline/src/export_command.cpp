@@ -1,0 +1,53 @@
+#include "organfit/pipeline/export_command.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <optional>
+
+#include "organfit/pipeline/export_stage.h"
+#include "organfit/pipeline/model_file.h"
+#include "organfit/support/error.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::pipeline {
+
+nlohmann::json run_export_command(const ExportCommand& c) {
+  if (c.rtstruct.empty() && c.labels.empty() && c.mesh.empty())
+    throw InputError("export: name at least one output (--rtstruct, --labels, --mesh)");
+  const SavedModel saved = load_model(c.model);
+  ExportRequest request;
+  request.rtstruct = c.rtstruct, request.labels = c.labels, request.mesh = c.mesh;
+  request.roi_name = c.roi_name.empty() ? saved.organ_name + "_fit" : c.roi_name;
+  std::optional<dicom::CtSeries> ct;
+  if (!c.rtstruct.empty() || !c.labels.empty()) {
+    if (c.ct.empty() && !saved.ct)
+      throw InputError(c.model.string() + ": the model names no planning CT; give --ct");
+    const fs::path folder = c.ct.empty() ? fs::path(saved.ct->folder) : c.ct;
+    // The model's own series when its folder is used; a folder given with --ct must hold
+    // one CT series, and it must be the model's (series and Frame of Reference).
+    dicom::CtReadOptions o;
+    if (saved.ct && c.ct.empty()) o.series_instance_uid = saved.ct->series_instance_uid;
+    ct = dicom::read_ct_series(folder, o);
+    if (saved.ct && (ct->frame_of_reference_uid != saved.ct->frame_of_reference_uid ||
+                     ct->series_instance_uid != saved.ct->series_instance_uid))
+      throw InputError(fmt::format("{}: this CT series (or its Frame of Reference) is not the model's: the model "
+                                   "was built on another CT",
+                                   folder.string()));
+    for (const auto& w : ct->warnings) spdlog::warn(w);
+  }
+  std::optional<dicom::StructureSet> other;
+  if (!c.copy_rois_from.empty()) {
+    if (c.rtstruct.empty()) throw InputError("export: --copy-rois-from needs --rtstruct");
+    other = dicom::read_rtstruct(c.copy_rois_from);
+    request.copy_rois_from = &*other;
+    request.skip_roi = saved.organ_name;
+  }
+  PendingExport pending = prepare_export(saved.model.state.x, saved.model.model->radius_mm(), ct ? &*ct : nullptr, request);
+  for (const auto& w : pending.warnings) spdlog::warn(w);
+  pending.commit();
+  return pending.summary;
+}
+
+}  // namespace organfit::pipeline

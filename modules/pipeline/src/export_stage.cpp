@@ -1,0 +1,85 @@
+#include "organfit/pipeline/export_stage.h"
+
+#include <fmt/format.h>
+
+#include "organfit/dicom/rtstruct_writer.h"
+#include "organfit/geometry/mask_ops.h"
+#include "organfit/geometry/slice_contours.h"
+#include "organfit/itkbridge/itk_images.h"
+#include "organfit/meshing/surface.h"
+#include "organfit/support/error.h"
+
+namespace organfit::pipeline {
+
+void PendingExport::commit() {
+  for (auto& write : writes_) write(summary);
+  writes_.clear();
+}
+
+PendingExport prepare_export(const particles::Positions& x, double rho, const dicom::CtSeries* ct,
+                             const ExportRequest& r) {
+  PendingExport out;
+  out.summary = nlohmann::json::object();
+  if (!r.rtstruct.empty() || !r.labels.empty()) {
+    if (!ct) throw InputError("export: an RT Structure Set or label map needs the planning CT");
+    auto mask = std::make_shared<geometry::LabelVolume>(geometry::closed_body_on_grid(x, rho, rho, ct->geometry));
+    if (mask->count(1) == 0) throw InputError("export: the model lies outside the planning CT's grid");
+    auto contours = geometry::slice_contours(*mask, 1);
+    out.summary["roi"] = r.roi_name;
+    out.summary["contours"] = contours.size();
+    out.summary["volume_on_ct_grid_cm3"] = mask->volume_mm3(1) / 1000.0;
+    if (!r.rtstruct.empty()) {
+      auto rois = std::make_shared<std::vector<dicom::RtstructRoi>>();
+      rois->push_back({r.roi_name, {0, 200, 255}, std::move(contours)});
+      nlohmann::json copied = nlohmann::json::array();
+      if (r.copy_rois_from) {
+        for (const auto& roi : r.copy_rois_from->rois) {
+          if (roi.name == r.skip_roi || roi.name == r.roi_name) continue;
+          dicom::RoiOnSlices placed = dicom::roi_on_slices(roi, *ct);
+          if (placed.skipped > 0)
+            out.warnings.push_back(fmt::format("export: ROI '{}': {} contour(s) not copied (not CLOSED_PLANAR or on no "
+                                               "slice of the CT)",
+                                               roi.name, placed.skipped));
+          if (placed.contours.empty()) continue;
+          dicom::RtstructRoi copy{roi.name, roi.colour, std::move(placed.contours)};
+          copy.generation_algorithm = "";  // copied: not ours to call AUTOMATIC
+          rois->push_back(std::move(copy));
+          copied.push_back(roi.name);
+        }
+      }
+      out.summary["copied_rois"] = copied;
+      out.files.push_back(r.rtstruct.filename().string());
+      const std::filesystem::path file = r.rtstruct;
+      out.writes_.push_back([file, rois, ct](nlohmann::json&) { dicom::write_rtstruct(file, *ct, *rois); });
+    }
+    if (!r.labels.empty()) {
+      out.files.push_back(r.labels.filename().string());
+      const std::filesystem::path file = r.labels;
+      out.writes_.push_back([file, mask](nlohmann::json&) { itkbridge::write_label_volume(file, *mask); });
+    }
+  }
+  if (!r.mesh.empty()) {
+    // The particles' body (balls closed by rho) on a grid of rho, independent of the CT:
+    // windowed-sinc smoothing removes the voxel steps, and rho/2 voxels changed the
+    // enclosed volume by 0.9% for 3.5x the time (1.8 s against 0.5 s at 100k particles).
+    const geometry::Aabb box{x.rowwise().minCoeff(), x.rowwise().maxCoeff()};
+    const geometry::ImageGeometry fine = geometry::grid_covering(box, rho, 3 * rho);
+    auto body = std::make_shared<geometry::LabelVolume>(geometry::closed_body_on_grid(x, rho, rho, fine));
+    out.summary["model_volume_mm3"] = body->volume_mm3(1);
+    out.files.push_back(r.mesh.filename().string());
+    const std::filesystem::path file = r.mesh;
+    out.writes_.push_back([file, body](nlohmann::json& summary) {
+      const meshing::SurfaceReport m = meshing::write_surface(*body, file);
+      summary["mesh"] = {{"file", file.filename().string()},
+                             {"triangles", m.triangles},
+                             {"boundary_edges", m.boundary_edges},
+                             {"non_manifold_edges", m.non_manifold_edges},
+                             {"outward", m.outward},
+                             {"enclosed_volume_mm3", m.enclosed_volume_mm3},
+                             {"area_mm2", m.area_mm2}};
+    });
+  }
+  return out;
+}
+
+}  // namespace organfit::pipeline

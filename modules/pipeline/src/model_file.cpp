@@ -1,0 +1,175 @@
+#include "organfit/pipeline/model_file.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <fstream>
+
+#include "organfit/support/atomic_file.h"
+#include "organfit/support/error.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::pipeline {
+namespace {
+
+constexpr const char* kFormat = "organfit-model";
+constexpr int kFormatVersion = 1;
+
+nlohmann::json vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+
+nlohmann::json flat(const Eigen::Matrix3Xd& m) {
+  return std::vector<double>(m.data(), m.data() + m.size());
+}
+
+/// The organ mask cropped to its voxels (label 1) plus one voxel, run-length encoded:
+/// alternating runs of 0 and 1, starting with 0, i fastest.
+nlohmann::json mask_to_json(const geometry::LabelVolume& mask) {
+  const auto& g = mask.geometry;
+  int lo[3] = {g.size[0], g.size[1], g.size[2]}, hi[3] = {-1, -1, -1};
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        if (mask.at(i, j, k) == 1) {
+          const int idx[3] = {i, j, k};
+          for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], idx[d]), hi[d] = std::max(hi[d], idx[d]);
+        }
+  geometry::ImageGeometry crop = g;
+  for (int d = 0; d < 3; ++d) {
+    lo[d] = std::max(0, lo[d] - 1), hi[d] = std::min(g.size[d] - 1, hi[d] + 1);
+    crop.size[d] = hi[d] - lo[d] + 1;
+  }
+  crop.origin_mm = g.index_to_physical(Eigen::Vector3d(lo[0], lo[1], lo[2]));
+  std::vector<long long> runs;
+  std::uint8_t current = 0;
+  long long length = 0;
+  for (int k = lo[2]; k <= hi[2]; ++k)
+    for (int j = lo[1]; j <= hi[1]; ++j)
+      for (int i = lo[0]; i <= hi[0]; ++i) {
+        const std::uint8_t v = mask.at(i, j, k) == 1;
+        if (v != current) runs.push_back(length), length = 0, current = v;
+        ++length;
+      }
+  runs.push_back(length);
+  const Eigen::Matrix3d& r = crop.direction;
+  return {{"size", {crop.size[0], crop.size[1], crop.size[2]}},
+          {"spacing_mm", vec(crop.spacing_mm)},
+          {"origin_mm", vec(crop.origin_mm)},
+          {"direction", std::vector<double>(r.data(), r.data() + 9)},  // column-major
+          {"runs", runs}};
+}
+
+}  // namespace
+
+void save_model(const fs::path& file, const ModelStageResult& m, const std::string& organ_name,
+                const std::optional<CtReference>& ct, const nlohmann::json& provenance) {
+  nlohmann::ordered_json j;
+  j["format"] = kFormat;
+  j["format_version"] = kFormatVersion;
+  j["provenance"] = provenance;
+  j["organ"] = {{"name", organ_name}, {"reference_volume_mm3", m.reference.volume_mm3(1)}};
+  j["settings"] = to_json(m.settings);
+  nlohmann::json shape = {{"kind", m.shape.kind}, {"size_mm", vec(m.shape.size_mm)}, {"centre_mm", vec(m.shape.centre_mm)}};
+  if (m.shape.mask) shape["mask"] = mask_to_json(*m.shape.mask);
+  j["shape"] = shape;
+  j["ct"] = ct ? nlohmann::json{{"folder", ct->folder},
+                                {"series_instance_uid", ct->series_instance_uid},
+                                {"frame_of_reference_uid", ct->frame_of_reference_uid}}
+               : nlohmann::json(nullptr);
+  j["lattice_spacing_mm"] = m.lattice_spacing_mm;
+  j["particles"] = m.state.size();
+  j["positions_mm"] = flat(m.state.x);
+  if (m.skeleton) {
+    j["skeleton"] = {{"nodes_mm", flat(m.skeleton->skeleton().nodes_mm)}};
+  } else {
+    j["skeleton"] = nullptr;
+  }
+  write_file_atomically(file, j.dump() + "\n");
+}
+
+SavedModel load_model(const fs::path& file) {
+  const std::string where = file.string();
+  auto fail = [&](const std::string& why) -> void { throw InputError(where + ": " + why); };
+  std::ifstream in(file);
+  if (!in) fail("cannot read the model file");
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(in);
+  } catch (const nlohmann::json::exception&) {
+    fail("not an organfit model (not JSON)");
+  }
+  if (!j.is_object() || j.value("format", "") != kFormat) fail("not an organfit model (no 'format: organfit-model')");
+  if (j.value("format_version", 0) != kFormatVersion)
+    fail(fmt::format("model format version {} is not {} (made by another organfit version)",
+                     j.value("format_version", 0), kFormatVersion));
+  SavedModel saved;
+  try {
+    ModelStageResult& m = saved.model;
+    m.settings = model_settings_from_json(j.at("settings"), where);
+    const auto& pos = j.at("positions_mm").get_ref<const nlohmann::json::array_t&>();
+    const long long n = j.at("particles").get<long long>();
+    if (n < 2 || static_cast<long long>(pos.size()) != 3 * n)
+      fail(fmt::format("{} particles but {} coordinates", n, pos.size()));
+    particles::Positions x(3, n);
+    for (long long i = 0; i < 3 * n; ++i) {
+      x.data()[i] = pos[static_cast<size_t>(i)].get<double>();
+      if (!std::isfinite(x.data()[i])) fail("a particle position is not finite");
+    }
+    m.state = particles::State(std::move(x));
+    m.lattice_spacing_mm = j.at("lattice_spacing_mm").get<double>();
+    if (!(m.lattice_spacing_mm > 0)) fail("lattice_spacing_mm must be > 0");
+
+    const auto& shape = j.at("shape");
+    auto read_vec = [](const nlohmann::json& v) { return Eigen::Vector3d(v.at(0), v.at(1), v.at(2)); };
+    if (shape.contains("mask")) {
+      const auto& mj = shape.at("mask");
+      geometry::ImageGeometry g;
+      for (int d = 0; d < 3; ++d) g.size[d] = mj.at("size").at(d).get<int>();
+      g.spacing_mm = read_vec(mj.at("spacing_mm"));
+      g.origin_mm = read_vec(mj.at("origin_mm"));
+      const std::vector<double> r = mj.at("direction").get<std::vector<double>>();
+      if (r.size() != 9) fail("shape.mask.direction needs 9 numbers");
+      g.direction = Eigen::Map<const Eigen::Matrix3d>(r.data());
+      if (g.voxel_count() <= 0 || !(g.spacing_mm.array() > 0).all()) fail("shape.mask has no voxels");
+      auto mask = std::make_shared<geometry::LabelVolume>(g);
+      size_t v = 0;
+      std::uint8_t value = 0;
+      for (const auto& run : mj.at("runs")) {
+        const long long length = run.get<long long>();
+        if (length < 0 || v + static_cast<size_t>(length) > mask->labels.size()) fail("shape.mask runs overflow the grid");
+        std::fill_n(mask->labels.begin() + static_cast<long>(v), length, value);
+        v += static_cast<size_t>(length);
+        value ^= 1;
+      }
+      if (v != mask->labels.size()) fail("shape.mask runs do not cover the grid");
+      m.shape = evaluation::make_mask_shape(std::move(mask));
+    } else {
+      m.shape = evaluation::make_shape(shape.at("kind").get<std::string>(), read_vec(shape.at("size_mm")),
+                                       read_vec(shape.at("centre_mm")));
+    }
+    const particles::CohesionParams cp = cohesion_params_from(m.settings);
+    m.reference = reference_body(m.shape, cp.r0_mm);
+    std::optional<particles::Skeleton> skeleton;
+    if (!j.at("skeleton").is_null()) {
+      const auto nodes = j.at("skeleton").at("nodes_mm").get<std::vector<double>>();
+      if (nodes.empty() || nodes.size() % 3) fail("skeleton.nodes_mm needs x, y, z per node");
+      skeleton.emplace();
+      skeleton->nodes_mm = Eigen::Map<const Eigen::Matrix3Xd>(nodes.data(), 3, static_cast<Eigen::Index>(nodes.size() / 3));
+    }
+    build_model_terms(m, skeleton ? &*skeleton : nullptr);
+    saved.organ_name = j.at("organ").at("name").get<std::string>();
+    if (!j.at("ct").is_null()) {
+      const auto& c = j.at("ct");
+      saved.ct = CtReference{c.at("folder").get<std::string>(), c.at("series_instance_uid").get<std::string>(),
+                             c.at("frame_of_reference_uid").get<std::string>()};
+    }
+    saved.provenance = j.value("provenance", nlohmann::json::object());
+  } catch (const nlohmann::json::exception& e) {
+    fail(std::string("malformed model: ") + e.what());
+  } catch (const std::invalid_argument& e) {
+    fail(std::string("invalid model: ") + e.what());
+  }
+  return saved;
+}
+
+}  // namespace organfit::pipeline

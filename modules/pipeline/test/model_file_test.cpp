@@ -1,0 +1,116 @@
+// The planning model file: what is saved is what is loaded, and bad files are refused
+// with one line naming the file.
+#include "organfit/pipeline/model_file.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <fstream>
+
+#include "organfit/pipeline/scene_schema.h"
+#include "organfit/support/error.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::pipeline {
+namespace {
+
+class ModelFile : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("organfit_model_" + std::to_string(getpid()));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  ModelStageResult build(const std::string& body) {
+    const config::Scene scene =
+        config::parse_scene("scene:\n  seed: 4\n" + body + "model:\n  radius_mm: 2.0\n  skeleton_stiffness: 0.3\n",
+                            dir_ / "s.yaml", scene_schema());
+    check_scene_rules(scene);
+    return run_model_stage(scene);
+  }
+  std::string error_of(const std::string& content) {
+    std::ofstream(dir_ / "bad.json") << content;
+    try {
+      load_model(dir_ / "bad.json");
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "no error";
+  }
+  fs::path dir_;
+};
+
+TEST_F(ModelFile, SavedAndLoadedModelsAreTheSame) {
+  ModelStageResult m = build("body:\n  shape: egg\n  size_mm: [30, 24, 20]\n");
+  ASSERT_NE(m.skeleton, nullptr);
+  const CtReference ct{"/data/ct", "1.2.3", "1.2.4"};
+  save_model(dir_ / "m.json", m, "Prostate", ct, {{"scene", "t"}, {"modelling_wall_s", 1.5}});
+  SavedModel back = load_model(dir_ / "m.json");
+  EXPECT_EQ(back.organ_name, "Prostate");
+  ASSERT_TRUE(back.ct.has_value());
+  EXPECT_EQ(back.ct->series_instance_uid, "1.2.3");
+  EXPECT_EQ(back.provenance.value("modelling_wall_s", 0.0), 1.5);
+  ASSERT_EQ(back.model.state.size(), m.state.size());
+  EXPECT_EQ((back.model.state.x - m.state.x).cwiseAbs().maxCoeff(), 0.0);  // bit for bit
+  EXPECT_EQ(back.model.lattice_spacing_mm, m.lattice_spacing_mm);
+  EXPECT_EQ(back.model.settings.seed, 4u);
+  EXPECT_EQ(back.model.settings.skeleton_stiffness, 0.3);
+  ASSERT_NE(back.model.skeleton, nullptr);
+  EXPECT_EQ(back.model.skeleton->skeleton().nodes_mm, m.skeleton->skeleton().nodes_mm);
+  EXPECT_EQ(back.model.skeleton_params.stiffness, m.skeleton_params.stiffness);
+  EXPECT_EQ(back.model.reference.labels, m.reference.labels);  // the same reference body
+  EXPECT_EQ(back.model.model->terms().size(), m.model->terms().size());
+  // The rebuilt force terms give the same forces.
+  particles::Forces fa, fb;
+  const double ea = m.model->compute_forces(m.state, fa, true);
+  const double eb = back.model.model->compute_forces(back.model.state, fb, true);
+  EXPECT_NEAR(ea, eb, 1e-9 * std::abs(ea));
+  EXPECT_LT((fa - fb).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
+  geometry::ImageGeometry g;
+  g.size = {30, 26, 12};
+  g.spacing_mm = Eigen::Vector3d(1.0, 1.0, 2.5);
+  g.origin_mm = Eigen::Vector3d(-15, -13, -14);
+  auto mask = std::make_shared<geometry::LabelVolume>(g);
+  for (int k = 2; k < 10; ++k)
+    for (int j = 4; j < 22; ++j)
+      for (int i = 5; i < 25; ++i) mask->at(i, j, k) = (i - 15) * (i - 15) + (j - 13) * (j - 13) < 64 ? 1 : 0;
+  const evaluation::Shape organ = evaluation::make_mask_shape(mask);
+  std::ofstream(dir_ / "rt.dcm") << "";  // the organ's input file must exist; it is not read here
+  const config::Scene scene = config::parse_scene("organ:\n  roi: X\n  rtstruct: rt.dcm\nmodel:\n  radius_mm: 2.0\n",
+                                                  dir_ / "s.yaml", scene_schema());
+  const ModelStageResult m = run_model_stage(scene, &organ);
+  save_model(dir_ / "m.json", m, "X", std::nullopt, nlohmann::json::object());
+  const SavedModel back = load_model(dir_ / "m.json");
+  ASSERT_TRUE(back.model.shape.mask);
+  EXPECT_FALSE(back.ct.has_value());
+  EXPECT_EQ(back.model.shape.mask->count(1), mask->count(1));
+  EXPECT_EQ(back.model.reference.labels, m.reference.labels);
+}
+
+TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
+  const std::string f = (dir_ / "bad.json").string();
+  EXPECT_EQ(error_of("not json"), f + ": not an organfit model (not JSON)");
+  EXPECT_EQ(error_of("{\"format\": \"x\"}"), f + ": not an organfit model (no 'format: organfit-model')");
+  EXPECT_EQ(error_of("{\"format\": \"organfit-model\", \"format_version\": 9}"),
+            f + ": model format version 9 is not 1 (made by another organfit version)");
+  const ModelStageResult m = build("body:\n");
+  save_model(dir_ / "m.json", m, "X", std::nullopt, nlohmann::json::object());
+  std::ifstream in(dir_ / "m.json");
+  nlohmann::json j = nlohmann::json::parse(in);
+  j["particles"] = j["particles"].get<int>() + 1;
+  EXPECT_NE(error_of(j.dump()).find("particles but"), std::string::npos);
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["settings"].erase("mass");
+  EXPECT_EQ(error_of(j.dump()), f + ": model setting 'mass' is missing or not a number");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["settings"]["radius_mm"] = -1;
+  EXPECT_NE(error_of(j.dump()).find(f + ": invalid model:"), std::string::npos);
+  EXPECT_NE(error_of("").find(f + ": not an organfit model"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace organfit::pipeline
