@@ -8,6 +8,7 @@
 
 #include "organfit/evaluation/cohesion_benchmark.h"
 #include "organfit/evaluation/skeleton_benchmark.h"
+#include "organfit/pipeline/ct_benchmark.h"
 #include "organfit/pipeline/export_command.h"
 #include "organfit/pipeline/runner.h"
 #include "organfit/pipeline/scene_schema.h"
@@ -52,6 +53,8 @@ int run_main(int argc, char** argv) {
   segment->add_option("--roi", seg.roi, "ROI name in the structure set");
   segment->add_option("--seed", seg.seed_mm, "Seed X,Y,Z in mm (patient LPS)")->delimiter(',')->expected(3);
   segment->add_option("--hu", seg.hu_window, "HU window LOW,HIGH")->delimiter(',')->expected(2);
+  segment->add_option("--search-box", seg.search_box_mm, "Side (mm) of the cube around the seed grown in; 0 = whole CT")
+      ->check(CLI::Range(0.0, 2000.0));
   segment->add_option("-o,--out", seg.out, "Mask file (.nrrd, .mha, .nii, .nii.gz)")->required();
 
   organfit::pipeline::ExportCommand exp;
@@ -104,6 +107,18 @@ int run_main(int argc, char** argv) {
   bench_skeleton->add_option("--width", sb.size_yz_mm, "Ellipsoid width (mm)")->check(CLI::PositiveNumber);
   bench_skeleton->add_option("--threads", sb.threads, "OpenMP threads")->check(CLI::Range(1, 256));
 
+  organfit::pipeline::CtBenchOptions ctb;
+  auto* bench_ct = bench->add_subcommand(
+      "ct", "CT stage on a 512x512x100 CT: read + segment + skeleton + seed, with peak memory");
+  bench_ct->add_option("--ct", ctb.ct, "CT folder (default: a pelvis phantom made first)");
+  bench_ct->add_option("--columns", ctb.columns, "Phantom columns")->check(CLI::Range(64, 2048));
+  bench_ct->add_option("--rows", ctb.rows, "Phantom rows")->check(CLI::Range(64, 2048));
+  bench_ct->add_option("--slices", ctb.slices, "Phantom slices")->check(CLI::Range(8, 2000));
+  bench_ct->add_option("--seed", ctb.seed_mm, "Organ seed X,Y,Z (mm)")->delimiter(',')->expected(3);
+  bench_ct->add_option("--hu", ctb.hu_window, "Organ HU window LO,HI")->delimiter(',')->expected(2);
+  bench_ct->add_option("--radius", ctb.radius_mm, "Particle radius (mm)")->check(CLI::Range(0.3, 20.0));
+  bench_ct->add_option("--threads", ctb.threads, "OpenMP threads (0: all)")->check(CLI::Range(0, 256));
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -145,6 +160,8 @@ int run_main(int argc, char** argv) {
     const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
     organfit::pipeline::run_scene(scene, out_dir);
     spdlog::info("done: {}/run.json", out_dir);
+  } else if (*bench_ct) {
+    std::cout << organfit::pipeline::run_ct_benchmark(ctb).dump() << "\n";
   } else if (*bench_skeleton) {
     std::cout << organfit::evaluation::run_skeleton_benchmark(sb).dump() << "\n";
   } else if (*bench_cohesion) {

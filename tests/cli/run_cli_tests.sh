@@ -216,6 +216,13 @@ if [[ -d "$src/../shared/data/ct-sts-002" ]]; then
 fi
 expect validate.session_with_a_model_section 2 "a session starts from planning.model: it has no 'model' section" -- validate "$scenes/bad-session-with-model.yaml"
 
+# bench ct (small): machine-readable, every step timed
+expect bench.ct_small 0 "" -- --quiet bench ct --columns 128 --rows 128 --slices 24 --radius 2.5
+check bench.ct_prints_steps_and_memory /usr/bin/python3 -c "
+import json; d = json.loads(open('$tmp/out').read())
+assert set(d['stage_wall_s']) == {'ct', 'organ', 'model'} and d['peak_memory_mib'] > 0 and d['particles'] > 100, d
+assert 25 < d['organ_volume_cm3'] < 40 and d['skeleton_from'] == 'organ mask', d"
+
 # SIGINT during a fit: stops within a second, exit 130, no final-named output, no temporary
 printf 'scene:\n  name: long\nbody:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\npoints:\n  count: 10000\nfit:\n  method: paper\n  max_wall_s: 60\n' > "$tmp/long.yaml"
 "$bin" --quiet run "$tmp/long.yaml" --out "$tmp/interrupted" > /dev/null 2> "$tmp/err" &

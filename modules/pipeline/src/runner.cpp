@@ -140,7 +140,10 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
       s.hu_high = scene.number("organ", "hu_high");
       s.smoothing_iterations = static_cast<int>(scene.integer("organ", "smoothing_iterations"));
       s.opening_radius_voxels = static_cast<int>(scene.integer("organ", "opening_radius_voxels"));
-      mask = segmentation::segment_from_seed(ct->geometry, ct->hu, s);
+      s.search_box_mm = scene.number("organ", "search_box_mm");
+      segmentation::SeededOrgan grown = segmentation::segment_from_seed(ct->geometry, ct->hu, s);
+      for (const auto& w : grown.warnings) warn(w);
+      mask = std::move(grown.mask);
       run["organ"] = {{"roi", roi}, {"source", "seed"}, {"volume_cm3", mask.volume_mm3(1) / 1000.0}};
       spdlog::info("organ: '{}' grown from the seed, {:.2f} cm3", roi, mask.volume_mm3(1) / 1000.0);
     } else {

@@ -43,7 +43,9 @@ config::Schema build_schema() {
       .number("hu_low", 20.0, "HU", -1024.0, 3071.0, "lowest HU grown into (source: seed)")
       .number("hu_high", 80.0, "HU", -1024.0, 3071.0, "highest HU grown into (source: seed)")
       .integer("smoothing_iterations", 5, 0, 100, "curvature-flow iterations before growing (source: seed)")
-      .integer("opening_radius_voxels", 1, 0, 10, "morphological opening that cuts thin leaks (source: seed)");
+      .integer("opening_radius_voxels", 1, 0, 10, "morphological opening that cuts thin leaks (source: seed)")
+      .number("search_box_mm", 200.0, "mm", 0.0, 2000.0,
+              "side of the cube around the seed the organ is grown in; 0 = the whole CT (source: seed)");
 
   s.section("body", "an analytic organ shape, for scenes without CT")
       .choice("shape", "ellipsoid", {"ellipsoid", "box", "egg", "lung"},

@@ -29,7 +29,10 @@ SegmentResult run_segment(const SegmentRequest& r) {
     s.seed_mm = Eigen::Vector3d(r.seed_mm[0], r.seed_mm[1], r.seed_mm[2]);
     s.hu_low = r.hu_window[0];
     s.hu_high = r.hu_window[1];
-    mask = segmentation::segment_from_seed(ct.geometry, ct.hu, s);
+    s.search_box_mm = r.search_box_mm;
+    segmentation::SeededOrgan organ = segmentation::segment_from_seed(ct.geometry, ct.hu, s);
+    result.warnings.insert(result.warnings.end(), organ.warnings.begin(), organ.warnings.end());
+    mask = std::move(organ.mask);
   }
   result.volume_cm3 = mask.volume_mm3(1) / 1000.0;
   itkbridge::write_label_volume(r.out, mask);

@@ -89,7 +89,7 @@ TEST_F(PelvisOnDisk, SeededSegmentationOfTheProstateReachesDice090) {
   s.seed_mm = Eigen::Vector3d(0, 0, 0);
   s.hu_low = 20;  // between urine (12) and prostate (42), the low-contrast side
   s.hu_high = 80;
-  const auto mask = segmentation::segment_from_seed(ct_.geometry, ct_.hu, s);
+  const auto mask = segmentation::segment_from_seed(ct_.geometry, ct_.hu, s).mask;
   const auto cmp = geometry::compare_masks(mask, only(truth_, phantom::kProstate));
   EXPECT_GE(cmp.dice, 0.90);
   EXPECT_NEAR(cmp.volume_a_mm3 / cmp.volume_b_mm3, 1.0, 0.15);

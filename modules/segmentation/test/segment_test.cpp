@@ -31,7 +31,7 @@ TEST(SegmentFromSeed, SphereInNoiseIsRecoveredWhole) {
   o.seed_mm = {20, 20, 20};
   o.hu_low = 20;
   o.hu_high = 100;
-  const geometry::LabelVolume m = segment_from_seed(g, hu, o);
+  const geometry::LabelVolume m = segment_from_seed(g, hu, o).mask;
   EXPECT_NEAR(static_cast<double>(m.count(1)), static_cast<double>(inside), 0.05 * inside);
   EXPECT_EQ(m.at(20, 20, 10), 1);
   EXPECT_EQ(m.at(2, 2, 2), 0);
@@ -67,11 +67,18 @@ TEST(SegmentFromSeed, LiverOfTheRealAbdominalCtHasAPlausibleVolume) {
   o.hu_low = 95;                      // the liver reads 120 +- 11 HU around the seed
   o.hu_high = 150;
   o.opening_radius_voxels = 2;        // radius 1 still leaks into stomach contents
-  const geometry::LabelVolume liver = segment_from_seed(ct.geometry, ct.hu, o);
+  o.search_box_mm = 0;                // the whole CT: a liver is wider than the default box
+  const geometry::LabelVolume liver = segment_from_seed(ct.geometry, ct.hu, o).mask;
   const double cm3 = liver.volume_mm3(1) / 1000.0;
   std::cout << "liver (ct-crlm-1004, from a seed): " << cm3 << " cm3\n";
   EXPECT_GT(cm3, 800.0);   // an adult liver holds about 1.2 to 1.8 litres;
   EXPECT_LT(cm3, 2500.0);  // the scan covers 20 cm of it
+  // In the default 200 mm box the liver reaches the box's edge, and the result says so.
+  o.search_box_mm = 200;
+  const SeededOrgan boxed = segment_from_seed(ct.geometry, ct.hu, o);
+  ASSERT_EQ(boxed.warnings.size(), 1u);
+  EXPECT_NE(boxed.warnings[0].find("reaches the edge of the 200 mm search box"), std::string::npos);
+  EXPECT_LT(boxed.mask.count(1), liver.count(1));
 }
 
 }  // namespace

@@ -7,7 +7,10 @@
 //   3. a morphological opening (ball of radius 1 voxel) cuts thin leaks into neighbours;
 //   4. the largest connected component is kept;
 //   5. holes (enclosed background, e.g. vessels outside the window) are filled.
+// All of it inside a search box around the seed (an organ is far smaller than a CT: on
+// 512 x 512 x 100 the whole CT took 5.3 s and 900 MiB); the mask is on the whole CT.
 #include <Eigen/Core>
+#include <string>
 #include <vector>
 
 #include "organfit/geometry/image_geometry.h"
@@ -19,12 +22,18 @@ struct SeedOptions {
   double hu_low = 0, hu_high = 0;                     ///< window, HU
   int smoothing_iterations = 5;
   int opening_radius_voxels = 1;
+  double search_box_mm = 200;  ///< side of the cube around the seed grown in (0: the whole CT)
+};
+
+struct SeededOrgan {
+  geometry::LabelVolume mask;         ///< on the whole CT's grid, label 1
+  std::vector<std::string> warnings;  ///< e.g. the organ reaches the search box's edge
 };
 
 /// Segments on a CT given as HU values (i fastest) on `geometry`. Throws InputError on
 /// a seed outside the CT, a seed whose (smoothed) HU is outside the window, or an
 /// empty window.
-geometry::LabelVolume segment_from_seed(const geometry::ImageGeometry& geometry, const std::vector<float>& hu,
-                                        const SeedOptions& options);
+SeededOrgan segment_from_seed(const geometry::ImageGeometry& geometry, const std::vector<float>& hu,
+                              const SeedOptions& options);
 
 }  // namespace organfit::segmentation
