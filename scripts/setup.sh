@@ -44,5 +44,5 @@ echo "setup: built $build_dir/bin/organfit"
 
 if ((run_default)); then
   "$build_dir/bin/organfit" run pipelines/default.yaml --out out/default
-  echo "setup: outputs in out/default (run.json, resolved.yaml)"
+  echo "setup: outputs in out/default: run.json, prostate_fit_rtstruct.dcm, prostate_fit.stl, phantom/ (the CT)"
 fi

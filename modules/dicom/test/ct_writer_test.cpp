@@ -77,5 +77,44 @@ TEST_F(CtWriter, RefusesAnExistingFolderAndWritesNothingOnBadInput) {
   EXPECT_FALSE(fs::exists(dir_ / "other"));
 }
 
+std::string read_error(const fs::path& folder) {
+  try {
+    read_ct_series(folder);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+// Defective series made with the writer, each refused by the reader naming the defect.
+TEST_F(CtWriter, ATiltedSeriesIsRefused) {
+  CtSeries ct = ramp_ct();
+  const double t = 10.0 * 3.14159265358979 / 180;  // slices shifted along y: a gantry tilt of 10 degrees
+  ct.geometry.direction.col(2) = Eigen::Vector3d(0, std::sin(t), std::cos(t));
+  write_ct_series(dir_ / "tilted", ct);
+  EXPECT_NE(read_error(dir_ / "tilted").find("do not advance along the slice normal (gantry tilt"), std::string::npos)
+      << read_error(dir_ / "tilted");
+}
+
+TEST_F(CtWriter, ANonAxialSeriesIsRefused) {
+  CtSeries ct = ramp_ct();
+  ct.geometry.direction << 1, 0, 0, 0, 0, 1, 0, -1, 0;  // coronal: rows along -z
+  write_ct_series(dir_ / "coronal", ct);
+  EXPECT_NE(read_error(dir_ / "coronal").find("non-axial slices"), std::string::npos) << read_error(dir_ / "coronal");
+}
+
+TEST_F(CtWriter, IrregularSliceSpacingIsRefused) {
+  // Two writes with the same UIDs, the second shifted by 1 mm: one slice of it swapped
+  // in gives gaps of 3.5 and 1.5 mm among 2.5 mm ones.
+  CtWriteOptions fixed;
+  fixed.fixed_uids_and_dates = true;
+  CtSeries a = ramp_ct(), b = ramp_ct();
+  b.geometry.origin_mm.z() += 1.0;
+  write_ct_series(dir_ / "a", a, fixed);
+  write_ct_series(dir_ / "b", b, fixed);
+  fs::copy_file(dir_ / "b" / "CT0005.dcm", dir_ / "a" / "CT0005.dcm", fs::copy_options::overwrite_existing);
+  EXPECT_NE(read_error(dir_ / "a").find("irregular slice spacing"), std::string::npos) << read_error(dir_ / "a");
+}
+
 }  // namespace
 }  // namespace organfit::dicom
