@@ -5,7 +5,9 @@
 
 namespace organfit::meshing {
 
-SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesystem::path& file) {
+namespace {
+
+PlainMask plain(const geometry::LabelVolume& mask) {
   PlainMask m;
   const auto& g = mask.geometry;
   m.size = g.size;
@@ -15,7 +17,10 @@ SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesy
     for (int e = 0; e < 3; ++e) m.direction[3 * d + e] = g.direction(d, e);
   }
   m.labels = mask.labels;
-  const PlainSurfaceReport p = vtk_write_surface(m, file.string());
+  return m;
+}
+
+SurfaceReport report_of(const PlainSurfaceReport& p) {
   SurfaceReport r;
   r.points = p.points;
   r.triangles = p.triangles;
@@ -25,6 +30,21 @@ SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesy
   r.area_mm2 = p.area_mm2;
   r.outward = p.signed_volume_mm3 > 0;
   return r;
+}
+
+}  // namespace
+
+SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesystem::path& file) {
+  return report_of(vtk_write_surface(plain(mask), file.string()));
+}
+
+SurfaceMesh surface_mesh(const geometry::LabelVolume& mask) {
+  PlainSurfaceReport p = vtk_write_surface(plain(mask), "", true);
+  SurfaceMesh out;
+  out.report = report_of(p);
+  out.vertex_mm = std::move(p.vertex_mm);
+  out.triangle_ids = std::move(p.triangle_ids);
+  return out;
 }
 
 }  // namespace organfit::meshing

@@ -53,10 +53,10 @@ double signed_volume(vtkPolyData* poly) {
 
 }  // namespace
 
-PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file) {
+PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file, bool keep_mesh) {
   const bool stl = ends_with(file, ".stl"), vtp = ends_with(file, ".vtp"), ply = ends_with(file, ".ply"),
              obj = ends_with(file, ".obj");
-  if (!stl && !vtp && !ply && !obj) throw InputError(file + ": unknown mesh format (use .stl, .vtp, .ply or .obj)");
+  if (!file.empty() && !stl && !vtp && !ply && !obj) throw InputError(file + ": unknown mesh format (use .stl, .vtp, .ply or .obj)");
   // Pad by one empty voxel all round so the surface closes at the grid border.
   const int nx = m.size[0] + 2, ny = m.size[1] + 2, nz = m.size[2] + 2;
   vtkNew<vtkImageData> image;
@@ -129,6 +129,22 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
   report.enclosed_volume_mm3 = mass->GetVolume();
   report.area_mm2 = mass->GetSurfaceArea();
   report.signed_volume_mm3 = signed_volume(surface);
+  if (keep_mesh) {
+    report.vertex_mm.reserve(static_cast<size_t>(3 * report.points));
+    for (vtkIdType p = 0; p < surface->GetNumberOfPoints(); ++p) {
+      double x[3];
+      surface->GetPoint(p, x);
+      for (double v : x) report.vertex_mm.push_back(static_cast<float>(v));
+    }
+    vtkCellArray* polys = surface->GetPolys();
+    vtkIdType n = 0;
+    const vtkIdType* ids = nullptr;
+    polys->InitTraversal();
+    while (polys->GetNextCell(n, ids))
+      if (n == 3)
+        for (int c = 0; c < 3; ++c) report.triangle_ids.push_back(static_cast<int>(ids[c]));
+  }
+  if (file.empty()) return report;
 
   TempPath temp(file);
   const std::string name = temp.path().string();

@@ -16,6 +16,7 @@
 #include "organfit/pipeline/export_stage.h"
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_file.h"
+#include "organfit/pipeline/report_stage.h"
 #include "organfit/pipeline/model_stage.h"
 #include "organfit/pipeline/synth_command.h"
 #include "organfit/segmentation/segment.h"
@@ -32,7 +33,7 @@ const char* version() { return ORGANFIT_VERSION; }
 const std::vector<StageInfo>& pipeline_stages() {
   static const std::vector<StageInfo> stages = {
       {"phantom", true}, {"ct", true},  {"organ", true},  {"model", true},  {"points", true},
-      {"ultrasound", false}, {"fit", true}, {"export", true}, {"report", false}};
+      {"ultrasound", false}, {"fit", true}, {"export", true}, {"report", true}};
   return stages;
 }
 
@@ -222,6 +223,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
   }
   std::vector<std::pair<std::string, std::string>> files;  // name, content
   std::string not_converged;
+  std::vector<double> residuals_mm;  // per point, after the fit (for the report)
   if (scene.has_section("fit") && model && points) {
     Stopwatch clock;
     FitStageResult fit;
@@ -235,6 +237,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
     run["model"]["skin_particles"] = fit.fit_summary["skin_particles"];
     if (!fit.truth_summary.is_null()) run["truth"] = fit.truth_summary;
     files.push_back({"history.csv", fit.history_csv});
+    residuals_mm = fit.fit.residuals_mm;
     spdlog::info("fit ({}): {} in {} steps, {:.3f} s; residual mean {:.3f} mm, max {:.3f} mm; volume {:+.2f}%",
                  fit.fit_summary["method"].get<std::string>(), fit.fit.stop_reason, fit.fit.steps,
                  fit.fit.wall_s, fit.fit.residual_mean_mm, fit.fit.residual_max_mm,
@@ -272,7 +275,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
     request.mesh = in_out("mesh");
     request.roi_name = scene.text("export", "roi_name");
     if (request.roi_name.empty()) request.roi_name = organ_name + "_fit";
-    if ((!request.rtstruct.empty() || !request.labels.empty()) && !ct) {
+    if ((!request.rtstruct.empty() || !request.labels.empty() ||
+         (scene.has_section("report") && ct_reference)) && !ct) {
       // A session: the planning CT named in the model file, checked to be the same series.
       if (!ct_reference) throw InputError(scene.path("planning", "model").string() + ": the model has no planning CT to export on");
       Stopwatch ct_clock;
@@ -338,6 +342,28 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
                                        {"modelling_wall_s", planning_modelling_s >= 0 ? planning_modelling_s : modelling_s()},
                                        {"fitted", scene.has_section("fit")}};
     save_model(out_dir / model_file, *model, organ_name, ct_reference, provenance);
+  }
+  if (scene.has_section("report")) {
+    Stopwatch clock;
+    ReportContext context;
+    context.scene_yaml = scene.resolved_yaml();
+    for (const auto& f : files)
+      if (f.first == "history.csv") context.history_csv = f.second;
+    context.ct = ct ? &*ct : nullptr;
+    context.planning = model ? &model->shape : nullptr;
+    context.fitted = model ? &model->state.x : nullptr;
+    context.rho_mm = model ? model->model->radius_mm() : 0;
+    if (points)
+      for (const auto& p : points->points) context.points_mm.push_back(p.p_mm);
+    context.residuals_mm = residuals_mm;
+    context.show_patient = scene.flag("report", "show_patient");
+    const std::string file = scene.text("report", "file");
+    run["outputs"].push_back(file);
+    record_stage("report", clock.elapsed_s());  // the page's own time is shown without itself
+    context.run = run;
+    write_file_atomically(out_dir / file, build_report(context));
+    run["stages"].back()["wall_s"] = clock.elapsed_s();
+    spdlog::info("report: {}", (out_dir / file).string());
   }
   write_file_atomically(out_dir / "resolved.yaml", scene.resolved_yaml());
   write_file_atomically(out_dir / "run.json", run.dump(2) + "\n");

@@ -126,6 +126,9 @@ config::Schema build_schema() {
       .flag("copy_other_rois", false, "copy the input structure set's other ROIs into the exported one")
       .text("model", "", "model file name inside --out (empty: none): the model as built, or as fitted, "
                          "for session scenes (planning.model) and organfit export");
+  s.section("report", "report.html: one self-contained page a physicist reads at a glance")
+      .text("file", "report.html", "report file name inside --out")
+      .flag("show_patient", false, "show the CT's patient name and ID in the report (off: never shown)");
   return s;
 }
 
@@ -200,6 +203,13 @@ void check_scene_rules(const config::Scene& scene) {
       if (name.find('/') != std::string::npos || name == "." || name == "..")
         scene.fail("export", key, "a file name inside --out, without folders");
     }
+  }
+  if (scene.has_section("report")) {
+    const std::string& file = scene.text("report", "file");
+    if (file.empty() || file.find('/') != std::string::npos || file == "." || file == "..")
+      scene.fail("report", "file", "a file name inside --out, without folders");
+    if (scene.flag("report", "show_patient") && !has_ct && !scene.has_section("planning"))
+      scene.fail("report", "show_patient", "the patient's name comes from the CT: there is none");
   }
   if (scene.has_section("fit")) {
     if (!has_model) scene.fail("fit", "method", "a fit needs a 'model' (or 'planning') section");

@@ -9,6 +9,7 @@
 // The mask is padded by one empty voxel so the surface closes at the grid's border.
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "organfit/geometry/image_geometry.h"
 
@@ -27,5 +28,13 @@ struct SurfaceReport {
 /// InputError naming the file on an unknown extension or a failed write, or when the
 /// mask is empty.
 SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesystem::path& file);
+
+/// The same surface as triangles, not written (for the report's 3D view).
+struct SurfaceMesh {
+  std::vector<float> vertex_mm;   ///< x, y, z per vertex, patient mm
+  std::vector<int> triangle_ids;  ///< three vertex indices per triangle, outward (counter-clockwise)
+  SurfaceReport report;
+};
+SurfaceMesh surface_mesh(const geometry::LabelVolume& mask);
 
 }  // namespace organfit::meshing

@@ -1,0 +1,30 @@
+#pragma once
+// The report stage: gathers what report.html shows from the run's stages.
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "organfit/dicom/ct_series.h"
+#include "organfit/evaluation/synthetic.h"
+#include "organfit/particles/state.h"
+
+namespace organfit::pipeline {
+
+struct ReportContext {
+  nlohmann::json run;                        ///< run.json as it will be written
+  std::string scene_yaml, history_csv;
+  const dicom::CtSeries* ct = nullptr;       ///< null: no CT views
+  const evaluation::Shape* planning = nullptr;  ///< the organ before the fit (its contour)
+  const particles::Positions* fitted = nullptr; ///< the particles after the fit
+  double rho_mm = 0;
+  std::vector<Eigen::Vector3d> points_mm;
+  std::vector<double> residuals_mm;
+  bool show_patient = false;                 ///< the scene asked for name and ID
+};
+
+/// The report page. Views: the CT planes through the fitted organ's centroid, cropped to
+/// both contours plus 25 mm.
+std::string build_report(const ReportContext& context);
+
+}  // namespace organfit::pipeline

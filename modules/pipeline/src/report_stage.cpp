@@ -1,0 +1,88 @@
+#include "organfit/pipeline/report_stage.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "organfit/geometry/mask_ops.h"
+#include "organfit/meshing/surface.h"
+#include "organfit/report/report.h"
+
+namespace organfit::pipeline {
+namespace {
+
+/// A shape's inside test at the CT's voxel centres (only within the shape's bounds).
+geometry::LabelVolume shape_on_grid(const evaluation::Shape& shape, const geometry::ImageGeometry& g) {
+  geometry::LabelVolume mask(g);
+  const geometry::Aabb box = shape.bounds();
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d corner((c & 1) ? box.max_mm.x() : box.min_mm.x(), (c & 2) ? box.max_mm.y() : box.min_mm.y(),
+                                 (c & 4) ? box.max_mm.z() : box.min_mm.z());
+    const Eigen::Vector3d idx = g.physical_to_index(corner);
+    lo = lo.cwiseMin(idx), hi = hi.cwiseMax(idx);
+  }
+  int a[3], b[3];
+  for (int d = 0; d < 3; ++d)
+    a[d] = std::max(0, static_cast<int>(std::floor(lo[d])) - 1), b[d] = std::min(g.size[d] - 1, static_cast<int>(std::ceil(hi[d])) + 1);
+  for (int k = a[2]; k <= b[2]; ++k)
+    for (int j = a[1]; j <= b[1]; ++j)
+      for (int i = a[0]; i <= b[0]; ++i) mask.at(i, j, k) = shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  return mask;
+}
+
+}  // namespace
+
+std::string build_report(const ReportContext& c) {
+  report::ReportInput in;
+  in.run = c.run;
+  in.scene_yaml = c.scene_yaml;
+  in.history_csv = c.history_csv;
+  in.points_mm = c.points_mm;
+  in.residuals_mm = c.residuals_mm;
+  if (c.show_patient && c.ct)
+    in.patient = c.ct->patient.patient_name + " (ID " + c.ct->patient.patient_id + ")";
+  if (c.fitted && c.fitted->cols() > 0) {
+    // The fitted surface as the mesh export makes it (balls closed by rho on a grid of rho).
+    const geometry::Aabb box{c.fitted->rowwise().minCoeff(), c.fitted->rowwise().maxCoeff()};
+    const geometry::LabelVolume body =
+        geometry::closed_body_on_grid(*c.fitted, c.rho_mm, c.rho_mm, geometry::grid_covering(box, c.rho_mm, 3 * c.rho_mm));
+    meshing::SurfaceMesh mesh = meshing::surface_mesh(body);
+    in.surface_vertex_mm = std::move(mesh.vertex_mm);
+    in.surface_triangles = std::move(mesh.triangle_ids);
+  }
+  if (c.ct && c.fitted) {
+    const auto& g = c.ct->geometry;
+    const geometry::LabelVolume fitted = geometry::closed_body_on_grid(*c.fitted, c.rho_mm, c.rho_mm, g);
+    const geometry::LabelVolume planning = c.planning ? shape_on_grid(*c.planning, g) : geometry::LabelVolume(g);
+    std::array<int, 3> lo{g.size[0], g.size[1], g.size[2]}, hi{-1, -1, -1};
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    long long n = 0;
+    for (int k = 0; k < g.size[2]; ++k)
+      for (int j = 0; j < g.size[1]; ++j)
+        for (int i = 0; i < g.size[0]; ++i) {
+          const bool f = fitted.at(i, j, k) == 1, p = planning.at(i, j, k) == 1;
+          if (!f && !p) continue;
+          const int idx[3] = {i, j, k};
+          for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], idx[d]), hi[d] = std::max(hi[d], idx[d]);
+          if (f) centroid += Eigen::Vector3d(i, j, k), ++n;
+        }
+    if (n > 0) {
+      centroid /= static_cast<double>(n);
+      for (int d = 0; d < 3; ++d) {
+        const int margin = static_cast<int>(std::ceil(25.0 / g.spacing_mm[d]));
+        lo[d] = std::max(0, lo[d] - margin), hi[d] = std::min(g.size[d] - 1, hi[d] + margin);
+      }
+      const geometry::LabelVolume* plan = c.planning ? &planning : nullptr;
+      const double slab = 0.5 * g.spacing_mm.maxCoeff() + 1.0;
+      for (auto [plane, axis] : {std::pair{report::Plane::kAxial, 2}, std::pair{report::Plane::kCoronal, 1},
+                                 std::pair{report::Plane::kSagittal, 0}})
+        in.views.push_back(report::slice_view(g, c.ct->hu, plane, static_cast<int>(std::lround(centroid[axis])), lo, hi,
+                                              plan, &fitted, c.points_mm, c.residuals_mm, slab));
+    }
+  }
+  return report::report_html(in);
+}
+
+}  // namespace organfit::pipeline

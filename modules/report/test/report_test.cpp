@@ -1,0 +1,115 @@
+// report.html's pieces: PNG and base64 encodings, the CT views' orientation, the page.
+#include "organfit/report/report.h"
+
+#include <gtest/gtest.h>
+#include <zlib.h>
+
+namespace organfit::report {
+namespace {
+
+TEST(Base64, MatchesRfc4648Vectors) {
+  EXPECT_EQ(base64(""), "");
+  EXPECT_EQ(base64("f"), "Zg==");
+  EXPECT_EQ(base64("fo"), "Zm8=");
+  EXPECT_EQ(base64("foo"), "Zm9v");
+  EXPECT_EQ(base64("foobar"), "Zm9vYmFy");
+}
+
+TEST(PngGray, DecodesBackToThePixels) {
+  const int w = 5, h = 3;
+  std::vector<std::uint8_t> pixels(w * h);
+  for (int i = 0; i < w * h; ++i) pixels[i] = static_cast<std::uint8_t>(17 * i);
+  const std::string png = png_gray(w, h, pixels.data());
+  ASSERT_EQ(png.substr(0, 8), std::string("\x89PNG\r\n\x1a\n", 8));
+  // IHDR: width, height, 8-bit grey.
+  auto u32 = [&](size_t at) {
+    return (std::uint32_t(std::uint8_t(png[at])) << 24) | (std::uint32_t(std::uint8_t(png[at + 1])) << 16) |
+           (std::uint32_t(std::uint8_t(png[at + 2])) << 8) | std::uint8_t(png[at + 3]);
+  };
+  EXPECT_EQ(png.substr(12, 4), "IHDR");
+  EXPECT_EQ(u32(16), 5u);
+  EXPECT_EQ(u32(20), 3u);
+  // IDAT inflates to rows of (filter 0, pixels).
+  const size_t idat = png.find("IDAT");
+  ASSERT_NE(idat, std::string::npos);
+  const std::uint32_t length = u32(idat - 4);
+  std::vector<std::uint8_t> raw(h * (w + 1));
+  uLongf raw_size = raw.size();
+  ASSERT_EQ(uncompress(raw.data(), &raw_size, reinterpret_cast<const Bytef*>(png.data() + idat + 4), length), Z_OK);
+  ASSERT_EQ(raw_size, raw.size());
+  for (int r = 0; r < h; ++r) {
+    EXPECT_EQ(raw[r * (w + 1)], 0);
+    for (int c = 0; c < w; ++c) EXPECT_EQ(raw[r * (w + 1) + 1 + c], pixels[r * w + c]);
+  }
+}
+
+class Views : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    g.size = {20, 16, 10};
+    g.spacing_mm = Eigen::Vector3d(1.0, 1.0, 2.0);
+    hu.assign(static_cast<size_t>(g.voxel_count()), -1000.f);
+    mask = geometry::LabelVolume(g);
+    // A bright block at i 4..9, j 5..8, k 2..6, also the mask.
+    for (int k = 2; k <= 6; ++k)
+      for (int j = 5; j <= 8; ++j)
+        for (int i = 4; i <= 9; ++i) {
+          hu[static_cast<size_t>(g.linear_index(i, j, k))] = 240.f;
+          mask.at(i, j, k) = 1;
+        }
+  }
+  geometry::ImageGeometry g;
+  std::vector<float> hu;
+  geometry::LabelVolume mask;
+};
+
+TEST_F(Views, AxialViewIsTheSliceWithAnteriorUpAndPatientRightOnTheLeft) {
+  const SliceView v = slice_view(g, hu, Plane::kAxial, 4, {0, 0, 0}, {19, 15, 9}, &mask, nullptr,
+                                 {Eigen::Vector3d(6, 6, 8.4), Eigen::Vector3d(6, 6, 14)}, {0.5, 3.0}, 1.0);
+  EXPECT_EQ(v.width, 20);
+  EXPECT_EQ(v.height, 16);
+  EXPECT_EQ(v.left + v.right + v.top + v.bottom, "RLAP");
+  EXPECT_EQ(v.gray[5 * 20 + 4], 255);  // 240 HU is the window's top (40 + 200)
+  EXPECT_EQ(v.gray[0], 0);
+  ASSERT_EQ(v.planning.size(), 1u);  // one outline around the block
+  ASSERT_EQ(v.points.size(), 1u);    // z = 8.4 is within 1 mm of the plane z = 8; z = 14 is not
+  EXPECT_NEAR(v.points[0].x_mm, 6.5, 1e-9);
+  EXPECT_NEAR(v.points[0].residual_mm, 0.5, 1e-12);
+}
+
+TEST_F(Views, CoronalViewPutsSuperiorAtTheTop) {
+  const SliceView v = slice_view(g, hu, Plane::kCoronal, 6, {0, 0, 0}, {19, 15, 9}, &mask, nullptr, {}, {}, 1.0);
+  EXPECT_EQ(v.height, 10);
+  EXPECT_EQ(v.top + v.bottom, "SI");
+  // Row 0 is k = 9 (dark), row 9 - 6 = 3 is k = 6 (bright).
+  EXPECT_EQ(v.gray[0 * 20 + 5], 0);
+  EXPECT_EQ(v.gray[3 * 20 + 5], 255);
+  EXPECT_DOUBLE_EQ(v.pixel_h_mm, 2.0);
+  EXPECT_EQ(slice_view(g, hu, Plane::kSagittal, 5, {0, 0, 0}, {19, 15, 9}, nullptr, nullptr, {}, {}, 1.0).left, "A");
+}
+
+TEST(ReportHtml, HasTheSectionsEscapesTextAndShowsNoPatientUnlessGiven) {
+  ReportInput in;
+  in.run = {{"scene", {{"name", "a<b"}}}, {"status", "ok"}, {"warnings", {"fit: 2 points rejected"}},
+            {"fit", {{"volume_change_pct", 1.7}, {"method", "spread"}}}, {"model", {{"radius_mm", 1.0}}},
+            {"stages", {{{"name", "fit"}, {"wall_s", 0.1}, {"peak_memory_mib", 50.0}}}}, {"outputs", {"run.json"}}};
+  in.history_csv = "step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,ke\n0,0,2,3,0,1\n20,0.1,1,1.5,0.2,0.1\n";
+  in.residuals_mm = {0.2, 1.5};
+  const std::string html = report_html(in);
+  EXPECT_NE(html.find("organfit report: a&lt;b"), std::string::npos);
+  EXPECT_NE(html.find("fit: 2 points rejected"), std::string::npos);
+  EXPECT_NE(html.find("volume changed by +1.70%"), std::string::npos);
+  EXPECT_NE(html.find("1 of 2 points were never reached"), std::string::npos);
+  EXPECT_NE(html.find("aria-label=\"error against run time\""), std::string::npos);
+  EXPECT_EQ(html.find("Patient:"), std::string::npos);
+  // No network: every "http" is the SVG namespace (an identifier, never fetched).
+  int links = 0;
+  for (size_t at = html.find("http"); at != std::string::npos; at = html.find("http", at + 1))
+    links += html.compare(at, 26, "http://www.w3.org/2000/svg") != 0;
+  EXPECT_EQ(links, 0);
+  in.patient = "Doe^J (ID 7)";
+  EXPECT_NE(report_html(in).find("Patient: Doe^J (ID 7)"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace organfit::report
