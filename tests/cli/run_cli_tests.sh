@@ -179,7 +179,12 @@ check default.fit_converges_with_truth /usr/bin/python3 -c "
 import json; d = json.load(open('$tmp/default/run.json'))
 assert [s['name'] for s in d['stages']][:4] == ['phantom', 'ct', 'organ', 'model'], d['stages']
 assert abs(d['organ']['volume_cm3'] - 35.0) < 1.0 and d['model']['skeleton_from'] == 'organ mask'
-assert d['fit']['converged'] and abs(d['fit']['volume_change_pct']) < 1.0 and d['truth']['recovery'] > 0.5, d['truth']"
+assert d['fit']['converged'] and abs(d['fit']['volume_change_pct']) < 1.0 and d['truth']['recovery'] > 0.5, d['truth']
+p = d['points']  # simulated transrectal ultrasound, speckle 1.0 (fully developed)
+assert p['source'] == 'simulate' and p['speckle'] == 1.0 and p['count'] == 87, p
+assert p['median_distance_to_true_surface_mm'] <= 1.0 and p['fraction_within_1_5_mm'] >= 0.8, p
+assert p['fraction_on_visible_surface'] >= 0.8, p"
+check default.saved_the_ultrasound_volume test -s "$tmp/default/ultrasound.mha"
 check default.report_written_without_patient_identifiers /usr/bin/python3 -c "
 html = open('$tmp/default/report.html').read()
 assert 'Phantom^Pelvis' not in html and 'PELVIS-1' not in html

@@ -112,6 +112,25 @@ void write_mask(const fs::path& file, const PlainMask& mask) {
   temp.commit();
 }
 
+PlainFloatImage read_float_image(const fs::path& file) {
+  register_formats();
+  std::error_code ec;
+  if (!fs::exists(file, ec)) throw InputError(file.string() + ": no such file");
+  auto reader = itk::ImageFileReader<FloatImage>::New();
+  reader->SetFileName(file.string());
+  try {
+    reader->Update();
+  } catch (const itk::ExceptionObject& e) {
+    throw InputError(file.string() + ": cannot read as an image (or its data file is missing)");
+  }
+  PlainFloatImage out;
+  const FloatImage* image = reader->GetOutput();
+  out.geometry = geometry_of(image);
+  const float* p = image->GetBufferPointer();
+  out.values.assign(p, p + out.geometry.voxel_count());
+  return out;
+}
+
 PlainMask read_mask(const fs::path& file) {
   register_formats();
   auto reader = itk::ImageFileReader<MaskImage>::New();

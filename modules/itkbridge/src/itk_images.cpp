@@ -39,4 +39,9 @@ void write_label_volume(const std::filesystem::path& file, const geometry::Label
 
 geometry::LabelVolume read_label_volume(const std::filesystem::path& file) { return from_plain(read_mask(file)); }
 
+ScalarImage read_scalar_image(const std::filesystem::path& file) {
+  PlainFloatImage plain = read_float_image(file);
+  return {from_plain(plain.geometry), std::move(plain.values)};
+}
+
 }  // namespace organfit::itkbridge

@@ -17,6 +17,7 @@
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_file.h"
 #include "organfit/pipeline/report_stage.h"
+#include "organfit/pipeline/ultrasound_stage.h"
 #include "organfit/pipeline/model_stage.h"
 #include "organfit/pipeline/synth_command.h"
 #include "organfit/segmentation/segment.h"
@@ -33,7 +34,7 @@ const char* version() { return ORGANFIT_VERSION; }
 const std::vector<StageInfo>& pipeline_stages() {
   static const std::vector<StageInfo> stages = {
       {"phantom", true}, {"ct", true},  {"organ", true},  {"model", true},  {"points", true},
-      {"ultrasound", false}, {"fit", true}, {"export", true}, {"report", true}};
+      {"ultrasound", true}, {"fit", true}, {"export", true}, {"report", true}};
   return stages;
 }
 
@@ -215,10 +216,64 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
     spdlog::info("the scene names no model");
   }
   std::optional<PointsStageResult> points;
+  std::vector<std::function<void()>> deferred_writes;  // files of the stages above, written at the end
+  std::vector<std::string> deferred_outputs;
   if (scene.has_section("points") && model) {
     Stopwatch clock;
-    points = run_points_stage(scene, *model);
-    record_stage("points", clock.elapsed_s());
+    if (scene.text("points", "source") == "ultrasound") {
+      // The phantom's true anatomy, when there is one, is what the probe images.
+      std::optional<geometry::LabelVolume> anatomy;
+      if (!phantom_rtstruct.empty())
+        anatomy = pelvis_tissue_classes(itkbridge::read_label_volume(phantom_rtstruct.parent_path() / "labels.nrrd"));
+      UltrasoundStageResult us = run_ultrasound_stage(scene, *model, ct ? &*ct : nullptr,
+                                                      organ && organ->mask ? organ->mask.get() : nullptr,
+                                                      anatomy ? &*anatomy : nullptr);
+      record_stage("ultrasound", clock.elapsed_s());
+      points = std::move(us.points);
+      if (points->truth) {
+        // How far the extracted points lie from the true (deformed) surface: against a
+        // dense noise-free sampling of it (0.2 mm apart on a 35 cm3 organ).
+        evaluation::SamplingOptions dense;
+        dense.count = 40000;
+        dense.noise_mm = 0;
+        const auto surface = evaluation::sample_deformed_surface(points->truth_shape, *points->truth, dense);
+        std::vector<double> d;
+        for (const auto& p : points->points) {
+          double best = 1e300;
+          for (const auto& q : surface) best = std::min(best, (p.p_mm - q.p_mm).squaredNorm());
+          d.push_back(std::sqrt(best));
+          if (d.back() > 1.5)
+            spdlog::debug("ultrasound: point ({:.1f}, {:.1f}, {:.1f}) mm, confidence {:.2f}, is {:.2f} mm off", p.p_mm.x(),
+                          p.p_mm.y(), p.p_mm.z(), p.confidence, d.back());
+        }
+        std::sort(d.begin(), d.end());
+        const double within = static_cast<double>(std::upper_bound(d.begin(), d.end(), 1.5) - d.begin()) / d.size();
+        points->summary["median_distance_to_true_surface_mm"] = d[d.size() / 2];
+        points->summary["fraction_within_1_5_mm"] = within;
+        points->summary["distance_to_true_surface_p90_mm"] = d[d.size() * 9 / 10];
+        points->summary["distance_to_true_surface_max_mm"] = d.back();
+        // ... and whether they lie on the part of it the probe sees (within 1.5 mm of
+        // where the simulator's rays crossed the organ's boundary before any shadow).
+        int on_visible = 0;
+        for (const auto& p : points->points) {
+          double best = 1e300;
+          for (const auto& q : us.true_boundary_mm) best = std::min(best, (p.p_mm - q).squaredNorm());
+          on_visible += best <= 1.5 * 1.5;
+        }
+        points->summary["fraction_on_visible_surface"] = static_cast<double>(on_visible) / points->points.size();
+        spdlog::info("ultrasound: points lie {:.2f} mm (median) from the true surface; {:.0f}% within 1.5 mm",
+                     d[d.size() / 2], 100 * within);
+      }
+      const std::string save = scene.text("ultrasound", "save_volume");
+      if (!save.empty() && us.bmode) {
+        auto volume = std::make_shared<geometry::LabelVolume>(std::move(*us.bmode));
+        deferred_writes.push_back([volume, file = out_dir / save] { itkbridge::write_label_volume(file, *volume); });
+        deferred_outputs.push_back(save);
+      }
+    } else {
+      points = run_points_stage(scene, *model);
+      record_stage("points", clock.elapsed_s());
+    }
     run["points"] = points->summary;
   }
   std::vector<std::pair<std::string, std::string>> files;  // name, content
@@ -328,10 +383,12 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
   run["outputs"] = {"resolved.yaml", "run.json"};
   for (const auto& f : files) run["outputs"].push_back(f.first);
   for (const auto& f : exported) run["outputs"].push_back(f);
+  for (const auto& f : deferred_outputs) run["outputs"].push_back(f);
   run["status"] = not_converged.empty() ? "ok" : "target_not_met";
   // Files are committed only now: a run that fails with an error leaves none. A fit
   // that did not converge still writes its results (run.json says so), then exits 3.
   for (const auto& f : files) write_file_atomically(out_dir / f.first, f.second);
+  for (const auto& write : deferred_writes) write();
   if (pending) {
     pending->commit();  // each file atomic; the mesh adds its report
     run["export"] = pending->summary;

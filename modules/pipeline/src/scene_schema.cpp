@@ -82,8 +82,8 @@ config::Schema build_schema() {
       .number("skeleton_overlap_r0", 0.5, "r0", 0.0, none,
               "a particle also joins nodes this much farther than its nearest one");
   s.section("points", "attractive points: generated on a known deformation of the body, or read")
-      .choice("source", "generate", {"generate", "file"},
-              "generate on the deformed body (truth known) or read from points.file")
+      .choice("source", "generate", {"generate", "file", "ultrasound"},
+              "generate on the deformed body (truth known), read from points.file, or segment the 'ultrasound'")
       .input_path("file", "CSV of x,y,z[,confidence] in mm (when source: file)", false)
       .integer("count", 87, 1, 100000, "number of points to generate")
       .number("noise_mm", 0.5, "mm", 0.0, 20.0, "Gaussian noise added to generated points")
@@ -95,6 +95,26 @@ config::Schema build_schema() {
               "sample a different shape than the body (same = the body, deformed)")
       .vec3("target_size_mm", Eigen::Vector3d(40, 30, 60), "mm", 0.0,
             "target_shape's proportions; scaled to the body's volume", true);
+
+  s.section("ultrasound", "the day's ultrasound, segmented into attractive points (points.source: ultrasound)")
+      .choice("source", "simulate", {"simulate", "volume"},
+              "simulate: B-mode of the planning CT deformed by points.stretch/bend_mm (truth known); "
+              "volume: a 3D ultrasound image already in CT coordinates")
+      .input_path("file", "the ultrasound volume (.mha, .nrrd, .nii) when source: volume", false)
+      .vec3("probe_offset_mm", Vector3d(0, 38, 0), "mm", none, "probe position from the organ's centre (simulate)")
+      .vec3("probe_axis", Vector3d(0, -1, 0), "", none, "beam direction (simulate; default: anterior, transrectal)")
+      .vec3("probe_lateral", Vector3d(1, 0, 0), "", none, "image's lateral direction, perpendicular to the axis")
+      .number("probe_radius_mm", 12.0, "mm", 0.0, 50.0,
+              "imaging starts this far from the probe's centre (its face; it displaces rectal gas)")
+      .number("max_depth_mm", 70.0, "mm", 10.0, 300.0, "imaging depth from the probe's centre (simulate)")
+      .number("half_angle_deg", 50.0, "deg", 5.0, 80.0, "half-angle of the field of view (simulate)")
+      .number("speckle", 1.0, "", 0.0, 1.0, "speckle level: 0 none, 1 fully developed Rayleigh (simulate)")
+      .number("voxel_mm", 0.5, "mm", 0.1, 5.0, "voxel size of the simulated volume", true)
+      .integer("rays", 2000, 16, 100000, "edge-search rays from the organ's centre")
+      .number("band_mm", 8.0, "mm", 1.0, 100.0, "search band around the model's surface along each ray")
+      .number("smoothing_mm", 1.0, "mm", 0.0, 10.0, "Gaussian speckle reduction before the edge search")
+      .number("mad_threshold", 3.0, "", 1.0, 20.0, "a ray's boundary radius this many MADs off its neighbours' is rejected")
+      .text("save_volume", "", "file name inside --out for the ultrasound volume used (.mha, .nrrd; empty: none)");
 
   s.section("fit", "deform the model onto the attractive points (paper s.3)")
       .choice("method", "spread", {"paper", "spread"},
@@ -181,6 +201,8 @@ void check_scene_rules(const config::Scene& scene) {
     if (scene.text("points", "source") == "file" && !scene.is_given("points", "file")) {
       scene.fail("points", "source", "source is 'file' but points.file is not given");
     }
+    if (scene.text("points", "source") == "ultrasound" && !scene.has_section("ultrasound"))
+      scene.fail("points", "source", "source is 'ultrasound' but the scene has no 'ultrasound' section");
     if (scene.text("points", "source") == "generate" && !scene.has_section("body") && !scene.has_section("organ") &&
         !scene.has_section("planning")) {
       scene.fail("points", "source", "generated points need the 'organ' or 'body' they are sampled from");
@@ -203,6 +225,18 @@ void check_scene_rules(const config::Scene& scene) {
       if (name.find('/') != std::string::npos || name == "." || name == "..")
         scene.fail("export", key, "a file name inside --out, without folders");
     }
+  }
+  if (scene.has_section("ultrasound")) {
+    const bool simulate = scene.text("ultrasound", "source") == "simulate";
+    if (!scene.has_section("points") || scene.text("points", "source") != "ultrasound")
+      scene.fail("ultrasound", "source", "the ultrasound is used by points.source: ultrasound");
+    if (simulate && !(has_ct && scene.has_section("organ")))
+      scene.fail("ultrasound", "source", "simulating needs the planning CT (ct or phantom) and the organ");
+    if (!simulate && !scene.is_given("ultrasound", "file"))
+      scene.fail("ultrasound", "file", "source is 'volume' but ultrasound.file is not given");
+    const std::string& name = scene.text("ultrasound", "save_volume");
+    if (name.find('/') != std::string::npos || name == "." || name == "..")
+      scene.fail("ultrasound", "save_volume", "a file name inside --out, without folders");
   }
   if (scene.has_section("report")) {
     const std::string& file = scene.text("report", "file");

@@ -2,6 +2,7 @@
 // organfit's plain images <-> the bridge's plain (Eigen-free) images, and files.
 // Include this on the organfit side; ITK code includes plain_image.h only.
 #include <filesystem>
+#include <vector>
 
 #include "organfit/geometry/image_geometry.h"
 #include "organfit/itkbridge/plain_image.h"
@@ -16,5 +17,12 @@ geometry::LabelVolume from_plain(const PlainMask& mask);
 /// write_mask / read_mask for a LabelVolume (geometry kept exactly).
 void write_label_volume(const std::filesystem::path& file, const geometry::LabelVolume& labels);
 geometry::LabelVolume read_label_volume(const std::filesystem::path& file);
+
+/// A scalar image as float values with its geometry (any pixel type ITK reads).
+struct ScalarImage {
+  geometry::ImageGeometry geometry;
+  std::vector<float> values;  ///< i fastest
+};
+ScalarImage read_scalar_image(const std::filesystem::path& file);
 
 }  // namespace organfit::itkbridge

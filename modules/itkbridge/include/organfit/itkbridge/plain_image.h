@@ -35,5 +35,8 @@ struct PlainFloatImage {
 void write_mask(const std::filesystem::path& file, const PlainMask& mask);
 /// Reads a mask (any image ITK reads, cast to 8 bits). Throws InputError naming the file.
 PlainMask read_mask(const std::filesystem::path& file);
+/// Reads any scalar image ITK reads as float values (e.g. an ultrasound volume). Throws
+/// InputError naming the file.
+PlainFloatImage read_float_image(const std::filesystem::path& file);
 
 }  // namespace organfit::itkbridge

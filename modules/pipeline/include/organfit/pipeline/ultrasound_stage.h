@@ -1,0 +1,35 @@
+#pragma once
+// The ultrasound stage: attractive points segmented from an ultrasound volume, either
+// simulated from the planning CT deformed by a known map (ground truth), or read.
+#include <optional>
+
+#include "organfit/config/scene.h"
+#include "organfit/dicom/ct_series.h"
+#include "organfit/pipeline/fit_stage.h"
+
+namespace organfit::pipeline {
+
+struct UltrasoundStageResult {
+  PointsStageResult points;                  ///< truth set when simulated
+  std::optional<geometry::LabelVolume> bmode;  ///< the B-mode volume (8 bit), to save if asked
+  std::vector<Eigen::Vector3d> true_boundary_mm;  ///< simulated: the surface the probe sees
+};
+
+/// Tissue classes of a CT by HU, with the organ on top: what the simulator images.
+/// Labels: 1 gas (< -400), 2 fat (< -30), 3 fluid (< 25), 4 soft tissue (< 150),
+/// 5 dense (< 400), 6 bone, 7 the organ (mask label 1).
+geometry::LabelVolume tissue_classes(const geometry::ImageGeometry& ct, const std::vector<float>& hu,
+                                     const geometry::LabelVolume* organ_mask);
+
+/// The same classes from the pelvis phantom's true labels (no partial-volume voxels:
+/// classes from HU put a dark "fluid" rim between the gland and fat, -26 HU being half way).
+geometry::LabelVolume pelvis_tissue_classes(const geometry::LabelVolume& phantom_labels);
+
+/// Runs the stage. `ct` and `organ_mask` (on the CT grid) are needed to simulate;
+/// `anatomy` (tissue classes on the CT grid, e.g. the phantom's) replaces the classes
+/// from HU when given.
+UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const ModelStageResult& model,
+                                           const dicom::CtSeries* ct, const geometry::LabelVolume* organ_mask,
+                                           const geometry::LabelVolume* anatomy = nullptr);
+
+}  // namespace organfit::pipeline

@@ -1,0 +1,156 @@
+#include "organfit/pipeline/ultrasound_stage.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+
+#include "organfit/itkbridge/itk_images.h"
+#include "organfit/phantom/pelvis.h"
+#include "organfit/support/error.h"
+#include "organfit/support/resources.h"
+#include "organfit/ultrasound/boundary_points.h"
+#include "organfit/ultrasound/simulator.h"
+
+namespace organfit::pipeline {
+
+geometry::LabelVolume tissue_classes(const geometry::ImageGeometry& g, const std::vector<float>& hu,
+                                     const geometry::LabelVolume* organ) {
+  geometry::LabelVolume t(g);
+  for (size_t v = 0; v < hu.size(); ++v) {
+    const float h = hu[v];
+    t.labels[v] = h < -400 ? 1 : h < -30 ? 2 : h < 25 ? 3 : h < 150 ? 4 : h < 400 ? 5 : 6;
+    if (organ && organ->labels[v] == 1) t.labels[v] = 7;
+  }
+  return t;
+}
+
+geometry::LabelVolume pelvis_tissue_classes(const geometry::LabelVolume& labels) {
+  geometry::LabelVolume t(labels.geometry);
+  for (size_t v = 0; v < labels.labels.size(); ++v) {
+    switch (labels.labels[v]) {
+      case phantom::kAir: t.labels[v] = 1; break;
+      case phantom::kSoftTissue: t.labels[v] = 2; break;  // fat
+      case phantom::kBladder: t.labels[v] = 3; break;     // urine
+      case phantom::kMuscle: case phantom::kRectum: t.labels[v] = 4; break;  // rectal gas: shadow from HU
+      case phantom::kProstate: t.labels[v] = 7; break;
+      default: t.labels[v] = 6;                          // bone
+    }
+  }
+  return t;
+}
+
+UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const ModelStageResult& model,
+                                           const dicom::CtSeries* ct, const geometry::LabelVolume* organ_mask,
+                                           const geometry::LabelVolume* anatomy) {
+  UltrasoundStageResult r;
+  PointsStageResult& pts = r.points;
+  geometry::ImageGeometry us_geometry;
+  std::vector<float> intensity;
+  std::vector<std::uint8_t> in_view;
+  nlohmann::json summary;
+  const std::string source = scene.text("ultrasound", "source");
+  if (source == "simulate") {
+    if (!ct || !organ_mask)
+      scene.fail("ultrasound", "source", "simulating ultrasound needs the planning CT and the organ (ct/phantom, organ)");
+    Stopwatch clock;
+    evaluation::Deformation d;
+    d.stretch = scene.number("points", "stretch");
+    d.bend_mm = scene.number("points", "bend_mm");
+    d.centre_mm = model.shape.centre_mm;
+    d.half_length_mm = 0.5 * model.shape.size_mm.x() * d.stretch;
+    // Today's anatomy: the organ deformed (its smooth shape pulled back through the map),
+    // everything else where the planning CT has it, fat where the organ was and is no
+    // more. Deforming the whole pelvis instead would also stretch the rectal gas round
+    // the probe and shadow half the field.
+    const geometry::LabelVolume tissue = anatomy ? *anatomy : tissue_classes(ct->geometry, ct->hu, organ_mask);
+    const auto& g = ct->geometry;
+    const evaluation::Shape& organ_shape = model.shape;
+    const ultrasound::TissueAt today = [&](const Eigen::Vector3d& p) {
+      if (organ_shape.inside(d.inverse(p))) return ultrasound::TissueSample{7, 40.0f};
+      const Eigen::Vector3d idx = g.physical_to_index(p);
+      const int i = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
+                k = static_cast<int>(std::lround(idx.z()));
+      if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) return ultrasound::TissueSample{};
+      const auto v = static_cast<size_t>(g.linear_index(i, j, k));
+      if (tissue.labels[v] == 7) return ultrasound::TissueSample{2, -95.0f};  // vacated: fat
+      return ultrasound::TissueSample{tissue.labels[v], ct->hu[v]};
+    };
+    ultrasound::ProbePose probe;
+    probe.position_mm = model.shape.centre_mm + scene.vec3("ultrasound", "probe_offset_mm");
+    probe.axis = scene.vec3("ultrasound", "probe_axis").normalized();
+    probe.lateral = scene.vec3("ultrasound", "probe_lateral").normalized();
+    ultrasound::SimulatorOptions so;
+    so.probe_radius_mm = scene.number("ultrasound", "probe_radius_mm");
+    so.max_depth_mm = scene.number("ultrasound", "max_depth_mm");
+    so.lateral_half_angle_deg = so.elevation_half_angle_deg = scene.number("ultrasound", "half_angle_deg");
+    so.speckle = scene.number("ultrasound", "speckle");
+    so.voxel_mm = scene.number("ultrasound", "voxel_mm");
+    so.seed = static_cast<std::uint64_t>(scene.integer("scene", "seed"));
+    // Echogenicity: anechoic fluid, hyperechoic fat, a hypoechoic gland.
+    so.echogenicity.fill(0.5f);
+    so.echogenicity[1] = 0.0f, so.echogenicity[2] = 0.9f, so.echogenicity[3] = 0.04f, so.echogenicity[4] = 0.5f;
+    so.echogenicity[5] = 0.7f, so.echogenicity[6] = 1.0f, so.echogenicity[7] = 0.3f;
+    so.organ_label = 7;
+    ultrasound::SimulatedUltrasound sim;
+    try {
+      sim = ultrasound::simulate_bmode(today, probe, so);
+    } catch (const std::invalid_argument& e) {
+      scene.fail("ultrasound", "probe_axis", e.what());
+    }
+    us_geometry = sim.geometry;
+    intensity.assign(sim.bmode.begin(), sim.bmode.end());
+    in_view = sim.in_view;
+    r.true_boundary_mm = sim.true_boundary_mm;
+    pts.truth = d;
+    pts.truth_shape = model.shape;
+    geometry::LabelVolume bmode(sim.geometry);
+    bmode.labels = sim.bmode;
+    r.bmode = std::move(bmode);
+    summary = {{"source", "simulate"},
+               {"probe_mm", {probe.position_mm.x(), probe.position_mm.y(), probe.position_mm.z()}},
+               {"speckle", so.speckle},
+               {"volume_size", {us_geometry.size[0], us_geometry.size[1], us_geometry.size[2]}},
+               {"visible_boundary_samples", sim.true_boundary_mm.size()},
+               {"stretch", d.stretch},
+               {"bend_mm", d.bend_mm},
+               {"simulate_wall_s", clock.elapsed_s()}};
+  } else {
+    const auto image = itkbridge::read_scalar_image(scene.path("ultrasound", "file"));
+    us_geometry = image.geometry;
+    intensity = image.values;
+    summary = {{"source", "volume"}, {"volume_size", {us_geometry.size[0], us_geometry.size[1], us_geometry.size[2]}}};
+  }
+
+  Stopwatch clock;
+  ultrasound::BoundaryOptions bo;
+  bo.centre_mm = model.shape.centre_mm;
+  bo.r_max_mm = 0.5 * model.shape.size_mm.maxCoeff() + scene.number("ultrasound", "band_mm");
+  bo.band_mm = scene.number("ultrasound", "band_mm");
+  const evaluation::Shape& prior = model.shape;
+  bo.prior_inside = [&prior](const Eigen::Vector3d& p) { return prior.inside(p); };
+  bo.rays = static_cast<int>(scene.integer("ultrasound", "rays"));
+  bo.smoothing_mm = scene.number("ultrasound", "smoothing_mm");
+  bo.mad_threshold = scene.number("ultrasound", "mad_threshold");
+  bo.target_count = static_cast<int>(scene.integer("points", "count"));
+  ultrasound::BoundaryResult found;
+  try {
+    found = ultrasound::boundary_points(us_geometry, intensity, in_view.empty() ? nullptr : &in_view, bo);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(std::string("ultrasound: ") + e.what());
+  }
+  if (found.points.empty())
+    throw TargetNotMetError("ultrasound: no boundary points found (the organ may be outside the field of view)");
+  for (const auto& p : found.points) pts.points.push_back({p.p_mm, p.confidence});
+  summary["rays"] = found.rays;
+  summary["rays_with_a_boundary"] = found.rays_in_view;
+  summary["rejected_by_neighbours"] = found.rejected;
+  summary["count"] = pts.points.size();
+  summary["segment_wall_s"] = clock.elapsed_s();
+  pts.summary = summary;
+  spdlog::info("ultrasound: {} points from {} rays with a boundary ({} rejected as inconsistent)", pts.points.size(),
+               found.rays_in_view, found.rejected);
+  return r;
+}
+
+}  // namespace organfit::pipeline
