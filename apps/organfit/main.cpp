@@ -14,6 +14,7 @@
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/pipeline/segment_command.h"
 #include "organfit/pipeline/synth_command.h"
+#include "organfit/pipeline/us_points_command.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
 #include "organfit/support/log.h"
@@ -66,6 +67,20 @@ int run_main(int argc, char** argv) {
   export_cmd->add_option("--mesh", exp.mesh, "Surface mesh to write (.stl, .vtp, .ply, .obj)");
   export_cmd->add_option("--roi-name", exp.roi_name, "Name of the exported ROI (default: the organ's name + _fit)");
   export_cmd->add_option("--copy-rois-from", exp.copy_rois_from, "RT Structure Set whose other ROIs are copied alongside");
+
+  organfit::pipeline::UsPointsCommand usp;
+  auto* us_points = app.add_subcommand("us-points", "Boundary points of an ultrasound volume, tracked sweep or DICOM image (CSV)");
+  us_points->add_option("--us", usp.input, "Ultrasound input: volume (.mha .nrrd .nii), sequence metafile, or .dcm")->required();
+  us_points->add_option("--tracker", usp.tracker, "Sequence metafile with the probe poses (matched by timestamp)");
+  us_points->add_option("--transform", usp.transform, "Tracked transform name (default: the file's own)");
+  us_points->add_option("--calibration", usp.calibration, "Image (mm) to probe, 16 numbers row by row")->delimiter(',')->expected(16);
+  us_points->add_option("--registration", usp.registration, "Tracker/volume to CT, 16 numbers (rigid)")->delimiter(',')->expected(16);
+  us_points->add_option("--pixel-mm", usp.pixel_mm, "Pixel size of a DICOM image without calibrated region")->check(CLI::PositiveNumber);
+  us_points->add_option("--centre", usp.centre_mm, "Region of interest centre X,Y,Z (mm, output coordinates)")->delimiter(',')->expected(3);
+  us_points->add_option("--radius", usp.radius_mm, "Region of interest radius (mm)")->check(CLI::PositiveNumber);
+  us_points->add_option("--count", usp.count, "Points to keep (0: all)")->check(CLI::Range(0, 100000));
+  us_points->add_option("--rays", usp.rays, "Search rays (3D volumes)")->check(CLI::Range(16, 100000));
+  us_points->add_option("-o,--out", usp.out, "Points CSV (x_mm,y_mm,z_mm,confidence)")->required();
 
   auto* synth = app.add_subcommand("synth", "Synthetic scans with known anatomy");
   synth->require_subcommand(1);
@@ -145,6 +160,8 @@ int run_main(int argc, char** argv) {
     const auto result = organfit::pipeline::run_segment(seg);
     for (const auto& w : result.warnings) spdlog::warn(w);
     std::cout << seg.out.string() << ": " << result.volume_cm3 << " cm3\n";
+  } else if (*us_points) {
+    std::cout << organfit::pipeline::run_us_points(usp).dump() << "\n";
   } else if (*export_cmd) {
     const auto summary = organfit::pipeline::run_export_command(exp);
     std::cout << summary.dump() << "\n";

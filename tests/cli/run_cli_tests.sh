@@ -243,6 +243,47 @@ import json; d = json.loads(open('$tmp/out').read())
 assert set(d['stage_wall_s']) == {'ct', 'organ', 'model'} and d['peak_memory_mib'] > 0 and d['particles'] > 100, d
 assert 25 < d['organ_volume_cm3'] < 40 and d['skeleton_from'] == 'organ mask', d"
 
+# us-points on the real ultrasound files: each loads with its geometry and yields points
+us="$src/../shared/data/us-plus"
+usd="$src/../shared/data/us-dicom"
+if [[ -d "$us" && -d "$usd" ]]; then
+  us_before=$(cat "$us"/* "$usd"/* | md5sum)
+  expect us.prostate10_sweep_with_tracker 0 "" -- --quiet us-points --us "$us/Prostate10_video.igs.mhd" --tracker "$us/Prostate10_tracker.igs.mha" --out "$tmp/us1.csv"
+  check us.prostate10_frames_matched_by_timestamp_gap_handled /usr/bin/python3 -c "
+import json; d = json.loads(open('$tmp/out').read())
+assert d['kind'] == 'tracked sweep' and d['frames'] == 9 and d['frames_used'] == 9 and d['points'] == 87, d"
+  check us.points_csv_has_87_rows test "$(wc -l < "$tmp/us1.csv")" -eq 88
+  expect us.bone_sweep_poses_in_file 0 "" -- --quiet us-points --us "$us/BoneUltrasound_L14.igs.mha" --out "$tmp/us2.csv"
+  check us.bone_sweep_21_frames grep -q '"frames_used":21' "$tmp/out"
+  expect us.spine_volume 0 "" -- --quiet us-points --us "$us/SpinePhantomFreehandReconstructed.mha" --out "$tmp/us3.csv"
+  check us.spine_volume_geometry grep -q '"size":\[147,106,104\]' "$tmp/out"
+  expect us.nwire_volume 0 "" -- --quiet us-points --us "$us/NwirePhantomFreehandReconstructed.mha" --out "$tmp/us4.csv"
+  expect us.aloka_palette_16bit 0 "" -- --quiet us-points --us "$usd/gdcm-US-ALOKA-16.dcm" --out "$tmp/us5.csv"
+  check us.aloka_pixel_size_from_region /usr/bin/python3 -c "
+import json; d = json.loads(open('$tmp/out').read())
+assert d['photometric'] == 'PALETTE COLOR' and d['pixel_size_from'] == 'ultrasound region' and abs(d['pixel_mm'][0] - 0.382653) < 1e-5, d"
+  expect us.philips_palette 0 "" -- --quiet us-points --us "$usd/OBXXXX1A.dcm" --out "$tmp/us6.csv"
+  check us.philips_pixel_size_from_region /usr/bin/python3 -c "
+import json; d = json.loads(open('$tmp/out').read()); assert abs(d['pixel_mm'][0] - 0.262288) < 1e-5, d"
+  expect us.uncalibrated_dicom_refused 2 "no calibrated ultrasound region" -- us-points --us "$usd/US1_UNCR.dcm" --out "$tmp/us7.csv"
+  check us.refusal_writes_nothing test ! -e "$tmp/us7.csv"
+  expect us.uncalibrated_dicom_with_pixel_size 0 "" -- --quiet us-points --us "$usd/US1_UNCR.dcm" --pixel-mm 0.2 --out "$tmp/us7.csv"
+  check us.rgb_converted grep -q '"photometric":"RGB"' "$tmp/out"
+  # Malformed inputs, made on copies
+  mkdir -p "$tmp/usbad"
+  cp "$us/Prostate10_video.igs.mhd" "$tmp/usbad/"   # its raw data file left behind
+  expect us.missing_raw_file 2 "data file Prostate10_video.raw is missing" -- us-points --us "$tmp/usbad/Prostate10_video.igs.mhd" --tracker "$us/Prostate10_tracker.igs.mha" --out "$tmp/x.csv"
+  sed 's/TransformStatus = OK/TransformStatus = INVALID/' "$us/Prostate10_tracker.igs.mha" > "$tmp/usbad/invalid_tracker.mha"
+  expect us.every_status_invalid 2 "no usable frame" -- us-points --us "$us/Prostate10_video.igs.mhd" --tracker "$tmp/usbad/invalid_tracker.mha" --out "$tmp/x.csv"
+  sed 's/^\(Seq_Frame0003_ToolToTrackerTransform = \)-0.20585/\1-2.0585/' "$us/Prostate10_tracker.igs.mha" > "$tmp/usbad/scaled_tracker.mha"
+  expect us.transform_not_rigid 2 "is not a rigid transform" -- us-points --us "$us/Prostate10_video.igs.mhd" --tracker "$tmp/usbad/scaled_tracker.mha" --out "$tmp/x.csv"
+  expect us.registration_not_rigid 2 "registration is not a rigid transform" -- us-points --us "$us/BoneUltrasound_L14.igs.mha" --registration 2,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1 --out "$tmp/x.csv"
+  check us.malformed_inputs_write_nothing test ! -e "$tmp/x.csv"
+  check us.inputs_unchanged test "$(cat "$us"/* "$usd"/* | md5sum)" = "$us_before"
+else
+  echo "skip us.*: $src/../shared/data/us-plus or us-dicom absent"
+fi
+
 # SIGINT during a fit: stops within a second, exit 130, no final-named output, no temporary
 printf 'scene:\n  name: long\nbody:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\npoints:\n  count: 10000\nfit:\n  method: paper\n  max_wall_s: 60\n' > "$tmp/long.yaml"
 "$bin" --quiet run "$tmp/long.yaml" --out "$tmp/interrupted" > /dev/null 2> "$tmp/err" &

@@ -5,6 +5,11 @@
 #include <limits>
 #include <stdexcept>
 
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+
+#include "organfit/ultrasound/sequence_metafile.h"
+
 namespace organfit::ultrasound {
 namespace {
 
@@ -87,30 +92,111 @@ BoundaryResult boundary_points(const geometry::ImageGeometry& g, const std::vect
     return value;
   };
 
-  // 2-3. Rays on a Fibonacci sphere.
+  // 2-3. Rays on a Fibonacci sphere; neighbours are the 8 nearest directions.
   const int n = o.rays;
-  std::vector<Eigen::Vector3d> dirs(n);
+  std::vector<Ray> rays(n);
   const double golden = 3.14159265358979323846 * (3 - std::sqrt(5.0));
   for (int r = 0; r < n; ++r) {
     const double z = 1 - 2 * (r + 0.5) / n, rho = std::sqrt(1 - z * z);
-    dirs[r] = Eigen::Vector3d(rho * std::cos(golden * r), rho * std::sin(golden * r), z);
+    rays[r] = {o.centre_mm, Eigen::Vector3d(rho * std::cos(golden * r), rho * std::sin(golden * r), z)};
   }
-  const double step = 0.25 * g.spacing_mm.minCoeff();
+  std::vector<std::vector<int>> neighbours(n);
+#pragma omp parallel for schedule(dynamic, 64)
+  for (int r = 0; r < n; ++r) {
+    std::vector<std::pair<double, int>> near;
+    for (int q = 0; q < n; ++q)
+      if (q != r) near.push_back({-rays[r].direction.dot(rays[q].direction), q});
+    std::partial_sort(near.begin(), near.begin() + 8, near.end());
+    for (int q = 0; q < 8; ++q) neighbours[r].push_back(near[q].second);
+  }
+  return search_rays(rays, neighbours, [&](int, const Eigen::Vector3d& p, bool& ok) { return sample(p, ok); },
+                     0.25 * g.spacing_mm.minCoeff(), o);
+}
+
+BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOptions& o, int rays_per_frame) {
+  if (rays_per_frame < 16) throw std::invalid_argument("sweep_boundary_points: at least 16 rays per frame");
+  struct Plane {
+    const TrackedFrame* frame;
+    std::vector<float> smooth;
+    Eigen::Vector3d origin, eu, ev;
+    Eigen::Matrix2d gram_inverse;
+  };
+  std::vector<Plane> planes;
+  std::vector<Ray> rays;
+  std::vector<int> plane_of;
+  std::vector<std::vector<int>> neighbours;
+  for (const auto& f : sweep.frames) {
+    if (f.pixels.size() != static_cast<size_t>(f.width) * f.height || f.width < 4 || f.height < 4) continue;
+    Plane pl;
+    pl.frame = &f;
+    pl.origin = f.pixel_to_ct_mm.block<3, 1>(0, 3);
+    pl.eu = f.pixel_to_ct_mm.block<3, 1>(0, 0);
+    pl.ev = f.pixel_to_ct_mm.block<3, 1>(0, 1);
+    const Eigen::Vector3d normal = pl.eu.cross(pl.ev).normalized();
+    const double distance = (o.centre_mm - pl.origin).dot(normal);
+    if (!(std::abs(distance) < o.r_max_mm)) continue;
+    Eigen::Matrix2d gram;
+    gram << pl.eu.dot(pl.eu), pl.eu.dot(pl.ev), pl.ev.dot(pl.eu), pl.ev.dot(pl.ev);
+    pl.gram_inverse = gram.inverse();
+    pl.smooth = f.pixels;
+    gaussian_smooth(pl.smooth, {f.width, f.height, 1},
+                    Eigen::Vector3d(o.smoothing_mm / pl.eu.norm(), o.smoothing_mm / pl.ev.norm(), 0));
+    const Eigen::Vector3d centre = o.centre_mm - distance * normal;
+    const int first = static_cast<int>(rays.size());
+    const Eigen::Vector3d u = pl.eu.normalized(), v = normal.cross(u);
+    for (int a = 0; a < rays_per_frame; ++a) {
+      const double t = 2 * 3.14159265358979323846 * a / rays_per_frame;
+      rays.push_back({centre, std::cos(t) * u + std::sin(t) * v});
+      plane_of.push_back(static_cast<int>(planes.size()));
+      std::vector<int> near;
+      for (int k = 1; k <= 4; ++k) {
+        near.push_back(first + (a + k) % rays_per_frame);
+        near.push_back(first + (a - k + rays_per_frame) % rays_per_frame);
+      }
+      neighbours.push_back(std::move(near));
+    }
+    planes.push_back(std::move(pl));
+  }
+  if (rays.empty()) return {};
+  double step = 1e9;
+  for (const auto& pl : planes) step = std::min(step, 0.5 * std::min(pl.eu.norm(), pl.ev.norm()));
+  return search_rays(
+      rays, neighbours,
+      [&](int ray, const Eigen::Vector3d& p, bool& ok) -> double {
+        const Plane& pl = planes[static_cast<size_t>(plane_of[static_cast<size_t>(ray)])];
+        const Eigen::Vector3d rel = p - pl.origin;
+        const Eigen::Vector2d ab = pl.gram_inverse * Eigen::Vector2d(rel.dot(pl.eu), rel.dot(pl.ev));
+        const int w = pl.frame->width, h = pl.frame->height;
+        const double fa = std::floor(ab.x()), fb = std::floor(ab.y());
+        ok = fa >= 0 && fb >= 0 && fa < w - 1 && fb < h - 1;
+        if (!ok) return 0;
+        const double ta = ab.x() - fa, tb = ab.y() - fb;
+        const size_t at = static_cast<size_t>(fb) * w + static_cast<size_t>(fa);
+        return (1 - ta) * (1 - tb) * pl.smooth[at] + ta * (1 - tb) * pl.smooth[at + 1] +
+               (1 - ta) * tb * pl.smooth[at + w] + ta * tb * pl.smooth[at + w + 1];
+      },
+      step, o);
+}
+
+BoundaryResult search_rays(const std::vector<Ray>& rays, const std::vector<std::vector<int>>& neighbours,
+                           const RaySampler& sample, double step, const BoundaryOptions& o) {
+  const int n = static_cast<int>(rays.size());
   std::vector<double> radius(n, -1), rise(n, 0);
 #pragma omp parallel for schedule(dynamic, 16)
   for (int r = 0; r < n; ++r) {
+    const Ray& ray = rays[r];
     double from = o.r_min_mm, to = o.r_max_mm;
     if (o.prior_inside) {  // where the prior's surface crosses the ray (its last inside sample)
       double surface = -1;
       for (double s = 0; s <= o.r_max_mm + o.band_mm; s += 0.5)
-        if (o.prior_inside(o.centre_mm + s * dirs[r])) surface = s;
+        if (o.prior_inside(ray.origin + s * ray.direction)) surface = s;
       if (surface < 0) continue;
       from = std::max(o.r_min_mm, surface - o.band_mm), to = surface + o.band_mm;
     }
     std::vector<double> profile;
     bool ok = true;
     for (double s = from; s <= to; s += step) {
-      const double v = sample(o.centre_mm + s * dirs[r], ok);
+      const double v = sample(r, ray.origin + s * ray.direction, ok);
       if (!ok) break;
       profile.push_back(v);
     }
@@ -148,14 +234,10 @@ BoundaryResult boundary_points(const geometry::ImageGeometry& g, const std::vect
   std::vector<double> residual(n, std::numeric_limits<double>::quiet_NaN());
   for (int r = 0; r < n; ++r) {
     if (radius[r] <= 0) continue;
-    std::vector<std::pair<double, int>> near;
-    for (int q = 0; q < n; ++q)
-      if (q != r && radius[q] > 0) near.push_back({-dirs[r].dot(dirs[q]), q});
-    if (near.size() < 3) continue;
-    const size_t k = std::min<size_t>(8, near.size());
-    std::partial_sort(near.begin(), near.begin() + static_cast<long>(k), near.end());
     std::vector<double> rs;
-    for (size_t q = 0; q < k; ++q) rs.push_back(radius[near[q].second]);
+    for (int q : neighbours[r])
+      if (radius[q] > 0) rs.push_back(radius[q]);
+    if (rs.size() < 3) continue;
     std::nth_element(rs.begin(), rs.begin() + static_cast<long>(rs.size() / 2), rs.end());
     residual[r] = radius[r] - rs[rs.size() / 2];
   }
@@ -175,8 +257,9 @@ BoundaryResult boundary_points(const geometry::ImageGeometry& g, const std::vect
       ++out.rejected;
       continue;
     }
-    accepted.push_back({o.centre_mm + radius[r] * dirs[r], std::clamp(rise[r] / max_rise, 0.1, 1.0)});
-    accepted_dirs.push_back(dirs[r]);
+    const Eigen::Vector3d p = rays[r].origin + radius[r] * rays[r].direction;
+    accepted.push_back({p, std::clamp(rise[r] / max_rise, 0.1, 1.0)});
+    accepted_dirs.push_back((p - o.centre_mm).normalized());
   }
 
   // 5. Spread over the boundary.

@@ -56,4 +56,22 @@ struct BoundaryResult {
 BoundaryResult boundary_points(const geometry::ImageGeometry& geometry, const std::vector<float>& intensity,
                                const std::vector<std::uint8_t>* in_view, const BoundaryOptions& options);
 
+struct TrackedSweep;
+
+/// The same on a tracked 2D sweep (see sequence_metafile.h): in each frame whose plane
+/// passes within r_max of the centre, `rays_per_frame` rays in the plane from the centre's
+/// projection; neighbours are the adjacent rays of the same frame. Points in CT mm.
+BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOptions& options, int rays_per_frame = 180);
+
+/// The engine under both: rays (origin, unit direction, in mm), each ray's neighbours
+/// (for step 4), and a sampler of the smoothed image along ray r at point p (setting `ok`
+/// false outside the field of view); steps 3 to 5 above, radii measured from each ray's
+/// origin, directions for step 5 taken from options.centre_mm.
+struct Ray {
+  Eigen::Vector3d origin, direction;
+};
+using RaySampler = std::function<double(int ray, const Eigen::Vector3d& p_mm, bool& ok)>;
+BoundaryResult search_rays(const std::vector<Ray>& rays, const std::vector<std::vector<int>>& neighbours,
+                           const RaySampler& sample, double step_mm, const BoundaryOptions& options);
+
 }  // namespace organfit::ultrasound
