@@ -14,6 +14,8 @@
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/pipeline/segment_command.h"
 #include "organfit/pipeline/synth_command.h"
+#include "organfit/pipeline/synth_ultrasound_command.h"
+#include "organfit/pipeline/us_benchmark.h"
 #include "organfit/pipeline/us_points_command.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
@@ -97,6 +99,20 @@ int run_main(int argc, char** argv) {
   synth_pelvis->add_option("--slice-mm", pelvis.slice_mm, "Slice spacing (mm)")->check(CLI::Range(0.1, 20.0));
   synth_pelvis->add_option("--noise-hu", pelvis.noise_hu, "Noise standard deviation (HU)")->check(CLI::Range(0.0, 500.0));
 
+  organfit::pipeline::SynthUltrasoundCommand sus;
+  auto* synth_us = synth->add_subcommand(
+      "ultrasound", "B-mode of a labelled volume (e.g. the phantom, organ deformed): volume, tracked sweep, true boundary");
+  synth_us->add_option("--labels", sus.labels, "Label volume (the phantom's labels.nrrd)")->required();
+  synth_us->add_option("--ct", sus.ct, "CT folder on the same grid (HU for gas and bone shadows)");
+  synth_us->add_option("--probe", sus.probe, "Probe X,Y,Z[,AX,AY,AZ[,LX,LY,LZ]] mm (default: transrectal)")->delimiter(',');
+  synth_us->add_option("-o,--out", sus.out, "Output folder (created; must be empty)")->required();
+  synth_us->add_option("--seed", sus.seed, "Seed of the speckle");
+  synth_us->add_option("--stretch", sus.stretch, "Organ stretch along x (volume-preserving)")->check(CLI::Range(0.5, 2.0));
+  synth_us->add_option("--bend", sus.bend_mm, "Organ bend (mm)")->check(CLI::Range(-30.0, 30.0));
+  synth_us->add_option("--organ-label", sus.organ_label, "Label of the organ (8: the phantom's prostate)")->check(CLI::Range(1, 255));
+  synth_us->add_option("--speckle", sus.speckle, "Speckle level 0..1")->check(CLI::Range(0.0, 1.0));
+  synth_us->add_option("--frames", sus.sweep_frames, "Frames of the tracked sweep")->check(CLI::Range(1, 2000));
+
   auto* bench = app.add_subcommand("bench", "Benchmarks; print machine-readable JSON on stdout");
   bench->require_subcommand(1);
   organfit::evaluation::CohesionBenchOptions cb;
@@ -134,6 +150,12 @@ int run_main(int argc, char** argv) {
   bench_ct->add_option("--radius", ctb.radius_mm, "Particle radius (mm)")->check(CLI::Range(0.3, 20.0));
   bench_ct->add_option("--threads", ctb.threads, "OpenMP threads (0: all)")->check(CLI::Range(0, 256));
 
+  organfit::pipeline::UsBenchOptions usb;
+  auto* bench_us = bench->add_subcommand("us", "Ultrasound segmentation: a 256^3 volume and a 100-frame sweep");
+  bench_us->add_option("--size", usb.volume_size, "Volume voxels per side")->check(CLI::Range(32, 1024));
+  bench_us->add_option("--frames", usb.frames, "Sweep frames")->check(CLI::Range(1, 10000));
+  bench_us->add_option("--threads", usb.threads, "OpenMP threads (0: all)")->check(CLI::Range(0, 256));
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -165,6 +187,8 @@ int run_main(int argc, char** argv) {
   } else if (*export_cmd) {
     const auto summary = organfit::pipeline::run_export_command(exp);
     std::cout << summary.dump() << "\n";
+  } else if (*synth_us) {
+    std::cout << organfit::pipeline::run_synth_ultrasound(sus).dump() << "\n";
   } else if (*synth_pelvis) {
     const auto result = organfit::pipeline::run_synth_pelvis(synth_out, pelvis);
     if (result.clipped_voxels > 0) spdlog::warn("{} voxel(s) outside the 12-bit HU range were clipped", result.clipped_voxels);
@@ -177,6 +201,8 @@ int run_main(int argc, char** argv) {
     const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
     organfit::pipeline::run_scene(scene, out_dir);
     spdlog::info("done: {}/run.json", out_dir);
+  } else if (*bench_us) {
+    std::cout << organfit::pipeline::run_us_benchmark(usb).dump() << "\n";
   } else if (*bench_ct) {
     std::cout << organfit::pipeline::run_ct_benchmark(ctb).dump() << "\n";
   } else if (*bench_skeleton) {

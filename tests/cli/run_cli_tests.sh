@@ -284,6 +284,25 @@ else
   echo "skip us.*: $src/../shared/data/us-plus or us-dicom absent"
 fi
 
+# synth ultrasound of the (deformed) phantom: volume, tracked sweep, true boundary; the
+# points us-points finds in both lie on the surface the probe sees (speckle 1.0)
+expect synth.ultrasound 0 "" -- --quiet synth ultrasound --labels "$tmp/default/phantom/labels.nrrd" --ct "$tmp/default/phantom/ct" --stretch 1.1 --bend 2 --frames 21 --out "$tmp/sus"
+check synth.ultrasound_files test -s "$tmp/sus/volume.mha" -a -s "$tmp/sus/sweep.igs.mha" -a -s "$tmp/sus/true_boundary.csv"
+expect us.points_from_simulated_sweep 0 "" -- --quiet us-points --us "$tmp/sus/sweep.igs.mha" --centre 0,0,0 --radius 35 --out "$tmp/sus_sweep.csv"
+expect us.points_from_simulated_volume 0 "" -- --quiet us-points --us "$tmp/sus/volume.mha" --centre 0,0,0 --radius 35 --out "$tmp/sus_volume.csv"
+for kind in sweep volume; do
+  check "us.simulated_${kind}_points_on_the_visible_surface" /usr/bin/python3 -c "
+import math
+truth = [tuple(map(float, l.split(','))) for l in open('$tmp/sus/true_boundary.csv').read().splitlines()[1:]]
+pts = [tuple(map(float, l.split(',')[:3])) for l in open('$tmp/sus_$kind.csv').read().splitlines()[1:]]
+d = sorted(min(math.dist(p, q) for q in truth) for p in pts)
+assert len(d) == 87 and d[len(d) // 2] <= 1.0 and sum(x <= 1.5 for x in d) >= 0.8 * len(d), d"
+done
+expect bench.us_small 0 "" -- --quiet bench us --size 200 --frames 10
+check bench.us_prints_both /usr/bin/python3 -c "
+import json; d = json.loads(open('$tmp/out').read())
+assert d['volume']['points'] == 87 and d['sweep']['points'] == 87 and d['volume']['within_1_5_mm'] >= 0.8, d"
+
 # SIGINT during a fit: stops within a second, exit 130, no final-named output, no temporary
 printf 'scene:\n  name: long\nbody:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\npoints:\n  count: 10000\nfit:\n  method: paper\n  max_wall_s: 60\n' > "$tmp/long.yaml"
 "$bin" --quiet run "$tmp/long.yaml" --out "$tmp/interrupted" > /dev/null 2> "$tmp/err" &

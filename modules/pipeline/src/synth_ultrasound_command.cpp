@@ -1,0 +1,143 @@
+#include "organfit/pipeline/synth_ultrasound_command.h"
+
+#include <fmt/format.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+
+#include "organfit/dicom/ct_series.h"
+#include "organfit/evaluation/synthetic.h"
+#include "organfit/itkbridge/itk_images.h"
+#include "organfit/phantom/pelvis.h"
+#include "organfit/pipeline/ultrasound_stage.h"
+#include "organfit/support/atomic_file.h"
+#include "organfit/support/error.h"
+#include "organfit/ultrasound/sequence_metafile.h"
+#include "organfit/ultrasound/simulator.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::pipeline {
+
+nlohmann::json run_synth_ultrasound(const SynthUltrasoundCommand& c) {
+  std::error_code ec;
+  if (fs::exists(c.out, ec) && !(fs::is_directory(c.out, ec) && fs::is_empty(c.out, ec)))
+    throw InputError(c.out.string() + ": exists and is not an empty folder");
+  if (!(c.probe.empty() || c.probe.size() == 3 || c.probe.size() == 6 || c.probe.size() == 9))
+    throw InputError("synth ultrasound: --probe takes X,Y,Z[,AX,AY,AZ[,LX,LY,LZ]]");
+  if (c.sweep_frames < 1) throw InputError("synth ultrasound: --frames must be at least 1");
+  const geometry::LabelVolume labels = itkbridge::read_label_volume(c.labels);
+  const auto& g = labels.geometry;
+  // HU for shadows: the CT's when given (same grid), else bone from the labels.
+  std::vector<float> hu(labels.labels.size(), 0.0f);
+  if (!c.ct.empty()) {
+    const dicom::CtSeries ct = dicom::read_ct_series(c.ct);
+    if (ct.geometry.size != g.size) throw InputError(c.ct.string() + ": the CT's grid is not the labels'");
+    hu = ct.hu;
+  } else {
+    for (size_t v = 0; v < hu.size(); ++v) {
+      const auto l = labels.labels[v];
+      hu[v] = l == phantom::kPelvicBone || l == phantom::kFemurLeft || l == phantom::kFemurRight ? 1000.0f
+              : l == phantom::kAir                                                           ? -1000.0f
+                                                                                             : 0.0f;
+    }
+  }
+  geometry::LabelVolume organ_mask(g);
+  for (size_t v = 0; v < labels.labels.size(); ++v) organ_mask.labels[v] = labels.labels[v] == c.organ_label;
+  if (organ_mask.count(1) == 0)
+    throw InputError(fmt::format("{}: no voxel has the organ label {}", c.labels.string(), c.organ_label));
+  const evaluation::Shape organ = evaluation::make_mask_shape(std::make_shared<const geometry::LabelVolume>(organ_mask));
+  evaluation::Deformation d;
+  d.stretch = c.stretch, d.bend_mm = c.bend_mm, d.centre_mm = organ.centre_mm;
+  d.half_length_mm = 0.5 * organ.size_mm.x() * d.stretch;
+  const geometry::LabelVolume tissue = pelvis_tissue_classes(labels);
+
+  ultrasound::ProbePose probe;
+  probe.position_mm = organ.centre_mm + Eigen::Vector3d(0, 38, 0);
+  if (c.probe.size() >= 3) probe.position_mm = Eigen::Vector3d(c.probe[0], c.probe[1], c.probe[2]);
+  if (c.probe.size() >= 6) probe.axis = Eigen::Vector3d(c.probe[3], c.probe[4], c.probe[5]).normalized();
+  if (c.probe.size() == 9) probe.lateral = Eigen::Vector3d(c.probe[6], c.probe[7], c.probe[8]).normalized();
+  ultrasound::SimulatorOptions so;
+  so.probe_radius_mm = 12;
+  so.speckle = c.speckle;
+  so.seed = c.seed;
+  so.echogenicity.fill(0.5f);
+  so.echogenicity[1] = 0.0f, so.echogenicity[2] = 0.9f, so.echogenicity[3] = 0.04f, so.echogenicity[4] = 0.5f;
+  so.echogenicity[6] = 1.0f, so.echogenicity[7] = 0.3f;
+  so.organ_label = 7;
+  const ultrasound::TissueAt today = [&](const Eigen::Vector3d& p) {
+    if (organ.inside(d.inverse(p))) return ultrasound::TissueSample{7, 40.0f};
+    const Eigen::Vector3d idx = g.physical_to_index(p);
+    const int i = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
+              k = static_cast<int>(std::lround(idx.z()));
+    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) return ultrasound::TissueSample{};
+    const auto v = static_cast<size_t>(g.linear_index(i, j, k));
+    return ultrasound::TissueSample{tissue.labels[v] == 7 ? 2 : tissue.labels[v], hu[v]};
+  };
+  ultrasound::SimulatedUltrasound sim;
+  try {
+    sim = ultrasound::simulate_bmode(today, probe, so);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(std::string("synth ultrasound: ") + e.what());
+  }
+
+  // The tracked sweep: a fan of planes through the probe, tilted about its lateral
+  // direction, each sampled from the volume (nearest voxel) at the volume's spacing.
+  const double px = so.voxel_mm;
+  const int width = static_cast<int>(std::ceil(2 * so.max_depth_mm * std::tan(so.lateral_half_angle_deg * M_PI / 180) / px));
+  const int height = static_cast<int>(std::ceil(so.max_depth_mm / px));
+  const Eigen::Vector3d elevation = probe.axis.cross(probe.lateral);
+  ultrasound::TrackedSweep sweep;
+  for (int f = 0; f < c.sweep_frames; ++f) {
+    const double tilt = c.sweep_frames == 1 ? 0.0 : (-40.0 + 80.0 * f / (c.sweep_frames - 1)) * M_PI / 180;
+    const Eigen::Vector3d beam = std::cos(tilt) * probe.axis + std::sin(tilt) * elevation;
+    ultrasound::TrackedFrame frame;
+    frame.index = f;
+    frame.timestamp_s = 0.1 * f;
+    frame.width = width, frame.height = height;
+    frame.pixel_to_ct_mm.setIdentity();
+    frame.pixel_to_ct_mm.block<3, 1>(0, 0) = px * probe.lateral;
+    frame.pixel_to_ct_mm.block<3, 1>(0, 1) = px * beam;
+    frame.pixel_to_ct_mm.block<3, 1>(0, 2) = probe.lateral.cross(beam);
+    frame.pixel_to_ct_mm.block<3, 1>(0, 3) = probe.position_mm - 0.5 * width * px * probe.lateral;
+    frame.pixels.assign(static_cast<size_t>(width) * height, 0.0f);
+    for (int r = 0; r < height; ++r)
+      for (int col = 0; col < width; ++col) {
+        const Eigen::Vector3d p = (frame.pixel_to_ct_mm * Eigen::Vector4d(col, r, 0, 1)).head<3>();
+        const Eigen::Vector3d idx = sim.geometry.physical_to_index(p);
+        const int i = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
+                  k = static_cast<int>(std::lround(idx.z()));
+        if (i < 0 || j < 0 || k < 0 || i >= sim.geometry.size[0] || j >= sim.geometry.size[1] || k >= sim.geometry.size[2])
+          continue;
+        frame.pixels[static_cast<size_t>(r) * width + col] = sim.bmode[static_cast<size_t>(sim.geometry.linear_index(i, j, k))];
+      }
+    sweep.frames.push_back(std::move(frame));
+  }
+
+  fs::create_directories(c.out, ec);
+  if (ec) throw InputError(c.out.string() + ": cannot create the folder: " + ec.message());
+  geometry::LabelVolume volume(sim.geometry);
+  volume.labels = sim.bmode;
+  itkbridge::write_label_volume(c.out / "volume.mha", volume);
+  ultrasound::write_sequence_metafile(c.out / "sweep.igs.mha", sweep, px);
+  std::string csv = "x_mm,y_mm,z_mm\n";
+  for (const auto& p : sim.true_boundary_mm) csv += fmt::format("{:.3f},{:.3f},{:.3f}\n", p.x(), p.y(), p.z());
+  write_file_atomically(c.out / "true_boundary.csv", csv);
+  nlohmann::json summary = {{"labels", c.labels.string()},
+                            {"seed", c.seed},
+                            {"speckle", c.speckle},
+                            {"organ_label", c.organ_label},
+                            {"organ_centre_mm", {organ.centre_mm.x(), organ.centre_mm.y(), organ.centre_mm.z()}},
+                            {"deformation", {{"stretch", c.stretch}, {"bend_mm", c.bend_mm}}},
+                            {"probe_mm", {probe.position_mm.x(), probe.position_mm.y(), probe.position_mm.z()}},
+                            {"probe_axis", {probe.axis.x(), probe.axis.y(), probe.axis.z()}},
+                            {"volume_size", {sim.geometry.size[0], sim.geometry.size[1], sim.geometry.size[2]}},
+                            {"sweep_frames", sweep.frames.size()},
+                            {"frame_size", {width, height}},
+                            {"true_boundary_points", sim.true_boundary_mm.size()},
+                            {"files", {"volume.mha", "sweep.igs.mha", "true_boundary.csv"}}};
+  write_file_atomically(c.out / "ultrasound.json", summary.dump(2) + "\n");
+  return summary;
+}
+
+}  // namespace organfit::pipeline
