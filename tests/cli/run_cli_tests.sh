@@ -298,10 +298,27 @@ pts = [tuple(map(float, l.split(',')[:3])) for l in open('$tmp/sus_$kind.csv').r
 d = sorted(min(math.dist(p, q) for q in truth) for p in pts)
 assert len(d) == 87 and d[len(d) // 2] <= 1.0 and sum(x <= 1.5 for x in d) >= 0.8 * len(d), d"
 done
+# the same sweep and volume as a scene's ultrasound (in CT coordinates: identity registration)
+for kind in sweep volume; do
+  file=$([[ $kind == sweep ]] && echo sweep.igs.mha || echo volume.mha)
+  printf 'phantom:\n  kind: pelvis\norgan:\n  roi: Prostate\nmodel:\n  radius_mm: 1.92\npoints:\n  source: ultrasound\nultrasound:\n  source: %s\n  file: %s\nfit:\n  method: spread\n' "$kind" "$tmp/sus/$file" > "$tmp/us_$kind.yaml"
+  expect "us.scene_from_a_$kind" 0 "" -- --quiet run "$tmp/us_$kind.yaml" --out "$tmp/us_${kind}_out"
+  check "us.scene_from_a_${kind}_fits" /usr/bin/python3 -c "
+import json; d = json.load(open('$tmp/us_${kind}_out/run.json'))
+assert d['points']['source'] == '$kind' and d['points']['count'] == 87 and d['fit']['converged'], d['points']"
+done
+printf 'phantom:\n  kind: pelvis\norgan:\n  roi: Prostate\nmodel:\n  radius_mm: 2\npoints:\n  source: ultrasound\nultrasound:\n  source: volume\n  file: %s\n  registration: [2, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]\n' "$tmp/sus/volume.mha" > "$tmp/us_bad_reg.yaml"
+expect validate.ultrasound_registration_not_rigid 2 "ultrasound.registration: not a rigid transform" -- validate "$tmp/us_bad_reg.yaml"
 expect bench.us_small 0 "" -- --quiet bench us --size 200 --frames 10
 check bench.us_prints_both /usr/bin/python3 -c "
 import json; d = json.loads(open('$tmp/out').read())
 assert d['volume']['points'] == 87 and d['sweep']['points'] == 87 and d['volume']['within_1_5_mm'] >= 0.8, d"
+
+# point sets as mesh vertices: PLY and legacy VTK
+expect points.from_ply 0 "" -- --quiet run "$scenes/points-from-ply.yaml" --out "$tmp/ply"
+check points.ply_read_four grep -q '"count": 4' "$tmp/ply/run.json"
+expect points.from_vtk 0 "" -- --quiet run "$scenes/points-from-vtk.yaml" --out "$tmp/vtk"
+check points.vtk_read_three grep -q '"count": 3' "$tmp/vtk/run.json"
 
 # SIGINT during a fit: stops within a second, exit 130, no final-named output, no temporary
 printf 'scene:\n  name: long\nbody:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\npoints:\n  count: 10000\nfit:\n  method: paper\n  max_wall_s: 60\n' > "$tmp/long.yaml"

@@ -122,6 +122,23 @@ class Parser {
         }
         return v;
       }
+      case ParamType::kMatrix4: {
+        // 16 numbers, or four rows of four.
+        std::vector<YAML::Node> flat;
+        if (node.IsSequence() && node.size() == 4 && node[0].IsSequence()) {
+          for (const auto& row : node) {
+            if (!row.IsSequence() || row.size() != 4) fail(line, key, "expected four rows of four numbers");
+            for (const auto& x : row) flat.push_back(x);
+          }
+        } else if (node.IsSequence() && node.size() == 16) {
+          for (const auto& x : node) flat.push_back(x);
+        } else {
+          fail(line, key, "expected a 4x4 matrix: 16 numbers row by row, or four rows of four");
+        }
+        Eigen::Matrix4d m;
+        for (int i = 0; i < 16; ++i) m(i / 4, i % 4) = as_number(flat[static_cast<size_t>(i)], "a number");
+        return m;
+      }
     }
     fail(line, key, "unsupported type");
   }
@@ -243,6 +260,10 @@ const std::string& Scene::text(const std::string& s, const std::string& n) const
 fs::path Scene::path(const std::string& s, const std::string& n) const {
   return std::get<std::string>(entry(s, n, ParamType::kInputPath).value);  // "" when not given
 }
+Eigen::Matrix4d Scene::matrix4(const std::string& s, const std::string& n) const {
+  return std::get<Eigen::Matrix4d>(entry(s, n, ParamType::kMatrix4).value);
+}
+
 Eigen::Vector3d Scene::vec3(const std::string& s, const std::string& n) const {
   return std::get<Eigen::Vector3d>(entry(s, n, ParamType::kVec3).value);
 }
@@ -293,6 +314,11 @@ nlohmann::json Scene::to_json() const {
       else if (auto* b = std::get_if<bool>(&v)) s[p->name] = *b;
       else if (auto* str = std::get_if<std::string>(&v)) s[p->name] = *str;
       else if (auto* vec = std::get_if<Eigen::Vector3d>(&v)) s[p->name] = {vec->x(), vec->y(), vec->z()};
+      else if (auto* m = std::get_if<Eigen::Matrix4d>(&v)) {
+        nlohmann::json rows = nlohmann::json::array();
+        for (int r = 0; r < 4; ++r) rows.push_back({(*m)(r, 0), (*m)(r, 1), (*m)(r, 2), (*m)(r, 3)});
+        s[p->name] = rows;
+      }
     }
     j[sec.name] = s;
   }

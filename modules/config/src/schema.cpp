@@ -17,6 +17,7 @@ const char* to_string(ParamType type) {
     case ParamType::kEnum: return "enum";
     case ParamType::kInputPath: return "path";
     case ParamType::kVec3: return "vec3";
+    case ParamType::kMatrix4: return "matrix4";
   }
   return "?";
 }
@@ -35,6 +36,12 @@ std::string value_to_text(const Value& value) {
     std::string operator()(long long v) const { return std::to_string(v); }
     std::string operator()(bool v) const { return v ? "true" : "false"; }
     std::string operator()(const std::string& v) const { return v; }
+    std::string operator()(const Eigen::Matrix4d& m) const {
+      std::string out = "[";
+      for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) out += (r + c ? ", " : "") + format_number(m(r, c));
+      return out + "]";
+    }
     std::string operator()(const Eigen::Vector3d& v) const {
       return fmt::format("[{}, {}, {}]", format_number(v.x()), format_number(v.y()),
                          format_number(v.z()));
@@ -150,6 +157,16 @@ Schema& Schema::input_path(const std::string& name, const std::string& doc, bool
   s.name = name;
   s.type = ParamType::kInputPath;
   if (!required) s.default_value = std::string();
+  s.doc = doc;
+  return add(std::move(s));
+}
+
+Schema& Schema::matrix4(const std::string& name, const std::string& doc) {
+  ParamSpec s;
+  s.name = name;
+  s.type = ParamType::kMatrix4;
+  s.default_value = Eigen::Matrix4d::Identity().eval();
+  s.unit = "mm";
   s.doc = doc;
   return add(std::move(s));
 }

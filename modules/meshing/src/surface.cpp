@@ -47,4 +47,12 @@ SurfaceMesh surface_mesh(const geometry::LabelVolume& mask) {
   return out;
 }
 
+std::vector<std::array<double, 4>> read_point_set(const std::filesystem::path& file) {
+  const PlainPointSet p = vtk_read_points(file.string());
+  std::vector<std::array<double, 4>> out;
+  for (size_t i = 0; i < p.confidence.size(); ++i)
+    out.push_back({p.xyz_mm[3 * i], p.xyz_mm[3 * i + 1], p.xyz_mm[3 * i + 2], p.confidence[i]});
+  return out;
+}
+
 }  // namespace organfit::meshing

@@ -11,6 +11,7 @@
 #include "organfit/fitting/global_fit.h"
 #include "organfit/fitting/spread_force.h"
 #include "organfit/geometry/mask_ops.h"
+#include "organfit/meshing/surface.h"
 #include "organfit/particles/diagnostics.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
@@ -66,7 +67,18 @@ std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
 PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model) {
   PointsStageResult r;
   if (scene.text("points", "source") == "file") {
-    r.points = read_points_csv(scene.path("points", "file"));
+    const fs::path file = scene.path("points", "file");
+    const std::string ext = file.extension().string();
+    if (ext == ".ply" || ext == ".vtk" || ext == ".vtp") {
+      for (const auto& p : meshing::read_point_set(file)) {
+        if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])))
+          throw InputError(file.string() + ": a point has a non-finite coordinate");
+        if (!(p[3] > 0 && p[3] <= 1)) throw InputError(file.string() + ": a confidence is outside (0, 1]");
+        r.points.push_back({Eigen::Vector3d(p[0], p[1], p[2]), p[3]});
+      }
+    } else {
+      r.points = read_points_csv(file);
+    }
     r.summary = {{"source", "file"}, {"count", r.points.size()}};
     return r;
   }

@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/LU>
+
 namespace organfit::pipeline {
 namespace {
 
@@ -84,7 +86,7 @@ config::Schema build_schema() {
   s.section("points", "attractive points: generated on a known deformation of the body, or read")
       .choice("source", "generate", {"generate", "file", "ultrasound"},
               "generate on the deformed body (truth known), read from points.file, or segment the 'ultrasound'")
-      .input_path("file", "CSV of x,y,z[,confidence] in mm (when source: file)", false)
+      .input_path("file", "points in mm: CSV x,y,z[,confidence], or the vertices of a .ply/.vtk/.vtp (source: file)", false)
       .integer("count", 87, 1, 100000, "number of points to generate")
       .number("noise_mm", 0.5, "mm", 0.0, 20.0, "Gaussian noise added to generated points")
       .number("outlier_fraction", 0.0, "", 0.0, 0.5, "fraction of generated points moved 5-15 mm off")
@@ -97,10 +99,15 @@ config::Schema build_schema() {
             "target_shape's proportions; scaled to the body's volume", true);
 
   s.section("ultrasound", "the day's ultrasound, segmented into attractive points (points.source: ultrasound)")
-      .choice("source", "simulate", {"simulate", "volume"},
-              "simulate: B-mode of the planning CT deformed by points.stretch/bend_mm (truth known); "
-              "volume: a 3D ultrasound image already in CT coordinates")
-      .input_path("file", "the ultrasound volume (.mha, .nrrd, .nii) when source: volume", false)
+      .choice("source", "simulate", {"simulate", "volume", "sweep", "dicom"},
+              "simulate: B-mode of the planning CT with the organ deformed by points.stretch/bend_mm (truth "
+              "known); volume: a 3D image; sweep: a tracked 2D sweep (PLUS sequence metafile); dicom: DICOM US")
+      .input_path("file", "the ultrasound input (volume .mha/.nrrd/.nii, sequence metafile, or .dcm)", false)
+      .input_path("tracker", "sequence metafile with the probe's poses, matched by timestamp (source: sweep)", false)
+      .text("transform", "", "tracked transform name (default: the file's own, e.g. ProbeToTrackerTransform)")
+      .matrix4("calibration", "image (mm) to probe: the probe's calibration (sweep, dicom)")
+      .matrix4("registration", "tracker (or volume) to CT patient coordinates; rigid (volume, sweep, dicom)")
+      .number("pixel_mm", 0.0, "mm", 0.0, 10.0, "pixel size of a DICOM image without a calibrated region (0: from it)")
       .vec3("probe_offset_mm", Vector3d(0, 38, 0), "mm", none, "probe position from the organ's centre (simulate)")
       .vec3("probe_axis", Vector3d(0, -1, 0), "", none, "beam direction (simulate; default: anterior, transrectal)")
       .vec3("probe_lateral", Vector3d(1, 0, 0), "", none, "image's lateral direction, perpendicular to the axis")
@@ -233,7 +240,12 @@ void check_scene_rules(const config::Scene& scene) {
     if (simulate && !(has_ct && scene.has_section("organ")))
       scene.fail("ultrasound", "source", "simulating needs the planning CT (ct or phantom) and the organ");
     if (!simulate && !scene.is_given("ultrasound", "file"))
-      scene.fail("ultrasound", "file", "source is 'volume' but ultrasound.file is not given");
+      scene.fail("ultrasound", "file", "source is '" + scene.text("ultrasound", "source") + "' but ultrasound.file is not given");
+    const Eigen::Matrix4d reg = scene.matrix4("ultrasound", "registration");
+    const Eigen::Matrix3d rot = reg.topLeftCorner<3, 3>();
+    if ((rot.transpose() * rot - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-3 || rot.determinant() < 0 ||
+        reg.row(3) != Eigen::RowVector4d(0, 0, 0, 1))
+      scene.fail("ultrasound", "registration", "not a rigid transform (a rotation and a translation, last row 0 0 0 1)");
     const std::string& name = scene.text("ultrasound", "save_volume");
     if (name.find('/') != std::string::npos || name == "." || name == "..")
       scene.fail("ultrasound", "save_volume", "a file name inside --out, without folders");

@@ -5,7 +5,13 @@
 
 #include <cmath>
 
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <optional>
+
+#include "organfit/dicom/us_image.h"
 #include "organfit/itkbridge/itk_images.h"
+#include "organfit/ultrasound/sequence_metafile.h"
 #include "organfit/phantom/pelvis.h"
 #include "organfit/support/error.h"
 #include "organfit/support/resources.h"
@@ -45,6 +51,8 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const Mod
                                            const geometry::LabelVolume* anatomy) {
   UltrasoundStageResult r;
   PointsStageResult& pts = r.points;
+  const Eigen::Matrix4d registration = scene.matrix4("ultrasound", "registration");
+  ultrasound::TrackedSweep sweep;  // 2D sources
   geometry::ImageGeometry us_geometry;
   std::vector<float> intensity;
   std::vector<std::uint8_t> in_view;
@@ -115,13 +123,40 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const Mod
                {"stretch", d.stretch},
                {"bend_mm", d.bend_mm},
                {"simulate_wall_s", clock.elapsed_s()}};
-  } else {
+  } else if (source == "volume") {
     const auto image = itkbridge::read_scalar_image(scene.path("ultrasound", "file"));
     us_geometry = image.geometry;
     intensity = image.values;
     summary = {{"source", "volume"}, {"volume_size", {us_geometry.size[0], us_geometry.size[1], us_geometry.size[2]}}};
+  } else {
+    // 2D frames: a tracked sweep, or DICOM frames placed by the calibration alone.
+    const Eigen::Matrix4d calibration = scene.matrix4("ultrasound", "calibration");
+    if (source == "sweep") {
+      const auto video = ultrasound::read_sequence_metafile(scene.path("ultrasound", "file"));
+      std::optional<ultrasound::SequenceMetafile> tracker;
+      if (scene.is_given("ultrasound", "tracker"))
+        tracker = ultrasound::read_sequence_metafile(scene.path("ultrasound", "tracker"), false);
+      ultrasound::SweepOptions so;
+      so.transform = scene.text("ultrasound", "transform");
+      so.image_to_probe = calibration;
+      so.tracker_to_ct = registration;
+      sweep = ultrasound::assemble_sweep(video, tracker ? &*tracker : nullptr, so);
+      summary = {{"source", "sweep"}, {"frames", video.frames.size()}, {"frames_used", sweep.frames.size()}};
+    } else {
+      const dicom::UsImage us = dicom::read_us_image(scene.path("ultrasound", "file"), scene.number("ultrasound", "pixel_mm"));
+      Eigen::Matrix4d scale = Eigen::Matrix4d::Identity();
+      scale(0, 0) = us.pixel_mm_x, scale(1, 1) = us.pixel_mm_y;
+      const size_t n = static_cast<size_t>(us.width) * us.height;
+      for (int f = 0; f < us.frames; ++f) {
+        ultrasound::TrackedFrame frame;
+        frame.index = f, frame.width = us.width, frame.height = us.height;
+        frame.pixels.assign(us.grey.begin() + static_cast<long>(f * n), us.grey.begin() + static_cast<long>((f + 1) * n));
+        frame.pixel_to_ct_mm = registration * calibration * scale;
+        sweep.frames.push_back(std::move(frame));
+      }
+      summary = {{"source", "dicom"}, {"frames", us.frames}, {"pixel_mm", {us.pixel_mm_x, us.pixel_mm_y}}};
+    }
   }
-
   Stopwatch clock;
   ultrasound::BoundaryOptions bo;
   bo.centre_mm = model.shape.centre_mm;
@@ -135,7 +170,17 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const Mod
   bo.target_count = static_cast<int>(scene.integer("points", "count"));
   ultrasound::BoundaryResult found;
   try {
-    found = ultrasound::boundary_points(us_geometry, intensity, in_view.empty() ? nullptr : &in_view, bo);
+    if (!sweep.frames.empty()) {
+      found = ultrasound::sweep_boundary_points(sweep, bo);  // already in CT coordinates
+    } else {
+      // A volume is searched in its own frame: the organ and its prior mapped into it.
+      const Eigen::Matrix4d to_volume = source == "volume" ? Eigen::Matrix4d(registration.inverse()) : Eigen::Matrix4d::Identity();
+      bo.centre_mm = (to_volume * model.shape.centre_mm.homogeneous()).head<3>();
+      const Eigen::Matrix4d to_ct = to_volume.inverse();
+      bo.prior_inside = [&prior, to_ct](const Eigen::Vector3d& p) { return prior.inside((to_ct * p.homogeneous()).head<3>()); };
+      found = ultrasound::boundary_points(us_geometry, intensity, in_view.empty() ? nullptr : &in_view, bo);
+      for (auto& p : found.points) p.p_mm = (to_ct * p.p_mm.homogeneous()).head<3>();
+    }
   } catch (const std::invalid_argument& e) {
     throw InputError(std::string("ultrasound: ") + e.what());
   }

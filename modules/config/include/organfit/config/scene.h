@@ -31,6 +31,7 @@ class Scene {
   /// Input path, already resolved against the scene's folder.
   std::filesystem::path path(const std::string& section, const std::string& name) const;
   Eigen::Vector3d vec3(const std::string& section, const std::string& name) const;
+  Eigen::Matrix4d matrix4(const std::string& section, const std::string& name) const;
 
   /// Line (1-based) where the key was given, or where its section starts when defaulted.
   int line_of(const std::string& section, const std::string& name) const;

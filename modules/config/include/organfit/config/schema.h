@@ -20,13 +20,14 @@ enum class ParamType {
   kString,     ///< free text
   kEnum,       ///< one of `choices`
   kInputPath,  ///< existing file or folder, relative to the scene file's folder
-  kVec3        ///< three numbers [x, y, z]
+  kVec3,       ///< three numbers [x, y, z]
+  kMatrix4     ///< a 4x4 transform: 16 numbers row by row, or four rows of four
 };
 
 const char* to_string(ParamType type);
 
 /// A parameter value. std::monostate means "no value" (a required key's default).
-using Value = std::variant<std::monostate, double, long long, bool, std::string, Eigen::Vector3d>;
+using Value = std::variant<std::monostate, double, long long, bool, std::string, Eigen::Vector3d, Eigen::Matrix4d>;
 
 /// One declared scene key.
 struct ParamSpec {
@@ -74,6 +75,8 @@ class Schema {
                  std::vector<std::string> choices, const std::string& doc);
   /// An input file or folder; optional ones default to "" (not given).
   Schema& input_path(const std::string& name, const std::string& doc, bool required = true);
+  /// A 4x4 transform (identity by default), e.g. a calibration or registration in mm.
+  Schema& matrix4(const std::string& name, const std::string& doc);
   Schema& vec3(const std::string& name, std::optional<Eigen::Vector3d> def, const std::string& unit,
                std::optional<double> min, const std::string& doc, bool min_exclusive = false);
 

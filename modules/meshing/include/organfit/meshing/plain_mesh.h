@@ -25,4 +25,12 @@ struct PlainSurfaceReport {
 /// report carries the triangles. Throws InputError (VTK side).
 PlainSurfaceReport vtk_write_surface(const PlainMask& mask, const std::string& file, bool keep_mesh = false);
 
+struct PlainPointSet {
+  std::vector<double> xyz_mm;      ///< x, y, z per point
+  std::vector<double> confidence;  ///< the "confidence" point array, else 1
+};
+
+/// Points of a .ply, legacy .vtk or .vtp file (VTK side). Throws InputError naming the file.
+PlainPointSet vtk_read_points(const std::string& file);
+
 }  // namespace organfit::meshing

@@ -9,6 +9,7 @@
 // The mask is padded by one empty voxel so the surface closes at the grid's border.
 #include <filesystem>
 #include <string>
+#include <array>
 #include <vector>
 
 #include "organfit/geometry/image_geometry.h"
@@ -36,5 +37,9 @@ struct SurfaceMesh {
   SurfaceReport report;
 };
 SurfaceMesh surface_mesh(const geometry::LabelVolume& mask);
+
+/// A point set from a mesh file's vertices (.ply, legacy .vtk, .vtp), with its
+/// "confidence" point array when it has one: x, y, z, confidence per point.
+std::vector<std::array<double, 4>> read_point_set(const std::filesystem::path& file);
 
 }  // namespace organfit::meshing
