@@ -10,6 +10,8 @@
 #include "organfit/evaluation/skeleton_benchmark.h"
 #include "organfit/pipeline/ct_benchmark.h"
 #include "organfit/pipeline/export_command.h"
+#include "organfit/pipeline/fit_benchmark.h"
+#include "organfit/pipeline/stability_benchmark.h"
 #include "organfit/pipeline/runner.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/pipeline/segment_command.h"
@@ -156,6 +158,17 @@ int run_main(int argc, char** argv) {
   bench_us->add_option("--frames", usb.frames, "Sweep frames")->check(CLI::Range(1, 10000));
   bench_us->add_option("--threads", usb.threads, "OpenMP threads (0: all)")->check(CLI::Range(0, 256));
 
+  organfit::pipeline::FitBenchOptions fb;
+  auto* bench_fit = bench->add_subcommand("fit", "Error against run time: the particle fits and TPS, CPD, ICP on known deformations");
+  bench_fit->add_option("-o,--out", fb.out, "Output folder: results.csv, curves.csv, work_precision.svg, RESULTS.md")->required();
+  bench_fit->add_flag("--quick", fb.quick, "The quick grid (20 cases, a few minutes on 2 cores)");
+  bench_fit->add_option("--threads", fb.threads, "OpenMP threads (0: all)")->check(CLI::Range(0, 256));
+
+  organfit::pipeline::StabilityBenchOptions stb;
+  auto* bench_stability = bench->add_subcommand("stability", "Stiff and extreme cases, both fitting methods: a pass/fail table");
+  bench_stability->add_option("-o,--out", stb.out, "Output folder: stability.csv, STABILITY.md")->required();
+  bench_stability->add_option("--threads", stb.threads, "OpenMP threads (0: all)")->check(CLI::Range(0, 256));
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -201,6 +214,12 @@ int run_main(int argc, char** argv) {
     const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
     organfit::pipeline::run_scene(scene, out_dir);
     spdlog::info("done: {}/run.json", out_dir);
+  } else if (*bench_stability) {
+    const auto summary = organfit::pipeline::run_stability_benchmark(stb);
+    std::cout << summary.dump() << "\n";
+    if (!summary["all_pass"].get<bool>()) return static_cast<int>(ExitCode::kTargetNotMet);
+  } else if (*bench_fit) {
+    std::cout << organfit::pipeline::run_fit_benchmark(fb).dump() << "\n";
   } else if (*bench_us) {
     std::cout << organfit::pipeline::run_us_benchmark(usb).dump() << "\n";
   } else if (*bench_ct) {

@@ -52,7 +52,9 @@ Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
     throw std::invalid_argument("unknown shape '" + kind + "' (ellipsoid, box, egg, lung)");
   }
   if (!(size_mm.array() > 0).all()) throw std::invalid_argument("shape size must be > 0 mm");
-  return Shape{kind, size_mm, centre_mm};
+  Shape shape;
+  shape.kind = kind, shape.size_mm = size_mm, shape.centre_mm = centre_mm;
+  return shape;
 }
 
 Shape make_mask_shape(std::shared_ptr<const geometry::LabelVolume> mask) {
@@ -88,19 +90,37 @@ double shape_volume_mm3(const Shape& shape, double voxel_mm) {
 }
 
 Eigen::Vector3d Deformation::apply(const Eigen::Vector3d& p) const {
+  const Eigen::Vector3d& c = centre_mm;
   const double s = stretch, t = 1.0 / std::sqrt(stretch);
-  Eigen::Vector3d q = centre_mm + Eigen::Vector3d(s, t, t).cwiseProduct(p - centre_mm);
-  const double u = (q.x() - centre_mm.x()) / half_length_mm;
+  Eigen::Vector3d q = c + Eigen::Vector3d(s, t, t).cwiseProduct(p - c);
+  const double u = (q.x() - c.x()) / half_length_mm;
   q.y() += bend_mm * u * u;
+  if (twist_rad != 0) {
+    const double a = twist_rad * u, ca = std::cos(a), sa = std::sin(a);
+    const double y = q.y() - c.y(), z = q.z() - c.z();
+    q.y() = c.y() + ca * y - sa * z, q.z() = c.z() + sa * y + ca * z;
+  }
+  const double two_s2 = 2 * bump_sigma_mm * bump_sigma_mm;
+  if (indent_mm != 0) q.y() += indent_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.z() - c.z(), 2)) / two_s2);
+  if (push_mm != 0) q.z() += push_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.y() - c.y(), 2)) / two_s2);
   return q;
 }
 
 Eigen::Vector3d Deformation::inverse(const Eigen::Vector3d& p) const {
+  const Eigen::Vector3d& c = centre_mm;
   Eigen::Vector3d q = p;
-  const double u = (q.x() - centre_mm.x()) / half_length_mm;
+  const double two_s2 = 2 * bump_sigma_mm * bump_sigma_mm;
+  if (push_mm != 0) q.z() -= push_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.y() - c.y(), 2)) / two_s2);
+  if (indent_mm != 0) q.y() -= indent_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.z() - c.z(), 2)) / two_s2);
+  const double u = (q.x() - c.x()) / half_length_mm;
+  if (twist_rad != 0) {
+    const double a = -twist_rad * u, ca = std::cos(a), sa = std::sin(a);
+    const double y = q.y() - c.y(), z = q.z() - c.z();
+    q.y() = c.y() + ca * y - sa * z, q.z() = c.z() + sa * y + ca * z;
+  }
   q.y() -= bend_mm * u * u;
   const double s = stretch, t = 1.0 / std::sqrt(stretch);
-  return centre_mm + Eigen::Vector3d(1 / s, 1 / t, 1 / t).cwiseProduct(q - centre_mm);
+  return c + Eigen::Vector3d(1 / s, 1 / t, 1 / t).cwiseProduct(q - c);
 }
 
 std::function<bool(const Eigen::Vector3d&)> deformed_inside(const Shape& shape,

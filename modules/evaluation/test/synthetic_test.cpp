@@ -34,6 +34,38 @@ TEST(Deformation, IsVolumePreservingAndExactlyInvertible) {
   EXPECT_NEAR(n * 0.125, v0, 0.005 * v0);
 }
 
+TEST(Deformation, EveryFamilyIsVolumePreservingAndExactlyInvertible) {
+  struct Family {
+    const char* name;
+    void (*set)(Deformation&);
+  };
+  const Family families[] = {
+      {"twist", [](Deformation& d) { d.twist_rad = 0.4; }},
+      {"indent", [](Deformation& d) { d.indent_mm = -8; }},
+      {"push", [](Deformation& d) { d.push_mm = -6; }},
+      {"all", [](Deformation& d) { d.stretch = 1.1, d.bend_mm = 2, d.twist_rad = 0.2, d.indent_mm = -5, d.push_mm = 4; }}};
+  for (const auto& f : families) {
+    Deformation d;
+    d.centre_mm = {1, -2, 3};
+    d.half_length_mm = 25;
+    f.set(d);
+    for (const Eigen::Vector3d& p : {Eigen::Vector3d(7, -4, 9), Eigen::Vector3d(-12, 10, -3), Eigen::Vector3d(20, 1, 0)}) {
+      EXPECT_LT((d.inverse(d.apply(p)) - p).norm(), 1e-10) << f.name;
+      Eigen::Matrix3d j;
+      for (int c = 0; c < 3; ++c) {
+        Eigen::Vector3d h = Eigen::Vector3d::Zero();
+        h[c] = 1e-6;
+        j.col(c) = (d.apply(p + h) - d.apply(p - h)) / 2e-6;
+      }
+      EXPECT_NEAR(j.determinant(), 1.0, 1e-7) << f.name;
+    }
+  }
+  // The indentation moves the posterior surface (+y) anteriorly at the centre by a.
+  Deformation d;
+  d.indent_mm = -8;
+  EXPECT_NEAR(d.apply({0, 15, 0}).y(), 7.0, 1e-12);
+}
+
 TEST(Sampling, PointsLieOnTheDeformedSurfaceWithinTheNoise) {
   const Shape s = make_shape("ellipsoid", {48, 38, 30}, {0, 0, 0});
   Deformation d;

@@ -64,6 +64,19 @@ std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
   return points;
 }
 
+evaluation::Deformation deformation_from(const config::Scene& scene, const evaluation::Shape& shape) {
+  evaluation::Deformation d;
+  d.stretch = scene.number("points", "stretch");
+  d.bend_mm = scene.number("points", "bend_mm");
+  d.twist_rad = scene.number("points", "twist_deg") * M_PI / 180;
+  d.indent_mm = scene.number("points", "indent_mm");
+  d.push_mm = scene.number("points", "push_mm");
+  d.bump_sigma_mm = scene.number("points", "bump_sigma_mm");
+  d.centre_mm = shape.centre_mm;
+  d.half_length_mm = 0.5 * shape.size_mm.x() * d.stretch;
+  return d;
+}
+
 PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model) {
   PointsStageResult r;
   if (scene.text("points", "source") == "file") {
@@ -93,11 +106,7 @@ PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageR
     t.size_mm *= scale;
     r.truth_shape = t;
   }
-  evaluation::Deformation d;
-  d.stretch = scene.number("points", "stretch");
-  d.bend_mm = scene.number("points", "bend_mm");
-  d.centre_mm = r.truth_shape.centre_mm;
-  d.half_length_mm = 0.5 * r.truth_shape.size_mm.x() * d.stretch;
+  const evaluation::Deformation d = deformation_from(scene, r.truth_shape);
   evaluation::SamplingOptions o;
   o.count = static_cast<int>(scene.integer("points", "count"));
   o.noise_mm = scene.number("points", "noise_mm");
@@ -108,7 +117,8 @@ PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageR
   r.truth = d;
   r.summary = {{"source", "generate"}, {"count", r.points.size()}, {"noise_mm", o.noise_mm},
                {"outlier_fraction", o.outlier_fraction}, {"coverage", scene.text("points", "coverage")},
-               {"stretch", d.stretch}, {"bend_mm", d.bend_mm}, {"target_shape", r.truth_shape.kind},
+               {"stretch", d.stretch}, {"bend_mm", d.bend_mm}, {"twist_rad", d.twist_rad}, {"indent_mm", d.indent_mm},
+               {"push_mm", d.push_mm}, {"target_shape", r.truth_shape.kind},
                {"target_size_mm", {r.truth_shape.size_mm.x(), r.truth_shape.size_mm.y(), r.truth_shape.size_mm.z()}}};
   return r;
 }
@@ -119,7 +129,8 @@ double body_volume(const particles::Positions& x, double rho) {
   return geometry::particle_body_volume_mm3(x, rho, 0.5 * rho, rho);
 }
 
-/// Bounds of the deformed shape: its corners mapped, widened by the bend.
+}  // namespace
+
 geometry::Aabb deformed_bounds(const evaluation::Shape& s, const evaluation::Deformation& d) {
   const geometry::Aabb b = s.bounds();
   geometry::Aabb out{Eigen::Vector3d::Constant(1e300), Eigen::Vector3d::Constant(-1e300)};
@@ -130,12 +141,14 @@ geometry::Aabb deformed_bounds(const evaluation::Shape& s, const evaluation::Def
     out.min_mm = out.min_mm.cwiseMin(q);
     out.max_mm = out.max_mm.cwiseMax(q);
   }
-  out.min_mm.y() -= std::abs(d.bend_mm);
-  out.max_mm.y() += std::abs(d.bend_mm);
+  // The non-affine parts move points off the corners' hull by at most their amplitudes.
+  const double margin = std::abs(d.bend_mm) + std::abs(d.indent_mm) + std::abs(d.push_mm) +
+                        std::abs(d.twist_rad) * 0.5 * (b.max_mm - b.min_mm).maxCoeff();
+  out.min_mm.array() -= margin;
+  out.max_mm.array() += margin;
   return out;
 }
 
-}  // namespace
 
 FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model,
                              const PointsStageResult& pts) {

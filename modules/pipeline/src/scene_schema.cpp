@@ -93,6 +93,10 @@ config::Schema build_schema() {
       .choice("coverage", "full", {"full", "half"}, "surface the points cover (half: the +y side)")
       .number("stretch", 1.0, "", 0.5, 2.0, "volume-preserving stretch along x of the true deformation")
       .number("bend_mm", 0.0, "mm", -30.0, 30.0, "sideways (y) displacement of the ends in the true deformation")
+      .number("twist_deg", 0.0, "deg", -90.0, 90.0, "turn of the ends about the x axis in the true deformation")
+      .number("indent_mm", 0.0, "mm", -20.0, 20.0, "Gaussian column shift along y (rectal filling: < 0 moves it anteriorly)")
+      .number("push_mm", 0.0, "mm", -20.0, 20.0, "Gaussian column shift along z (bladder push: < 0 moves it inferiorly)")
+      .number("bump_sigma_mm", 8.0, "mm", 1.0, 100.0, "width of the indent and push bumps", true)
       .choice("target_shape", "same", {"same", "ellipsoid", "box", "egg", "lung"},
               "sample a different shape than the body (same = the body, deformed)")
       .vec3("target_size_mm", Eigen::Vector3d(40, 30, 60), "mm", 0.0,

@@ -62,11 +62,7 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const Mod
     if (!ct || !organ_mask)
       scene.fail("ultrasound", "source", "simulating ultrasound needs the planning CT and the organ (ct/phantom, organ)");
     Stopwatch clock;
-    evaluation::Deformation d;
-    d.stretch = scene.number("points", "stretch");
-    d.bend_mm = scene.number("points", "bend_mm");
-    d.centre_mm = model.shape.centre_mm;
-    d.half_length_mm = 0.5 * model.shape.size_mm.x() * d.stretch;
+    const evaluation::Deformation d = deformation_from(scene, model.shape);
     // Today's anatomy: the organ deformed (its smooth shape pulled back through the map),
     // everything else where the planning CT has it, fat where the organ was and is no
     // more. Deforming the whole pelvis instead would also stretch the rectal gas round

@@ -42,18 +42,30 @@ Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
 /// Volume of a shape by counting voxel centres (mm^3).
 double shape_volume_mm3(const Shape& shape, double voxel_mm);
 
-/// A volume-preserving deformation with a known inverse, about a centre c:
-///   stretch: x' = c + S (x - c), S = diag(s, 1/sqrt(s), 1/sqrt(s))      (det 1)
-///   bend:    y' = y + b ((x' - c_x) / L)^2, with L the half-length along x  (det 1)
-/// applied stretch first. `bend_mm` is how far the ends move sideways.
+/// A volume-preserving deformation with a known inverse, about a centre c, applied in
+/// this order (each step has Jacobian determinant 1, so their composition has too):
+///   stretch: x' = c + S (x - c), S = diag(s, 1/sqrt(s), 1/sqrt(s))
+///   bend:    y' = y + b ((x' - c_x) / L)^2, with L the half-length along x
+///   twist:   (y, z) turned about the x axis through c by  w (x - c_x) / L  radians
+///   indent:  y' = y + a exp(-((x - c_x)^2 + (z - c_z)^2) / (2 sigma^2))   (rectal filling:
+///            a column of tissue moved anteriorly for a < 0, dent behind, bulge in front)
+///   push:    z' = z + p exp(-((x - c_x)^2 + (y - c_y)^2) / (2 sigma^2))   (bladder push)
+/// Each of bend, indent and push moves a coordinate by a function of the others (a shear);
+/// the twist is a rotation whose angle depends on the untouched coordinate.
 struct Deformation {
   double stretch = 1.0;
   double bend_mm = 0.0;
+  double twist_rad = 0.0;   ///< w: the turn at x = c_x +- L
+  double indent_mm = 0.0;   ///< a
+  double push_mm = 0.0;     ///< p
+  double bump_sigma_mm = 8.0;
   Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();
   double half_length_mm = 1.0;
   Eigen::Vector3d apply(const Eigen::Vector3d& p) const;
   Eigen::Vector3d inverse(const Eigen::Vector3d& p) const;
-  bool is_identity() const { return stretch == 1.0 && bend_mm == 0.0; }
+  bool is_identity() const {
+    return stretch == 1.0 && bend_mm == 0.0 && twist_rad == 0.0 && indent_mm == 0.0 && push_mm == 0.0;
+  }
 };
 
 struct SamplingOptions {

@@ -24,6 +24,13 @@ std::vector<fitting::AttractivePoint> read_points_csv(const std::filesystem::pat
 
 PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model);
 
+/// The true deformation the points section describes (evaluation::Deformation), about the
+/// shape's centre.
+evaluation::Deformation deformation_from(const config::Scene& scene, const evaluation::Shape& shape);
+
+/// A box holding the deformed shape: its corners mapped, widened by the non-affine parts.
+geometry::Aabb deformed_bounds(const evaluation::Shape& shape, const evaluation::Deformation& deformation);
+
 struct FitStageResult {
   fitting::FitResult fit;
   nlohmann::json fit_summary;    ///< run.json "fit"

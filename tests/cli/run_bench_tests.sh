@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# The evaluation benchmarks run end to end (the quick grid) and write what they promise:
+# results.csv with its columns, curves, the work-precision plot and RESULTS.md; the
+# stability matrix with every row passing. Prints "N passed, N failed".
+set -u
+bin="${ORGANFIT:?set ORGANFIT to the organfit binary}"
+tmp="$(mktemp -d)"
+trap 'rm -rf "$tmp"' EXIT
+passed=0
+failed=0
+check() {  # check NAME CONDITION...
+  local name="$1"
+  shift
+  if "$@"; then echo "ok   $name"; passed=$((passed + 1)); else echo "FAIL $name"; failed=$((failed + 1)); fi
+}
+
+"$bin" --quiet bench fit --quick --out "$tmp/fit" > "$tmp/fit.json" 2> "$tmp/fit.err"
+check bench.fit_quick_runs test $? -eq 0
+check bench.fit_results_csv_columns /usr/bin/python3 -c "
+import csv
+rows = list(csv.DictReader(open('$tmp/fit/results.csv')))
+need = 'method,shape,family,magnitude_mm,points,noise_mm,outliers,wall_s,msd_mm,hd95_mm,dice,volume_change_pct'.split(',')
+assert all(k in rows[0] for k in need), rows[0].keys()
+assert len(rows) == 100 and {r['method'] for r in rows} == {'spread', 'paper', 'tps', 'cpd', 'icp'}
+assert {r['family'] for r in rows} == {'stretch', 'bend', 'twist', 'indent', 'push'}
+assert all(0 <= float(r['dice']) <= 1 and float(r['msd_mm']) >= 0 for r in rows)"
+check bench.fit_curves_and_plot /usr/bin/python3 -c "
+import xml.dom.minidom
+lines = open('$tmp/fit/curves.csv').read().splitlines()
+assert lines[0] == 'case,method,step,wall_s,residual_mean_mm,volume_change_pct' and len(lines) > 100
+xml.dom.minidom.parse('$tmp/fit/work_precision.svg')"
+check bench.fit_results_md grep -q "MSD <= 1.0 mm:" "$tmp/fit/RESULTS.md"
+"$bin" --quiet bench stability --out "$tmp/stab" > "$tmp/stab.json" 2> /dev/null
+check bench.stability_every_row_passes test $? -eq 0
+check bench.stability_table /usr/bin/python3 -c "
+import csv, json
+rows = list(csv.DictReader(open('$tmp/stab/stability.csv')))
+assert len(rows) == 22 and all(r['pass'] == 'true' for r in rows)
+assert {r['outcome'] for r in rows} <= {'converged', 'stopped', 'refused'}
+assert json.load(open('$tmp/stab.json'))['all_pass']"
+echo "$passed passed, $failed failed"
+[[ $failed -eq 0 ]]
