@@ -7,8 +7,11 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <optional>
 
+#include "organfit/dicom/structure_set.h"
 #include "organfit/evaluation/baselines.h"
+#include "organfit/phantom/pelvis.h"
 #include "organfit/fitting/global_fit.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/itkbridge/tps.h"
@@ -25,8 +28,26 @@ namespace organfit::pipeline {
 namespace {
 
 struct ShapeCase {
-  std::string name, yaml;  ///< yaml: the body and model sections
+  std::string name, yaml;                  ///< yaml: the body and model sections
+  std::optional<evaluation::Shape> organ;  ///< a mask shape (phantom prostate, real GTV)
 };
+
+/// The pelvis phantom's prostate (label mask on its CT grid).
+evaluation::Shape phantom_prostate() {
+  const phantom::PelvisPhantom ph = phantom::make_pelvis_phantom(phantom::PelvisOptions{});
+  auto mask = std::make_shared<geometry::LabelVolume>(ph.labels.geometry);
+  for (size_t v = 0; v < mask->labels.size(); ++v) mask->labels[v] = ph.labels.labels[v] == phantom::kProstate;
+  return evaluation::make_mask_shape(mask);
+}
+
+/// The real GTV of ../shared/data/ct-sts-004 (its contours matched by position).
+std::optional<evaluation::Shape> real_gtv(const fs::path& data) {
+  std::error_code ec;
+  if (!fs::exists(data / "ct-sts-004" / "rtstruct.dcm", ec)) return std::nullopt;
+  const dicom::CtSeries ct = dicom::read_ct_series(data / "ct-sts-004" / "ct");
+  auto roi = dicom::rasterise_roi(dicom::read_rtstruct(data / "ct-sts-004" / "rtstruct.dcm"), "GTV_Mass_CT", ct, "ct-sts-004");
+  return evaluation::make_mask_shape(std::make_shared<geometry::LabelVolume>(std::move(roi.mask)));
+}
 
 struct Row {
   std::string method, shape, family;
@@ -121,14 +142,17 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   Stopwatch total;
 
   std::vector<ShapeCase> shapes = {
-      {"prostate", "body:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\n"},
-      {"cube", "body:\n  shape: box\n  size_mm: [30, 30, 30]\nmodel:\n  radius_mm: 1.75\n"}};
+      {"phantom_prostate", "body:\nmodel:\n  radius_mm: 1.92\n", phantom_prostate()},
+      {"cube", "body:\n  shape: box\n  size_mm: [30, 30, 30]\nmodel:\n  radius_mm: 1.75\n", std::nullopt}};
   std::vector<std::string> families = {"stretch", "bend", "twist", "indent", "push"};
   std::vector<double> magnitudes = {5, 10};
   std::vector<int> counts = {87};
   std::vector<double> noises = {0.5}, outliers = {0.0};
   if (!o.quick) {
-    shapes.push_back({"lung", "body:\n  shape: lung\n  size_mm: [40, 30, 60]\nmodel:\n  radius_mm: 1.9\n"});
+    shapes.push_back({"egg", "body:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\n", std::nullopt});
+    shapes.push_back({"lung", "body:\n  shape: lung\n  size_mm: [40, 30, 60]\nmodel:\n  radius_mm: 1.9\n", std::nullopt});
+    if (auto gtv = real_gtv(ORGANFIT_SHARED_DATA_DIR_STRING))
+      shapes.push_back({"real_gtv_sts004", "body:\nmodel:\n  radius_mm: 3.0\n", std::move(gtv)});
     magnitudes = {2, 5, 10, 15};
     counts = {20, 50, 87, 200};
     noises = {0, 0.5, 1.0};
@@ -140,7 +164,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   int case_id = 0;
   for (const auto& shape : shapes) {
     const config::Scene base = config::parse_scene("scene:\n  seed: 1\n" + shape.yaml, o.out / "bench.yaml", scene_schema());
-    const ModelStageResult model = run_model_stage(base);
+    const ModelStageResult model = run_model_stage(base, shape.organ ? &*shape.organ : nullptr);
     const double rho = model.model->radius_mm();
     const fitting::SurfaceSamples full = fitting::reference_surface(model.reference, 1);
     // ~400 surface samples for the baselines (CPD's M x M system).

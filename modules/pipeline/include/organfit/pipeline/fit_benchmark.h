@@ -23,7 +23,11 @@ namespace organfit::pipeline {
 
 struct FitBenchOptions {
   std::filesystem::path out;
-  bool quick = false;  ///< 2 shapes x 5 families x 2 magnitudes, 87 points, 0.5 mm noise
+  /// quick: the phantom's prostate and a 30 mm cube x 5 families x 5 and 10 mm, 87
+  /// points, 0.5 mm noise, no outliers (20 cases). Full: also an egg, a lung-like body and
+  /// the real GTV of ct-sts-004; 2, 5, 10, 15 mm; 20, 50, 87, 200 points; 0, 0.5, 1 mm
+  /// noise; 0 and 5% outliers.
+  bool quick = false;
   int threads = 0;
 };
 
