@@ -23,3 +23,13 @@ if(ORGANFIT_SANITIZE)
   target_compile_definitions(organfit_sanitizer_defaults PRIVATE
     ORGANFIT_UBSAN_SUPPRESSIONS="${PROJECT_SOURCE_DIR}/tests/sanitizers/ubsan.supp")
 endif()
+
+# libFuzzer (clang only): every organfit library instrumented for coverage, with ASan and
+# UBSan; the fuzz targets in tests/fuzz/ link libFuzzer's main.
+if(ORGANFIT_FUZZ)
+  if(NOT CMAKE_CXX_COMPILER_ID STREQUAL "Clang")
+    message(FATAL_ERROR "ORGANFIT_FUZZ needs clang (cmake -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_C_COMPILER=clang)")
+  endif()
+  add_compile_options(-fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer)
+  add_link_options(-fsanitize=address,undefined)
+endif()

@@ -35,6 +35,9 @@ int run_main(int argc, char** argv) {
   bool quiet = false, verbose = false;
   app.add_flag("-q,--quiet", quiet, "Only warnings and errors; no progress");
   app.add_flag("-v,--verbose", verbose, "More detail in logs and errors");
+  organfit::pipeline::RunOptions run_options;
+  app.add_flag("--show-phi", run_options.show_phi,
+               "Allow the patient's name, ID and birth date in the report (report.show_patient); never in logs");
 
   std::string scene_file, out_dir;
   auto* run = app.add_subcommand("run", "Run a scene: the stages it names, outputs into --out");
@@ -212,7 +215,7 @@ int run_main(int argc, char** argv) {
     std::cout << scene_file << ": valid (" << scene.sections().size() << " sections)\n";
   } else if (*run) {
     const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
-    organfit::pipeline::run_scene(scene, out_dir);
+    organfit::pipeline::run_scene(scene, out_dir, run_options);
     spdlog::info("done: {}/run.json", out_dir);
   } else if (*bench_stability) {
     const auto summary = organfit::pipeline::run_stability_benchmark(stb);

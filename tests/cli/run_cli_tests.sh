@@ -332,6 +332,40 @@ for scene_file in "$src"/pipelines/*.yaml; do
   check "shipped.$name" bash -c "[[ $code -eq 0 || ( $code -eq 3 && -s '$tmp/shipped/$name/run.json' ) ]]"
 done
 
+# determinism: the same scene, seed and threads give bit-identical meshes and label maps,
+# and (with export.fixed_uids) identical RT Structure Sets; without it only UIDs and
+# dates differ. Patient identifiers: in no output but the DICOM files, nor in the logs,
+# unless --show-phi.
+printf 'scene:\n  threads: 2\nphantom:\n  columns: 128\n  rows: 128\n  pixel_mm: 3.2\n  slices: 24\n  slice_mm: 5\norgan:\n  roi: Prostate\nmodel:\n  radius_mm: 2.5\npoints:\n  count: 60\n  stretch: 1.1\nfit:\n  method: spread\nexport:\n  rtstruct: fit.dcm\n  labels: fit.nrrd\n  mesh: fit.stl\n  fixed_uids: %s\nreport:\n  file: report.html\n  show_patient: true\n' true > "$tmp/det_fixed.yaml"
+sed 's/fixed_uids: true/fixed_uids: false/' "$tmp/det_fixed.yaml" > "$tmp/det_new.yaml"
+for run in a b; do
+  "$bin" -v run "$tmp/det_fixed.yaml" --out "$tmp/det_fixed_$run" > /dev/null 2> "$tmp/det_log_$run.txt"
+  "$bin" --quiet run "$tmp/det_new.yaml" --out "$tmp/det_new_$run" > /dev/null 2>&1
+done
+for f in fit.stl fit.nrrd fit.dcm; do
+  check "determinism.$f" cmp -s "$tmp/det_fixed_a/$f" "$tmp/det_fixed_b/$f"
+done
+check determinism.same_history_but_wall_time /usr/bin/python3 -c "
+rows = [[l.split(',')[:1] + l.split(',')[2:] for l in open('$tmp/det_fixed_%s/history.csv' % r).read().splitlines()] for r in 'ab']
+assert rows[0] == rows[1] and len(rows[0]) > 2"
+check determinism.new_uids_differ bash -c "! cmp -s '$tmp/det_new_a/fit.dcm' '$tmp/det_new_b/fit.dcm'"
+check determinism.only_uids_and_dates_differ /usr/bin/python3 -c "
+import pydicom
+a, b = (pydicom.dcmread('$tmp/det_new_%s/fit.dcm' % r) for r in 'ab')
+assert a.SOPInstanceUID != b.SOPInstanceUID
+ca = [c.ContourData for r in a.ROIContourSequence for c in r.ContourSequence]
+cb = [c.ContourData for r in b.ROIContourSequence for c in r.ContourSequence]
+assert ca == cb and [r.ROIName for r in a.StructureSetROISequence] == [r.ROIName for r in b.StructureSetROISequence]
+skip = {'SOPInstanceUID', 'SeriesInstanceUID', 'InstanceCreationDate', 'InstanceCreationTime', 'StructureSetDate', 'StructureSetTime', 'ROIContourSequence'}
+for e in a:
+    if e.keyword and e.keyword not in skip and e.VR != 'SQ':
+        assert e.value == b[e.tag].value, e.keyword"
+check phi.not_in_outputs_or_logs bash -c "! grep -rlE 'Phantom\^Pelvis|PELVIS-1' --exclude='*.dcm' '$tmp/det_fixed_a' '$tmp/det_log_a.txt'"
+check phi.warned_that_the_report_hides_it grep -q "needs --show-phi" "$tmp/det_log_a.txt"
+"$bin" --quiet --show-phi run "$tmp/det_fixed.yaml" --out "$tmp/det_phi" > /dev/null 2>&1
+check phi.shown_only_with_show_phi grep -q "Phantom^Pelvis (ID PELVIS-1)" "$tmp/det_phi/report.html"
+check phi.still_not_in_run_json bash -c "! grep -qE 'Phantom\^Pelvis|PELVIS-1' '$tmp/det_phi/run.json'"
+
 # SIGINT during a fit: stops within a second, exit 130, no final-named output, no temporary
 printf 'scene:\n  name: long\nbody:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\npoints:\n  count: 10000\nfit:\n  method: paper\n  max_wall_s: 60\n' > "$tmp/long.yaml"
 "$bin" --quiet run "$tmp/long.yaml" --out "$tmp/interrupted" > /dev/null 2> "$tmp/err" &

@@ -53,18 +53,24 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   std::error_code ec;
   if (!fs::is_directory(folder, ec)) fail("not a folder");
 
+  detail::quiet_gdcm();
   gdcm::Directory directory;
   directory.Load(folder.string(), false);
-  const auto& files = directory.GetFilenames();
-  if (files.empty()) fail("the folder is empty: no CT series");
+  std::vector<std::string> files;
+  int unsafe = 0;
+  for (const auto& f : directory.GetFilenames()) {
+    if (detail::safe_for_gdcm(f)) files.push_back(f);
+    else ++unsafe;  // truncated inside its meta header: counted with the files that are not DICOM
+  }
+  if (files.empty() && unsafe == 0) fail("the folder is empty: no CT series");
   gdcm::Scanner scanner;
   for (const auto& t : {kModality, kSeriesUid, kSeriesDescription, kSopUid, kSopClass, kPosition, kOrientation,
                         kPixelSpacing, kRows, kColumns, kFrameOfReference, kGantryTilt})
     scanner.AddTag(t);
-  if (!scanner.Scan(files)) fail("cannot scan the folder");
+  if (!files.empty() && !scanner.Scan(files)) fail("cannot scan the folder");
 
   CtSeries series;
-  int not_dicom = 0, other_modality = 0;
+  int not_dicom = unsafe, other_modality = 0;
   std::map<std::string, std::vector<Header>> by_series;
   for (const auto& f : files) {
     if (!scanner.IsKey(f.c_str())) {
@@ -210,6 +216,10 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     std::vector<char> buffer(image.GetBufferLength());
     if (!image.GetBuffer(buffer.data())) fail("cannot decode the pixels of " + name);
     if (buffer.size() < per_slice * pf.GetPixelSize()) fail(name + ": pixel data shorter than its size says");
+    // GDCM reads a file cut short inside its pixel data with only a warning: refuse it.
+    if (!reader.GetFile().GetHeader().GetDataSetTransferSyntax().IsEncapsulated() &&
+        !detail::native_pixel_data_complete(slices[s].file))
+      fail(name + ": its pixel data is cut short (a truncated file)");
     const double slope = image.GetSlope(), intercept = image.GetIntercept();
     float* out = series.hu.data() + s * per_slice;
     for (size_t v = 0; v < per_slice; ++v) {

@@ -48,6 +48,8 @@ const Roi* StructureSet::find(const std::string& name) const {
 
 StructureSet read_rtstruct(const fs::path& file) {
   const std::string where = file.string();
+  detail::quiet_gdcm();
+  if (!detail::safe_for_gdcm(where)) throw InputError(where + ": cannot read as DICOM (missing, truncated or not DICOM)");
   gdcm::Reader reader;
   reader.SetFileName(where.c_str());
   if (!reader.Read()) throw InputError(where + ": cannot read as DICOM (missing, truncated or not DICOM)");

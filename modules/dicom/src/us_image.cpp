@@ -9,6 +9,7 @@
 
 #include <cstring>
 
+#include "dicom_values.h"
 #include "organfit/support/error.h"
 
 namespace organfit::dicom {
@@ -31,7 +32,8 @@ bool value_of(const gdcm::DataSet& ds, uint16_t group, uint16_t element, T& out)
 UsImage read_us_image(const std::filesystem::path& file, double pixel_mm) {
   const std::string where = file.string();
   auto fail = [&](const std::string& why) -> void { throw InputError(where + ": " + why); };
-  gdcm::Trace::WarningOff();  // e.g. "No spacing value found": ultrasound has regions instead
+  detail::quiet_gdcm();  // e.g. "No spacing value found": ultrasound has regions instead
+  if (!detail::safe_for_gdcm(where)) fail("cannot read as DICOM (missing, truncated or not DICOM)");
   gdcm::ImageReader reader;
   reader.SetFileName(where.c_str());
   if (!reader.Read()) fail("cannot read as a DICOM image");

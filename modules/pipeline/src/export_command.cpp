@@ -46,6 +46,10 @@ nlohmann::json run_export_command(const ExportCommand& c) {
   }
   PendingExport pending = prepare_export(saved.model.state.x, saved.model.model->radius_mm(), ct ? &*ct : nullptr, request);
   for (const auto& w : pending.warnings) spdlog::warn(w);
+  for (const auto& f : {c.rtstruct, c.labels, c.mesh}) {
+    std::error_code ec;
+    if (!f.empty() && !f.parent_path().empty()) fs::create_directories(f.parent_path(), ec);
+  }
   pending.commit();
   return pending.summary;
 }

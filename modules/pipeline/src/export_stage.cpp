@@ -50,7 +50,9 @@ PendingExport prepare_export(const particles::Positions& x, double rho, const di
       out.summary["copied_rois"] = copied;
       out.files.push_back(r.rtstruct.filename().string());
       const std::filesystem::path file = r.rtstruct;
-      out.writes_.push_back([file, rois, ct](nlohmann::json&) { dicom::write_rtstruct(file, *ct, *rois); });
+      dicom::RtstructWriteOptions options;
+      options.fixed_uids_and_dates = r.fixed_uids;
+      out.writes_.push_back([file, rois, ct, options](nlohmann::json&) { dicom::write_rtstruct(file, *ct, *rois, options); });
     }
     if (!r.labels.empty()) {
       out.files.push_back(r.labels.filename().string());

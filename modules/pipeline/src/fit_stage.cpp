@@ -64,6 +64,23 @@ std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
   return points;
 }
 
+std::vector<fitting::AttractivePoint> read_points_file(const fs::path& file) {
+  const std::string ext = file.extension().string();
+  std::vector<fitting::AttractivePoint> points;
+  if (ext == ".ply" || ext == ".vtk" || ext == ".vtp") {
+    for (const auto& p : meshing::read_point_set(file)) {
+      if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])))
+        throw InputError(file.string() + ": a point has a non-finite coordinate");
+      if (!(p[3] > 0 && p[3] <= 1)) throw InputError(file.string() + ": a confidence is outside (0, 1]");
+      points.push_back({Eigen::Vector3d(p[0], p[1], p[2]), p[3]});
+    }
+  } else {
+    points = read_points_csv(file);
+  }
+  if (points.empty()) throw InputError(file.string() + ": no points in the file");
+  return points;
+}
+
 evaluation::Deformation deformation_from(const config::Scene& scene, const evaluation::Shape& shape) {
   evaluation::Deformation d;
   d.stretch = scene.number("points", "stretch");
@@ -80,18 +97,7 @@ evaluation::Deformation deformation_from(const config::Scene& scene, const evalu
 PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model) {
   PointsStageResult r;
   if (scene.text("points", "source") == "file") {
-    const fs::path file = scene.path("points", "file");
-    const std::string ext = file.extension().string();
-    if (ext == ".ply" || ext == ".vtk" || ext == ".vtp") {
-      for (const auto& p : meshing::read_point_set(file)) {
-        if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])))
-          throw InputError(file.string() + ": a point has a non-finite coordinate");
-        if (!(p[3] > 0 && p[3] <= 1)) throw InputError(file.string() + ": a confidence is outside (0, 1]");
-        r.points.push_back({Eigen::Vector3d(p[0], p[1], p[2]), p[3]});
-      }
-    } else {
-      r.points = read_points_csv(file);
-    }
+    r.points = read_points_file(scene.path("points", "file"));
     r.summary = {{"source", "file"}, {"count", r.points.size()}};
     return r;
   }

@@ -57,7 +57,7 @@ void prepare_output_folder(const config::Scene& scene, const fs::path& out_dir) 
 
 }  // namespace
 
-nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
+nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, const RunOptions& run_options) {
   prepare_output_folder(scene, out_dir);
   const long long threads = scene.integer("scene", "threads");
   if (threads > 0) omp_set_num_threads(static_cast<int>(threads));
@@ -329,6 +329,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
     request.labels = in_out("labels");
     request.mesh = in_out("mesh");
     request.roi_name = scene.text("export", "roi_name");
+    request.fixed_uids = scene.flag("export", "fixed_uids");
     if (request.roi_name.empty()) request.roi_name = organ_name + "_fit";
     if ((!request.rtstruct.empty() || !request.labels.empty() ||
          (scene.has_section("report") && ct_reference)) && !ct) {
@@ -413,7 +414,9 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir) {
     if (points)
       for (const auto& p : points->points) context.points_mm.push_back(p.p_mm);
     context.residuals_mm = residuals_mm;
-    context.show_patient = scene.flag("report", "show_patient");
+    context.show_patient = scene.flag("report", "show_patient") && run_options.show_phi;
+    if (scene.flag("report", "show_patient") && !run_options.show_phi)
+      warn("report: the patient's name and ID are not shown: report.show_patient needs --show-phi on the command line");
     const std::string file = scene.text("report", "file");
     run["outputs"].push_back(file);
     record_stage("report", clock.elapsed_s());  // the page's own time is shown without itself

@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include "organfit/pipeline/fit_stage.h"
+
 #include <Eigen/LU>
 
 namespace organfit::pipeline {
@@ -155,11 +157,12 @@ config::Schema build_schema() {
       .text("mesh", "", "surface mesh file name inside --out: .stl, .vtp, .ply, .obj (empty: none)")
       .text("roi_name", "", "name of the exported ROI (default: the organ's ROI name + _fit)")
       .flag("copy_other_rois", false, "copy the input structure set's other ROIs into the exported one")
+      .flag("fixed_uids", false, "derive the RT Structure Set's UIDs from the CT's and fix its dates (tests)")
       .text("model", "", "model file name inside --out (empty: none): the model as built, or as fitted, "
                          "for session scenes (planning.model) and organfit export");
   s.section("report", "report.html: one self-contained page a physicist reads at a glance")
       .text("file", "report.html", "report file name inside --out")
-      .flag("show_patient", false, "show the CT's patient name and ID in the report (off: never shown)");
+      .flag("show_patient", false, "show the CT's patient name and ID in the report (also needs --show-phi)");
   return s;
 }
 
@@ -212,6 +215,8 @@ void check_scene_rules(const config::Scene& scene) {
     if (scene.text("points", "source") == "file" && !scene.is_given("points", "file")) {
       scene.fail("points", "source", "source is 'file' but points.file is not given");
     }
+    // The file's contents are checked now, before any work (a bad line fails validate).
+    if (scene.text("points", "source") == "file") (void)read_points_file(scene.path("points", "file"));
     if (scene.text("points", "source") == "ultrasound" && !scene.has_section("ultrasound"))
       scene.fail("points", "source", "source is 'ultrasound' but the scene has no 'ultrasound' section");
     if (scene.text("points", "source") == "generate" && !scene.has_section("body") && !scene.has_section("organ") &&

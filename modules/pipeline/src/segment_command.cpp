@@ -35,6 +35,8 @@ SegmentResult run_segment(const SegmentRequest& r) {
     mask = std::move(organ.mask);
   }
   result.volume_cm3 = mask.volume_mm3(1) / 1000.0;
+  std::error_code ec;
+  if (!r.out.parent_path().empty()) std::filesystem::create_directories(r.out.parent_path(), ec);
   itkbridge::write_label_volume(r.out, mask);
   return result;
 }

@@ -149,6 +149,7 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
                             summary["centre_mm"].dump() + " mm, radius " + fmt::format("{:.1f}", o.r_max_mm) + " mm)");
   std::string csv = "x_mm,y_mm,z_mm,confidence\n";
   for (const auto& p : found.points) csv += fmt::format("{:.3f},{:.3f},{:.3f},{:.3f}\n", p.p_mm.x(), p.p_mm.y(), p.p_mm.z(), p.confidence);
+  if (!c.out.parent_path().empty()) fs::create_directories(c.out.parent_path(), ec);
   write_file_atomically(c.out, csv);
   summary["out"] = c.out.string();
   return summary;

@@ -26,6 +26,7 @@ struct ExportRequest {
   /// ROIs to copy into the RT Structure Set beside the fitted one (from the input one).
   const dicom::StructureSet* copy_rois_from = nullptr;
   std::string skip_roi;  ///< not copied (the organ the fit replaces is kept under its own name)
+  bool fixed_uids = false;  ///< deterministic UIDs and dates (tests)
 };
 
 class PendingExport {

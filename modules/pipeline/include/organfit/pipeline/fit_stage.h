@@ -22,6 +22,10 @@ struct PointsStageResult {
 /// Throws InputError "file:line: reason" on text, missing columns, NaN or Inf.
 std::vector<fitting::AttractivePoint> read_points_csv(const std::filesystem::path& file);
 
+/// A point set by extension: CSV (read_points_csv), or the vertices of a .ply, .vtk or
+/// .vtp. Throws InputError naming the file on bad content or no points.
+std::vector<fitting::AttractivePoint> read_points_file(const std::filesystem::path& file);
+
 PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model);
 
 /// The true deformation the points section describes (evaluation::Deformation), about the

@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# The bad-input corpus (tests/bad_inputs/make_corpus.py): every case through the organfit
+# command. Refusals: exit 2, one line on stderr naming the file (or scene key) and the
+# problem, nothing left in the output folder, inputs unchanged. Tolerated defects: exit
+# 0 with the expected warning. Prints "N passed, N failed".
+set -u
+src="$1"
+bin="${ORGANFIT:?set ORGANFIT to the organfit binary}"
+data="$src/../shared/data"
+tmp="$(mktemp -d)"
+trap 'rm -rf "$tmp"' EXIT
+passed=0
+failed=0
+if ! /usr/bin/python3 -c 'import pydicom' 2> /dev/null || [[ ! -d "$data/us-plus" ]]; then
+  echo "skip: the corpus needs python3-pydicom and ../shared/data (scripts/setup.sh installs pydicom)"
+  exit 0
+fi
+/usr/bin/python3 "$src/tests/bad_inputs/make_corpus.py" "$tmp/corpus" "$bin" "$data" > /dev/null || { echo "FAIL corpus generation"; exit 1; }
+for dir in "$tmp"/corpus/*/; do
+  name=$(basename "$dir")
+  dir=${dir%/}
+  mapfile -t args < <(/usr/bin/python3 -c "
+import json, sys
+c = json.load(open('$dir/case.json'))
+for a in c['args']: print(a.replace('{case}', '$dir').replace('{data}', '$data'))")
+  code=$(/usr/bin/python3 -c "import json; print(json.load(open('$dir/case.json'))['code'])")
+  expect=$(/usr/bin/python3 -c "import json; print(json.load(open('$dir/case.json'))['expect'])")
+  before=$(cd "$dir" && find . -path ./out -prune -o -type f -print0 | sort -z | xargs -0 md5sum | md5sum)
+  data_before=$(find "$data/us-plus" "$data/us-dicom" -type f -print0 | sort -z | xargs -0 md5sum | md5sum)
+  timeout 120 "$bin" "${args[@]}" > "$tmp/out.txt" 2> "$tmp/err.txt"
+  got=$?
+  after=$(cd "$dir" && find . -path ./out -prune -o -type f -print0 | sort -z | xargs -0 md5sum | md5sum)
+  data_after=$(find "$data/us-plus" "$data/us-dicom" -type f -print0 | sort -z | xargs -0 md5sum | md5sum)
+  lines=$(grep -c . "$tmp/err.txt")
+  why=""
+  [[ $got -ne $code ]] && why="exit $got, expected $code"
+  [[ -z "$why" && -n "$expect" ]] && ! grep -qF -- "$expect" "$tmp/err.txt" && why="stderr lacks '$expect'"
+  if [[ -z "$why" && $code -eq 2 ]]; then
+    [[ $lines -ne 1 ]] && why="$lines lines on stderr"
+    [[ -z "$why" ]] && ! grep -qE "(/|\.yaml:[0-9]+: [a-z_]+\.|--[a-z]+|segment: )" "$tmp/err.txt" && why="names no file, key or option"
+    [[ -z "$why" && -d "$dir/out" && -n "$(ls -A "$dir/out")" ]] && why="left outputs: $(ls -A "$dir/out")"
+  fi
+  [[ -z "$why" && "$before" != "$after" ]] && why="an input file changed"
+  [[ -z "$why" && "$data_before" != "$data_after" ]] && why="a shared data file changed"
+  if [[ -z "$why" ]]; then
+    echo "ok   bad_input.$name"
+    passed=$((passed + 1))
+  else
+    echo "FAIL bad_input.$name: $why: $(head -c 300 "$tmp/err.txt")"
+    failed=$((failed + 1))
+  fi
+done
+echo "$passed passed, $failed failed"
+[[ $failed -eq 0 && $passed -ge 40 ]]
