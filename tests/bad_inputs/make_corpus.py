@@ -40,7 +40,7 @@ def edit_all(d, fn):
         edit_ct(d, i, fn)
 
 # --- CT series defects -------------------------------------------------------------
-d = case('ct_truncated_slice', SEGMENT, 'CT0006.dcm: its pixel data is cut short', names='CT0006.dcm')
+d = case('ct_truncated_slice', SEGMENT, 'CT0006.dcm: a truncated or corrupt DICOM file', names='CT0006.dcm')
 with open(os.path.join(d, 'ct', 'CT0006.dcm'), 'r+b') as f:
     f.truncate(os.path.getsize(os.path.join(d, 'ct', 'CT0006.dcm')) // 2)
 d = case('ct_two_series_no_choice', SEGMENT, '2 CT series; choose one')

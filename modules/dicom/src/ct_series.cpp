@@ -57,10 +57,11 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   gdcm::Directory directory;
   directory.Load(folder.string(), false);
   std::vector<std::string> files;
-  int unsafe = 0;
+  const int unsafe = 0;
   for (const auto& f : directory.GetFilenames()) {
-    if (detail::safe_for_gdcm(f)) files.push_back(f);
-    else ++unsafe;  // truncated inside its meta header: counted with the files that are not DICOM
+    if (!detail::safe_for_gdcm(f))  // a DICOM file whose lengths run past its end
+      fail(fs::path(f).filename().string() + ": a truncated or corrupt DICOM file (its elements run past its end)");
+    files.push_back(f);
   }
   if (files.empty() && unsafe == 0) fail("the folder is empty: no CT series");
   gdcm::Scanner scanner;

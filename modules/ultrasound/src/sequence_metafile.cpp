@@ -93,6 +93,9 @@ SequenceMetafile read_sequence_metafile(const fs::path& file, bool read_pixels) 
     raw.assign(std::istreambuf_iterator<char>(in), {});
   } else {
     const fs::path data = file.parent_path() / data_file;
+    std::error_code ec;
+    if (data_file.empty() || !fs::is_regular_file(data, ec))  // found by fuzzing: a folder named here
+      fail("its data file " + (data_file.empty() ? std::string("(none named)") : data.filename().string()) + " is missing");
     std::ifstream d(data, std::ios::binary);
     if (!d) fail("its data file " + data.filename().string() + " is missing");
     raw.assign(std::istreambuf_iterator<char>(d), {});
