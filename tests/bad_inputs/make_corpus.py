@@ -170,7 +170,15 @@ open(os.path.join(d, 'full', 'keep.txt'), 'w').write('mine\n')
 # --- tolerated: a warning and a correct result ---------------------------------------------------
 d = case('tolerated_stray_files', SEGMENT, 'not DICOM were ignored', code=0)
 open(os.path.join(d, 'ct', 'README'), 'w').write('notes\n')
-open(os.path.join(d, 'ct', 'DICOMDIR'), 'wb').write(b'\0' * 128 + b'DICM' + b'\0' * 64)
+from pydicom.dataset import FileDataset, FileMetaDataset
+meta = FileMetaDataset()
+meta.MediaStorageSOPClassUID = '1.2.840.10008.1.3.10'  # Media Storage Directory
+meta.MediaStorageSOPInstanceUID = '1.2.826.0.1.3680043.2.1125.99.7'
+meta.TransferSyntaxUID = '1.2.840.10008.1.2.1'
+dicomdir = FileDataset(os.path.join(d, 'ct', 'DICOMDIR'), {}, file_meta=meta, preamble=b'\0' * 128)
+dicomdir.FileSetID = 'ORGANFIT'
+dicomdir.is_little_endian, dicomdir.is_implicit_VR = True, False
+dicomdir.save_as(os.path.join(d, 'ct', 'DICOMDIR'), write_like_original=False)
 d = case('tolerated_compressed_slices', SEGMENT, '', code=0)
 for name in ct_files:
     p = os.path.join(d, 'ct', name)

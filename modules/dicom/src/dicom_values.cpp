@@ -40,48 +40,95 @@ void quiet_gdcm() {
   gdcm::Trace::DebugOff();
 }
 
+namespace {
+
+constexpr const char* kLongVrs[] = {"OB", "OW", "OF", "SQ", "UT", "UN", "OD", "OL", "UC", "UR", "OV"};
+
+std::uint32_t u32_at(const unsigned char* p) {
+  return p[0] | (p[1] << 8) | (p[2] << 16) | (static_cast<std::uint32_t>(p[3]) << 24);
+}
+
+/// Walks explicit-VR little-endian elements in [at, end): every declared length must fit,
+/// sequences and items included (undefined lengths end at their delimiters). Returns the
+/// position after the last element walked, or -1 when a length runs past `end`. Stops
+/// (returning `at`) at anything that is not explicit VR: GDCM decides about those.
+long long walk(const std::vector<unsigned char>& b, long long at, long long end, int depth, bool& ok) {
+  if (depth > 32) return ok = false, -1;  // nesting deeper than any real structure set
+  while (at + 8 <= end) {
+    const unsigned char* e = b.data() + at;
+    const std::uint16_t group = static_cast<std::uint16_t>(e[0] | (e[1] << 8));
+    const std::uint16_t element = static_cast<std::uint16_t>(e[2] | (e[3] << 8));
+    if (group == 0xFFFE) {  // item or delimiter: tag + 4-byte length, no VR
+      const std::uint32_t length = u32_at(e + 4);
+      if (element == 0xE00D || element == 0xE0DD) return at + 8;  // item / sequence delimiter
+      if (element != 0xE000) return ok = false, -1;
+      if (length == 0xFFFFFFFFu) {
+        at = walk(b, at + 8, end, depth + 1, ok);
+        if (!ok) return -1;
+      } else {
+        if (at + 8 + length > end) return ok = false, -1;
+        walk(b, at + 8, at + 8 + length, depth + 1, ok);
+        if (!ok) return -1;
+        at += 8 + length;
+      }
+      continue;
+    }
+    if (!(std::isupper(e[4]) && std::isupper(e[5]))) return at;  // not explicit VR here
+    const std::string vr(reinterpret_cast<const char*>(e + 4), 2);
+    const bool long_form = std::any_of(std::begin(kLongVrs), std::end(kLongVrs), [&](const char* v) { return vr == v; });
+    long long header = 8, length = e[6] | (e[7] << 8);
+    if (long_form) {
+      if (at + 12 > end) return ok = false, -1;
+      header = 12;
+      length = u32_at(e + 8);
+      if (length == 0xFFFFFFFFLL) {  // undefined length: a sequence (or encapsulated pixels) of items
+        at = walk(b, at + 12, end, depth + 1, ok);
+        if (!ok) return -1;
+        continue;
+      }
+    }
+    if (at + header + length > end) return ok = false, -1;
+    if (vr == "SQ") {
+      walk(b, at + header, at + header + length, depth + 1, ok);
+      if (!ok) return -1;
+    }
+    at += header + length;
+  }
+  return at;
+}
+
+}  // namespace
+
 bool safe_for_gdcm(const std::string& file) {
   std::ifstream in(file, std::ios::binary);
   if (!in) return false;
-  in.seekg(0, std::ios::end);
-  const long long size = in.tellg();
+  std::vector<unsigned char> b((std::istreambuf_iterator<char>(in)), {});
+  const long long size = static_cast<long long>(b.size());
   if (size < 132) return size > 0;  // no preamble: a raw data set, GDCM reads it or refuses
-  char head[144] = {};
-  in.seekg(0);
-  in.read(head, std::min<long long>(size, 144));
-  if (std::memcmp(head + 128, "DICM", 4) != 0) return true;  // not Part 10: GDCM tries as raw
-  // The first meta element is (0002,0000) UL 4 <length>: the group must fit in the file.
+  if (std::memcmp(b.data() + 128, "DICM", 4) != 0) return true;  // not Part 10: GDCM tries as raw
+  // The File Meta group: (0002,0000) UL 4 <length> first, then group-2 elements that must
+  // each be well formed and end inside the group (GDCM 3.0 aborts on an assertion there).
   if (size < 144) return false;
-  const auto* b = reinterpret_cast<const unsigned char*>(head + 132);
-  if (!(b[0] == 0x02 && b[1] == 0x00 && b[2] == 0x00 && b[3] == 0x00 && b[4] == 'U' && b[5] == 'L')) return true;
-  const std::uint32_t group_length = b[8] | (b[9] << 8) | (b[10] << 16) | (static_cast<std::uint32_t>(b[11]) << 24);
-  if (144 + static_cast<long long>(group_length) > size) return false;
-  // The data set's top-level elements (explicit VR little endian): each declared length
-  // must fit in the file. GDCM allocates by declared length before reading: a corrupt
-  // length of a gigabyte cost 1.8 GB and seconds per file (found by fuzzing). Checking
-  // stops at the first element of undefined length (a sequence: its items are not walked).
-  std::vector<char> rest(static_cast<size_t>(size));
-  in.clear();
-  in.seekg(0);
-  in.read(rest.data(), size);
-  long long at = 144 + group_length;
-  static const char* long_vrs[] = {"OB", "OW", "OF", "SQ", "UT", "UN", "OD", "OL", "UC", "UR", "OV"};
-  while (at + 8 <= size) {
-    const auto* e = reinterpret_cast<const unsigned char*>(rest.data() + at);
+  const unsigned char* m = b.data() + 132;
+  if (!(m[0] == 0x02 && m[1] == 0x00 && m[2] == 0x00 && m[3] == 0x00 && m[4] == 'U' && m[5] == 'L')) return false;
+  const long long meta_end = 144 + static_cast<long long>(u32_at(m + 8));
+  if (meta_end > size) return false;
+  for (long long at = 144; at < meta_end;) {
+    if (at + 8 > meta_end) return false;
+    const unsigned char* e = b.data() + at;
+    if (!(e[0] == 0x02 && e[1] == 0x00 && std::isupper(e[4]) && std::isupper(e[5]))) return false;
     const std::string vr(reinterpret_cast<const char*>(e + 4), 2);
-    if (!(std::isupper(e[4]) && std::isupper(e[5]))) return true;  // implicit VR or not parseable: GDCM decides
-    const bool long_form = std::any_of(std::begin(long_vrs), std::end(long_vrs), [&](const char* v) { return vr == v; });
-    long long header = 8, length = e[6] | (e[7] << 8);
-    if (long_form) {
-      if (at + 12 > size) return false;
-      header = 12;
-      length = e[8] | (e[9] << 8) | (e[10] << 16) | (static_cast<long long>(e[11]) << 24);
-      if (length == 0xFFFFFFFFLL) return true;
-    }
-    if (at + header + length > size) return false;
+    const bool long_form = std::any_of(std::begin(kLongVrs), std::end(kLongVrs), [&](const char* v) { return vr == v; });
+    const long long header = long_form ? 12 : 8;
+    const long long length = long_form ? (at + 12 <= meta_end ? u32_at(e + 8) : -1) : (e[6] | (e[7] << 8));
+    if (length < 0 || at + header + length > meta_end) return false;
     at += header + length;
   }
-  return true;
+  // The data set: every declared length must fit in the file. GDCM allocates by declared
+  // length before reading: a corrupt length cost 1.8 GB per file (found by fuzzing).
+  bool ok = true;
+  walk(b, meta_end, size, 0, ok);
+  return ok;
 }
 
 bool native_pixel_data_complete(const std::string& file) {
