@@ -57,23 +57,11 @@ nlohmann::json run_synth_ultrasound(const SynthUltrasoundCommand& c) {
   if (c.probe.size() >= 3) probe.position_mm = Eigen::Vector3d(c.probe[0], c.probe[1], c.probe[2]);
   if (c.probe.size() >= 6) probe.axis = Eigen::Vector3d(c.probe[3], c.probe[4], c.probe[5]).normalized();
   if (c.probe.size() == 9) probe.lateral = Eigen::Vector3d(c.probe[6], c.probe[7], c.probe[8]).normalized();
-  ultrasound::SimulatorOptions so;
+  ultrasound::SimulatorOptions so = tissue_class_simulator_options();
   so.probe_radius_mm = 12;
   so.speckle = c.speckle;
   so.seed = c.seed;
-  so.echogenicity.fill(0.5f);
-  so.echogenicity[1] = 0.0f, so.echogenicity[2] = 0.9f, so.echogenicity[3] = 0.04f, so.echogenicity[4] = 0.5f;
-  so.echogenicity[6] = 1.0f, so.echogenicity[7] = 0.3f;
-  so.organ_label = 7;
-  const ultrasound::TissueAt today = [&](const Eigen::Vector3d& p) {
-    if (organ.inside(d.inverse(p))) return ultrasound::TissueSample{7, 40.0f};
-    const Eigen::Vector3d idx = g.physical_to_index(p);
-    const int i = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
-              k = static_cast<int>(std::lround(idx.z()));
-    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) return ultrasound::TissueSample{};
-    const auto v = static_cast<size_t>(g.linear_index(i, j, k));
-    return ultrasound::TissueSample{tissue.labels[v] == 7 ? 2 : tissue.labels[v], hu[v]};
-  };
+  const ultrasound::TissueAt today = deformed_anatomy(tissue, hu, organ, d);
   ultrasound::SimulatedUltrasound sim;
   try {
     sim = ultrasound::simulate_bmode(today, probe, so);

@@ -46,6 +46,36 @@ geometry::LabelVolume pelvis_tissue_classes(const geometry::LabelVolume& labels)
   return t;
 }
 
+ultrasound::SimulatorOptions tissue_class_simulator_options() {
+  ultrasound::SimulatorOptions so;
+  // Echogenicity: anechoic fluid, hyperechoic fat, a hypoechoic gland.
+  so.echogenicity.fill(0.5f);
+  so.echogenicity[1] = 0.0f, so.echogenicity[2] = 0.9f, so.echogenicity[3] = 0.04f, so.echogenicity[4] = 0.5f;
+  so.echogenicity[5] = 0.7f, so.echogenicity[6] = 1.0f, so.echogenicity[7] = 0.3f;
+  so.organ_label = 7;
+  return so;
+}
+
+ultrasound::TissueAt deformed_anatomy(const geometry::LabelVolume& tissue, const std::vector<float>& hu,
+                                      const evaluation::Shape& organ, const evaluation::Deformation& d) {
+  // The organ by its smooth shape pulled back through the map, everything else where the
+  // planning CT has it, fat where the organ was and is no more. Deforming the whole
+  // pelvis instead would also stretch the rectal gas round the probe and shadow half the
+  // field. Copies are captured: the simulator calls this from several threads.
+  return [tissue = std::make_shared<const geometry::LabelVolume>(tissue),
+          hu = std::make_shared<const std::vector<float>>(hu), organ, d](const Eigen::Vector3d& p) {
+    if (organ.inside(d.inverse(p))) return ultrasound::TissueSample{7, 40.0f};
+    const auto& g = tissue->geometry;
+    const Eigen::Vector3d idx = g.physical_to_index(p);
+    const int i = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
+              k = static_cast<int>(std::lround(idx.z()));
+    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) return ultrasound::TissueSample{};
+    const auto v = static_cast<size_t>(g.linear_index(i, j, k));
+    if (tissue->labels[v] == 7) return ultrasound::TissueSample{2, -95.0f};  // vacated: fat
+    return ultrasound::TissueSample{tissue->labels[v], (*hu)[v]};
+  };
+}
+
 UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const ModelStageResult& model,
                                            const dicom::CtSeries* ct, const geometry::LabelVolume* organ_mask,
                                            const geometry::LabelVolume* anatomy) {
@@ -63,39 +93,19 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const Mod
       scene.fail("ultrasound", "source", "simulating ultrasound needs the planning CT and the organ (ct/phantom, organ)");
     Stopwatch clock;
     const evaluation::Deformation d = deformation_from(scene, model.shape);
-    // Today's anatomy: the organ deformed (its smooth shape pulled back through the map),
-    // everything else where the planning CT has it, fat where the organ was and is no
-    // more. Deforming the whole pelvis instead would also stretch the rectal gas round
-    // the probe and shadow half the field.
     const geometry::LabelVolume tissue = anatomy ? *anatomy : tissue_classes(ct->geometry, ct->hu, organ_mask);
-    const auto& g = ct->geometry;
-    const evaluation::Shape& organ_shape = model.shape;
-    const ultrasound::TissueAt today = [&](const Eigen::Vector3d& p) {
-      if (organ_shape.inside(d.inverse(p))) return ultrasound::TissueSample{7, 40.0f};
-      const Eigen::Vector3d idx = g.physical_to_index(p);
-      const int i = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
-                k = static_cast<int>(std::lround(idx.z()));
-      if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) return ultrasound::TissueSample{};
-      const auto v = static_cast<size_t>(g.linear_index(i, j, k));
-      if (tissue.labels[v] == 7) return ultrasound::TissueSample{2, -95.0f};  // vacated: fat
-      return ultrasound::TissueSample{tissue.labels[v], ct->hu[v]};
-    };
+    const ultrasound::TissueAt today = deformed_anatomy(tissue, ct->hu, model.shape, d);
     ultrasound::ProbePose probe;
     probe.position_mm = model.shape.centre_mm + scene.vec3("ultrasound", "probe_offset_mm");
     probe.axis = scene.vec3("ultrasound", "probe_axis").normalized();
     probe.lateral = scene.vec3("ultrasound", "probe_lateral").normalized();
-    ultrasound::SimulatorOptions so;
+    ultrasound::SimulatorOptions so = tissue_class_simulator_options();
     so.probe_radius_mm = scene.number("ultrasound", "probe_radius_mm");
     so.max_depth_mm = scene.number("ultrasound", "max_depth_mm");
     so.lateral_half_angle_deg = so.elevation_half_angle_deg = scene.number("ultrasound", "half_angle_deg");
     so.speckle = scene.number("ultrasound", "speckle");
     so.voxel_mm = scene.number("ultrasound", "voxel_mm");
     so.seed = static_cast<std::uint64_t>(scene.integer("scene", "seed"));
-    // Echogenicity: anechoic fluid, hyperechoic fat, a hypoechoic gland.
-    so.echogenicity.fill(0.5f);
-    so.echogenicity[1] = 0.0f, so.echogenicity[2] = 0.9f, so.echogenicity[3] = 0.04f, so.echogenicity[4] = 0.5f;
-    so.echogenicity[5] = 0.7f, so.echogenicity[6] = 1.0f, so.echogenicity[7] = 0.3f;
-    so.organ_label = 7;
     ultrasound::SimulatedUltrasound sim;
     try {
       sim = ultrasound::simulate_bmode(today, probe, so);

@@ -6,6 +6,7 @@
 #include "organfit/config/scene.h"
 #include "organfit/dicom/ct_series.h"
 #include "organfit/pipeline/fit_stage.h"
+#include "organfit/ultrasound/simulator.h"
 
 namespace organfit::pipeline {
 
@@ -24,6 +25,14 @@ geometry::LabelVolume tissue_classes(const geometry::ImageGeometry& ct, const st
 /// The same classes from the pelvis phantom's true labels (no partial-volume voxels:
 /// classes from HU put a dark "fluid" rim between the gland and fat, -26 HU being half way).
 geometry::LabelVolume pelvis_tissue_classes(const geometry::LabelVolume& phantom_labels);
+
+/// The simulator's settings for tissue classes (echogenicity per class; the organ is 7).
+ultrasound::SimulatorOptions tissue_class_simulator_options();
+
+/// Today's anatomy for the simulator: `organ` deformed by `deformation`, the rest as the
+/// planning CT has it (tissue classes and HU on its grid), fat where the organ was.
+ultrasound::TissueAt deformed_anatomy(const geometry::LabelVolume& tissue, const std::vector<float>& hu,
+                                      const evaluation::Shape& organ, const evaluation::Deformation& deformation);
 
 /// Runs the stage. `ct` and `organ_mask` (on the CT grid) are needed to simulate;
 /// `anatomy` (tissue classes on the CT grid, e.g. the phantom's) replaces the classes
