@@ -52,7 +52,8 @@ std::uint32_t u32_at(const unsigned char* p) {
 /// sequences and items included (undefined lengths end at their delimiters). Returns the
 /// position after the last element walked, or -1 when a length runs past `end`. Stops
 /// (returning `at`) at anything that is not explicit VR: GDCM decides about those.
-long long walk(const std::vector<unsigned char>& b, long long at, long long end, int depth, bool& ok) {
+long long walk(const std::vector<unsigned char>& b, long long at, long long end, int depth, bool& ok, bool implicit,
+               bool raw_items = false) {
   if (depth > 32) return ok = false, -1;  // nesting deeper than any real structure set
   while (at + 8 <= end) {
     const unsigned char* e = b.data() + at;
@@ -63,17 +64,29 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
       if (element == 0xE00D || element == 0xE0DD) return at + 8;  // item / sequence delimiter
       if (element != 0xE000) return ok = false, -1;
       if (length == 0xFFFFFFFFu) {
-        at = walk(b, at + 8, end, depth + 1, ok);
+        if (raw_items) return ok = false, -1;  // fragments always have a length
+        at = walk(b, at + 8, end, depth + 1, ok, implicit);
         if (!ok) return -1;
       } else {
         if (at + 8 + length > end) return ok = false, -1;
-        walk(b, at + 8, at + 8 + length, depth + 1, ok);
+        if (!raw_items) walk(b, at + 8, at + 8 + length, depth + 1, ok, implicit);  // fragments hold data
         if (!ok) return -1;
         at += 8 + length;
       }
       continue;
     }
-    if (!(std::isupper(e[4]) && std::isupper(e[5]))) return at;  // not explicit VR here
+    if (implicit) {  // tag, 4-byte length; undefined lengths are sequences of items
+      const std::uint32_t length = u32_at(e + 4);
+      if (length == 0xFFFFFFFFu) {
+        at = walk(b, at + 8, end, depth + 1, ok, implicit);
+        if (!ok) return -1;
+        continue;
+      }
+      if (at + 8 + static_cast<long long>(length) > end) return ok = false, -1;
+      at += 8 + length;
+      continue;
+    }
+    if (!(std::isupper(e[4]) && std::isupper(e[5]))) return ok = false, -1;  // explicit VR must name a VR
     const std::string vr(reinterpret_cast<const char*>(e + 4), 2);
     const bool long_form = std::any_of(std::begin(kLongVrs), std::end(kLongVrs), [&](const char* v) { return vr == v; });
     long long header = 8, length = e[6] | (e[7] << 8);
@@ -81,15 +94,15 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
       if (at + 12 > end) return ok = false, -1;
       header = 12;
       length = u32_at(e + 8);
-      if (length == 0xFFFFFFFFLL) {  // undefined length: a sequence (or encapsulated pixels) of items
-        at = walk(b, at + 12, end, depth + 1, ok);
+      if (length == 0xFFFFFFFFLL) {  // undefined length: a sequence, or encapsulated pixel fragments
+        at = walk(b, at + 12, end, depth + 1, ok, implicit, vr != "SQ");
         if (!ok) return -1;
         continue;
       }
     }
     if (at + header + length > end) return ok = false, -1;
     if (vr == "SQ") {
-      walk(b, at + header, at + header + length, depth + 1, ok);
+      walk(b, at + header, at + header + length, depth + 1, ok, implicit);
       if (!ok) return -1;
     }
     at += header + length;
@@ -113,9 +126,12 @@ bool safe_for_gdcm(const std::string& file) {
   if (!(m[0] == 0x02 && m[1] == 0x00 && m[2] == 0x00 && m[3] == 0x00 && m[4] == 'U' && m[5] == 'L')) return false;
   const long long meta_end = 144 + static_cast<long long>(u32_at(m + 8));
   if (meta_end > size) return false;
+  std::string syntax;
   for (long long at = 144; at < meta_end;) {
     if (at + 8 > meta_end) return false;
     const unsigned char* e = b.data() + at;
+    if (e[2] == 0x10 && e[3] == 0x00 && at + 8 + (e[6] | (e[7] << 8)) <= meta_end)  // (0002,0010) Transfer Syntax UID
+      syntax.assign(reinterpret_cast<const char*>(e + 8), static_cast<size_t>(e[6] | (e[7] << 8)));
     if (!(e[0] == 0x02 && e[1] == 0x00 && std::isupper(e[4]) && std::isupper(e[5]))) return false;
     const std::string vr(reinterpret_cast<const char*>(e + 4), 2);
     const bool long_form = std::any_of(std::begin(kLongVrs), std::end(kLongVrs), [&](const char* v) { return vr == v; });
@@ -126,8 +142,10 @@ bool safe_for_gdcm(const std::string& file) {
   }
   // The data set: every declared length must fit in the file. GDCM allocates by declared
   // length before reading: a corrupt length cost 1.8 GB per file (found by fuzzing).
+  while (!syntax.empty() && (syntax.back() == '\0' || syntax.back() == ' ')) syntax.pop_back();
+  if (syntax == "1.2.840.10008.1.2.2") return true;  // explicit big endian (retired): GDCM decides
   bool ok = true;
-  walk(b, meta_end, size, 0, ok);
+  walk(b, meta_end, size, 0, ok, syntax == "1.2.840.10008.1.2");
   return ok;
 }
 

@@ -73,8 +73,10 @@ SequenceMetafile read_sequence_metafile(const fs::path& file, bool read_pixels) 
   for (auto& [index, frame] : frames) s.frames.push_back(std::move(frame));
   const std::vector<double> dims = numbers_of(s.header["DimSize"]);
   if (dims.size() < 2 || dims.size() > 3) fail("DimSize must have 2 or 3 numbers");
+  for (const double v : dims)  // found by fuzzing: 7.8e42 overflowed the int it was cast to
+    if (!(v >= 1 && v <= 100000 && v == std::floor(v))) fail("DimSize must hold whole numbers from 1 to 100000");
   for (size_t d = 0; d < 3; ++d) s.size[d] = d < dims.size() ? static_cast<int>(dims[d]) : 1;
-  if (s.size[0] <= 0 || s.size[1] <= 0 || s.size[2] <= 0) fail("DimSize must be positive");
+  if (1.0 * s.size[0] * s.size[1] * s.size[2] > 2e9) fail("DimSize is larger than 2e9 pixels");
   const std::vector<double> spacing = numbers_of(s.header["ElementSpacing"]);
   for (size_t d = 0; d < 3 && d < spacing.size(); ++d) s.spacing_mm[d] = spacing[d];
   if (!read_pixels) return s;

@@ -63,6 +63,9 @@ TEST_F(SequenceFiles, MalformedFilesAreRefusedNamingTheProblem) {
   EXPECT_NE(error_of(write("nodata.mha", head)).find("no ElementDataFile line"), std::string::npos);
   // Found by fuzzing: a data file that is a folder threw std::ios_failure.
   EXPECT_NE(error_of(write("folder.mha", head + "ElementDataFile = .\n")).find("is missing"), std::string::npos);
+  // Found by fuzzing: a DimSize of 7.8e42 overflowed the int it was cast to (UBSan).
+  EXPECT_NE(error_of(write("huge.mha", "DimSize = 7.8e42 2 1\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n")).find("DimSize must hold whole numbers"),
+            std::string::npos);
   EXPECT_NE(error_of(write("short.mha", head + "ElementDataFile = LOCAL\nab")).find("DimSize needs 4"), std::string::npos);
   EXPECT_NE(error_of(write("type.mha", "DimSize = 2 2 1\nElementType = MET_DOUBLE\nElementDataFile = LOCAL\n")).find("not supported"),
             std::string::npos);
