@@ -42,7 +42,13 @@ void quiet_gdcm() {
 
 namespace {
 
-constexpr const char* kLongVrs[] = {"OB", "OW", "OF", "SQ", "UT", "UN", "OD", "OL", "UC", "UR", "OV"};
+constexpr const char* kLongVrs[] = {"OB", "OW", "OF", "SQ", "UT", "UN", "OD", "OL", "UC", "UR", "OV", "SV", "UV"};
+/// Every VR of PS3.5 (2023); an element naming another makes GDCM 3.0 abort (found by fuzzing).
+bool known_vr(const unsigned char* v) {
+  static const char* all[] = {"AE", "AS", "AT", "CS", "DA", "DS", "DT", "FL", "FD", "IS", "LO", "LT", "OB", "OD", "OF", "OL", "OV",
+                              "OW", "PN", "SH", "SL", "SQ", "SS", "ST", "SV", "TM", "UC", "UI", "UL", "UN", "UR", "US", "UT", "UV"};
+  return std::any_of(std::begin(all), std::end(all), [&](const char* a) { return a[0] == v[0] && a[1] == v[1]; });
+}
 
 std::uint32_t u32_at(const unsigned char* p) {
   return p[0] | (p[1] << 8) | (p[2] << 16) | (static_cast<std::uint32_t>(p[3]) << 24);
@@ -59,6 +65,7 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
     const unsigned char* e = b.data() + at;
     const std::uint16_t group = static_cast<std::uint16_t>(e[0] | (e[1] << 8));
     const std::uint16_t element = static_cast<std::uint16_t>(e[2] | (e[3] << 8));
+    if (group == 0xFFFE && depth == 0) return ok = false, -1;  // items belong in sequences (GDCM aborts)
     if (group == 0xFFFE) {  // item or delimiter: tag + 4-byte length, no VR
       const std::uint32_t length = u32_at(e + 4);
       if (element == 0xE00D || element == 0xE0DD) return at + 8;  // item / sequence delimiter
@@ -86,7 +93,7 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
       at += 8 + length;
       continue;
     }
-    if (!(std::isupper(e[4]) && std::isupper(e[5]))) return ok = false, -1;  // explicit VR must name a VR
+    if (!known_vr(e + 4)) return ok = false, -1;  // explicit VR must name a VR
     const std::string vr(reinterpret_cast<const char*>(e + 4), 2);
     const bool long_form = std::any_of(std::begin(kLongVrs), std::end(kLongVrs), [&](const char* v) { return vr == v; });
     long long header = 8, length = e[6] | (e[7] << 8);
@@ -132,7 +139,7 @@ bool safe_for_gdcm(const std::string& file) {
     const unsigned char* e = b.data() + at;
     if (e[2] == 0x10 && e[3] == 0x00 && at + 8 + (e[6] | (e[7] << 8)) <= meta_end)  // (0002,0010) Transfer Syntax UID
       syntax.assign(reinterpret_cast<const char*>(e + 8), static_cast<size_t>(e[6] | (e[7] << 8)));
-    if (!(e[0] == 0x02 && e[1] == 0x00 && std::isupper(e[4]) && std::isupper(e[5]))) return false;
+    if (!(e[0] == 0x02 && e[1] == 0x00 && known_vr(e + 4))) return false;
     const std::string vr(reinterpret_cast<const char*>(e + 4), 2);
     const bool long_form = std::any_of(std::begin(kLongVrs), std::end(kLongVrs), [&](const char* v) { return vr == v; });
     const long long header = long_form ? 12 : 8;
@@ -145,8 +152,8 @@ bool safe_for_gdcm(const std::string& file) {
   while (!syntax.empty() && (syntax.back() == '\0' || syntax.back() == ' ')) syntax.pop_back();
   if (syntax == "1.2.840.10008.1.2.2") return true;  // explicit big endian (retired): GDCM decides
   bool ok = true;
-  walk(b, meta_end, size, 0, ok, syntax == "1.2.840.10008.1.2");
-  return ok;
+  const long long end = walk(b, meta_end, size, 0, ok, syntax == "1.2.840.10008.1.2");
+  return ok && end == size;  // a few stray bytes after the last element also made GDCM abort
 }
 
 bool native_pixel_data_complete(const std::string& file) {
