@@ -57,11 +57,15 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   gdcm::Directory directory;
   directory.Load(folder.string(), false);
   std::vector<std::string> files;
-  const int unsafe = 0;
+  int unsafe = 0;  // files that are not DICOM at all: ignored with a warning
   for (const auto& f : directory.GetFilenames()) {
-    if (!detail::safe_for_gdcm(f))  // a DICOM file whose lengths run past its end
+    if (detail::safe_for_gdcm(f)) {
+      files.push_back(f);
+    } else if (detail::is_part10(f)) {  // a DICOM file whose lengths run past its end
       fail(fs::path(f).filename().string() + ": a truncated or corrupt DICOM file (its elements run past its end)");
-    files.push_back(f);
+    } else {
+      ++unsafe;
+    }
   }
   if (files.empty() && unsafe == 0) fail("the folder is empty: no CT series");
   gdcm::Scanner scanner;

@@ -59,33 +59,38 @@ std::uint32_t u32_at(const unsigned char* p) {
 /// position after the last element walked, or -1 when a length runs past `end`. Stops
 /// (returning `at`) at anything that is not explicit VR: GDCM decides about those.
 long long walk(const std::vector<unsigned char>& b, long long at, long long end, int depth, bool& ok, bool implicit,
-               bool raw_items = false) {
+               bool raw_items = false, bool big = false) {
+  auto r16 = [big](const unsigned char* p) {
+    return static_cast<std::uint16_t>(big ? (p[0] << 8) | p[1] : p[0] | (p[1] << 8));
+  };
+  auto r32 = [big](const unsigned char* p) {
+    return big ? (static_cast<std::uint32_t>(p[0]) << 24) | (p[1] << 16) | (p[2] << 8) | p[3] : u32_at(p);
+  };
   if (depth > 32) return ok = false, -1;  // nesting deeper than any real structure set
   while (at + 8 <= end) {
     const unsigned char* e = b.data() + at;
-    const std::uint16_t group = static_cast<std::uint16_t>(e[0] | (e[1] << 8));
-    const std::uint16_t element = static_cast<std::uint16_t>(e[2] | (e[3] << 8));
+    const std::uint16_t group = r16(e), element = r16(e + 2);
     if (group == 0xFFFE && depth == 0) return ok = false, -1;  // items belong in sequences (GDCM aborts)
     if (group == 0xFFFE) {  // item or delimiter: tag + 4-byte length, no VR
-      const std::uint32_t length = u32_at(e + 4);
+      const std::uint32_t length = r32(e + 4);
       if (element == 0xE00D || element == 0xE0DD) return at + 8;  // item / sequence delimiter
       if (element != 0xE000) return ok = false, -1;
       if (length == 0xFFFFFFFFu) {
         if (raw_items) return ok = false, -1;  // fragments always have a length
-        at = walk(b, at + 8, end, depth + 1, ok, implicit);
+        at = walk(b, at + 8, end, depth + 1, ok, implicit, false, big);
         if (!ok) return -1;
       } else {
         if (at + 8 + length > end) return ok = false, -1;
-        if (!raw_items) walk(b, at + 8, at + 8 + length, depth + 1, ok, implicit);  // fragments hold data
+        if (!raw_items) walk(b, at + 8, at + 8 + length, depth + 1, ok, implicit, false, big);  // fragments hold data
         if (!ok) return -1;
         at += 8 + length;
       }
       continue;
     }
     if (implicit) {  // tag, 4-byte length; undefined lengths are sequences of items
-      const std::uint32_t length = u32_at(e + 4);
+      const std::uint32_t length = r32(e + 4);
       if (length == 0xFFFFFFFFu) {
-        at = walk(b, at + 8, end, depth + 1, ok, implicit);
+        at = walk(b, at + 8, end, depth + 1, ok, implicit, false, big);
         if (!ok) return -1;
         continue;
       }
@@ -96,20 +101,20 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
     if (!known_vr(e + 4)) return ok = false, -1;  // explicit VR must name a VR
     const std::string vr(reinterpret_cast<const char*>(e + 4), 2);
     const bool long_form = std::any_of(std::begin(kLongVrs), std::end(kLongVrs), [&](const char* v) { return vr == v; });
-    long long header = 8, length = e[6] | (e[7] << 8);
+    long long header = 8, length = r16(e + 6);
     if (long_form) {
       if (at + 12 > end) return ok = false, -1;
       header = 12;
-      length = u32_at(e + 8);
+      length = r32(e + 8);
       if (length == 0xFFFFFFFFLL) {  // undefined length: a sequence, or encapsulated pixel fragments
-        at = walk(b, at + 12, end, depth + 1, ok, implicit, vr != "SQ");
+        at = walk(b, at + 12, end, depth + 1, ok, implicit, vr != "SQ", big);
         if (!ok) return -1;
         continue;
       }
     }
     if (at + header + length > end) return ok = false, -1;
     if (vr == "SQ") {
-      walk(b, at + header, at + header + length, depth + 1, ok, implicit);
+      walk(b, at + header, at + header + length, depth + 1, ok, implicit, false, big);
       if (!ok) return -1;
     }
     at += header + length;
@@ -119,13 +124,27 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
 
 }  // namespace
 
+bool is_part10(const std::string& file) {
+  std::ifstream in(file, std::ios::binary);
+  char head[132] = {};
+  in.read(head, sizeof head);
+  return in.gcount() == 132 && std::memcmp(head + 128, "DICM", 4) == 0;
+}
+
 bool safe_for_gdcm(const std::string& file) {
   std::ifstream in(file, std::ios::binary);
   if (!in) return false;
   std::vector<unsigned char> b((std::istreambuf_iterator<char>(in)), {});
   const long long size = static_cast<long long>(b.size());
-  if (size < 132) return size > 0;  // no preamble: a raw data set, GDCM reads it or refuses
-  if (std::memcmp(b.data() + 128, "DICM", 4) != 0) return true;  // not Part 10: GDCM tries as raw
+  if (size < 132 || std::memcmp(b.data() + 128, "DICM", 4) != 0) {
+    // Not Part 10: a raw data set, which GDCM reads in whichever encoding fits. It must
+    // walk cleanly in one of them (a 29-byte file made GDCM allocate 2.4 GB: fuzzing).
+    for (const auto& [implicit, big] : {std::pair{false, false}, std::pair{true, false}, std::pair{false, true}}) {
+      bool ok = true;
+      if (walk(b, 0, size, 0, ok, implicit, false, big) == size && ok && size > 0) return true;
+    }
+    return false;
+  }
   // The File Meta group: (0002,0000) UL 4 <length> first, then group-2 elements that must
   // each be well formed and end inside the group (GDCM 3.0 aborts on an assertion there).
   if (size < 144) return false;
@@ -150,9 +169,8 @@ bool safe_for_gdcm(const std::string& file) {
   // The data set: every declared length must fit in the file. GDCM allocates by declared
   // length before reading: a corrupt length cost 1.8 GB per file (found by fuzzing).
   while (!syntax.empty() && (syntax.back() == '\0' || syntax.back() == ' ')) syntax.pop_back();
-  if (syntax == "1.2.840.10008.1.2.2") return true;  // explicit big endian (retired): GDCM decides
-  bool ok = true;
-  const long long end = walk(b, meta_end, size, 0, ok, syntax == "1.2.840.10008.1.2");
+  bool ok = true;  // explicit big endian (retired) is walked too: GDCM allocated 2.4 GB on one
+  const long long end = walk(b, meta_end, size, 0, ok, syntax == "1.2.840.10008.1.2", false, syntax == "1.2.840.10008.1.2.2");
   return ok && end == size;  // a few stray bytes after the last element also made GDCM abort
 }
 

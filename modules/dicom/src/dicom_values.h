@@ -13,6 +13,9 @@ void quiet_gdcm();
 /// aborts on an assertion there instead of failing).
 bool safe_for_gdcm(const std::string& file);
 
+/// True when the file has the DICOM Part 10 marker ("DICM" after a 128-byte preamble).
+bool is_part10(const std::string& file);
+
 /// False when a file's native (unencapsulated) Pixel Data element runs past the end of
 /// the file: the element is found by its tag (7FE0,0010) in explicit or implicit little
 /// endian, and its declared length must fit.
