@@ -59,7 +59,7 @@ std::uint32_t u32_at(const unsigned char* p) {
 /// position after the last element walked, or -1 when a length runs past `end`. Stops
 /// (returning `at`) at anything that is not explicit VR: GDCM decides about those.
 long long walk(const std::vector<unsigned char>& b, long long at, long long end, int depth, bool& ok, bool implicit,
-               bool raw_items = false, bool big = false) {
+               bool raw_items = false, bool big = false, bool undefined_length = false) {
   auto r16 = [big](const unsigned char* p) {
     return static_cast<std::uint16_t>(big ? (p[0] << 8) | p[1] : p[0] | (p[1] << 8));
   };
@@ -77,7 +77,7 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
       if (element != 0xE000) return ok = false, -1;
       if (length == 0xFFFFFFFFu) {
         if (raw_items) return ok = false, -1;  // fragments always have a length
-        at = walk(b, at + 8, end, depth + 1, ok, implicit, false, big);
+        at = walk(b, at + 8, end, depth + 1, ok, implicit, false, big, true);
         if (!ok) return -1;
       } else {
         if (at + 8 + length > end) return ok = false, -1;
@@ -90,7 +90,7 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
     if (implicit) {  // tag, 4-byte length; undefined lengths are sequences of items
       const std::uint32_t length = r32(e + 4);
       if (length == 0xFFFFFFFFu) {
-        at = walk(b, at + 8, end, depth + 1, ok, implicit, false, big);
+        at = walk(b, at + 8, end, depth + 1, ok, implicit, false, big, true);
         if (!ok) return -1;
         continue;
       }
@@ -107,7 +107,7 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
       header = 12;
       length = r32(e + 8);
       if (length == 0xFFFFFFFFLL) {  // undefined length: a sequence, or encapsulated pixel fragments
-        at = walk(b, at + 12, end, depth + 1, ok, implicit, vr != "SQ", big);
+        at = walk(b, at + 12, end, depth + 1, ok, implicit, vr != "SQ", big, true);
         if (!ok) return -1;
         continue;
       }
@@ -119,6 +119,9 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
     }
     at += header + length;
   }
+  // Content of undefined length must end at its delimiter, not at the end of the file:
+  // an item left open made GDCM abort (found by fuzzing).
+  if (undefined_length) return ok = false, -1;
   return at;
 }
 
