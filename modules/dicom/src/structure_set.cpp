@@ -75,7 +75,8 @@ StructureSet read_rtstruct(const fs::path& file) {
       Roi& roi = by_number[number];
       roi.number = number;
       const std::vector<double> colour = numbers(text(item, 0x3006, 0x002a));
-      if (colour.size() == 3)
+      // Only a real colour is taken (a NaN cast to int is undefined: found by fuzzing).
+      if (colour.size() == 3 && std::all_of(colour.begin(), colour.end(), [](double v) { return v >= 0 && v <= 255; }))
         for (int c = 0; c < 3; ++c) roi.colour[c] = static_cast<int>(colour[c]);
       auto contours = sequence(item, 0x3006, 0x0040);
       if (!contours) continue;
