@@ -72,7 +72,12 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   for (const auto& t : {kModality, kSeriesUid, kSeriesDescription, kSopUid, kSopClass, kPosition, kOrientation,
                         kPixelSpacing, kRows, kColumns, kFrameOfReference, kGantryTilt})
     scanner.AddTag(t);
-  if (!files.empty() && !scanner.Scan(files)) fail("cannot scan the folder");
+  bool scanned = true;
+  {
+    ReadingInput guard(where.c_str(), "GDCM");
+    scanned = files.empty() || scanner.Scan(files);
+  }
+  if (!scanned) fail("cannot scan the folder");
 
   CtSeries series;
   int not_dicom = unsafe, other_modality = 0;
@@ -214,7 +219,12 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     const std::string name = fs::path(slices[s].file).filename().string();
     gdcm::ImageReader reader;
     reader.SetFileName(slices[s].file.c_str());
-    if (!reader.Read()) fail("cannot read the pixels of " + name + " (truncated or unsupported)");
+    bool read_ok = false;
+    {
+      ReadingInput guard(slices[s].file.c_str(), "GDCM");
+      read_ok = reader.Read();
+    }
+    if (!read_ok) fail("cannot read the pixels of " + name + " (truncated or unsupported)");
     const gdcm::Image& image = reader.GetImage();
     const gdcm::PixelFormat pf = image.GetPixelFormat();
     if (pf.GetSamplesPerPixel() != 1) fail(name + ": not a grey-scale image");

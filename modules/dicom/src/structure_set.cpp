@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "dicom_values.h"
+#include "organfit/support/interrupt.h"
 #include "organfit/support/error.h"
 
 namespace fs = std::filesystem;
@@ -52,7 +53,12 @@ StructureSet read_rtstruct(const fs::path& file) {
   if (!detail::safe_for_gdcm(where)) throw InputError(where + ": cannot read as DICOM (missing, truncated or not DICOM)");
   gdcm::Reader reader;
   reader.SetFileName(where.c_str());
-  if (!reader.Read()) throw InputError(where + ": cannot read as DICOM (missing, truncated or not DICOM)");
+  bool read_ok = false;
+  {
+    ReadingInput guard(where.c_str(), "GDCM");
+    read_ok = reader.Read();
+  }
+  if (!read_ok) throw InputError(where + ": cannot read as DICOM (missing, truncated or not DICOM)");
   const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
   if (text(ds, 0x0008, 0x0060) != "RTSTRUCT")
     throw InputError(where + ": not an RT Structure Set (Modality '" + text(ds, 0x0008, 0x0060) + "')");

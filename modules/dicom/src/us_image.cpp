@@ -10,6 +10,7 @@
 #include <cstring>
 
 #include "dicom_values.h"
+#include "organfit/support/interrupt.h"
 #include "organfit/support/error.h"
 
 namespace organfit::dicom {
@@ -36,7 +37,12 @@ UsImage read_us_image(const std::filesystem::path& file, double pixel_mm) {
   if (!detail::safe_for_gdcm(where)) fail("cannot read as DICOM (missing, truncated or not DICOM)");
   gdcm::ImageReader reader;
   reader.SetFileName(where.c_str());
-  if (!reader.Read()) fail("cannot read as a DICOM image");
+  bool read_ok = false;
+  {
+    ReadingInput guard(where.c_str(), "GDCM");
+    read_ok = reader.Read();
+  }
+  if (!read_ok) fail("cannot read as a DICOM image");
   // GDCM's filters keep their input in a SmartPointer: it must live on the heap.
   gdcm::SmartPointer<gdcm::Image> input = new gdcm::Image(reader.GetImage());
   gdcm::Image image = *input;
