@@ -71,32 +71,22 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
     // SOP Common, Patient, General Study.
     put(ds, 0x0008, 0x0005, V::CS, "ISO_IR 192");
     put(ds, 0x0008, 0x0008, V::CS, "ORIGINAL\\PRIMARY\\AXIAL");
+    detail::put_patient_study(ds, ct.patient);  // Patient, General Study: verbatim
     put(ds, 0x0008, 0x0016, V::UI, kCtImageClass);
     put(ds, 0x0008, 0x0018, V::UI, slice.sop_instance_uid);
-    put(ds, 0x0008, 0x0020, V::DA, ct.patient.study_date);
     put(ds, 0x0008, 0x0021, V::DA, ct.patient.study_date);
-    put(ds, 0x0008, 0x0030, V::TM, ct.patient.study_time);
     put(ds, 0x0008, 0x0031, V::TM, ct.patient.study_time);
-    put(ds, 0x0008, 0x0050, V::SH, ct.patient.accession_number);
     put(ds, 0x0008, 0x0060, V::CS, "CT");
     put(ds, 0x0008, 0x0070, V::LO, "organfit");
-    put(ds, 0x0008, 0x0090, V::PN, ct.patient.referring_physician_name);
-    put(ds, 0x0008, 0x1030, V::LO, ct.patient.study_description);
     put(ds, 0x0008, 0x103e, V::LO, ct.series_description);
     put(ds, 0x0008, 0x1090, V::LO, "organfit synthetic phantom");
-    put(ds, 0x0010, 0x0010, V::PN, ct.patient.patient_name);
-    put(ds, 0x0010, 0x0020, V::LO, ct.patient.patient_id);
-    put(ds, 0x0010, 0x0030, V::DA, ct.patient.patient_birth_date);
-    put(ds, 0x0010, 0x0040, V::CS, ct.patient.patient_sex);
     // General Series, CT Image, Image Plane.
     if (!options.body_part_examined.empty()) put(ds, 0x0018, 0x0015, V::CS, options.body_part_examined);
     else put(ds, 0x0020, 0x0060, V::CS, "");  // Laterality, Type 2C: unknown when the body part is
     put(ds, 0x0018, 0x0050, V::DS, ds_number(g.spacing_mm[2]));  // Slice Thickness
     put(ds, 0x0018, 0x0060, V::DS, "120");                       // KVP
     put(ds, 0x0018, 0x5100, V::CS, "HFS");                       // Patient Position
-    put(ds, 0x0020, 0x000d, V::UI, ct.patient.study_instance_uid);
     put(ds, 0x0020, 0x000e, V::UI, ct.series_instance_uid);
-    put(ds, 0x0020, 0x0010, V::SH, ct.patient.study_id);
     put(ds, 0x0020, 0x0011, V::IS, "1");
     put(ds, 0x0020, 0x0012, V::IS, "1");
     put(ds, 0x0020, 0x0013, V::IS, std::to_string(k + 1));

@@ -17,6 +17,21 @@ void put(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const gd
   ds.Replace(de);
 }
 
+void put_patient_study(gdcm::DataSet& ds, const PatientStudy& p) {
+  using V = gdcm::VR;
+  put(ds, 0x0008, 0x0020, V::DA, p.study_date);
+  put(ds, 0x0008, 0x0030, V::TM, p.study_time);
+  put(ds, 0x0008, 0x0050, V::SH, p.accession_number);
+  put(ds, 0x0008, 0x0090, V::PN, p.referring_physician_name);
+  put(ds, 0x0008, 0x1030, V::LO, p.study_description);
+  put(ds, 0x0010, 0x0010, V::PN, p.patient_name);
+  put(ds, 0x0010, 0x0020, V::LO, p.patient_id);
+  put(ds, 0x0010, 0x0030, V::DA, p.patient_birth_date);
+  put(ds, 0x0010, 0x0040, V::CS, p.patient_sex);
+  put(ds, 0x0020, 0x000d, V::UI, p.study_instance_uid);
+  put(ds, 0x0020, 0x0010, V::SH, p.study_id);
+}
+
 gdcm::Item new_item() {
   gdcm::Item item;
   item.SetVLToUndefined();

@@ -8,12 +8,18 @@
 #include <string>
 #include <vector>
 
+#include "organfit/dicom/ct_series.h"
+
 namespace organfit::dicom::detail {
 
 /// Inserts (or replaces) a string element, padded to even length (UIDs with NUL, other
 /// VRs with a space). The value is written as given: callers copy source attributes
 /// verbatim (see rtstruct_writer.cpp for why).
 void put(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const gdcm::VR& vr, std::string value);
+
+/// The Patient and General Study attributes of `patient`, copied verbatim (an object
+/// must agree with its study: see rtstruct_writer.cpp). Shared by the CT and RTSTRUCT writers.
+void put_patient_study(gdcm::DataSet& ds, const PatientStudy& patient);
 
 /// An item of undefined length, ready for a nested data set.
 gdcm::Item new_item();

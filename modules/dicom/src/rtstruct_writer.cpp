@@ -40,25 +40,15 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
   put(ds, 0x0008, 0x0005, V::CS, "ISO_IR 192");
   put(ds, 0x0008, 0x0012, V::DA, date);
   put(ds, 0x0008, 0x0013, V::TM, time);
+  detail::put_patient_study(ds, ct.patient);  // Patient, General Study: verbatim
   put(ds, 0x0008, 0x0016, V::UI, kRtstructClass);
   put(ds, 0x0008, 0x0018, V::UI, sop_uid);
-  put(ds, 0x0008, 0x0020, V::DA, ct.patient.study_date);
-  put(ds, 0x0008, 0x0030, V::TM, ct.patient.study_time);
-  put(ds, 0x0008, 0x0050, V::SH, ct.patient.accession_number);
   put(ds, 0x0008, 0x0060, V::CS, "RTSTRUCT");
   put(ds, 0x0008, 0x0070, V::LO, "organfit");
-  put(ds, 0x0008, 0x0090, V::PN, ct.patient.referring_physician_name);
-  put(ds, 0x0008, 0x1030, V::LO, ct.patient.study_description);
   put(ds, 0x0008, 0x1070, V::PN, "");  // Operators' Name (RT Series, Type 2)
   put(ds, 0x0008, 0x103e, V::LO, "organfit fitted structures");
-  put(ds, 0x0010, 0x0010, V::PN, ct.patient.patient_name);
-  put(ds, 0x0010, 0x0020, V::LO, ct.patient.patient_id);
-  put(ds, 0x0010, 0x0030, V::DA, ct.patient.patient_birth_date);
-  put(ds, 0x0010, 0x0040, V::CS, ct.patient.patient_sex);
   put(ds, 0x0018, 0x1020, V::LO, "organfit");
-  put(ds, 0x0020, 0x000d, V::UI, ct.patient.study_instance_uid);
   put(ds, 0x0020, 0x000e, V::UI, series_uid);
-  put(ds, 0x0020, 0x0010, V::SH, ct.patient.study_id);
   put(ds, 0x0020, 0x0011, V::IS, "1");
   put(ds, 0x0020, 0x0052, V::UI, ct.frame_of_reference_uid);  // Frame of Reference at the top level
   put(ds, 0x0020, 0x1040, V::LO, "");                         // Position Reference Indicator (Type 2)
