@@ -15,7 +15,7 @@ run_default=1
 # Build and run-time dependencies (libraries), then tools the tests use.
 packages=(
   build-essential cmake ninja-build ccache pkg-config
-  libeigen3-dev libyaml-cpp-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev
+  libeigen3-dev libyaml-cpp-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev zlib1g-dev
   libgtest-dev libbenchmark-dev libomp-dev
   libinsighttoolkit5-dev libgdcm-dev libgdcm-tools libvtk9-dev
 )
