@@ -36,6 +36,8 @@ struct OursResult {
   double loop_s;
   long long list_builds;
   double pairs_per_particle;  ///< listed pairs (within cutoff + skin) per particle, at the end
+  double pair_s;              ///< in the pair loop, during the timed steps
+  double neighbour_s;         ///< building neighbour lists, during the timed steps
 };
 
 OursResult run_ours(long long requested, long long steps, int threads) {
@@ -69,10 +71,17 @@ OursResult run_ours(long long requested, long long steps, int threads) {
   omp_set_num_threads(threads);
   Integrator integ(model, opt);
   integ.refresh_forces(s);  // setup (LAMMPS's setup is also outside its loop time)
+  const auto& list = cohesion.neighbour_list();
+  const double pair0 = cohesion.pair_seconds(), neigh0 = list.build_seconds();
   Stopwatch clock;
   integ.run(s, steps);
-  const auto& list = cohesion.neighbour_list();
-  return {n, clock.elapsed_s(), list.builds(), double(list.pair_count()) / double(n)};
+  const double loop_s = clock.elapsed_s();
+  return {n,
+          loop_s,
+          list.builds(),
+          double(list.pair_count()) / double(n),
+          cohesion.pair_seconds() - pair0,
+          list.build_seconds() - neigh0};
 }
 
 struct LammpsResult {
@@ -153,6 +162,8 @@ nlohmann::json run_cohesion_benchmark(const CohesionBenchOptions& o) {
                       {"wall_s", ours.loop_s},
                       {"us_per_particle_step", us},
                       {"neighbour_list_builds", ours.list_builds},
+                      {"pair_us_per_particle_step", ours.pair_s / (double(ours.particles) * o.steps) * 1e6},
+                      {"neighbour_us_per_particle_step", ours.neighbour_s / (double(ours.particles) * o.steps) * 1e6},
                       {"lammps_us_per_particle_step", nullptr},
                       {"ratio_vs_lammps", nullptr}};
   if (o.run_lammps) {
@@ -197,6 +208,9 @@ nlohmann::json run_cohesion_scaling(int threads) {
     rows.push_back({{"particles", r.particles},
                     {"steps", steps},
                     {"us_per_particle_step", us},
+                    {"pair_us_per_particle_step", r.pair_s / (double(r.particles) * steps) * 1e6},
+                    {"neighbour_us_per_particle_step", r.neighbour_s / (double(r.particles) * steps) * 1e6},
+                    {"neighbour_list_builds", r.list_builds},
                     {"pairs_per_particle", r.pairs_per_particle}});
     if (r.particles >= 9000) lo = std::min(lo, us), hi = std::max(hi, us);
   }

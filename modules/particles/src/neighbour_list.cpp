@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
@@ -9,17 +10,17 @@
 namespace organfit::particles {
 namespace {
 
-// Forward half stencil: the 13 neighbour cells "after" a cell, so each pair of cells
-// is visited once. Reach: [-1, 1] in x and y, [0, 1] in z.
-constexpr std::array<std::array<int, 3>, 13> kForward = {{{1, 0, 0},
-                                                          {-1, 1, 0}, {0, 1, 0}, {1, 1, 0},
-                                                          {-1, -1, 1}, {0, -1, 1}, {1, -1, 1},
-                                                          {-1, 0, 1}, {0, 0, 1}, {1, 0, 1},
-                                                          {-1, 1, 1}, {0, 1, 1}, {1, 1, 1}}};
+// Cells are half the reach (cutoff + skin) wide, so a particle's neighbours lie in the
+// rows of cells at most kRowReach away in y and z, and a short run of cells along x in
+// each row. Rows are contiguous in memory, so each is scanned as one run of slots.
+constexpr int kRowReach = 2;
 
-// Cells per block edge. A block's pairs write only to its own cells and the layer of
-// cells just beyond it, so blocks two apart (same colour) never write the same particle.
+// Blocks are slabs: every cell along x, kBlock rows of cells in y and in z. A block's
+// pairs write only to its own cells and to cells at most kRowReach beyond it in y and z,
+// so blocks two apart in y or z (same colour) never write the same particle:
+// kBlock >= 2 * kRowReach.
 constexpr int kBlock = 4;
+static_assert(kBlock >= 2 * kRowReach, "same-colour blocks must not share written cells");
 
 // Grids with more cells than this per particle are coarsened: a far-away particle
 // must not make the grid (and memory) explode. Larger cells stay correct, only slower.
@@ -48,7 +49,9 @@ bool NeighbourList::update(const Eigen::Matrix3Xd& x) {
     }
     if (!moved) return false;
   }
+  const auto start = std::chrono::steady_clock::now();
   build(x);
+  build_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return true;
 }
 
@@ -60,7 +63,7 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
   order_.resize(n);
   first_.assign(n + 1, 0);
   neighbours_.clear();
-  colours_.assign(8, {});
+  colours_.clear();
   block_begin_.clear();
   block_end_.clear();
   if (n == 0) {
@@ -73,7 +76,7 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
   const Eigen::Vector3d hi = x.rowwise().maxCoeff();
   const Eigen::Vector3d extent = (hi - lo).cwiseMax(1e-12);
   const double reach = cutoff_ + skin_;
-  double cell = reach;
+  double cell = reach / kRowReach;
   std::array<long long, 3> dims{};
   const long long budget =
       std::max<long long>(kMinCellBudget, static_cast<long long>(kMaxCellsPerParticle * n));
@@ -87,8 +90,8 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
   const long long ncells = dims[0] * dims[1] * dims[2];
   const Eigen::Vector3d inv_cell(nx / extent.x(), ny / extent.y(), nz / extent.z());
 
-  // Cells are grouped in blocks of kBlock^3 cells; particles are stored block by block
-  // (cells in order within a block), counting-sorted and stable in particle index.
+  // Particles are stored block by block, and within a block in cell order (x fastest),
+  // counting-sorted and stable in particle index: each row of cells is one run of slots.
   std::vector<int> cell_of(n);
   for (int i = 0; i < n; ++i) {
     const Eigen::Vector3d q = (x.col(i) - lo).cwiseProduct(inv_cell);
@@ -97,17 +100,15 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
     const int cz = std::min(nz - 1, static_cast<int>(q.z()));
     cell_of[i] = cx + nx * (cy + ny * cz);
   }
-  const int bx = (nx + kBlock - 1) / kBlock, by = (ny + kBlock - 1) / kBlock,
-            bz = (nz + kBlock - 1) / kBlock;
-  const long long nblocks = 1LL * bx * by * bz;
+  const int by = (ny + kBlock - 1) / kBlock, bz = (nz + kBlock - 1) / kBlock;
+  const long long nblocks = 1LL * by * bz;
   // Rank of each cell in memory: block-major, then the cell's place in its block.
   std::vector<int> rank(ncells);
   {
     std::vector<int> block_fill(nblocks + 1, 0);
     auto block_of = [&](long long c) {
-      const int cx = static_cast<int>(c % nx), cy = static_cast<int>((c / nx) % ny),
-                cz = static_cast<int>(c / (1LL * nx * ny));
-      return (cx / kBlock) + bx * ((cy / kBlock) + by * (cz / kBlock));
+      const int cy = static_cast<int>((c / nx) % ny), cz = static_cast<int>(c / (1LL * nx * ny));
+      return (cy / kBlock) + by * (cz / kBlock);
     };
     for (long long c = 0; c < ncells; ++c) ++block_fill[block_of(c) + 1];
     for (long long b = 0; b < nblocks; ++b) block_fill[b + 1] += block_fill[b];
@@ -130,58 +131,75 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
   block_begin_.assign(nblocks, n);
   block_end_.assign(nblocks, 0);
   for (int cz = 0; cz < nz; ++cz)
-    for (int cy = 0; cy < ny; ++cy)
-      for (int cx = 0; cx < nx; ++cx) {
-        const int c = cx + nx * (cy + ny * cz);
-        const int b = (cx / kBlock) + bx * ((cy / kBlock) + by * (cz / kBlock));
-        block_begin_[b] = std::min(block_begin_[b], cell_begin_[c]);
-        block_end_[b] = std::max(block_end_[b], cell_end_[c]);
-      }
-  colours_.assign(8, {});
+    for (int cy = 0; cy < ny; ++cy) {
+      const int b = (cy / kBlock) + by * (cz / kBlock);
+      const int row = nx * (cy + ny * cz);
+      block_begin_[b] = std::min(block_begin_[b], cell_begin_[row]);
+      block_end_[b] = std::max(block_end_[b], cell_end_[row + nx - 1]);
+    }
+  colours_.assign(4, {});
   for (int b3 = 0; b3 < bz; ++b3)
-    for (int b2 = 0; b2 < by; ++b2)
-      for (int b1 = 0; b1 < bx; ++b1) {
-        const int b = b1 + bx * (b2 + by * b3);
-        if (block_begin_[b] >= block_end_[b]) continue;
-        colours_[(b1 % 2) + 2 * (b2 % 2) + 4 * (b3 % 2)].push_back(b);
-      }
-  std::vector<double> xs(3 * static_cast<size_t>(n));
-  for (int s = 0; s < n; ++s)
-    for (int d = 0; d < 3; ++d) xs[3 * s + d] = x(d, order_[s]);
+    for (int b2 = 0; b2 < by; ++b2) {
+      const int b = b2 + by * b3;
+      if (block_begin_[b] >= block_end_[b]) continue;
+      colours_[(b2 % 2) + 2 * (b3 % 2)].push_back(b);
+    }
+  // Sorted positions by axis (structure of arrays): the distance test below then runs
+  // on vector registers.
+  std::vector<double> px(n), py(n), pz(n);
+  for (int s = 0; s < n; ++s) {
+    const int i = order_[s];
+    px[s] = x(0, i), py[s] = x(1, i), pz[s] = x(2, i);
+  }
 
   // One pass into a fixed stride per slot (parallel and deterministic: each slot's list
   // depends only on the geometry), then compacted. The stride is re-learnt on overflow.
   const double reach2 = reach * reach;
   const Eigen::Vector3d cell_size(extent.x() / nx, extent.y() / ny, extent.z() / nz);
-  auto visit = [&](int s, auto&& emit) {
+  // Lists the candidates of slot s within reach into out[0, k); k may end above `last`
+  // (the room), in which case the caller redoes the build with more room.
+  auto visit = [&](int s, int* out, int last) {
     const int c = cell_of[order_[s]];
-    const int cx = c % nx, cy = (c / nx) % ny, cz = c / (nx * ny);
-    const double xi = xs[3 * s], yi = xs[3 * s + 1], zi = xs[3 * s + 2];
+    const int cy = (c / nx) % ny, cz = c / (nx * ny);
+    const double xi = px[s], yi = py[s], zi = pz[s];
+    int k = 0;
     // Branchless: every candidate is written, the count advances only for those within
-    // reach (the test fails unpredictably for ~1/3 of candidates).
+    // reach (the test fails unpredictably for about half of the candidates).
     auto scan = [&](int from, int to) {
       for (int t = from; t < to; ++t) {
-        const double dx = xi - xs[3 * t], dy = yi - xs[3 * t + 1], dz = zi - xs[3 * t + 2];
-        emit(t, dx * dx + dy * dy + dz * dz < reach2);
+        const double dx = xi - px[t], dy = yi - py[t], dz = zi - pz[t];
+        out[std::min(k, last)] = t;
+        k += dx * dx + dy * dy + dz * dz < reach2;
       }
     };
-    scan(s + 1, cell_end_[c]);  // own cell: later slots only
-    for (const auto& o : kForward) {
-      const int ox = cx + o[0], oy = cy + o[1], oz = cz + o[2];
-      if (ox < 0 || oy < 0 || oz < 0 || ox >= nx || oy >= ny || oz >= nz) continue;
-      // Skip a cell whose box lies entirely beyond reach of this particle.
-      const int oi[3] = {ox, oy, oz};
-      const double p[3] = {xi, yi, zi};
-      double gap2 = 0;
-      for (int d = 0; d < 3; ++d) {
-        const double lo_d = lo[d] + oi[d] * cell_size[d];
-        const double g = std::max({0.0, lo_d - p[d], p[d] - (lo_d + cell_size[d])});
-        gap2 += g * g;
+    // The cell column along x holding x + dx (clamped as in binning).
+    auto column = [&](double xq) {
+      const double q = (xq - lo.x()) * inv_cell.x();
+      return q <= 0 ? 0 : q >= nx - 1 ? nx - 1 : static_cast<int>(q);  // no int overflow
+    };
+    // Pruning is padded by a hair so that rounding never drops a pair within reach.
+    const double prune2 = reach2 * (1 + 1e-12);
+    // Own row: later slots of the own cell, then the cells ahead along x.
+    const int own_row = nx * (cy + ny * cz);
+    scan(s + 1, cell_end_[own_row + column(xi + reach * (1 + 1e-12))]);
+    // Rows ahead: dz > 0 (any dy), or dz = 0 and dy > 0. Each pair is listed once.
+    for (int oz = 0; oz <= kRowReach && cz + oz < nz; ++oz) {
+      const int rz = cz + oz;
+      const double z_lo = lo.z() + rz * cell_size.z();
+      const double gz = oz == 0 ? 0.0 : std::max(0.0, z_lo - zi);
+      for (int oy = oz == 0 ? 1 : -kRowReach; oy <= kRowReach; ++oy) {
+        const int ry = cy + oy;
+        if (ry < 0 || ry >= ny) continue;
+        const double y_lo = lo.y() + ry * cell_size.y();
+        const double gy = std::max({0.0, y_lo - yi, yi - (y_lo + cell_size.y())});
+        const double g2 = gy * gy + gz * gz;
+        if (g2 >= prune2) continue;
+        const double rx = std::sqrt(prune2 - g2);
+        const int row = nx * (ry + ny * rz);
+        scan(cell_begin_[row + column(xi - rx)], cell_end_[row + column(xi + rx)]);
       }
-      if (gap2 >= reach2) continue;
-      const int oc = ox + nx * (oy + ny * oz);
-      scan(cell_begin_[oc], cell_end_[oc]);
     }
+    return k;
   };
   std::vector<int> counts(n, 0);
   for (;;) {
@@ -190,13 +208,8 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
     int overflow = 0;
 #pragma omp parallel for schedule(dynamic, 256) reduction(max : overflow) if (n >= kParallelMinParticles)
     for (int s = 0; s < n; ++s) {
-      int k = 0;
-      int* out = scratch_.data() + stride * s;
-      const int last = stride_ - 1;  // a rejected candidate may land one past the count
-      visit(s, [&](int t, bool within) {
-        out[std::min(k, last)] = t;
-        k += within;
-      });
+      // A rejected candidate may land one past the count: room for it at `last`.
+      const int k = visit(s, scratch_.data() + stride * s, stride_ - 1);
       counts[s] = k;
       overflow = std::max(overflow, k + 1);
     }

@@ -63,6 +63,23 @@ INSTANTIATE_TEST_SUITE_P(Exponents, CohesionForceOnRandomSystems,
                          ::testing::Values(std::make_pair(6, 12), std::make_pair(4, 8),
                                            std::make_pair(12, 24), std::make_pair(5, 9)));
 
+TEST(CohesionForce, EqualsAllPairsInACompressedClusterWithLongNeighbourLists) {
+  // 200 particles in a 3 mm cube at r0 = 2 mm: every pair is listed (lists longer than
+  // the pair loop's chunk) and many lie below the floor (the linearised law).
+  CohesionParams p;
+  p.r0_mm = 2.0;
+  const LennardJones law(p);
+  State s(random_cloud(200, 3.0, 0.0, 11));
+  CohesionForce term(law, 0.6);
+  Forces f = Forces::Zero(3, s.size());
+  const double e = term.add_forces(s, f, true);
+  EXPECT_EQ(term.neighbour_list().pair_count(), 200 * 199 / 2);
+  const Forces ref = all_pairs_forces(law, s.x);
+  EXPECT_TRUE(f.allFinite());
+  EXPECT_LT((f - ref).cwiseAbs().maxCoeff(), 1e-9 * (1 + ref.cwiseAbs().maxCoeff()));
+  EXPECT_NEAR(e, all_pairs_energy(law, s.x), 1e-9 * (1 + std::abs(e)));
+}
+
 TEST(CohesionForce, NeighbourListRebuildsOnlyAfterHalfSkinDisplacement) {
   CohesionParams p;
   const LennardJones law(p);

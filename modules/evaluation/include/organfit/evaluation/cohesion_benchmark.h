@@ -9,7 +9,9 @@
 // 4 c^3 atoms. organfit rebuilds its list when a particle moved skin/2 (never missing a
 // pair). LAMMPS runs twice: as in.lj (`every 20 check no`, unconditional rebuilds:
 // `ratio_vs_lammps`) and with organfit's policy (`every 1 check yes`:
-// `ratio_vs_lammps_checked`). Timings cover the stepping loop only ("Loop time").
+// `ratio_vs_lammps_checked`). Timings cover the stepping loop only ("Loop time"); the
+// pair loop and the list builds are also timed apart (`pair_us_per_particle_step`,
+// `neighbour_us_per_particle_step`, LAMMPS's "Pair" and "Neigh" lines).
 #include <nlohmann/json.hpp>
 #include <string>
 

@@ -27,6 +27,9 @@ class CohesionForce : public ForceTerm {
   const LennardJones& law() const { return law_; }
   const NeighbourList& neighbour_list() const { return list_; }
   double pair_damping() const { return pair_damping_; }
+  /// Wall time in the pair loop, summed over calls (s): the "Pair" line of a LAMMPS
+  /// timing breakdown (neighbour-list builds are in neighbour_list().build_seconds()).
+  double pair_seconds() const { return pair_seconds_; }
 
  private:
   template <class Kernel, bool kDamped>
@@ -35,6 +38,7 @@ class CohesionForce : public ForceTerm {
   LennardJones law_;
   NeighbourList list_;
   double pair_damping_;
+  double pair_seconds_ = 0;
   std::vector<double> xs_, vs_, fs_, es_;  // sorted copies: positions, velocities, forces, energies
 };
 

@@ -9,14 +9,19 @@
 // sorted slot to its particle. Open (non-periodic) boundaries: the grid spans the
 // particles' bounding box at build time.
 //
-// Deterministic threading: cells are grouped in blocks of 4^3 cells, stored one after
-// another in memory, and blocks are coloured by the parity of their block coordinates.
-// A block's pairs reach only its own cells and the layer of cells just beyond it, so
-// blocks of one colour never write to the same particle. Colours are processed one
-// after another, blocks of one colour in parallel, each block's slots in order: every
-// force is summed in an order fixed by the geometry alone, hence bit-identical results
-// for any thread count. Each block is a contiguous run of memory (cache friendly at
-// any size).
+// Build: cells are half the reach (cutoff + skin) wide and stored row by row (x
+// fastest), so a particle's candidates are the runs of slots of at most 13 rows of
+// cells ahead of it (2 rows in y and z), each run cut along x to the cells the sphere
+// of reach can touch: about 2.5 candidates per listed pair, against 4.3 with cells one
+// reach wide and their 13 neighbour cells.
+//
+// Deterministic threading: rows are grouped in blocks of 4 x 4 rows (slabs of cells
+// along x), stored one after another in memory, and blocks are coloured by the parity
+// of their (y, z) block coordinates. A block's pairs reach only its own cells and the
+// two rows of cells beyond it, so blocks of one colour never write to the same
+// particle. Colours are processed one after another, blocks of one colour in parallel,
+// each block's slots in order: every force is summed in an order fixed by the geometry
+// alone, hence bit-identical results for any thread count.
 #include <Eigen/Core>
 #include <vector>
 
@@ -41,6 +46,9 @@ class NeighbourList {
   double cutoff() const { return cutoff_; }
   double skin() const { return skin_; }
   long long builds() const { return builds_; }
+  /// Wall time spent building, summed over all builds (s): the "Neigh" line of a
+  /// LAMMPS timing breakdown.
+  double build_seconds() const { return build_seconds_; }
   int size() const { return static_cast<int>(order_.size()); }
 
   /// Sorted slot -> particle index.
@@ -60,6 +68,7 @@ class NeighbourList {
   double cutoff_, skin_;
   bool valid_ = false;
   long long builds_ = 0;
+  double build_seconds_ = 0;
   Eigen::Matrix3Xd x_at_build_;
   std::vector<int> order_, first_, neighbours_, cell_begin_, cell_end_, block_begin_, block_end_;
   std::vector<int> scratch_;  // per-slot lists at a fixed stride, before compaction
