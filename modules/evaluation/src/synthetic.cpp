@@ -5,29 +5,8 @@
 
 namespace organfit::evaluation {
 
-namespace {
-/// A mask's surface as the 0.5 level of its trilinear interpolation: between voxel
-/// centres the boundary runs straight from slice to slice instead of stepping by the
-/// slice gap (a 2.5-3 mm staircase on CT), while the voxel centres keep their labels.
-bool inside_mask(const geometry::LabelVolume& mask, const Eigen::Vector3d& p) {
-  const auto& g = mask.geometry;
-  const Eigen::Vector3d idx = g.physical_to_index(p);
-  const Eigen::Vector3d base = idx.array().floor();
-  const Eigen::Vector3d t = idx - base;
-  double value = 0;
-  for (int c = 0; c < 8; ++c) {
-    const int i = static_cast<int>(base.x()) + (c & 1), j = static_cast<int>(base.y()) + ((c >> 1) & 1),
-              k = static_cast<int>(base.z()) + ((c >> 2) & 1);
-    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) continue;
-    if (mask.at(i, j, k) != 1) continue;
-    value += ((c & 1) ? t.x() : 1 - t.x()) * (((c >> 1) & 1) ? t.y() : 1 - t.y()) * (((c >> 2) & 1) ? t.z() : 1 - t.z());
-  }
-  return value >= 0.5;
-}
-}  // namespace
-
 bool Shape::inside(const Eigen::Vector3d& p) const {
-  if (mask) return inside_mask(*mask, p);
+  if (mask) return geometry::inside_interpolated(*mask, p);
   const Eigen::Vector3d semi = 0.5 * size_mm;
   const Eigen::Vector3d q = p - centre_mm;
   if (kind == "box") return (q.cwiseAbs().array() <= semi.array()).all();
@@ -183,6 +162,25 @@ geometry::SurfaceComparison compare_with_body(const Eigen::Matrix3Xd& particles,
       for (int i = 0; i < g.size[0]; ++i)
         truth.at(i, j, k) = inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
   return geometry::compare_masks(model, truth);
+}
+
+geometry::SurfaceComparison compare_with_body(const fitting::EmbeddedBody& organ,
+                                              const std::function<bool(const Eigen::Vector3d&)>& inside,
+                                              const geometry::Aabb& body_bounds, double voxel_mm) {
+  geometry::Aabb box = organ.bounds();
+  box.min_mm = box.min_mm.cwiseMin(body_bounds.min_mm);
+  box.max_mm = box.max_mm.cwiseMax(body_bounds.max_mm);
+  return compare_mask_with_body(organ.on_grid(geometry::grid_covering(box, voxel_mm, 2 * voxel_mm)), inside);
+}
+
+geometry::SurfaceComparison compare_mask_with_body(const geometry::LabelVolume& body,
+                                                   const std::function<bool(const Eigen::Vector3d&)>& inside) {
+  const geometry::ImageGeometry& g = body.geometry;
+  geometry::LabelVolume truth(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) truth.at(i, j, k) = inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  return geometry::compare_masks(body, truth);
 }
 
 }  // namespace organfit::evaluation

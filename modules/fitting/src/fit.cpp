@@ -1,5 +1,6 @@
 #include "organfit/fitting/fit.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -9,15 +10,22 @@ namespace organfit::fitting {
 
 std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
                                    const particles::Positions& x, const std::vector<int>& skin,
-                                   double radius_mm, const std::vector<PointStatus>* status) {
+                                   double radius_mm, const std::vector<PointStatus>* status,
+                                   const std::vector<double>* depths_mm) {
   std::vector<double> out(points.size(), std::numeric_limits<double>::infinity());
   for (size_t k = 0; k < points.size(); ++k) {
     if (status && k < status->size() && (*status)[k].rejected) {
       out[k] = std::numeric_limits<double>::quiet_NaN();
       continue;
     }
-    const double d2 = nearest_particle(x, skin, points[k].p_mm).second;
-    if (std::isfinite(d2)) out[k] = std::abs(std::sqrt(d2) - radius_mm);
+    if (!depths_mm) {
+      const double d2 = nearest_particle(x, skin, points[k].p_mm).second;
+      if (std::isfinite(d2)) out[k] = std::abs(std::sqrt(d2) - radius_mm);
+      continue;
+    }
+    double best = std::numeric_limits<double>::infinity();
+    for (int i : skin) best = std::min(best, (x.col(i) - points[k].p_mm).norm() - (*depths_mm)[static_cast<size_t>(i)]);
+    if (std::isfinite(best)) out[k] = std::abs(best);
   }
   return out;
 }
@@ -50,7 +58,8 @@ FitResult run_fit(particles::Model& model, particles::State& state,
   for (int row = 0;; ++row) {
     HistoryRow h;
     h.step = integ.stats().steps;
-    const std::vector<double> r = data_residuals(points, state.x, skin_of(state.x), rho, status);
+    const std::vector<double> r = data_residuals(points, state.x, skin_of(state.x), rho, status,
+                                                 o.surface_depths_mm.empty() ? nullptr : &o.surface_depths_mm);
     double sum = 0, mx = 0;
     int counted = 0;
     for (double v : r)

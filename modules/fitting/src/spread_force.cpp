@@ -26,6 +26,13 @@ SpreadAttractiveForce::SpreadAttractiveForce(std::vector<AttractivePoint> points
   patch_.resize(points_.size());
 }
 
+void SpreadAttractiveForce::set_surface_depths(std::vector<double> depth_mm) {
+  for (double d : depth_mm)
+    if (!(d >= 0) || !std::isfinite(d)) throw std::invalid_argument("spread force: surface depths must be finite and >= 0");
+  depth_ = std::move(depth_mm);
+  skin_.invalidate();  // re-assign the epicentres with the new depths
+}
+
 void SpreadAttractiveForce::assign(const particles::Positions& x) {
   const auto& skin = skin_.skin();
   w_ = first_shell_counts(x, 1.3 * r0_);
@@ -35,12 +42,16 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
     PointStatus& st = status_[k];
     st = PointStatus{};
     patch_[k].clear();
-    const auto [epicentre, d2] = nearest_particle(x, skin, points_[k].p_mm);
-    st.epicentre = epicentre;
+    // Epicentre: the skin particle whose surface (its depth away) is nearest the point.
+    double best = std::numeric_limits<double>::infinity();
+    for (int i : skin) {
+      const double gap = (x.col(i) - points_[k].p_mm).norm() - depth(i);
+      if (gap < best) best = gap, st.epicentre = i;
+    }
     if (st.epicentre < 0) continue;
-    st.d_min_mm = std::sqrt(d2);
+    st.d_min_mm = (x.col(st.epicentre) - points_[k].p_mm).norm();
     st.inside_model = skin_.inside(points_[k].p_mm);
-    if (!st.inside_model && st.d_min_mm - rho_ > outlier) {
+    if (!st.inside_model && st.d_min_mm - depth(st.epicentre) > outlier) {
       st.rejected = true;
       continue;
     }
@@ -56,12 +67,12 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
   // more than 2 r0) are not boundary data: e.g. a point deep inside the organ.
   std::vector<double> off;
   for (const auto& st : status_)
-    if (!st.rejected && st.epicentre >= 0) off.push_back(std::abs(st.d_min_mm - rho_));
+    if (!st.rejected && st.epicentre >= 0) off.push_back(std::abs(st.d_min_mm - depth(st.epicentre)));
   if (off.size() >= 5) {
     const double cut = std::max(2.0 * r0_, outlier_cutoff(off, 5.0));
     for (size_t k = 0; k < status_.size(); ++k) {
       PointStatus& st = status_[k];
-      if (!st.rejected && st.epicentre >= 0 && std::abs(st.d_min_mm - rho_) > cut) {
+      if (!st.rejected && st.epicentre >= 0 && std::abs(st.d_min_mm - depth(st.epicentre)) > cut) {
         st.rejected = true;
         patch_[k].clear();
       }
@@ -80,9 +91,10 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
     const Eigen::Vector3d to_p = points_[k].p_mm - state.x.col(st.epicentre);
     const double d = to_p.norm();
     st.d_min_mm = d;
-    st.reached = std::abs(d - rho_) < 1e-3 * rho_;
+    const double reach = depth(st.epicentre);
+    st.reached = std::abs(d - reach) < 1e-3 * rho_;
     if (d < 1e-12) continue;
-    const Eigen::Vector3d r = (d - rho_) * (to_p / d);
+    const Eigen::Vector3d r = (d - reach) * (to_p / d);
     for (const auto& [i, w] : patch_[k]) {
       num_[i] += w * r;
       den_[i] += w;

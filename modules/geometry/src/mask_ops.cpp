@@ -218,4 +218,23 @@ SurfaceComparison compare_particle_bodies(const Eigen::Matrix3Xd& a, const Eigen
   return compare_masks(closed_body_on_grid(a, radius_mm, closing_mm, g), closed_body_on_grid(b, radius_mm, closing_mm, g));
 }
 
+bool inside_interpolated(const LabelVolume& mask, const Eigen::Vector3d& p_mm) {
+  const auto& g = mask.geometry;
+  const Eigen::Vector3d idx = g.physical_to_index(p_mm);
+  if (!idx.allFinite()) return false;
+  const Eigen::Vector3d base = idx.array().floor();
+  if ((base.array() < -1).any() || base.x() >= g.size[0] || base.y() >= g.size[1] || base.z() >= g.size[2]) return false;
+  const Eigen::Vector3d t = idx - base;
+  double value = 0;
+  for (int c = 0; c < 8; ++c) {
+    const int i = static_cast<int>(base.x()) + (c & 1), j = static_cast<int>(base.y()) + ((c >> 1) & 1),
+              k = static_cast<int>(base.z()) + ((c >> 2) & 1);
+    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) continue;
+    if (mask.at(i, j, k) != 1) continue;
+    value += ((c & 1) ? t.x() : 1 - t.x()) * (((c >> 1) & 1) ? t.y() : 1 - t.y()) *
+             (((c >> 2) & 1) ? t.z() : 1 - t.z());
+  }
+  return value >= 0.5;
+}
+
 }  // namespace organfit::geometry

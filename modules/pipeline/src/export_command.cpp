@@ -44,7 +44,8 @@ nlohmann::json run_export_command(const ExportCommand& c) {
     request.copy_rois_from = &*other;
     request.skip_roi = saved.organ_name;
   }
-  PendingExport pending = prepare_export(saved.model.state.x, saved.model.model->radius_mm(), ct ? &*ct : nullptr, request);
+  PendingExport pending =
+      prepare_export(organ_body(saved.model), saved.model.model->radius_mm(), ct ? &*ct : nullptr, request);
   for (const auto& w : pending.warnings) spdlog::warn(w);
   for (const auto& f : {c.rtstruct, c.labels, c.mesh}) {
     std::error_code ec;

@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/LU>
+
 #include <cmath>
 #include <fstream>
 
@@ -84,6 +86,17 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
   } else {
     j["skeleton"] = nullptr;
   }
+  // A fitted model: how its reference follows the particles (fitting/embedded_body.h).
+  if (m.placed.cols() == m.state.x.cols() && m.placed.cols() > 0) {
+    const auto& map = m.global_map;
+    j["embedding"] = {{"placed_positions_mm", flat(m.placed)},
+                      {"global_affine", std::vector<double>(map.affine.a.data(), map.affine.a.data() + 9)},
+                      {"global_translation_mm", vec(map.affine.t)},
+                      {"global_shear_centre_mm", vec(map.shears.centre)},
+                      {"global_shears", std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)}};
+  } else {
+    j["embedding"] = nullptr;
+  }
   write_file_atomically(file, j.dump() + "\n");
 }
 
@@ -157,6 +170,22 @@ SavedModel load_model(const fs::path& file) {
       skeleton->nodes_mm = Eigen::Map<const Eigen::Matrix3Xd>(nodes.data(), 3, static_cast<Eigen::Index>(nodes.size() / 3));
     }
     build_model_terms(m, skeleton ? &*skeleton : nullptr);
+    if (j.contains("embedding") && !j.at("embedding").is_null()) {
+      const auto& e = j.at("embedding");
+      const auto placed = e.at("placed_positions_mm").get<std::vector<double>>();
+      const auto a = e.at("global_affine").get<std::vector<double>>();
+      const auto c = e.at("global_shears").get<std::vector<double>>();
+      if (placed.size() != static_cast<size_t>(3 * n)) fail("embedding.placed_positions_mm needs x, y, z per particle");
+      if (a.size() != 9 || c.size() != 9) fail("embedding.global_affine and global_shears need 9 numbers each");
+      m.placed = Eigen::Map<const Eigen::Matrix3Xd>(placed.data(), 3, static_cast<Eigen::Index>(n));
+      m.global_map.affine.a = Eigen::Map<const Eigen::Matrix3d>(a.data());
+      m.global_map.affine.t = read_vec(e.at("global_translation_mm"));
+      m.global_map.shears.centre = read_vec(e.at("global_shear_centre_mm"));
+      m.global_map.shears.c = Eigen::Map<const Eigen::Matrix<double, 9, 1>>(c.data());
+      if (!m.placed.allFinite() || !m.global_map.affine.a.allFinite() || !m.global_map.shears.c.allFinite() ||
+          std::abs(m.global_map.affine.a.determinant() - 1) > 1e-6)
+        fail("embedding: not finite, or the global map does not keep volume (det != 1)");
+    }
     saved.organ_name = j.at("organ").at("name").get<std::string>();
     if (!j.at("ct").is_null()) {
       const auto& c = j.at("ct");

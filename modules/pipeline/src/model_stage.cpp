@@ -128,6 +128,13 @@ void build_model_terms(ModelStageResult& result, const particles::Skeleton* skel
   if (skeleton && skeleton->node_count() > 0) add_skeleton_term(result, *skeleton);
 }
 
+fitting::EmbeddedBody organ_body(const ModelStageResult& m) {
+  const bool fitted = m.placed.cols() == m.state.x.cols() && m.placed.cols() > 0;
+  return fitting::EmbeddedBody(std::make_shared<const geometry::LabelVolume>(m.reference), m.global_map,
+                               fitted ? m.placed : m.state.x, m.state.x,
+                               fitting::embedding_support_mm(m.lattice_spacing_mm));
+}
+
 void add_skeleton_term(ModelStageResult& result, const particles::Skeleton& skeleton) {
   result.skeleton = &result.model->add(
       std::make_unique<particles::SkeletonForce>(skeleton, result.state.x, result.skeleton_params));

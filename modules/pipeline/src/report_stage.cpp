@@ -43,18 +43,16 @@ std::string build_report(const ReportContext& c) {
   in.residuals_mm = c.residuals_mm;
   if (c.show_patient && c.ct)
     in.patient = c.ct->patient.patient_name + " (ID " + c.ct->patient.patient_id + ")";
-  if (c.fitted && c.fitted->cols() > 0) {
-    // The fitted surface as the mesh export makes it (balls closed by rho on a grid of rho).
-    const geometry::Aabb box{c.fitted->rowwise().minCoeff(), c.fitted->rowwise().maxCoeff()};
-    const geometry::LabelVolume body =
-        geometry::closed_body_on_grid(*c.fitted, c.rho_mm, c.rho_mm, geometry::grid_covering(box, c.rho_mm, 3 * c.rho_mm));
+  if (c.fitted) {
+    // The fitted surface as the mesh export makes it (the organ on a grid of rho).
+    const geometry::LabelVolume body = c.fitted->on_grid(geometry::grid_covering(c.fitted->bounds(), c.rho_mm, c.rho_mm));
     meshing::SurfaceMesh mesh = meshing::surface_mesh(body);
     in.surface_vertex_mm = std::move(mesh.vertex_mm);
     in.surface_triangles = std::move(mesh.triangle_ids);
   }
   if (c.ct && c.fitted) {
     const auto& g = c.ct->geometry;
-    const geometry::LabelVolume fitted = geometry::closed_body_on_grid(*c.fitted, c.rho_mm, c.rho_mm, g);
+    const geometry::LabelVolume fitted = c.fitted->on_grid(g);
     const geometry::LabelVolume planning = c.planning ? shape_on_grid(*c.planning, g) : geometry::LabelVolume(g);
     std::array<int, 3> lo{g.size[0], g.size[1], g.size[2]}, hi{-1, -1, -1};
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();

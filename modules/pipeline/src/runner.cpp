@@ -287,7 +287,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
     } catch (const particles::StabilityError& e) {
       throw TargetNotMetError(std::string("fit: the simulation could not continue stably: ") + e.what());
     }
-    record_stage("fit", clock.elapsed_s());
+    record_stage("fit", clock.elapsed_s() - fit.truth_wall_s);
+    if (fit.truth_wall_s > 0) record_stage("truth", fit.truth_wall_s);  // evaluation, not the update
     run["fit"] = fit.fit_summary;
     run["model"]["skin_particles"] = fit.fit_summary["skin_particles"];
     if (!fit.truth_summary.is_null()) run["truth"] = fit.truth_summary;
@@ -349,7 +350,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
       input_rtss = dicom::read_rtstruct(file);
       request.copy_rois_from = &*input_rtss;
     }
-    pending = prepare_export(model->state.x, model->model->radius_mm(), ct ? &*ct : nullptr, request);
+    pending = prepare_export(organ_body(*model), model->model->radius_mm(), ct ? &*ct : nullptr, request);
     for (const auto& w : pending->warnings) warn(w);
     for (const auto& f : pending->files) exported.push_back(f);
     model_file = scene.text("export", "model");
@@ -409,7 +410,9 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
       if (f.first == "history.csv") context.history_csv = f.second;
     context.ct = ct ? &*ct : nullptr;
     context.planning = model ? &model->shape : nullptr;
-    context.fitted = model ? &model->state.x : nullptr;
+    std::optional<fitting::EmbeddedBody> organ;
+    if (model) organ.emplace(organ_body(*model));
+    context.fitted = organ ? &*organ : nullptr;
     context.rho_mm = model ? model->model->radius_mm() : 0;
     if (points)
       for (const auto& p : points->points) context.points_mm.push_back(p.p_mm);

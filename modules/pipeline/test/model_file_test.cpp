@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <fstream>
 
 #include "organfit/pipeline/scene_schema.h"
@@ -67,6 +68,29 @@ TEST_F(ModelFile, SavedAndLoadedModelsAreTheSame) {
   const double eb = back.model.model->compute_forces(back.model.state, fb, true);
   EXPECT_NEAR(ea, eb, 1e-9 * std::abs(ea));
   EXPECT_LT((fa - fb).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
+  ModelStageResult m = build("body:\n  shape: ellipsoid\n  size_mm: [30, 24, 20]\n");
+  // As a fit leaves it: a global map, particles placed by it, then moved locally.
+  m.global_map.affine.a = Eigen::Vector3d(1.2, 1 / std::sqrt(1.2), 1 / std::sqrt(1.2)).asDiagonal();
+  m.global_map.affine.t = Eigen::Vector3d(0.5, -1, 2);
+  m.global_map.shears.c(3) = 0.003;
+  m.placed = m.state.x;
+  for (Eigen::Index i = 0; i < m.placed.cols(); ++i) m.placed.col(i) = m.global_map.apply(m.state.x.col(i));
+  m.state.x = m.placed;
+  m.state.x.row(1).array() += 0.4;
+  save_model(dir_ / "fitted.json", m, "Prostate", std::nullopt, {});
+  SavedModel back = load_model(dir_ / "fitted.json");
+  const fitting::EmbeddedBody a = organ_body(m), b = organ_body(back.model);
+  for (const Eigen::Vector3d q : {Eigen::Vector3d(0, 0.4, 2), Eigen::Vector3d(16, -1, 1), Eigen::Vector3d(-3, 11, 2)})
+    EXPECT_LT((a.pull_back(q) - b.pull_back(q)).norm(), 1e-12);
+  // Not the planning organ any more: it moved 0.4 mm in y.
+  EXPECT_NEAR((a.pull_back(Eigen::Vector3d(0, 0.4, 2)) - m.global_map.inverse(Eigen::Vector3d(0, 0, 2))).norm(), 0, 1e-6);
+  // A model saved at rest has no embedding.
+  ModelStageResult rest = build("body:\n  shape: ellipsoid\n  size_mm: [30, 24, 20]\n");
+  save_model(dir_ / "rest.json", rest, "Prostate", std::nullopt, {});
+  EXPECT_EQ(load_model(dir_ / "rest.json").model.placed.cols(), 0);
 }
 
 TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "organfit/fitting/attractive_points.h"
+#include "organfit/fitting/embedded_body.h"
 #include "organfit/geometry/mask_ops.h"
 
 namespace organfit::evaluation {
@@ -93,5 +94,16 @@ std::function<bool(const Eigen::Vector3d&)> deformed_inside(const Shape& shape,
 geometry::SurfaceComparison compare_with_body(const Eigen::Matrix3Xd& particles, double radius_mm,
                                               const std::function<bool(const Eigen::Vector3d&)>& inside,
                                               const geometry::Aabb& body_bounds, double voxel_mm);
+
+/// Compares the organ a model carries (fitting/embedded_body.h) with a body given by its
+/// inside test, on a grid of `voxel_mm` covering both.
+geometry::SurfaceComparison compare_with_body(const fitting::EmbeddedBody& organ,
+                                              const std::function<bool(const Eigen::Vector3d&)>& inside,
+                                              const geometry::Aabb& body_bounds, double voxel_mm);
+
+/// Compares a body already on a grid (label 1) with a body given by its inside test,
+/// sampled at the same grid's voxel centres.
+geometry::SurfaceComparison compare_mask_with_body(const geometry::LabelVolume& body,
+                                                   const std::function<bool(const Eigen::Vector3d&)>& inside);
 
 }  // namespace organfit::evaluation

@@ -5,6 +5,8 @@
 // For point k with epicentre e_k (nearest skin particle, re-assigned when the skin is
 // recomputed), the residual is the vector from the epicentre's surface point to p_k:
 //     r_k = (|p_k - x_e| - rho) u_ek,   u_ek = (p_k - x_e) / |p_k - x_e|.
+// (With surface depths set, rho is replaced by the epicentre's depth below the organ's
+// embedded surface: set_surface_depths.)
 // Skin particles i of the patch (within patch_radius of e_k) share that displacement with
 // Gaussian weights w_ik = exp(-|x_i - x_e|^2 / (2 sigma^2)) (positions at assignment),
 // normalised where patches overlap (a partition of unity, so nearby points average
@@ -43,6 +45,15 @@ class SpreadAttractiveForce : public particles::ForceTerm {
   const SkinDetector& skin() const { return skin_; }
   const std::vector<PointStatus>& status() const { return status_; }
 
+  /// Each particle's depth below the organ's surface (mm, one per particle; see
+  /// fitting/embedded_body.h): the residual of a point becomes |p - x_e| - depth_e and
+  /// its epicentre the skin particle minimising that, so the surface fitted is the
+  /// embedded body's, not the balls'. Without it every depth is rho (the balls').
+  /// Throws std::invalid_argument on a negative or non-finite depth.
+  void set_surface_depths(std::vector<double> depth_mm);
+  /// Depth of particle i (mm).
+  double depth(int i) const { return depth_.empty() ? rho_ : depth_[static_cast<size_t>(i)]; }
+
  private:
   void assign(const particles::Positions& x);
   std::vector<AttractivePoint> points_;
@@ -52,6 +63,7 @@ class SpreadAttractiveForce : public particles::ForceTerm {
   std::vector<PointStatus> status_;
   std::vector<std::vector<std::pair<int, double>>> patch_;  // (particle, weight) per point
   std::vector<int> w_;  // W(i) at the last assignment
+  std::vector<double> depth_;  // per particle; empty: rho for all
   std::vector<Eigen::Vector3d> num_;
   std::vector<double> den_;
 };

@@ -44,6 +44,12 @@ void close_mask(LabelVolume& mask, double radius_mm);
 LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm, double closing_mm,
                                 const ImageGeometry& grid);
 
+/// Whether `p_mm` lies inside the surface of a mask taken as the 0.5 level of the
+/// trilinear interpolation of its indicator (label 1 = 1, else 0; 0 off the grid). On a
+/// CT mask with thick slices the surface then runs straight from slice to slice instead
+/// of stepping by the slice gap, while voxel centres keep their labels.
+bool inside_interpolated(const LabelVolume& mask, const Eigen::Vector3d& p_mm);
+
 /// The surface voxels of a mask (label != 0 with a face neighbour outside or off-grid).
 std::vector<std::uint8_t> surface_of(const LabelVolume& mask);
 

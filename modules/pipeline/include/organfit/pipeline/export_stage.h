@@ -1,8 +1,10 @@
 #pragma once
-// The export stage: a (fitted) particle model written for the planning system.
-//   rtstruct  a DICOM RT Structure Set on the planning CT: the model's body (balls of
-//             rho closed by rho) on the CT grid, contoured slice by slice; optionally the
-//             input structure set's other ROIs copied alongside
+// The export stage: a (fitted) particle model written for the planning system. What is
+// written is the organ the model carries: its reference body (the planning organ) moved
+// with the particles (fitting/embedded_body.h); at rest, the planning organ itself.
+//   rtstruct  a DICOM RT Structure Set on the planning CT: that organ on the CT grid,
+//             contoured slice by slice; optionally the input structure set's other ROIs
+//             copied alongside
 //   labels    the same mask as a label map (NRRD, MHA, NIfTI) with the CT's geometry
 //   mesh      the body's surface (STL, VTP, PLY, OBJ), independent of the CT grid
 // Everything is computed first; files are written only by commit(), each atomically,
@@ -13,6 +15,8 @@
 #include <optional>
 #include <string>
 #include <vector>
+
+#include "organfit/fitting/embedded_body.h"
 
 #include "organfit/dicom/ct_series.h"
 #include "organfit/dicom/structure_set.h"
@@ -38,14 +42,15 @@ class PendingExport {
   void commit();
 
  private:
-  friend PendingExport prepare_export(const particles::Positions&, double, const dicom::CtSeries*,
+  friend PendingExport prepare_export(const fitting::EmbeddedBody&, double, const dicom::CtSeries*,
                                       const ExportRequest&);
   std::vector<std::function<void(nlohmann::json& summary)>> writes_;
 };
 
-/// Computes the exports of particles `x` of radius `rho_mm`. `ct` is needed for the
-/// RT Structure Set and the label map (InputError otherwise).
-PendingExport prepare_export(const particles::Positions& x, double rho_mm, const dicom::CtSeries* ct,
+/// Computes the exports of the organ a model carries (pipeline::organ_body), whose
+/// particles have radius `rho_mm` (the mesh's voxel). `ct` is needed for the RT
+/// Structure Set and the label map (InputError otherwise).
+PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho_mm, const dicom::CtSeries* ct,
                              const ExportRequest& request);
 
 }  // namespace organfit::pipeline

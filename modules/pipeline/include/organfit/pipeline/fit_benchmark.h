@@ -5,14 +5,19 @@
 //
 // Each case: an organ shape, a volume-preserving deformation family and magnitude (the
 // largest displacement it causes, mm), points on the posterior half of the deformed
-// surface (what a transrectal probe sees) with noise and outliers, seeded. Every method's
-// result is the model's particles moved (by the fit, or by the baseline's map), measured
-// the same way (geometry/mask_ops.h):
-//   msd_mm     symmetric mean surface distance between the particles' closed body (balls
-//              of rho closed by rho) and the true deformed body, on a grid of rho/2;
-//   hd95_mm    the symmetric 95th percentile of the same surface distances;
+// surface (what a transrectal probe sees) with noise and outliers, seeded. Every method
+// moves the model's particles (by the fit, or by the baseline's map), and its result is
+// the organ those particles carry: the model's reference body moved with them
+// (fitting/embedded_body.h; the particle fits with their global map, the baselines with
+// their map sampled at the particles), measured the same way (geometry/mask_ops.h):
+//   msd_mm     symmetric mean surface distance between that organ and the true deformed
+//              body, both on a grid of rho/2 covering both: the mean, over the surface
+//              voxels of each mask, of the distance to the other mask's surface voxels;
+//   hd95_mm    the 95th percentile of the same two sets of distances pooled;
 //   dice       on that grid;
-//   volume_change_pct  the closed body's volume against the model's before the fit;
+//   volume_change_pct  that organ's volume against the model's reference at rest;
+//   msd_balls_mm, volume_change_balls_pct  the same for the particles' own body (balls
+//              of rho closed by rho), the paper's surface;
 //   residual_mm  mean over the points of |distance to the nearest particle centre - rho|.
 // Writes DIR/results.csv, DIR/curves.csv (the particle fits' histories), DIR/work_precision.svg
 // and DIR/RESULTS.md.

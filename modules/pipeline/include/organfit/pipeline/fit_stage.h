@@ -7,6 +7,7 @@
 #include "organfit/config/scene.h"
 #include "organfit/evaluation/synthetic.h"
 #include "organfit/fitting/fit.h"
+#include "organfit/fitting/global_fit.h"
 #include "organfit/pipeline/model_stage.h"
 
 namespace organfit::pipeline {
@@ -41,6 +42,12 @@ struct FitStageResult {
   nlohmann::json truth_summary;  ///< run.json "truth" (when the truth is known)
   std::string history_csv;
   std::string not_converged_message;  ///< which points are left and how far
+  /// How the organ's reference body follows the particles (fitting/embedded_body.h):
+  /// the global map (identity for the paper's method) and where the particles were
+  /// placed before the local stage.
+  fitting::GlobalMap global_map;
+  particles::Positions placed;
+  double truth_wall_s = 0;  ///< measuring against the known truth (not part of the update)
 };
 
 FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model,

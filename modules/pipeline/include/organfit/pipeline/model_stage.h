@@ -6,6 +6,7 @@
 
 #include "organfit/config/scene.h"
 #include "organfit/evaluation/synthetic.h"
+#include "organfit/fitting/embedded_body.h"
 #include "organfit/particles/skeleton.h"
 #include "organfit/particles/integrator.h"
 #include "organfit/particles/model.h"
@@ -47,7 +48,15 @@ struct ModelStageResult {
   particles::SkeletonParams skeleton_params;
   double skeleton_node_spacing_mm = 0;
   nlohmann::json summary;  ///< run.json "model" block
+  /// How the reference follows the particles (fitting/embedded_body.h): the fit's global
+  /// map and where it placed the particles (empty: they are where the model put them).
+  fitting::GlobalMap global_map;
+  particles::Positions placed;
 };
+
+/// The organ as the model carries it now: the reference body moved with the particles
+/// (at rest, the reference itself). What is exported, reported and measured.
+fitting::EmbeddedBody organ_body(const ModelStageResult& model);
 
 /// Fills the organ (when given, e.g. imported from CT) or the scene's analytic body with
 /// particles at the relaxed fcc spacing and relaxes them.

@@ -7,6 +7,7 @@
 
 #include "organfit/dicom/ct_series.h"
 #include "organfit/evaluation/synthetic.h"
+#include "organfit/fitting/embedded_body.h"
 #include "organfit/particles/state.h"
 
 namespace organfit::pipeline {
@@ -16,8 +17,8 @@ struct ReportContext {
   std::string scene_yaml, history_csv;
   const dicom::CtSeries* ct = nullptr;       ///< null: no CT views
   const evaluation::Shape* planning = nullptr;  ///< the organ before the fit (its contour)
-  const particles::Positions* fitted = nullptr; ///< the particles after the fit
-  double rho_mm = 0;
+  const fitting::EmbeddedBody* fitted = nullptr; ///< the organ after the fit (pipeline::organ_body)
+  double rho_mm = 0;                         ///< the particles' radius: the 3D view's voxel
   std::vector<Eigen::Vector3d> points_mm;
   std::vector<double> residuals_mm;
   bool show_patient = false;                 ///< the scene asked for name and ID

@@ -1,0 +1,164 @@
+#include "organfit/fitting/embedded_body.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "organfit/geometry/mask_ops.h"
+
+namespace organfit::fitting {
+
+EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> reference, GlobalMap map,
+                           particles::Positions placed, particles::Positions current, double support_mm)
+    : reference_(std::move(reference)), map_(std::move(map)), placed_(std::move(placed)),
+      current_(std::move(current)), h_(support_mm) {
+  if (!reference_) throw std::invalid_argument("embedded body: no reference body");
+  if (placed_.cols() != current_.cols())
+    throw std::invalid_argument("embedded body: placed and current particle counts differ");
+  if (!placed_.allFinite() || !current_.allFinite())
+    throw std::invalid_argument("embedded body: a particle position is not finite");
+  if (!(support_mm > 0) || !std::isfinite(support_mm))
+    throw std::invalid_argument("embedded body: support must be > 0 mm");
+  map_inverse_a_ = map_.affine.a.inverse();
+  lo_ = current_.cols() > 0 ? Eigen::Vector3d(current_.rowwise().minCoeff()) : Eigen::Vector3d::Zero();
+  for (Eigen::Index i = 0; i < current_.cols(); ++i) {
+    const Eigen::Vector3d c = ((current_.col(i) - lo_) / h_).array().floor();
+    cells_[key(static_cast<int>(c.x()), static_cast<int>(c.y()), static_cast<int>(c.z()))].push_back(
+        static_cast<int>(i));
+  }
+}
+
+long long EmbeddedBody::key(int i, int j, int k) const {
+  // Cells are within a few hundred of the origin for any organ; 21 bits per axis.
+  return (static_cast<long long>(i + (1 << 20)) << 42) | (static_cast<long long>(j + (1 << 20)) << 21) |
+         static_cast<long long>(k + (1 << 20));
+}
+
+Eigen::Vector3d EmbeddedBody::pull_back(const Eigen::Vector3d& q) const {
+  const Eigen::Vector3d nan = Eigen::Vector3d::Constant(std::nan(""));
+  if (!q.allFinite()) return nan;
+  const Eigen::Vector3d c = ((q - lo_) / h_).array().floor();
+  if ((c.array().abs() > 1e5).any()) return nan;  // far from every particle
+  const int ci = static_cast<int>(c.x()), cj = static_cast<int>(c.y()), ck = static_cast<int>(c.z());
+  // Weighted least squares for u(x) = c0 + B (x - q) / h over the neighbours within h.
+  // Where they spread too little in some direction to fix the gradient (a tip of the
+  // body, where they may all lie in one lattice plane), h grows: the field is
+  // extrapolated from a wider, well-spread neighbourhood instead of guessing a zero slope.
+  for (int widen = 0; widen < 3; ++widen) {
+    const double h = h_ * (widen == 0 ? 1.0 : widen == 1 ? 1.5 : 2.0);
+    const int reach = widen == 0 ? 1 : 2;
+    Eigen::Matrix4d m = Eigen::Matrix4d::Zero();
+    Eigen::Matrix<double, 4, 3> r = Eigen::Matrix<double, 4, 3>::Zero();
+    int count = 0;
+    const double h2 = h * h;
+    for (int dk = -reach; dk <= reach; ++dk)
+      for (int dj = -reach; dj <= reach; ++dj)
+        for (int di = -reach; di <= reach; ++di) {
+          const auto it = cells_.find(key(ci + di, cj + dj, ck + dk));
+          if (it == cells_.end()) continue;
+          for (int p : it->second) {
+            const Eigen::Vector3d d = current_.col(p) - q;
+            const double s = d.squaredNorm() / h2;
+            if (s >= 1) continue;
+            const double w = (1 - s) * (1 - s) * (1 - s);
+            const Eigen::Vector4d phi(1, d.x() / h, d.y() / h, d.z() / h);
+            m.noalias() += w * phi * phi.transpose();
+            r.noalias() += w * phi * (placed_.col(p) - current_.col(p)).transpose();
+            ++count;
+          }
+        }
+    if (count < 4) {
+      if (widen == 0) return nan;  // beyond the body: no particle within the support
+      continue;
+    }
+    // Spread of the neighbours (weighted covariance, in units of h^2): well-posed when its
+    // smallest eigenvalue is at least (h/10)^2.
+    const Eigen::Matrix3d cov = m.bottomRightCorner<3, 3>() / m(0, 0) -
+                                m.block<3, 1>(1, 0) * m.block<1, 3>(0, 1) / (m(0, 0) * m(0, 0));
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> spread;
+    spread.computeDirect(cov, Eigen::EigenvaluesOnly);
+    if (spread.eigenvalues()(0) < 1e-2 && widen < 2) continue;
+    // A faint pull of the gradient towards zero keeps a degenerate last resort solvable.
+    m.bottomRightCorner<3, 3>() += 1e-9 * m(0, 0) * Eigen::Matrix3d::Identity();
+    const Eigen::Matrix<double, 4, 3> coef = m.ldlt().solve(r);
+    const Eigen::Vector3d q0 = q + coef.row(0).transpose();
+    return map_inverse_a_ * (map_.shears.inverse(q0) - map_.affine.t);
+  }
+  return nan;
+}
+
+bool EmbeddedBody::inside(const Eigen::Vector3d& q) const {
+  const Eigen::Vector3d r = pull_back(q);
+  return r.allFinite() && geometry::inside_interpolated(*reference_, r);
+}
+
+geometry::Aabb EmbeddedBody::bounds() const {
+  if (current_.cols() == 0) return {};
+  return {current_.rowwise().minCoeff().transpose().array() - h_,
+          current_.rowwise().maxCoeff().transpose().array() + h_};
+}
+
+geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid) const {
+  geometry::LabelVolume out(grid);
+  if (current_.cols() == 0) return out;
+  const geometry::Aabb b = bounds();
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = Eigen::Vector3d::Constant(-1e300);
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d corner((c & 1) ? b.max_mm.x() : b.min_mm.x(), (c & 2) ? b.max_mm.y() : b.min_mm.y(),
+                                 (c & 4) ? b.max_mm.z() : b.min_mm.z());
+    const Eigen::Vector3d idx = grid.physical_to_index(corner);
+    lo = lo.cwiseMin(idx), hi = hi.cwiseMax(idx);
+  }
+  int i0[3], i1[3];
+  for (int d = 0; d < 3; ++d) {
+    i0[d] = static_cast<int>(std::max(0.0, std::floor(lo[d])));
+    i1[d] = static_cast<int>(std::min(static_cast<double>(grid.size[d] - 1), std::ceil(hi[d])));
+  }
+#pragma omp parallel for schedule(dynamic, 1) collapse(2)
+  for (int k = i0[2]; k <= i1[2]; ++k)
+    for (int j = i0[1]; j <= i1[1]; ++j)
+      for (int i = i0[0]; i <= i1[0]; ++i)
+        out.at(i, j, k) = inside(grid.index_to_physical(Eigen::Vector3d(i, j, k))) ? 1 : 0;
+  return out;
+}
+
+double EmbeddedBody::volume_mm3(double voxel_mm) const {
+  if (current_.cols() == 0) return 0;
+  return on_grid(geometry::grid_covering(bounds(), voxel_mm, voxel_mm)).volume_mm3(1);
+}
+
+std::vector<double> surface_depths(const particles::Positions& x, const Eigen::Matrix3Xd& surface,
+                                   double reach) {
+  std::vector<double> depth(static_cast<size_t>(x.cols()), reach);
+  if (surface.cols() == 0 || !(reach > 0)) return depth;
+  const Eigen::Vector3d lo = surface.rowwise().minCoeff();
+  auto cell_of = [&](const Eigen::Vector3d& p) -> Eigen::Vector3i {
+    const Eigen::Vector3d c = ((p - lo) / reach).array().floor();
+    return c.cwiseMax(-1e6).cwiseMin(1e6).cast<int>();
+  };
+  auto key = [](const Eigen::Vector3i& c) {
+    return (static_cast<long long>(c.x() + (1 << 20)) << 42) | (static_cast<long long>(c.y() + (1 << 20)) << 21) |
+           static_cast<long long>(c.z() + (1 << 20));
+  };
+  std::unordered_map<long long, std::vector<int>> cells;
+  for (Eigen::Index j = 0; j < surface.cols(); ++j) cells[key(cell_of(surface.col(j)))].push_back(static_cast<int>(j));
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index i = 0; i < x.cols(); ++i) {
+    const Eigen::Vector3i c = cell_of(x.col(i));
+    double best2 = reach * reach;
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const auto it = cells.find(key(c + Eigen::Vector3i(dx, dy, dz)));
+          if (it == cells.end()) continue;
+          for (int j : it->second) best2 = std::min(best2, (surface.col(j) - x.col(i)).squaredNorm());
+        }
+    depth[static_cast<size_t>(i)] = std::sqrt(best2);
+  }
+  return depth;
+}
+
+}  // namespace organfit::fitting

@@ -1,0 +1,169 @@
+// EmbeddedBody: the reference body moved with the particles. At rest it is the
+// reference; affine motion of the particles (or a global map) moves it exactly.
+#include "organfit/fitting/embedded_body.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <cmath>
+#include <random>
+
+#include "organfit/fitting/spread_force.h"
+#include "organfit/geometry/mask_ops.h"
+#include "organfit/particles/cohesion.h"
+
+namespace organfit::fitting {
+namespace {
+
+constexpr double kSpacing = 3.0;  // particle spacing (mm)
+
+/// An ellipsoid of semi-axes 20, 14, 11 mm centred at c, as a mask of 0.75 mm voxels.
+std::shared_ptr<const geometry::LabelVolume> ellipsoid_mask(const Eigen::Vector3d& c) {
+  const Eigen::Vector3d semi(20, 14, 11);
+  const geometry::ImageGeometry g = geometry::grid_covering({c - semi, c + semi}, 0.75, 3.0);
+  auto mask = std::make_shared<geometry::LabelVolume>(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k)) - c;
+        mask->at(i, j, k) = p.cwiseQuotient(semi).squaredNorm() <= 1.0;
+      }
+  return mask;
+}
+
+/// Particles on a cubic lattice inside the mask, at least half a spacing in.
+particles::Positions fill(const geometry::LabelVolume& mask) {
+  const geometry::Aabb b = mask.geometry.bounds_mm();
+  std::vector<Eigen::Vector3d> pts;
+  for (double z = b.min_mm.z(); z <= b.max_mm.z(); z += kSpacing)
+    for (double y = b.min_mm.y(); y <= b.max_mm.y(); y += kSpacing)
+      for (double x = b.min_mm.x(); x <= b.max_mm.x(); x += kSpacing) {
+        const Eigen::Vector3d p(x, y, z);
+        bool deep = true;
+        for (int d = 0; d < 3 && deep; ++d)
+          for (double s : {-0.5, 0.5}) deep = deep && geometry::inside_interpolated(mask, p + s * kSpacing * Eigen::Vector3d::Unit(d));
+        if (deep) pts.push_back(p);
+      }
+  particles::Positions x(3, static_cast<Eigen::Index>(pts.size()));
+  for (size_t i = 0; i < pts.size(); ++i) x.col(static_cast<Eigen::Index>(i)) = pts[i];
+  return x;
+}
+
+TEST(EmbeddedBody, AtRestIsTheReference) {
+  const Eigen::Vector3d c(10, -5, 30);
+  const auto mask = ellipsoid_mask(c);
+  const particles::Positions x = fill(*mask);
+  const EmbeddedBody body(mask, GlobalMap{}, x, x, embedding_support_mm(kSpacing));
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<double> u(-24, 24);
+  int agree = 0, tried = 0;
+  for (int s = 0; s < 4000; ++s) {
+    const Eigen::Vector3d q = c + Eigen::Vector3d(u(rng), 0.7 * u(rng), 0.6 * u(rng));
+    if (!body.bounds().min_mm.isApprox(body.bounds().min_mm)) continue;
+    ++tried;
+    agree += body.inside(q) == geometry::inside_interpolated(*mask, q);
+  }
+  EXPECT_EQ(agree, tried);
+  const double v_ref = mask->volume_mm3(1), v = body.volume_mm3(0.75);
+  EXPECT_NEAR(v / v_ref, 1.0, 0.01);
+  EXPECT_NEAR(v_ref, 4.0 / 3.0 * M_PI * 20 * 14 * 11, 0.02 * v_ref);
+}
+
+TEST(EmbeddedBody, FollowsAnAffineMotionOfTheParticlesExactly) {
+  const Eigen::Vector3d c(0, 0, 0);
+  const auto mask = ellipsoid_mask(c);
+  const particles::Positions x0 = fill(*mask);
+  Eigen::Matrix3d a;
+  a << 1.2, 0.1, 0.0, -0.05, 0.9, 0.08, 0.02, 0.0, 0.95;
+  const Eigen::Vector3d t(3, -2, 1.5);
+  const particles::Positions x1 = (a * x0).colwise() + t;
+  const EmbeddedBody body(mask, GlobalMap{}, x0, x1, embedding_support_mm(kSpacing));
+  // Pulled back through the moving-least-squares field: exact for affine motion, also
+  // beyond the outermost particles (on and just outside the surface).
+  for (const Eigen::Vector3d r : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(19.5, 0, 0), Eigen::Vector3d(0, -14.2, 0),
+                                  Eigen::Vector3d(8, 7, -8), Eigen::Vector3d(-12, 3, 8.5)}) {
+    const Eigen::Vector3d q = a * r + t;
+    EXPECT_LT((body.pull_back(q) - r).norm(), 1e-6) << r.transpose();
+  }
+  EXPECT_NEAR(body.volume_mm3(0.75) / (mask->volume_mm3(1) * a.determinant()), 1.0, 0.01);
+}
+
+TEST(EmbeddedBody, AppliesTheGlobalMapsInverse) {
+  const auto mask = ellipsoid_mask(Eigen::Vector3d::Zero());
+  const particles::Positions x0 = fill(*mask);
+  GlobalMap map;
+  map.affine.a = Eigen::Vector3d(1.3, 1 / std::sqrt(1.3), 1 / std::sqrt(1.3)).asDiagonal();
+  map.affine.t = Eigen::Vector3d(1, 2, 3);
+  map.shears.c(3) = 0.004;  // y += 0.004 u_x^2: a bend
+  particles::Positions placed(3, x0.cols());
+  for (Eigen::Index i = 0; i < x0.cols(); ++i) placed.col(i) = map.apply(x0.col(i));
+  const EmbeddedBody body(mask, map, placed, placed, embedding_support_mm(kSpacing));
+  for (const Eigen::Vector3d r : {Eigen::Vector3d(15, 2, 1), Eigen::Vector3d(-19.5, 0, 0), Eigen::Vector3d(0, 13.8, 0)})
+    EXPECT_LT((body.pull_back(map.apply(r)) - r).norm(), 1e-9);
+  // Volume-preserving map: the same volume.
+  EXPECT_NEAR(body.volume_mm3(0.75) / mask->volume_mm3(1), 1.0, 0.01);
+}
+
+TEST(EmbeddedBody, IsEmptyFarFromTheParticlesAndRefusesBadInput) {
+  const auto mask = ellipsoid_mask(Eigen::Vector3d::Zero());
+  const particles::Positions x = fill(*mask);
+  const EmbeddedBody body(mask, GlobalMap{}, x, x, embedding_support_mm(kSpacing));
+  EXPECT_FALSE(body.pull_back(Eigen::Vector3d(500, 0, 0)).allFinite());
+  EXPECT_FALSE(body.inside(Eigen::Vector3d(500, 0, 0)));
+  EXPECT_FALSE(body.inside(Eigen::Vector3d(std::nan(""), 0, 0)));
+  EXPECT_FALSE(body.inside(Eigen::Vector3d(1e300, -1e300, 0)));
+  EXPECT_THROW(EmbeddedBody(mask, GlobalMap{}, x, x.leftCols(3), 5.0), std::invalid_argument);
+  EXPECT_THROW(EmbeddedBody(mask, GlobalMap{}, x, x, 0.0), std::invalid_argument);
+  particles::Positions bad = x;
+  bad(0, 0) = std::nan("");
+  EXPECT_THROW(EmbeddedBody(mask, GlobalMap{}, bad, x, 5.0), std::invalid_argument);
+}
+
+TEST(SurfaceDepths, AreDistancesToTheNearestSampleCappedAtTheReach) {
+  // Samples on the plane z = 0 (0.5 mm apart); particles below it.
+  Eigen::Matrix3Xd plane(3, 41 * 41);
+  for (int j = 0, k = 0; j < 41; ++j)
+    for (int i = 0; i < 41; ++i, ++k) plane.col(k) = Eigen::Vector3d(-10 + 0.5 * i, -10 + 0.5 * j, 0);
+  particles::Positions x(3, 3);
+  x.col(0) = Eigen::Vector3d(0.25, 0, -1.5);
+  x.col(1) = Eigen::Vector3d(3, -2, -0.2);
+  x.col(2) = Eigen::Vector3d(0, 0, -40);
+  const std::vector<double> d = surface_depths(x, plane, 6.0);
+  EXPECT_NEAR(d[0], std::hypot(0.25, 1.5), 1e-12);
+  EXPECT_NEAR(d[1], 0.2, 1e-12);
+  EXPECT_DOUBLE_EQ(d[2], 6.0);
+}
+
+TEST(SpreadAttractiveForce, PullsTheEpicentreToItsDepthBelowThePoint) {
+  // Two particles; the point is 5 mm above particle 0, whose surface lies 1.2 mm above
+  // it: the residual is 3.8 mm, and the force on particle 0 points at the point.
+  particles::CohesionParams cp;
+  cp.r0_mm = 3.0;
+  const particles::LennardJones law(cp);
+  particles::Positions x(3, 2);
+  x.col(0) = Eigen::Vector3d(0, 0, 0);
+  x.col(1) = Eigen::Vector3d(0, 0, -3);
+  SpreadForceParams params;
+  params.hold_volume = false;
+  params.outlier_distance_mm = 20;
+  params.stiffness_fraction = 1e-3;  // below the cohesion cap
+  SpreadAttractiveForce term({{Eigen::Vector3d(0, 0, 5), 1.0}}, law, 1.5, params, 0.5);
+  term.set_surface_depths({1.2, 1.2});
+  particles::State s(x);
+  particles::Forces f = particles::Forces::Zero(3, 2);
+  term.add_forces(s, f, false);
+  EXPECT_EQ(term.status()[0].epicentre, 0);
+  EXPECT_GT(f(2, 0), 0);
+  EXPECT_NEAR(f.col(0).head<2>().norm(), 0, 1e-12);
+  // With the balls' radius (1.5 mm) instead the residual is 3.5 mm: the pull is smaller
+  // in the ratio 3.5 / 3.8 (below the cohesion cap).
+  SpreadAttractiveForce balls({{Eigen::Vector3d(0, 0, 5), 1.0}}, law, 1.5, params, 0.5);
+  particles::Forces g = particles::Forces::Zero(3, 2);
+  balls.add_forces(s, g, false);
+  EXPECT_NEAR(g(2, 0) / f(2, 0), 3.5 / 3.8, 1e-9);
+  EXPECT_THROW(term.set_surface_depths({-1.0, 1.0}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace organfit::fitting
