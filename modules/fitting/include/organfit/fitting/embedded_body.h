@@ -44,7 +44,8 @@ class EmbeddedBody {
   /// A box holding the body: the current particles' box widened by the support (mm).
   geometry::Aabb bounds() const;
   /// The body on a grid (label 1 inside); only the part of the grid within bounds() is
-  /// evaluated.
+  /// evaluated, the local displacement on a lattice of a quarter of the support and
+  /// interpolated trilinearly in between.
   geometry::LabelVolume on_grid(const geometry::ImageGeometry& grid) const;
   /// Volume (mm^3) by counting voxel centres on an axis-aligned grid of `voxel_mm`.
   double volume_mm3(double voxel_mm) const;
@@ -60,6 +61,11 @@ class EmbeddedBody {
   Eigen::Vector3d lo_;  // hash grid origin (mm), cells of size h_
   std::unordered_map<long long, std::vector<int>> cells_;
   long long key(int i, int j, int k) const;
+  /// Step 1: q + u(q) (NaN when no particle is within the support of q); the support
+  /// widens where the neighbours spread too little, unless told not to.
+  Eigen::Vector3d unmove_locally(const Eigen::Vector3d& q_mm, bool widen_if_needed = true) const;
+  /// Step 2: the global map's inverse.
+  Eigen::Vector3d unmap_globally(const Eigen::Vector3d& q0_mm) const;
 };
 
 /// Depth of each particle below a surface given by dense samples (mm): its distance to
