@@ -166,6 +166,8 @@ int run_main(int argc, char** argv) {
   bench_fit->add_option("-o,--out", fb.out, "Output folder: results.csv, curves.csv, work_precision.svg, RESULTS.md")->required();
   bench_fit->add_flag("--quick", fb.quick, "The quick grid (20 cases, a few minutes on 2 cores)");
   bench_fit->add_option("--threads", fb.threads, "OpenMP threads (0: all)")->check(CLI::Range(0, 256));
+  bench_fit->add_option("--sample", fb.sample, "Run N cases, a seeded uniform sample of the grid (0: all)")
+      ->check(CLI::Range(0LL, 1000000LL));
 
   organfit::pipeline::StabilityBenchOptions stb;
   auto* bench_stability = bench->add_subcommand("stability", "Stiff and extreme cases, both fitting methods: a pass/fail table");

@@ -30,6 +30,28 @@ lines = open('$tmp/fit/curves.csv').read().splitlines()
 assert lines[0] == 'case,method,step,wall_s,residual_mean_mm,volume_change_pct' and len(lines) > 100
 xml.dom.minidom.parse('$tmp/fit/work_precision.svg')"
 check bench.fit_results_md grep -q "MSD <= 1.0 mm:" "$tmp/fit/RESULTS.md"
+# Ours against the baselines on the same cases (medians; the quick grid's numbers are in
+# the README): closer than TPS and than half of CPD, and the volume kept within 1%.
+check bench.fit_ours_ahead_of_the_baselines /usr/bin/python3 -c "
+import json
+j = json.load(open('$tmp/fit.json'))
+assert j['versus_tps']['median_msd_ratio'] < 1.0, j['versus_tps']
+assert j['versus_cpd']['median_msd_ratio'] < 0.5, j['versus_cpd']
+assert j['spread']['median_volume_change_pct'] < 1.0 < j['tps']['median_volume_change_pct'], j['spread']
+assert j['versus_tps']['smaller_volume_change'] == j['versus_tps']['cases']"
+# --sample: a seeded subset whose cases are the same cases as in the whole grid.
+"$bin" --quiet bench fit --quick --sample 3 --out "$tmp/sample" > "$tmp/sample.json" 2> /dev/null
+check bench.fit_sample_runs_the_same_cases /usr/bin/python3 -c "
+import csv, json
+key = lambda r: (r['method'], r['shape'], r['family'], r['magnitude_mm'], r['points'], r['noise_mm'], r['outliers'])
+whole = {key(r): r for r in csv.DictReader(open('$tmp/fit/results.csv'))}
+part = list(csv.DictReader(open('$tmp/sample/results.csv')))
+assert len(part) == 15, len(part)
+for r in part:
+    assert r['msd_mm'] == whole[key(r)]['msd_mm'] and r['volume_change_pct'] == whole[key(r)]['volume_change_pct'], key(r)
+j = json.load(open('$tmp/sample.json'))
+assert j['cases'] == 3 and j['grid_cases'] == 20
+assert 'a seeded uniform sample' in open('$tmp/sample/RESULTS.md').read()"
 "$bin" --quiet bench stability --out "$tmp/stab" > "$tmp/stab.json" 2> /dev/null
 check bench.stability_every_row_passes test $? -eq 0
 check bench.stability_table /usr/bin/python3 -c "

@@ -10,6 +10,9 @@
 #include "organfit/geometry/mask_ops.h"
 
 namespace organfit::fitting {
+namespace {
+constexpr double kMaxExtentMm = 2000;  // larger than any organ: grids over it are not made
+}  // namespace
 
 EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> reference, GlobalMap map,
                            particles::Positions placed, particles::Positions current, double support_mm)
@@ -23,6 +26,9 @@ EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> referenc
   if (!(support_mm > 0) || !std::isfinite(support_mm))
     throw std::invalid_argument("embedded body: support must be > 0 mm");
   map_inverse_a_ = map_.affine.a.inverse();
+  if (current_.cols() > 0 &&
+      (current_.rowwise().maxCoeff() - current_.rowwise().minCoeff()).maxCoeff() > kMaxExtentMm)
+    throw std::invalid_argument("embedded body: the particles span more than 2 m (the model has come apart)");
   lo_ = current_.cols() > 0 ? Eigen::Vector3d(current_.rowwise().minCoeff()) : Eigen::Vector3d::Zero();
   for (Eigen::Index i = 0; i < current_.cols(); ++i) {
     const Eigen::Vector3d c = ((current_.col(i) - lo_) / h_).array().floor();
@@ -135,9 +141,17 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   // error of ~ spacing^2 / 8 times its curvature: hundredths of a mm), directly where a
   // lattice corner has no particle near.
   const double lattice = 0.25 * h_;
-  const Eigen::Vector3d l0 = b.min_mm;
+  // The lattice covers the evaluated voxels (the grid's part within bounds()) only.
+  Eigen::Vector3d v_lo = Eigen::Vector3d::Constant(1e300), v_hi = Eigen::Vector3d::Constant(-1e300);
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d corner = grid.index_to_physical(
+        Eigen::Vector3d((c & 1) ? i1[0] : i0[0], (c & 2) ? i1[1] : i0[1], (c & 4) ? i1[2] : i0[2]));
+    v_lo = v_lo.cwiseMin(corner), v_hi = v_hi.cwiseMax(corner);
+  }
+  const Eigen::Vector3d l0 = v_lo.cwiseMax(b.min_mm).array() - lattice;
+  const Eigen::Vector3d l1 = v_hi.cwiseMin(b.max_mm);
   int nl[3];
-  for (int d = 0; d < 3; ++d) nl[d] = static_cast<int>(std::ceil((b.max_mm[d] - b.min_mm[d]) / lattice)) + 2;
+  for (int d = 0; d < 3; ++d) nl[d] = std::max(2, static_cast<int>(std::ceil((l1[d] - l0[d]) / lattice)) + 2);
   const long long nodes = 1LL * nl[0] * nl[1] * nl[2];
   std::vector<Eigen::Vector3d> q0(static_cast<size_t>(nodes));
 #pragma omp parallel for schedule(dynamic, 16)

@@ -118,6 +118,10 @@ TEST(EmbeddedBody, IsEmptyFarFromTheParticlesAndRefusesBadInput) {
   particles::Positions bad = x;
   bad(0, 0) = std::nan("");
   EXPECT_THROW(EmbeddedBody(mask, GlobalMap{}, bad, x, 5.0), std::invalid_argument);
+  // A particle flung 3 m away: no grid over that is made.
+  particles::Positions flung = x;
+  flung(1, 0) = 3000;
+  EXPECT_THROW(EmbeddedBody(mask, GlobalMap{}, x, flung, 5.0), std::invalid_argument);
 }
 
 TEST(SurfaceDepths, AreDistancesToTheNearestSampleCappedAtTheReach) {

@@ -33,6 +33,7 @@ struct FitBenchOptions {
   /// the real GTV of ct-sts-004; 2, 5, 10, 15 mm; 20, 50, 87, 200 points; 0, 0.5, 1 mm
   /// noise; 0 and 5% outliers.
   bool quick = false;
+  long long sample = 0;  ///< run this many cases, a seeded uniform sample of the grid (0: all)
   int threads = 0;
 };
 
