@@ -61,11 +61,16 @@ FitResult run_fit(particles::Model& model, particles::State& state,
     const std::vector<double> r = data_residuals(points, state.x, skin_of(state.x), rho, status,
                                                  o.surface_depths_mm.empty() ? nullptr : &o.surface_depths_mm);
     double sum = 0, mx = 0;
-    int counted = 0;
+    std::vector<double> kept;
     for (double v : r)
-      if (!std::isnan(v)) sum += v, mx = std::max(mx, v), ++counted;
-    h.residual_mean_mm = counted == 0 ? 0 : sum / counted;
+      if (!std::isnan(v)) sum += v, mx = std::max(mx, v), kept.push_back(v);
+    h.residual_mean_mm = kept.empty() ? 0 : sum / static_cast<double>(kept.size());
     h.residual_max_mm = mx;
+    if (!kept.empty()) {  // the 95th percentile (nearest rank)
+      const size_t k = static_cast<size_t>(std::ceil(0.95 * static_cast<double>(kept.size()))) - 1;
+      std::nth_element(kept.begin(), kept.begin() + static_cast<long>(k), kept.end());
+      h.residual_p95_mm = kept[k];
+    }
     h.kinetic_energy_per_particle = integ.kinetic_energy(state) / n;
     h.volume_change_pct = std::numeric_limits<double>::quiet_NaN();
     if (o.volume && row % std::max(1, o.volume_every_rows) == 0) {
@@ -79,8 +84,10 @@ FitResult run_fit(particles::Model& model, particles::State& state,
     result.residuals_mm = r;
     result.residual_mean_mm = h.residual_mean_mm;
     result.residual_max_mm = h.residual_max_mm;
+    result.residual_p95_mm = h.residual_p95_mm;
 
-    if (h.residual_mean_mm <= o.residual_mean_tolerance_mm && h.residual_max_mm <= max_tol &&
+    // The 95th percentile, not the largest: one noisy point must not decide convergence.
+    if (h.residual_mean_mm <= o.residual_mean_tolerance_mm && h.residual_p95_mm <= max_tol &&
         h.kinetic_energy_per_particle <= o.kinetic_tolerance && row > 0) {
       result.converged = true;
       result.stop_reason = "converged";

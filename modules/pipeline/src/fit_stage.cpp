@@ -339,6 +339,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
                      {"residual_floor_mm", residual_floor},
                      {"residual_tolerance_mm", fo.residual_mean_tolerance_mm},
                      {"residual_max_mm", out.fit.residual_max_mm},
+                     {"residual_p95_mm", out.fit.residual_p95_mm},
                      {"volume_before_mm3", organ_v0},
                      {"volume_after_mm3", organ_v1},
                      {"volume_change_pct", 100.0 * (organ_v1 - organ_v0) / organ_v0},

@@ -135,7 +135,7 @@ config::Schema build_schema() {
       .number("residual_tolerance_mm", 0.5, "mm", 0.0, none,
               "converged when the mean data residual is at most this", true)
       .number("residual_max_tolerance_mm", 0.0, "mm", 0.0, none,
-              "... and the largest at most this (0 = the particle radius)")
+              "... and the 95th percentile at most this (0 = the particle radius)")
       .integer("max_steps", 20000, 1, 100000000, "step budget")
       .number("max_wall_s", 60.0, "s", 0.0, none, "wall-time budget", true)
       .integer("record_every", 20, 1, 100000, "steps between history rows")

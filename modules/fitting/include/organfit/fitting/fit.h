@@ -22,7 +22,8 @@ std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
 
 struct FitOptions {
   double residual_mean_tolerance_mm = 0.5;  ///< converged: mean residual at most this
-  double residual_max_tolerance_mm = 0.0;   ///< ... and max at most this (0: the particle radius)
+  double residual_max_tolerance_mm = 0.0;   ///< ... and the 95th percentile at most this (0: the
+                                            ///< particle radius): one noisy point does not decide
   double kinetic_tolerance = 1e-4;          ///< ... and kinetic energy per particle below this
   long long max_steps = 20000;
   double max_wall_s = 60.0;
@@ -40,7 +41,7 @@ struct FitOptions {
 struct HistoryRow {
   long long step = 0;
   double wall_s = 0;
-  double residual_mean_mm = 0, residual_max_mm = 0;
+  double residual_mean_mm = 0, residual_max_mm = 0, residual_p95_mm = 0;
   double volume_change_pct = 0;  ///< NaN when not measured at this row
   double kinetic_energy_per_particle = 0;
 };
@@ -51,7 +52,7 @@ struct FitResult {
   long long steps = 0;
   double wall_s = 0;             ///< fitting work
   double instrument_wall_s = 0;  ///< history measurements (volume), not part of the fit
-  double residual_mean_mm = 0, residual_max_mm = 0;
+  double residual_mean_mm = 0, residual_max_mm = 0, residual_p95_mm = 0;
   std::vector<double> residuals_mm;
   std::vector<HistoryRow> history;
 };
