@@ -323,7 +323,13 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   out.fit.wall_s += global.is_null() ? 0.0 : global["wall_s"].get<double>();
 
   const double v1 = body_volume(state.x, rho);
-  const fitting::EmbeddedBody organ_after = organ_body(model);
+  const fitting::EmbeddedBody organ_after = [&] {
+    try {
+      return organ_body(model);
+    } catch (const std::invalid_argument& e) {  // particles flung apart: not an input error
+      throw TargetNotMetError(std::string("fit: the model did not hold together: ") + e.what());
+    }
+  }();
   const double organ_v1 = organ_after.volume_mm3(truth_voxel);
   int rejected = 0;
   for (const auto& st : *status) rejected += st.rejected;
