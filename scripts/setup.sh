@@ -19,7 +19,7 @@ packages=(
   libgtest-dev libbenchmark-dev libomp-dev
   libinsighttoolkit5-dev libgdcm-dev libgdcm-tools libvtk9-dev
 )
-test_tools=(lammps python3 plastimatch dicom3tools python3-pydicom chromium)
+test_tools=(lammps python3 plastimatch dicom3tools python3-pydicom chromium clang-format)
 
 missing=()
 for p in "${packages[@]}" "${test_tools[@]}"; do

@@ -11,10 +11,10 @@
 #include "organfit/pipeline/ct_benchmark.h"
 #include "organfit/pipeline/export_command.h"
 #include "organfit/pipeline/fit_benchmark.h"
-#include "organfit/pipeline/stability_benchmark.h"
 #include "organfit/pipeline/runner.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/pipeline/segment_command.h"
+#include "organfit/pipeline/stability_benchmark.h"
 #include "organfit/pipeline/synth_command.h"
 #include "organfit/pipeline/synth_ultrasound_command.h"
 #include "organfit/pipeline/us_benchmark.h"
@@ -37,56 +37,91 @@ int run_main(int argc, char** argv) {
   app.add_flag("-v,--verbose", verbose, "More detail in logs and errors");
   organfit::pipeline::RunOptions run_options;
   app.add_flag("--show-phi", run_options.show_phi,
-               "Allow the patient's name, ID and birth date in the report (report.show_patient); never in logs");
+               "Allow the patient's name, ID and birth date in the report (report.show_patient); "
+               "never in logs");
 
   std::string scene_file, out_dir;
   auto* run = app.add_subcommand("run", "Run a scene: the stages it names, outputs into --out");
   run->add_option("scene", scene_file, "Scene file (YAML)")->required();
-  run->add_option("-o,--out", out_dir, "Output folder (created; not the scene's folder)")->required();
+  run->add_option("-o,--out", out_dir, "Output folder (created; not the scene's folder)")
+      ->required();
 
   auto* validate = app.add_subcommand("validate", "Check a scene without running it");
   validate->add_option("scene", scene_file, "Scene file (YAML)")->required();
 
   bool schema_json = false;
-  auto* schema = app.add_subcommand("schema", "Print every scene key: type, default, unit, range, doc");
+  auto* schema =
+      app.add_subcommand("schema", "Print every scene key: type, default, unit, range, doc");
   schema->add_flag("--json", schema_json, "As JSON");
 
   auto* version = app.add_subcommand("version", "Print the organfit version");
 
   organfit::pipeline::SegmentRequest seg;
-  auto* segment = app.add_subcommand("segment", "An organ mask from a CT: imported from an RTSTRUCT or grown from a seed");
+  auto* segment = app.add_subcommand(
+      "segment", "An organ mask from a CT: imported from an RTSTRUCT or grown from a seed");
   segment->add_option("--ct", seg.ct_folder, "Folder of the CT series")->required();
-  segment->add_option("--series-uid", seg.series_uid, "Series Instance UID when the folder holds several CT series");
+  segment->add_option("--series-uid", seg.series_uid,
+                      "Series Instance UID when the folder holds several CT series");
   segment->add_option("--rtstruct", seg.rtstruct, "RT Structure Set to import from");
   segment->add_option("--roi", seg.roi, "ROI name in the structure set");
-  segment->add_option("--seed", seg.seed_mm, "Seed X,Y,Z in mm (patient LPS)")->delimiter(',')->expected(3);
+  segment->add_option("--seed", seg.seed_mm, "Seed X,Y,Z in mm (patient LPS)")
+      ->delimiter(',')
+      ->expected(3);
   segment->add_option("--hu", seg.hu_window, "HU window LOW,HIGH")->delimiter(',')->expected(2);
-  segment->add_option("--search-box", seg.search_box_mm, "Side (mm) of the cube around the seed grown in; 0 = whole CT")
+  segment
+      ->add_option("--search-box", seg.search_box_mm,
+                   "Side (mm) of the cube around the seed grown in; 0 = whole CT")
       ->check(CLI::Range(0.0, 2000.0));
   segment->add_option("-o,--out", seg.out, "Mask file (.nrrd, .mha, .nii, .nii.gz)")->required();
 
   organfit::pipeline::ExportCommand exp;
-  auto* export_cmd = app.add_subcommand("export", "Write a saved model for the planning system: RTSTRUCT, label map, mesh");
+  auto* export_cmd = app.add_subcommand(
+      "export", "Write a saved model for the planning system: RTSTRUCT, label map, mesh");
   export_cmd->add_option("--model", exp.model, "Model file (a scene's export.model)")->required();
-  export_cmd->add_option("--ct", exp.ct, "Planning CT folder (default: the one the model was built on)");
+  export_cmd->add_option("--ct", exp.ct,
+                         "Planning CT folder (default: the one the model was built on)");
   export_cmd->add_option("--rtstruct", exp.rtstruct, "RT Structure Set to write (.dcm)");
   export_cmd->add_option("--labels", exp.labels, "Label map to write (.nrrd, .mha, .nii, .nii.gz)");
   export_cmd->add_option("--mesh", exp.mesh, "Surface mesh to write (.stl, .vtp, .ply, .obj)");
-  export_cmd->add_option("--roi-name", exp.roi_name, "Name of the exported ROI (default: the organ's name + _fit)");
-  export_cmd->add_option("--copy-rois-from", exp.copy_rois_from, "RT Structure Set whose other ROIs are copied alongside");
+  export_cmd->add_option("--roi-name", exp.roi_name,
+                         "Name of the exported ROI (default: the organ's name + _fit)");
+  export_cmd->add_option("--copy-rois-from", exp.copy_rois_from,
+                         "RT Structure Set whose other ROIs are copied alongside");
 
   organfit::pipeline::UsPointsCommand usp;
-  auto* us_points = app.add_subcommand("us-points", "Boundary points of an ultrasound volume, tracked sweep or DICOM image (CSV)");
-  us_points->add_option("--us", usp.input, "Ultrasound input: volume (.mha .nrrd .nii), sequence metafile, or .dcm")->required();
-  us_points->add_option("--tracker", usp.tracker, "Sequence metafile with the probe poses (matched by timestamp)");
-  us_points->add_option("--transform", usp.transform, "Tracked transform name (default: the file's own)");
-  us_points->add_option("--calibration", usp.calibration, "Image (mm) to probe, 16 numbers row by row")->delimiter(',')->expected(16);
-  us_points->add_option("--registration", usp.registration, "Tracker/volume to CT, 16 numbers (rigid)")->delimiter(',')->expected(16);
-  us_points->add_option("--pixel-mm", usp.pixel_mm, "Pixel size of a DICOM image without calibrated region")->check(CLI::PositiveNumber);
-  us_points->add_option("--centre", usp.centre_mm, "Region of interest centre X,Y,Z (mm, output coordinates)")->delimiter(',')->expected(3);
-  us_points->add_option("--radius", usp.radius_mm, "Region of interest radius (mm)")->check(CLI::PositiveNumber);
-  us_points->add_option("--count", usp.count, "Points to keep (0: all)")->check(CLI::Range(0, 100000));
-  us_points->add_option("--rays", usp.rays, "Search rays (3D volumes)")->check(CLI::Range(16, 100000));
+  auto* us_points = app.add_subcommand(
+      "us-points", "Boundary points of an ultrasound volume, tracked sweep or DICOM image (CSV)");
+  us_points
+      ->add_option("--us", usp.input,
+                   "Ultrasound input: volume (.mha .nrrd .nii), sequence metafile, or .dcm")
+      ->required();
+  us_points->add_option("--tracker", usp.tracker,
+                        "Sequence metafile with the probe poses (matched by timestamp)");
+  us_points->add_option("--transform", usp.transform,
+                        "Tracked transform name (default: the file's own)");
+  us_points
+      ->add_option("--calibration", usp.calibration, "Image (mm) to probe, 16 numbers row by row")
+      ->delimiter(',')
+      ->expected(16);
+  us_points
+      ->add_option("--registration", usp.registration, "Tracker/volume to CT, 16 numbers (rigid)")
+      ->delimiter(',')
+      ->expected(16);
+  us_points
+      ->add_option("--pixel-mm", usp.pixel_mm,
+                   "Pixel size of a DICOM image without calibrated region")
+      ->check(CLI::PositiveNumber);
+  us_points
+      ->add_option("--centre", usp.centre_mm,
+                   "Region of interest centre X,Y,Z (mm, output coordinates)")
+      ->delimiter(',')
+      ->expected(3);
+  us_points->add_option("--radius", usp.radius_mm, "Region of interest radius (mm)")
+      ->check(CLI::PositiveNumber);
+  us_points->add_option("--count", usp.count, "Points to keep (0: all)")
+      ->check(CLI::Range(0, 100000));
+  us_points->add_option("--rays", usp.rays, "Search rays (3D volumes)")
+      ->check(CLI::Range(16, 100000));
   us_points->add_option("-o,--out", usp.out, "Points CSV (x_mm,y_mm,z_mm,confidence)")->required();
 
   auto* synth = app.add_subcommand("synth", "Synthetic scans with known anatomy");
@@ -94,29 +129,46 @@ int run_main(int argc, char** argv) {
   organfit::phantom::PelvisOptions pelvis;
   std::string synth_out;
   auto* synth_pelvis = synth->add_subcommand(
-      "pelvis", "A pelvis phantom: DIR/ct/ (DICOM CT), DIR/rtstruct.dcm (true organs), DIR/labels.nrrd");
-  synth_pelvis->add_option("-o,--out", synth_out, "Output folder (created; must be empty)")->required();
+      "pelvis",
+      "A pelvis phantom: DIR/ct/ (DICOM CT), DIR/rtstruct.dcm (true organs), DIR/labels.nrrd");
+  synth_pelvis->add_option("-o,--out", synth_out, "Output folder (created; must be empty)")
+      ->required();
   synth_pelvis->add_option("--seed", pelvis.seed, "Seed of the noise (same seed, same files)");
-  synth_pelvis->add_option("--columns", pelvis.columns, "Voxels along x")->check(CLI::Range(8, 2048));
+  synth_pelvis->add_option("--columns", pelvis.columns, "Voxels along x")
+      ->check(CLI::Range(8, 2048));
   synth_pelvis->add_option("--rows", pelvis.rows, "Voxels along y")->check(CLI::Range(8, 2048));
-  synth_pelvis->add_option("--slices", pelvis.slices, "Slices along z, centred on the prostate")->check(CLI::Range(8, 2000));
-  synth_pelvis->add_option("--pixel-mm", pelvis.pixel_mm, "In-plane spacing (mm)")->check(CLI::Range(0.1, 10.0));
-  synth_pelvis->add_option("--slice-mm", pelvis.slice_mm, "Slice spacing (mm)")->check(CLI::Range(0.1, 20.0));
-  synth_pelvis->add_option("--noise-hu", pelvis.noise_hu, "Noise standard deviation (HU)")->check(CLI::Range(0.0, 500.0));
+  synth_pelvis->add_option("--slices", pelvis.slices, "Slices along z, centred on the prostate")
+      ->check(CLI::Range(8, 2000));
+  synth_pelvis->add_option("--pixel-mm", pelvis.pixel_mm, "In-plane spacing (mm)")
+      ->check(CLI::Range(0.1, 10.0));
+  synth_pelvis->add_option("--slice-mm", pelvis.slice_mm, "Slice spacing (mm)")
+      ->check(CLI::Range(0.1, 20.0));
+  synth_pelvis->add_option("--noise-hu", pelvis.noise_hu, "Noise standard deviation (HU)")
+      ->check(CLI::Range(0.0, 500.0));
 
   organfit::pipeline::SynthUltrasoundCommand sus;
-  auto* synth_us = synth->add_subcommand(
-      "ultrasound", "B-mode of a labelled volume (e.g. the phantom, organ deformed): volume, tracked sweep, true boundary");
-  synth_us->add_option("--labels", sus.labels, "Label volume (the phantom's labels.nrrd)")->required();
+  auto* synth_us = synth->add_subcommand("ultrasound",
+                                         "B-mode of a labelled volume (e.g. the phantom, organ "
+                                         "deformed): volume, tracked sweep, true boundary");
+  synth_us->add_option("--labels", sus.labels, "Label volume (the phantom's labels.nrrd)")
+      ->required();
   synth_us->add_option("--ct", sus.ct, "CT folder on the same grid (HU for gas and bone shadows)");
-  synth_us->add_option("--probe", sus.probe, "Probe X,Y,Z[,AX,AY,AZ[,LX,LY,LZ]] mm (default: transrectal)")->delimiter(',');
+  synth_us
+      ->add_option("--probe", sus.probe,
+                   "Probe X,Y,Z[,AX,AY,AZ[,LX,LY,LZ]] mm (default: transrectal)")
+      ->delimiter(',');
   synth_us->add_option("-o,--out", sus.out, "Output folder (created; must be empty)")->required();
   synth_us->add_option("--seed", sus.seed, "Seed of the speckle");
-  synth_us->add_option("--stretch", sus.stretch, "Organ stretch along x (volume-preserving)")->check(CLI::Range(0.5, 2.0));
+  synth_us->add_option("--stretch", sus.stretch, "Organ stretch along x (volume-preserving)")
+      ->check(CLI::Range(0.5, 2.0));
   synth_us->add_option("--bend", sus.bend_mm, "Organ bend (mm)")->check(CLI::Range(-30.0, 30.0));
-  synth_us->add_option("--organ-label", sus.organ_label, "Label of the organ (8: the phantom's prostate)")->check(CLI::Range(1, 255));
+  synth_us
+      ->add_option("--organ-label", sus.organ_label,
+                   "Label of the organ (8: the phantom's prostate)")
+      ->check(CLI::Range(1, 255));
   synth_us->add_option("--speckle", sus.speckle, "Speckle level 0..1")->check(CLI::Range(0.0, 1.0));
-  synth_us->add_option("--frames", sus.sweep_frames, "Frames of the tracked sweep")->check(CLI::Range(1, 2000));
+  synth_us->add_option("--frames", sus.sweep_frames, "Frames of the tracked sweep")
+      ->check(CLI::Range(1, 2000));
 
   auto* bench = app.add_subcommand("bench", "Benchmarks; print machine-readable JSON on stdout");
   bench->require_subcommand(1);
@@ -128,19 +180,28 @@ int run_main(int argc, char** argv) {
       ->check(CLI::Range(4LL, 50000000LL));
   bench_cohesion->add_option("--steps", cb.steps, "Steps")->check(CLI::Range(1LL, 1000000LL));
   bench_cohesion->add_option("--threads", cb.threads, "OpenMP threads")->check(CLI::Range(1, 256));
-  bench_cohesion->add_flag("--scaling", scaling, "Cost per particle-step from 1e3 to 1e6 particles");
+  bench_cohesion->add_flag("--scaling", scaling,
+                           "Cost per particle-step from 1e3 to 1e6 particles");
   bench_cohesion->add_flag("--no-lammps", no_lammps, "Do not run LAMMPS alongside");
 
   organfit::evaluation::SkeletonBenchOptions sb;
   auto* bench_skeleton = bench->add_subcommand(
       "skeleton", "Shape kept with the skeleton vs rounding up without, in a fluid-like state");
-  bench_skeleton->add_option("--steps", sb.steps, "Thermostat steps")->check(CLI::Range(1LL, 100000000LL));
-  bench_skeleton->add_option("--temperature", sb.temperature, "kT in units of E0")->check(CLI::Range(0.0, 10.0));
-  bench_skeleton->add_option("--friction", sb.friction, "Thermostat friction K_a/M (1/s)")->check(CLI::PositiveNumber);
-  bench_skeleton->add_option("--stiffness", sb.stiffness_fraction, "Skeleton stiffness / LJ stiffness")->check(CLI::PositiveNumber);
-  bench_skeleton->add_option("--node-spacing", sb.node_spacing_r0, "Skeleton node spacing (r0)")->check(CLI::PositiveNumber);
-  bench_skeleton->add_option("--length", sb.size_x_mm, "Ellipsoid length (mm)")->check(CLI::PositiveNumber);
-  bench_skeleton->add_option("--width", sb.size_yz_mm, "Ellipsoid width (mm)")->check(CLI::PositiveNumber);
+  bench_skeleton->add_option("--steps", sb.steps, "Thermostat steps")
+      ->check(CLI::Range(1LL, 100000000LL));
+  bench_skeleton->add_option("--temperature", sb.temperature, "kT in units of E0")
+      ->check(CLI::Range(0.0, 10.0));
+  bench_skeleton->add_option("--friction", sb.friction, "Thermostat friction K_a/M (1/s)")
+      ->check(CLI::PositiveNumber);
+  bench_skeleton
+      ->add_option("--stiffness", sb.stiffness_fraction, "Skeleton stiffness / LJ stiffness")
+      ->check(CLI::PositiveNumber);
+  bench_skeleton->add_option("--node-spacing", sb.node_spacing_r0, "Skeleton node spacing (r0)")
+      ->check(CLI::PositiveNumber);
+  bench_skeleton->add_option("--length", sb.size_x_mm, "Ellipsoid length (mm)")
+      ->check(CLI::PositiveNumber);
+  bench_skeleton->add_option("--width", sb.size_yz_mm, "Ellipsoid width (mm)")
+      ->check(CLI::PositiveNumber);
   bench_skeleton->add_option("--threads", sb.threads, "OpenMP threads")->check(CLI::Range(1, 256));
 
   organfit::pipeline::CtBenchOptions ctb;
@@ -152,27 +213,42 @@ int run_main(int argc, char** argv) {
   bench_ct->add_option("--slices", ctb.slices, "Phantom slices")->check(CLI::Range(8, 2000));
   bench_ct->add_option("--seed", ctb.seed_mm, "Organ seed X,Y,Z (mm)")->delimiter(',')->expected(3);
   bench_ct->add_option("--hu", ctb.hu_window, "Organ HU window LO,HI")->delimiter(',')->expected(2);
-  bench_ct->add_option("--radius", ctb.radius_mm, "Particle radius (mm)")->check(CLI::Range(0.3, 20.0));
-  bench_ct->add_option("--threads", ctb.threads, "OpenMP threads (0: all)")->check(CLI::Range(0, 256));
+  bench_ct->add_option("--radius", ctb.radius_mm, "Particle radius (mm)")
+      ->check(CLI::Range(0.3, 20.0));
+  bench_ct->add_option("--threads", ctb.threads, "OpenMP threads (0: all)")
+      ->check(CLI::Range(0, 256));
 
   organfit::pipeline::UsBenchOptions usb;
-  auto* bench_us = bench->add_subcommand("us", "Ultrasound segmentation: a 256^3 volume and a 100-frame sweep");
-  bench_us->add_option("--size", usb.volume_size, "Volume voxels per side")->check(CLI::Range(32, 1024));
+  auto* bench_us =
+      bench->add_subcommand("us", "Ultrasound segmentation: a 256^3 volume and a 100-frame sweep");
+  bench_us->add_option("--size", usb.volume_size, "Volume voxels per side")
+      ->check(CLI::Range(32, 1024));
   bench_us->add_option("--frames", usb.frames, "Sweep frames")->check(CLI::Range(1, 10000));
-  bench_us->add_option("--threads", usb.threads, "OpenMP threads (0: all)")->check(CLI::Range(0, 256));
+  bench_us->add_option("--threads", usb.threads, "OpenMP threads (0: all)")
+      ->check(CLI::Range(0, 256));
 
   organfit::pipeline::FitBenchOptions fb;
-  auto* bench_fit = bench->add_subcommand("fit", "Error against run time: the particle fits and TPS, CPD, ICP on known deformations");
-  bench_fit->add_option("-o,--out", fb.out, "Output folder: results.csv, curves.csv, work_precision.svg, RESULTS.md")->required();
+  auto* bench_fit = bench->add_subcommand(
+      "fit", "Error against run time: the particle fits and TPS, CPD, ICP on known deformations");
+  bench_fit
+      ->add_option("-o,--out", fb.out,
+                   "Output folder: results.csv, curves.csv, work_precision.svg, RESULTS.md")
+      ->required();
   bench_fit->add_flag("--quick", fb.quick, "The quick grid (20 cases, a few minutes on 2 cores)");
-  bench_fit->add_option("--threads", fb.threads, "OpenMP threads (0: all)")->check(CLI::Range(0, 256));
-  bench_fit->add_option("--sample", fb.sample, "Run N cases, a seeded uniform sample of the grid (0: all)")
+  bench_fit->add_option("--threads", fb.threads, "OpenMP threads (0: all)")
+      ->check(CLI::Range(0, 256));
+  bench_fit
+      ->add_option("--sample", fb.sample,
+                   "Run N cases, a seeded uniform sample of the grid (0: all)")
       ->check(CLI::Range(0LL, 1000000LL));
 
   organfit::pipeline::StabilityBenchOptions stb;
-  auto* bench_stability = bench->add_subcommand("stability", "Stiff and extreme cases, both fitting methods: a pass/fail table");
-  bench_stability->add_option("-o,--out", stb.out, "Output folder: stability.csv, STABILITY.md")->required();
-  bench_stability->add_option("--threads", stb.threads, "OpenMP threads (0: all)")->check(CLI::Range(0, 256));
+  auto* bench_stability = bench->add_subcommand(
+      "stability", "Stiff and extreme cases, both fitting methods: a pass/fail table");
+  bench_stability->add_option("-o,--out", stb.out, "Output folder: stability.csv, STABILITY.md")
+      ->required();
+  bench_stability->add_option("--threads", stb.threads, "OpenMP threads (0: all)")
+      ->check(CLI::Range(0, 256));
 
   try {
     app.parse(argc, argv);
@@ -198,7 +274,8 @@ int run_main(int argc, char** argv) {
     std::cout << (schema_json ? s.to_json().dump(2) + "\n" : s.to_text());
   } else if (*segment) {
     const auto result = organfit::pipeline::run_segment(seg);
-    for (const auto& w : result.warnings) spdlog::warn(w);
+    for (const auto& w : result.warnings)
+      spdlog::warn(w);
     std::cout << seg.out.string() << ": " << result.volume_cm3 << " cm3\n";
   } else if (*us_points) {
     std::cout << organfit::pipeline::run_us_points(usp).dump() << "\n";
@@ -209,7 +286,8 @@ int run_main(int argc, char** argv) {
     std::cout << organfit::pipeline::run_synth_ultrasound(sus).dump() << "\n";
   } else if (*synth_pelvis) {
     const auto result = organfit::pipeline::run_synth_pelvis(synth_out, pelvis);
-    if (result.clipped_voxels > 0) spdlog::warn("{} voxel(s) outside the 12-bit HU range were clipped", result.clipped_voxels);
+    if (result.clipped_voxels > 0)
+      spdlog::warn("{} voxel(s) outside the 12-bit HU range were clipped", result.clipped_voxels);
     std::cout << synth_out << ": pelvis phantom, " << result.slices << " slices, prostate "
               << result.prostate_volume_cm3 << " cm3\n";
   } else if (*validate) {

@@ -12,8 +12,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     ct.geometry.size = {32, 32, 8};
     ct.geometry.spacing_mm = Eigen::Vector3d(2, 2, 3);
     ct.frame_of_reference_uid = rtss.frame_of_reference_uid;
-    for (int k = 0; k < 8; ++k) ct.slices.push_back({"1.2.3." + std::to_string(k), "", Eigen::Vector3d(0, 0, 3.0 * k), {}});
-    for (const auto& roi : rtss.rois) (void)organfit::dicom::rasterise_roi(rtss, roi.name, ct, "fuzz");
+    for (int k = 0; k < 8; ++k)
+      ct.slices.push_back({"1.2.3." + std::to_string(k), "", Eigen::Vector3d(0, 0, 3.0 * k), {}});
+    for (const auto& roi : rtss.rois)
+      (void)organfit::dicom::rasterise_roi(rtss, roi.name, ct, "fuzz");
   } catch (const organfit::Error&) {
   }
   return 0;

@@ -8,8 +8,8 @@
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string text(reinterpret_cast<const char*>(data), size);
   try {
-    const organfit::config::Scene scene =
-        organfit::config::parse_scene(text, "/nonexistent/fuzz.yaml", organfit::pipeline::scene_schema());
+    const organfit::config::Scene scene = organfit::config::parse_scene(
+        text, "/nonexistent/fuzz.yaml", organfit::pipeline::scene_schema());
     organfit::pipeline::check_scene_rules(scene);
     (void)scene.resolved_yaml();
   } catch (const organfit::Error&) {

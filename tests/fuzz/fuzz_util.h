@@ -7,9 +7,11 @@
 #include <filesystem>
 #include <string>
 
-inline std::filesystem::path bytes_to_file(const uint8_t* data, size_t size, const char* extension) {
+inline std::filesystem::path bytes_to_file(const uint8_t* data, size_t size,
+                                           const char* extension) {
   static const std::filesystem::path file =
-      std::filesystem::temp_directory_path() / ("organfit_fuzz_" + std::to_string(getpid()) + extension);
+      std::filesystem::temp_directory_path() /
+      ("organfit_fuzz_" + std::to_string(getpid()) + extension);
   FILE* f = std::fopen(file.c_str(), "wb");
   if (f) {
     std::fwrite(data, 1, size, f);

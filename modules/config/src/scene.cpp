@@ -17,7 +17,8 @@ namespace {
 /// Levenshtein distance, for "did you mean" on misspelled keys.
 size_t edit_distance(const std::string& a, const std::string& b) {
   std::vector<size_t> prev(b.size() + 1), cur(b.size() + 1);
-  for (size_t j = 0; j <= b.size(); ++j) prev[j] = j;
+  for (size_t j = 0; j <= b.size(); ++j)
+    prev[j] = j;
   for (size_t i = 1; i <= a.size(); ++i) {
     cur[0] = i;
     for (size_t j = 1; j <= b.size(); ++j) {
@@ -51,24 +52,29 @@ class Parser {
     const int line = node.Mark().line;
     const std::string key = spec.key();
     auto scalar_text = [&]() -> std::string {
-      if (!node.IsScalar()) fail(line, key, fmt::format("expected a {}, got a {}", to_string(spec.type),
-                                                         node.IsSequence() ? "list" : "mapping"));
+      if (!node.IsScalar())
+        fail(line, key,
+             fmt::format("expected a {}, got a {}", to_string(spec.type),
+                         node.IsSequence() ? "list" : "mapping"));
       return node.Scalar();
     };
     auto as_number = [&](const YAML::Node& n, const std::string& what) -> double {
       double v = 0;
       if (!n.IsScalar() || !YAML::convert<double>::decode(n, v)) {
-        fail(n.Mark().line, key, fmt::format("expected {}, got '{}'", what,
-                                             n.IsScalar() ? n.Scalar() : std::string("a list")));
+        fail(n.Mark().line, key,
+             fmt::format("expected {}, got '{}'", what,
+                         n.IsScalar() ? n.Scalar() : std::string("a list")));
       }
-      if (!std::isfinite(v)) fail(n.Mark().line, key, fmt::format("must be finite, got '{}'", n.Scalar()));
+      if (!std::isfinite(v))
+        fail(n.Mark().line, key, fmt::format("must be finite, got '{}'", n.Scalar()));
       return v;
     };
     auto check_range = [&](double v, int at) {
       if ((spec.min && (spec.min_exclusive ? !(v > *spec.min) : !(v >= *spec.min))) ||
           (spec.max && !(v <= *spec.max))) {
-        fail(at, key, fmt::format("{} is out of range {}{}", value_to_text(Value(v)),
-                                  spec.range_text(), spec.unit.empty() ? "" : " " + spec.unit));
+        fail(at, key,
+             fmt::format("{} is out of range {}{}", value_to_text(Value(v)), spec.range_text(),
+                         spec.unit.empty() ? "" : " " + spec.unit));
       }
     };
     switch (spec.type) {
@@ -94,12 +100,14 @@ class Parser {
         }
         return v;
       }
-      case ParamType::kString: return scalar_text();
+      case ParamType::kString:
+        return scalar_text();
       case ParamType::kEnum: {
         const std::string s = scalar_text();
         if (std::find(spec.choices.begin(), spec.choices.end(), s) == spec.choices.end()) {
-          fail(line, key, fmt::format("'{}' is not one of {}{}", s, spec.range_text(),
-                                      suggestion(s, spec.choices)));
+          fail(line, key,
+               fmt::format("'{}' is not one of {}{}", s, spec.range_text(),
+                           suggestion(s, spec.choices)));
         }
         return s;
       }
@@ -127,16 +135,20 @@ class Parser {
         std::vector<YAML::Node> flat;
         if (node.IsSequence() && node.size() == 4 && node[0].IsSequence()) {
           for (const auto& row : node) {
-            if (!row.IsSequence() || row.size() != 4) fail(line, key, "expected four rows of four numbers");
-            for (const auto& x : row) flat.push_back(x);
+            if (!row.IsSequence() || row.size() != 4)
+              fail(line, key, "expected four rows of four numbers");
+            for (const auto& x : row)
+              flat.push_back(x);
           }
         } else if (node.IsSequence() && node.size() == 16) {
-          for (const auto& x : node) flat.push_back(x);
+          for (const auto& x : node)
+            flat.push_back(x);
         } else {
           fail(line, key, "expected a 4x4 matrix: 16 numbers row by row, or four rows of four");
         }
         Eigen::Matrix4d m;
-        for (int i = 0; i < 16; ++i) m(i / 4, i % 4) = as_number(flat[static_cast<size_t>(i)], "a number");
+        for (int i = 0; i < 16; ++i)
+          m(i / 4, i % 4) = as_number(flat[static_cast<size_t>(i)], "a number");
         return m;
       }
     }
@@ -149,7 +161,8 @@ class Parser {
 
 std::vector<std::string> section_names(const Schema& schema) {
   std::vector<std::string> out;
-  for (const auto& s : schema.sections()) out.push_back(s.name);
+  for (const auto& s : schema.sections())
+    out.push_back(s.name);
   return out;
 }
 
@@ -183,7 +196,8 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
       parser.fail(body.Mark().line, sec, "a section is a mapping of keys");
     }
     std::vector<std::string> known;
-    for (const auto* p : schema.params_of(sec)) known.push_back(p->name);
+    for (const auto* p : schema.params_of(sec))
+      known.push_back(p->name);
     if (body.IsMap()) {
       for (const auto& item : body) {
         const std::string name = item.first.Scalar();
@@ -216,7 +230,8 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
 
 Scene load_scene(const fs::path& file, const Schema& schema) {
   std::error_code ec;
-  if (fs::is_directory(file, ec)) throw InputError(file.string() + ": is a folder, not a scene file");
+  if (fs::is_directory(file, ec))
+    throw InputError(file.string() + ": is a folder, not a scene file");
   std::ifstream in(file);
   if (!in) throw InputError(file.string() + ": cannot read the scene file");
   std::stringstream ss;
@@ -233,8 +248,8 @@ const Scene::Entry& Scene::entry(const std::string& section, const std::string& 
                                  ParamType type) const {
   const ParamSpec* spec = schema_->find(section, name);
   if (!spec || spec->type != type) {
-    throw std::logic_error(fmt::format("scene key {}.{} is not declared as {}", section, name,
-                                       to_string(type)));
+    throw std::logic_error(
+        fmt::format("scene key {}.{} is not declared as {}", section, name, to_string(type)));
   }
   auto it = entries_.find(spec->key());
   if (it == entries_.end()) {
@@ -254,7 +269,8 @@ bool Scene::flag(const std::string& s, const std::string& n) const {
 }
 const std::string& Scene::text(const std::string& s, const std::string& n) const {
   const ParamSpec* spec = schema_->find(s, n);
-  const ParamType t = spec && spec->type == ParamType::kEnum ? ParamType::kEnum : ParamType::kString;
+  const ParamType t =
+      spec && spec->type == ParamType::kEnum ? ParamType::kEnum : ParamType::kString;
   return std::get<std::string>(entry(s, n, t).value);
 }
 fs::path Scene::path(const std::string& s, const std::string& n) const {
@@ -277,7 +293,8 @@ int Scene::line_of(const std::string& s, const std::string& n) const {
 
 void Scene::fail(const std::string& s, const std::string& n, const std::string& reason) const {
   // An empty key: the rule is about the whole section.
-  throw InputError(fmt::format("{}:{}: {}{}{}: {}", file_.string(), line_of(s, n), s, n.empty() ? "" : ".", n, reason));
+  throw InputError(fmt::format("{}:{}: {}{}{}: {}", file_.string(), line_of(s, n), s,
+                               n.empty() ? "" : ".", n, reason));
 }
 
 std::string Scene::resolved_yaml() const {
@@ -309,14 +326,20 @@ nlohmann::json Scene::to_json() const {
     nlohmann::json s = nlohmann::json::object();
     for (const auto* p : schema_->params_of(sec.name)) {
       const auto& v = entries_.at(p->key()).value;
-      if (auto* d = std::get_if<double>(&v)) s[p->name] = *d;
-      else if (auto* i = std::get_if<long long>(&v)) s[p->name] = *i;
-      else if (auto* b = std::get_if<bool>(&v)) s[p->name] = *b;
-      else if (auto* str = std::get_if<std::string>(&v)) s[p->name] = *str;
-      else if (auto* vec = std::get_if<Eigen::Vector3d>(&v)) s[p->name] = {vec->x(), vec->y(), vec->z()};
+      if (auto* d = std::get_if<double>(&v))
+        s[p->name] = *d;
+      else if (auto* i = std::get_if<long long>(&v))
+        s[p->name] = *i;
+      else if (auto* b = std::get_if<bool>(&v))
+        s[p->name] = *b;
+      else if (auto* str = std::get_if<std::string>(&v))
+        s[p->name] = *str;
+      else if (auto* vec = std::get_if<Eigen::Vector3d>(&v))
+        s[p->name] = {vec->x(), vec->y(), vec->z()};
       else if (auto* m = std::get_if<Eigen::Matrix4d>(&v)) {
         nlohmann::json rows = nlohmann::json::array();
-        for (int r = 0; r < 4; ++r) rows.push_back({(*m)(r, 0), (*m)(r, 1), (*m)(r, 2), (*m)(r, 3)});
+        for (int r = 0; r < 4; ++r)
+          rows.push_back({(*m)(r, 0), (*m)(r, 1), (*m)(r, 2), (*m)(r, 3)});
         s[p->name] = rows;
       }
     }

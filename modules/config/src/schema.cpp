@@ -10,14 +10,22 @@ namespace organfit::config {
 
 const char* to_string(ParamType type) {
   switch (type) {
-    case ParamType::kNumber: return "number";
-    case ParamType::kInteger: return "integer";
-    case ParamType::kBool: return "bool";
-    case ParamType::kString: return "string";
-    case ParamType::kEnum: return "enum";
-    case ParamType::kInputPath: return "path";
-    case ParamType::kVec3: return "vec3";
-    case ParamType::kMatrix4: return "matrix4";
+    case ParamType::kNumber:
+      return "number";
+    case ParamType::kInteger:
+      return "integer";
+    case ParamType::kBool:
+      return "bool";
+    case ParamType::kString:
+      return "string";
+    case ParamType::kEnum:
+      return "enum";
+    case ParamType::kInputPath:
+      return "path";
+    case ParamType::kVec3:
+      return "vec3";
+    case ParamType::kMatrix4:
+      return "matrix4";
   }
   return "?";
 }
@@ -39,7 +47,8 @@ std::string value_to_text(const Value& value) {
     std::string operator()(const Eigen::Matrix4d& m) const {
       std::string out = "[";
       for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) out += (r + c ? ", " : "") + format_number(m(r, c));
+        for (int c = 0; c < 4; ++c)
+          out += (r + c ? ", " : "") + format_number(m(r, c));
       return out + "]";
     }
     std::string operator()(const Eigen::Vector3d& v) const {
@@ -53,7 +62,8 @@ std::string value_to_text(const Value& value) {
 std::string ParamSpec::range_text() const {
   if (type == ParamType::kEnum) {
     std::string s = "{";
-    for (size_t i = 0; i < choices.size(); ++i) s += (i ? ", " : "") + choices[i];
+    for (size_t i = 0; i < choices.size(); ++i)
+      s += (i ? ", " : "") + choices[i];
     return s + "}";
   }
   if (!min && !max) return "";
@@ -95,8 +105,8 @@ Schema& Schema::add(ParamSpec spec) {
 }
 
 Schema& Schema::number(const std::string& name, std::optional<double> def, const std::string& unit,
-                       std::optional<double> min, std::optional<double> max,
-                       const std::string& doc, bool min_exclusive) {
+                       std::optional<double> min, std::optional<double> max, const std::string& doc,
+                       bool min_exclusive) {
   ParamSpec s;
   s.name = name;
   s.type = ParamType::kNumber;

@@ -16,7 +16,9 @@ Schema test_schema() {
       .flag("skeleton", true, "attach a skeleton")
       .choice("method", "spread", {"paper", "spread"}, "fit variant")
       .vec3("size_mm", Eigen::Vector3d(10, 20, 30), "mm", 0.0, "box size", true);
-  s.section("points", "attractive points").input_path("file", "points CSV").text("label", "x", "a label");
+  s.section("points", "attractive points")
+      .input_path("file", "points CSV")
+      .text("label", "x", "a label");
   return s;
 }
 
@@ -90,7 +92,8 @@ TEST(SceneParse, Vec3NeedsThreeNumbersEachInRange) {
 }
 
 TEST(SceneParse, MissingRequiredKeyAndMissingFile) {
-  EXPECT_EQ(error_of("points:\n  label: a\n"), "/scenes/s.yaml:1: points.file: required key is missing");
+  EXPECT_EQ(error_of("points:\n  label: a\n"),
+            "/scenes/s.yaml:1: points.file: required key is missing");
   EXPECT_EQ(error_of("points:\n  file: nowhere.csv\n"),
             "/scenes/s.yaml:2: points.file: no such file or folder: /scenes/nowhere.csv");
 }
@@ -110,8 +113,7 @@ TEST(SceneParse, DuplicatesSyntaxAndShapeErrors) {
 TEST(SceneParse, RelativePathsResolveAgainstTheSceneFolder) {
   const Schema schema = test_schema();
   const std::string dir = ORGANFIT_SOURCE_DIR;
-  const Scene scene =
-      parse_scene("points:\n  file: CMakeLists.txt\n", dir + "/scene.yaml", schema);
+  const Scene scene = parse_scene("points:\n  file: CMakeLists.txt\n", dir + "/scene.yaml", schema);
   EXPECT_EQ(scene.path("points", "file"), std::filesystem::path(dir + "/CMakeLists.txt"));
 }
 

@@ -23,10 +23,11 @@ namespace fs = std::filesystem;
 namespace organfit::dicom {
 namespace {
 
-const gdcm::Tag kModality(0x0008, 0x0060), kSeriesUid(0x0020, 0x000e), kSeriesDescription(0x0008, 0x103e),
-    kSopUid(0x0008, 0x0018), kSopClass(0x0008, 0x0016), kPosition(0x0020, 0x0032),
-    kOrientation(0x0020, 0x0037), kPixelSpacing(0x0028, 0x0030), kRows(0x0028, 0x0010),
-    kColumns(0x0028, 0x0011), kFrameOfReference(0x0020, 0x0052), kGantryTilt(0x0018, 0x1120);
+const gdcm::Tag kModality(0x0008, 0x0060), kSeriesUid(0x0020, 0x000e),
+    kSeriesDescription(0x0008, 0x103e), kSopUid(0x0008, 0x0018), kSopClass(0x0008, 0x0016),
+    kPosition(0x0020, 0x0032), kOrientation(0x0020, 0x0037), kPixelSpacing(0x0028, 0x0030),
+    kRows(0x0028, 0x0010), kColumns(0x0028, 0x0011), kFrameOfReference(0x0020, 0x0052),
+    kGantryTilt(0x0018, 0x1120);
 
 std::string trimmed(const char* v) {
   if (!v) return {};
@@ -62,15 +63,17 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     if (detail::safe_for_gdcm(f)) {
       files.push_back(f);
     } else if (detail::is_part10(f)) {  // a DICOM file whose lengths run past its end
-      fail(fs::path(f).filename().string() + ": a truncated or corrupt DICOM file (its elements run past its end)");
+      fail(fs::path(f).filename().string() +
+           ": a truncated or corrupt DICOM file (its elements run past its end)");
     } else {
       ++unsafe;
     }
   }
   if (files.empty() && unsafe == 0) fail("the folder is empty: no CT series");
   gdcm::Scanner scanner;
-  for (const auto& t : {kModality, kSeriesUid, kSeriesDescription, kSopUid, kSopClass, kPosition, kOrientation,
-                        kPixelSpacing, kRows, kColumns, kFrameOfReference, kGantryTilt})
+  for (const auto& t :
+       {kModality, kSeriesUid, kSeriesDescription, kSopUid, kSopClass, kPosition, kOrientation,
+        kPixelSpacing, kRows, kColumns, kFrameOfReference, kGantryTilt})
     scanner.AddTag(t);
   bool scanned = true;
   {
@@ -108,42 +111,52 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     h.tilt = tilt.empty() ? 0.0 : std::atof(tilt.c_str());
     by_series[h.series_uid].push_back(std::move(h));
   }
-  if (not_dicom > 0) series.warnings.push_back(fmt::format("{}: {} file(s) that are not DICOM were ignored", where, not_dicom));
+  if (not_dicom > 0)
+    series.warnings.push_back(
+        fmt::format("{}: {} file(s) that are not DICOM were ignored", where, not_dicom));
   if (other_modality > 0)
-    series.warnings.push_back(fmt::format("{}: {} DICOM object(s) that are not CT were ignored", where, other_modality));
+    series.warnings.push_back(
+        fmt::format("{}: {} DICOM object(s) that are not CT were ignored", where, other_modality));
   if (by_series.empty()) fail("no CT series (no DICOM file with Modality CT)");
 
   // Choose the series.
   auto describe = [&]() {
     std::string list;
     for (const auto& [uid, hs] : by_series)
-      list += fmt::format("{}{} ('{}', {} slices)", list.empty() ? "" : "; ", uid, hs.front().description, hs.size());
+      list += fmt::format("{}{} ('{}', {} slices)", list.empty() ? "" : "; ", uid,
+                          hs.front().description, hs.size());
     return list;
   };
   const std::vector<Header>* chosen = nullptr;
   if (!options.series_instance_uid.empty()) {
     auto it = by_series.find(options.series_instance_uid);
-    if (it == by_series.end()) fail("no CT series with UID " + options.series_instance_uid + "; found: " + describe());
+    if (it == by_series.end())
+      fail("no CT series with UID " + options.series_instance_uid + "; found: " + describe());
     chosen = &it->second;
   } else if (!options.series_description.empty()) {
     for (const auto& [uid, hs] : by_series)
       if (hs.front().description == options.series_description) {
-        if (chosen) fail("several CT series are described '" + options.series_description + "': " + describe());
+        if (chosen)
+          fail("several CT series are described '" + options.series_description +
+               "': " + describe());
         chosen = &hs;
       }
-    if (!chosen) fail("no CT series described '" + options.series_description + "'; found: " + describe());
+    if (!chosen)
+      fail("no CT series described '" + options.series_description + "'; found: " + describe());
   } else if (by_series.size() == 1) {
     chosen = &by_series.begin()->second;
   } else {
-    fail(fmt::format("{} CT series; choose one by Series Instance UID or description: {}", by_series.size(), describe()));
+    fail(fmt::format("{} CT series; choose one by Series Instance UID or description: {}",
+                     by_series.size(), describe()));
   }
   std::vector<Header> slices = *chosen;
 
   // Consistent geometry across slices.
   const Header& first = slices.front();
-  if (first.orientation.size() != 6 || first.spacing.size() != 2 || first.position.size() != 3 || first.rows <= 0 ||
-      first.columns <= 0)
-    fail("slice " + fs::path(first.file).filename().string() + " lacks its geometry (orientation, spacing, position or size)");
+  if (first.orientation.size() != 6 || first.spacing.size() != 2 || first.position.size() != 3 ||
+      first.rows <= 0 || first.columns <= 0)
+    fail("slice " + fs::path(first.file).filename().string() +
+         " lacks its geometry (orientation, spacing, position or size)");
   for (const auto& h : slices) {
     if (h.rows != first.rows || h.columns != first.columns)
       fail("slices differ in size (" + fs::path(h.file).filename().string() + ")");
@@ -155,24 +168,29 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     for (int c = 0; c < 6; ++c)
       if (std::abs(h.orientation[c] - first.orientation[c]) > 1e-4)
         fail("slices differ in orientation (" + fs::path(h.file).filename().string() + ")");
-    if (std::abs(h.tilt) > 1e-3) fail(fmt::format("gantry tilt of {} degrees: tilted series are not supported", h.tilt));
+    if (std::abs(h.tilt) > 1e-3)
+      fail(fmt::format("gantry tilt of {} degrees: tilted series are not supported", h.tilt));
   }
   const Eigen::Vector3d row_dir(first.orientation[0], first.orientation[1], first.orientation[2]);
   const Eigen::Vector3d col_dir(first.orientation[3], first.orientation[4], first.orientation[5]);
   const Eigen::Vector3d normal = row_dir.cross(col_dir).normalized();
   if (std::abs(normal.z()) < 0.99)
-    fail(fmt::format("non-axial slices (normal {:.2f}, {:.2f}, {:.2f}): only axial CT is supported", normal.x(),
-                     normal.y(), normal.z()));
+    fail(fmt::format("non-axial slices (normal {:.2f}, {:.2f}, {:.2f}): only axial CT is supported",
+                     normal.x(), normal.y(), normal.z()));
 
   // Sort along the normal; detect duplicates, missing slices, irregular gaps and tilt.
-  auto along = [&](const Header& h) { return normal.dot(Eigen::Vector3d(h.position[0], h.position[1], h.position[2])); };
-  std::stable_sort(slices.begin(), slices.end(), [&](const Header& a, const Header& b) { return along(a) < along(b); });
+  auto along = [&](const Header& h) {
+    return normal.dot(Eigen::Vector3d(h.position[0], h.position[1], h.position[2]));
+  };
+  std::stable_sort(slices.begin(), slices.end(),
+                   [&](const Header& a, const Header& b) { return along(a) < along(b); });
   std::vector<double> gaps;
   for (size_t s = 1; s < slices.size(); ++s) {
     const double gap = along(slices[s]) - along(slices[s - 1]);
     if (gap < 1e-3)
       fail(fmt::format("duplicate slice position {:.2f} mm ({} and {})", along(slices[s]),
-                       fs::path(slices[s - 1].file).filename().string(), fs::path(slices[s].file).filename().string()));
+                       fs::path(slices[s - 1].file).filename().string(),
+                       fs::path(slices[s].file).filename().string()));
     gaps.push_back(gap);
   }
   double slice_gap = 1.0;
@@ -185,17 +203,22 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
       const double lo = along(slices[s]), hi = along(slices[s + 1]);
       const double ratio = gaps[s] / slice_gap;
       if (std::abs(ratio - std::round(ratio)) < 0.05 && ratio > 1.5)
-        fail(fmt::format("missing slice: a gap of {:.2f} mm between {:.2f} and {:.2f} mm (slices are {:.2f} mm apart)",
-                         gaps[s], lo, hi, slice_gap));
-      fail(fmt::format("irregular slice spacing: {:.2f} mm between {:.2f} and {:.2f} mm, {:.2f} mm elsewhere", gaps[s],
-                       lo, hi, slice_gap));
+        fail(
+            fmt::format("missing slice: a gap of {:.2f} mm between {:.2f} and {:.2f} mm (slices "
+                        "are {:.2f} mm apart)",
+                        gaps[s], lo, hi, slice_gap));
+      fail(fmt::format(
+          "irregular slice spacing: {:.2f} mm between {:.2f} and {:.2f} mm, {:.2f} mm elsewhere",
+          gaps[s], lo, hi, slice_gap));
     }
     // Positions must advance along the normal only (else the series is tilted or sheared).
     const Eigen::Vector3d p0(first.position[0], first.position[1], first.position[2]);
     for (const auto& h : slices) {
       const Eigen::Vector3d d = Eigen::Vector3d(h.position[0], h.position[1], h.position[2]) - p0;
       if ((d - normal.dot(d) * normal).norm() > 0.01 * slice_gap + 1e-3)
-        fail("slice positions do not advance along the slice normal (gantry tilt or a sheared series)");
+        fail(
+            "slice positions do not advance along the slice normal (gantry tilt or a sheared "
+            "series)");
     }
   }
 
@@ -203,7 +226,8 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   geometry::ImageGeometry& g = series.geometry;
   g.size = {first.columns, first.rows, static_cast<int>(slices.size())};
   g.spacing_mm = Eigen::Vector3d(first.spacing[1], first.spacing[0], slice_gap);
-  g.origin_mm = Eigen::Vector3d(slices.front().position[0], slices.front().position[1], slices.front().position[2]);
+  g.origin_mm = Eigen::Vector3d(slices.front().position[0], slices.front().position[1],
+                                slices.front().position[2]);
   g.direction.col(0) = row_dir;
   g.direction.col(1) = col_dir;
   g.direction.col(2) = normal;
@@ -230,7 +254,8 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     if (pf.GetSamplesPerPixel() != 1) fail(name + ": not a grey-scale image");
     std::vector<char> buffer(image.GetBufferLength());
     if (!image.GetBuffer(buffer.data())) fail("cannot decode the pixels of " + name);
-    if (buffer.size() < per_slice * pf.GetPixelSize()) fail(name + ": pixel data shorter than its size says");
+    if (buffer.size() < per_slice * pf.GetPixelSize())
+      fail(name + ": pixel data shorter than its size says");
     // GDCM reads a file cut short inside its pixel data with only a warning: refuse it.
     if (!reader.GetFile().GetHeader().GetDataSetTransferSyntax().IsEncapsulated() &&
         !detail::native_pixel_data_complete(slices[s].file))
@@ -240,23 +265,39 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     for (size_t v = 0; v < per_slice; ++v) {
       double raw = 0;
       switch (pf.GetScalarType()) {
-        case gdcm::PixelFormat::INT16: raw = reinterpret_cast<const int16_t*>(buffer.data())[v]; break;
-        case gdcm::PixelFormat::UINT16: raw = reinterpret_cast<const uint16_t*>(buffer.data())[v]; break;
-        case gdcm::PixelFormat::INT8: raw = reinterpret_cast<const int8_t*>(buffer.data())[v]; break;
-        case gdcm::PixelFormat::UINT8: raw = reinterpret_cast<const uint8_t*>(buffer.data())[v]; break;
-        case gdcm::PixelFormat::INT32: raw = reinterpret_cast<const int32_t*>(buffer.data())[v]; break;
-        case gdcm::PixelFormat::UINT32: raw = reinterpret_cast<const uint32_t*>(buffer.data())[v]; break;
-        default: fail(name + ": unsupported pixel type");
+        case gdcm::PixelFormat::INT16:
+          raw = reinterpret_cast<const int16_t*>(buffer.data())[v];
+          break;
+        case gdcm::PixelFormat::UINT16:
+          raw = reinterpret_cast<const uint16_t*>(buffer.data())[v];
+          break;
+        case gdcm::PixelFormat::INT8:
+          raw = reinterpret_cast<const int8_t*>(buffer.data())[v];
+          break;
+        case gdcm::PixelFormat::UINT8:
+          raw = reinterpret_cast<const uint8_t*>(buffer.data())[v];
+          break;
+        case gdcm::PixelFormat::INT32:
+          raw = reinterpret_cast<const int32_t*>(buffer.data())[v];
+          break;
+        case gdcm::PixelFormat::UINT32:
+          raw = reinterpret_cast<const uint32_t*>(buffer.data())[v];
+          break;
+        default:
+          fail(name + ": unsupported pixel type");
       }
       out[v] = static_cast<float>(raw * slope + intercept);
     }
-    series.slices.push_back({slices[s].sop_uid, slices[s].sop_class,
-                             Eigen::Vector3d(slices[s].position[0], slices[s].position[1], slices[s].position[2]),
-                             slices[s].file});
+    series.slices.push_back(
+        {slices[s].sop_uid, slices[s].sop_class,
+         Eigen::Vector3d(slices[s].position[0], slices[s].position[1], slices[s].position[2]),
+         slices[s].file});
     if (s == 0) {  // patient and study, copied later into exported objects
       gdcm::StringFilter sf;
       sf.SetFile(reader.GetFile());
-      auto get = [&](uint16_t gr, uint16_t el) { return trimmed(sf.ToString(gdcm::Tag(gr, el)).c_str()); };
+      auto get = [&](uint16_t gr, uint16_t el) {
+        return trimmed(sf.ToString(gdcm::Tag(gr, el)).c_str());
+      };
       PatientStudy& p = series.patient;
       p.patient_name = get(0x0010, 0x0010);
       p.patient_id = get(0x0010, 0x0020);

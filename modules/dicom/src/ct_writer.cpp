@@ -29,11 +29,14 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
   if (g.voxel_count() <= 0 || ct.hu.size() != static_cast<size_t>(g.voxel_count()))
     throw InputError(where + ": the CT has no voxels or its values do not match its size");
   std::error_code ec;
-  if (fs::exists(folder, ec)) throw InputError(where + ": exists already; a CT series is written into a new folder");
+  if (fs::exists(folder, ec))
+    throw InputError(where + ": exists already; a CT series is written into a new folder");
   if (!folder.parent_path().empty()) fs::create_directories(folder.parent_path(), ec);
 
   const bool fixed = options.fixed_uids_and_dates;
-  auto uid = [&](const std::string& what) { return detail::make_uid(fixed, options.uid_key + "|" + what); };
+  auto uid = [&](const std::string& what) {
+    return detail::make_uid(fixed, options.uid_key + "|" + what);
+  };
   if (ct.patient.study_instance_uid.empty()) ct.patient.study_instance_uid = uid("study");
   if (ct.series_instance_uid.empty()) ct.series_instance_uid = uid("series");
   if (ct.frame_of_reference_uid.empty()) ct.frame_of_reference_uid = uid("frame");
@@ -47,8 +50,10 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
 
   const Eigen::Vector3d row_cosines = g.direction.col(0), column_cosines = g.direction.col(1);
   std::string orientation;
-  for (int d = 0; d < 3; ++d) orientation += (d ? "\\" : "") + ds_number(row_cosines[d]);
-  for (int d = 0; d < 3; ++d) orientation += "\\" + ds_number(column_cosines[d]);
+  for (int d = 0; d < 3; ++d)
+    orientation += (d ? "\\" : "") + ds_number(row_cosines[d]);
+  for (int d = 0; d < 3; ++d)
+    orientation += "\\" + ds_number(column_cosines[d]);
   const int columns = g.size[0], rows = g.size[1];
   const size_t per_slice = static_cast<size_t>(columns) * static_cast<size_t>(rows);
   long long clipped = 0;
@@ -63,7 +68,8 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
     for (size_t v = 0; v < per_slice; ++v) {
       const double stored = std::round(double(ct.hu[k * per_slice + v]) - kIntercept);
       if (!(stored >= 0 && stored <= kMaxStored)) ++clipped;
-      pixels[v] = static_cast<std::uint16_t>(std::clamp(std::isfinite(stored) ? stored : 0.0, 0.0, double(kMaxStored)));
+      pixels[v] = static_cast<std::uint16_t>(
+          std::clamp(std::isfinite(stored) ? stored : 0.0, 0.0, double(kMaxStored)));
     }
 
     gdcm::Writer writer;
@@ -81,8 +87,10 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
     put(ds, 0x0008, 0x103e, V::LO, ct.series_description);
     put(ds, 0x0008, 0x1090, V::LO, "organfit synthetic phantom");
     // General Series, CT Image, Image Plane.
-    if (!options.body_part_examined.empty()) put(ds, 0x0018, 0x0015, V::CS, options.body_part_examined);
-    else put(ds, 0x0020, 0x0060, V::CS, "");  // Laterality, Type 2C: unknown when the body part is
+    if (!options.body_part_examined.empty())
+      put(ds, 0x0018, 0x0015, V::CS, options.body_part_examined);
+    else
+      put(ds, 0x0020, 0x0060, V::CS, "");  // Laterality, Type 2C: unknown when the body part is
     put(ds, 0x0018, 0x0050, V::DS, ds_number(g.spacing_mm[2]));  // Slice Thickness
     put(ds, 0x0018, 0x0060, V::DS, "120");                       // KVP
     put(ds, 0x0018, 0x5100, V::CS, "HFS");                       // Patient Position
@@ -109,10 +117,10 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
     put_us(0x0010, static_cast<uint16_t>(rows));
     put_us(0x0011, static_cast<uint16_t>(columns));
     put(ds, 0x0028, 0x0030, V::DS, ds_number(g.spacing_mm[1]) + "\\" + ds_number(g.spacing_mm[0]));
-    put_us(0x0100, 16);  // Bits Allocated
-    put_us(0x0101, 12);  // Bits Stored
-    put_us(0x0102, 11);  // High Bit
-    put_us(0x0103, 0);   // Pixel Representation: unsigned
+    put_us(0x0100, 16);                     // Bits Allocated
+    put_us(0x0101, 12);                     // Bits Stored
+    put_us(0x0102, 11);                     // High Bit
+    put_us(0x0103, 0);                      // Pixel Representation: unsigned
     put(ds, 0x0028, 0x1050, V::DS, "40");   // Window Center (soft tissue)
     put(ds, 0x0028, 0x1051, V::DS, "400");  // Window Width
     put(ds, 0x0028, 0x1052, V::DS, std::to_string(kIntercept));
@@ -120,7 +128,8 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
     put(ds, 0x0028, 0x1054, V::LO, "HU");
     gdcm::DataElement pixel_data(gdcm::Tag(0x7fe0, 0x0010));
     pixel_data.SetVR(V::OW);
-    pixel_data.SetByteValue(reinterpret_cast<const char*>(pixels.data()), static_cast<uint32_t>(per_slice * 2));
+    pixel_data.SetByteValue(reinterpret_cast<const char*>(pixels.data()),
+                            static_cast<uint32_t>(per_slice * 2));
     ds.Replace(pixel_data);
 
     gdcm::FileMetaInformation& meta = writer.GetFile().GetHeader();
@@ -128,7 +137,8 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
     meta.SetSourceApplicationEntityTitle("ORGANFIT");
     const fs::path file = temp.path() / slice.file.filename();
     writer.SetFileName(file.string().c_str());
-    if (!writer.Write()) throw InputError(fmt::format("{}: cannot write {}", where, file.filename().string()));
+    if (!writer.Write())
+      throw InputError(fmt::format("{}: cannot write {}", where, file.filename().string()));
     slices.push_back(std::move(slice));
   }
   temp.commit();

@@ -4,15 +4,14 @@
 
 #include <algorithm>
 #include <cctype>
-#include <vector>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <iterator>
-#include <string>
-
-#include <cmath>
 #include <sstream>
+#include <string>
+#include <vector>
 
 namespace organfit::dicom::detail {
 
@@ -42,12 +41,16 @@ void quiet_gdcm() {
 
 namespace {
 
-constexpr const char* kLongVrs[] = {"OB", "OW", "OF", "SQ", "UT", "UN", "OD", "OL", "UC", "UR", "OV", "SV", "UV"};
+constexpr const char* kLongVrs[] = {"OB", "OW", "OF", "SQ", "UT", "UN", "OD",
+                                    "OL", "UC", "UR", "OV", "SV", "UV"};
 /// Every VR of PS3.5 (2023); an element naming another makes GDCM 3.0 abort (found by fuzzing).
 bool known_vr(const unsigned char* v) {
-  static const char* all[] = {"AE", "AS", "AT", "CS", "DA", "DS", "DT", "FL", "FD", "IS", "LO", "LT", "OB", "OD", "OF", "OL", "OV",
-                              "OW", "PN", "SH", "SL", "SQ", "SS", "ST", "SV", "TM", "UC", "UI", "UL", "UN", "UR", "US", "UT", "UV"};
-  return std::any_of(std::begin(all), std::end(all), [&](const char* a) { return a[0] == v[0] && a[1] == v[1]; });
+  static const char* all[] = {"AE", "AS", "AT", "CS", "DA", "DS", "DT", "FL", "FD",
+                              "IS", "LO", "LT", "OB", "OD", "OF", "OL", "OV", "OW",
+                              "PN", "SH", "SL", "SQ", "SS", "ST", "SV", "TM", "UC",
+                              "UI", "UL", "UN", "UR", "US", "UT", "UV"};
+  return std::any_of(std::begin(all), std::end(all),
+                     [&](const char* a) { return a[0] == v[0] && a[1] == v[1]; });
 }
 
 std::uint32_t u32_at(const unsigned char* p) {
@@ -58,20 +61,23 @@ std::uint32_t u32_at(const unsigned char* p) {
 /// sequences and items included (undefined lengths end at their delimiters). Returns the
 /// position after the last element walked, or -1 when a length runs past `end`. Stops
 /// (returning `at`) at anything that is not explicit VR: GDCM decides about those.
-long long walk(const std::vector<unsigned char>& b, long long at, long long end, int depth, bool& ok, bool implicit,
-               bool raw_items = false, bool big = false, bool undefined_length = false) {
+long long walk(const std::vector<unsigned char>& b, long long at, long long end, int depth,
+               bool& ok, bool implicit, bool raw_items = false, bool big = false,
+               bool undefined_length = false) {
   auto r16 = [big](const unsigned char* p) {
     return static_cast<std::uint16_t>(big ? (p[0] << 8) | p[1] : p[0] | (p[1] << 8));
   };
   auto r32 = [big](const unsigned char* p) {
-    return big ? (static_cast<std::uint32_t>(p[0]) << 24) | (p[1] << 16) | (p[2] << 8) | p[3] : u32_at(p);
+    return big ? (static_cast<std::uint32_t>(p[0]) << 24) | (p[1] << 16) | (p[2] << 8) | p[3]
+               : u32_at(p);
   };
   if (depth > 32) return ok = false, -1;  // nesting deeper than any real structure set
   while (at + 8 <= end) {
     const unsigned char* e = b.data() + at;
     const std::uint16_t group = r16(e), element = r16(e + 2);
-    if (group == 0xFFFE && depth == 0) return ok = false, -1;  // items belong in sequences (GDCM aborts)
-    if (group == 0xFFFE) {  // item or delimiter: tag + 4-byte length, no VR
+    if (group == 0xFFFE && depth == 0)
+      return ok = false, -1;  // items belong in sequences (GDCM aborts)
+    if (group == 0xFFFE) {    // item or delimiter: tag + 4-byte length, no VR
       const std::uint32_t length = r32(e + 4);
       if (element == 0xE00D || element == 0xE0DD) return at + 8;  // item / sequence delimiter
       if (element != 0xE000) return ok = false, -1;
@@ -81,7 +87,9 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
         if (!ok) return -1;
       } else {
         if (at + 8 + length > end) return ok = false, -1;
-        if (!raw_items) walk(b, at + 8, at + 8 + length, depth + 1, ok, implicit, false, big);  // fragments hold data
+        if (!raw_items)
+          walk(b, at + 8, at + 8 + length, depth + 1, ok, implicit, false,
+               big);  // fragments hold data
         if (!ok) return -1;
         at += 8 + length;
       }
@@ -100,13 +108,15 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
     }
     if (!known_vr(e + 4)) return ok = false, -1;  // explicit VR must name a VR
     const std::string vr(reinterpret_cast<const char*>(e + 4), 2);
-    const bool long_form = std::any_of(std::begin(kLongVrs), std::end(kLongVrs), [&](const char* v) { return vr == v; });
+    const bool long_form = std::any_of(std::begin(kLongVrs), std::end(kLongVrs),
+                                       [&](const char* v) { return vr == v; });
     long long header = 8, length = r16(e + 6);
     if (long_form) {
       if (at + 12 > end) return ok = false, -1;
       header = 12;
       length = r32(e + 8);
-      if (length == 0xFFFFFFFFLL) {  // undefined length: a sequence, or encapsulated pixel fragments
+      if (length ==
+          0xFFFFFFFFLL) {  // undefined length: a sequence, or encapsulated pixel fragments
         at = walk(b, at + 12, end, depth + 1, ok, implicit, vr != "SQ", big, true);
         if (!ok) return -1;
         continue;
@@ -144,7 +154,8 @@ bool safe_for_gdcm(const std::string& file) {
     // walk cleanly in one of them (a 29-byte file made GDCM allocate 2.4 GB: fuzzing).
     // A File Meta group (0002) without the Part 10 preamble made GDCM abort (fuzzing).
     if (size >= 2 && b[0] == 0x02 && b[1] == 0x00) return false;
-    for (const auto& [implicit, big] : {std::pair{false, false}, std::pair{true, false}, std::pair{false, true}}) {
+    for (const auto& [implicit, big] :
+         {std::pair{false, false}, std::pair{true, false}, std::pair{false, true}}) {
       bool ok = true;
       if (walk(b, 0, size, 0, ok, implicit, false, big) == size && ok && size > 0) return true;
     }
@@ -154,28 +165,34 @@ bool safe_for_gdcm(const std::string& file) {
   // each be well formed and end inside the group (GDCM 3.0 aborts on an assertion there).
   if (size < 144) return false;
   const unsigned char* m = b.data() + 132;
-  if (!(m[0] == 0x02 && m[1] == 0x00 && m[2] == 0x00 && m[3] == 0x00 && m[4] == 'U' && m[5] == 'L')) return false;
+  if (!(m[0] == 0x02 && m[1] == 0x00 && m[2] == 0x00 && m[3] == 0x00 && m[4] == 'U' && m[5] == 'L'))
+    return false;
   const long long meta_end = 144 + static_cast<long long>(u32_at(m + 8));
   if (meta_end > size) return false;
   std::string syntax;
   for (long long at = 144; at < meta_end;) {
     if (at + 8 > meta_end) return false;
     const unsigned char* e = b.data() + at;
-    if (e[2] == 0x10 && e[3] == 0x00 && at + 8 + (e[6] | (e[7] << 8)) <= meta_end)  // (0002,0010) Transfer Syntax UID
+    if (e[2] == 0x10 && e[3] == 0x00 &&
+        at + 8 + (e[6] | (e[7] << 8)) <= meta_end)  // (0002,0010) Transfer Syntax UID
       syntax.assign(reinterpret_cast<const char*>(e + 8), static_cast<size_t>(e[6] | (e[7] << 8)));
     if (!(e[0] == 0x02 && e[1] == 0x00 && known_vr(e + 4))) return false;
     const std::string vr(reinterpret_cast<const char*>(e + 4), 2);
-    const bool long_form = std::any_of(std::begin(kLongVrs), std::end(kLongVrs), [&](const char* v) { return vr == v; });
+    const bool long_form = std::any_of(std::begin(kLongVrs), std::end(kLongVrs),
+                                       [&](const char* v) { return vr == v; });
     const long long header = long_form ? 12 : 8;
-    const long long length = long_form ? (at + 12 <= meta_end ? u32_at(e + 8) : -1) : (e[6] | (e[7] << 8));
+    const long long length =
+        long_form ? (at + 12 <= meta_end ? u32_at(e + 8) : -1) : (e[6] | (e[7] << 8));
     if (length < 0 || at + header + length > meta_end) return false;
     at += header + length;
   }
   // The data set: every declared length must fit in the file. GDCM allocates by declared
   // length before reading: a corrupt length cost 1.8 GB per file (found by fuzzing).
-  while (!syntax.empty() && (syntax.back() == '\0' || syntax.back() == ' ')) syntax.pop_back();
+  while (!syntax.empty() && (syntax.back() == '\0' || syntax.back() == ' '))
+    syntax.pop_back();
   bool ok = true;  // explicit big endian (retired) is walked too: GDCM allocated 2.4 GB on one
-  const long long end = walk(b, meta_end, size, 0, ok, syntax == "1.2.840.10008.1.2", false, syntax == "1.2.840.10008.1.2.2");
+  const long long end = walk(b, meta_end, size, 0, ok, syntax == "1.2.840.10008.1.2", false,
+                             syntax == "1.2.840.10008.1.2.2");
   return ok && end == size;  // a few stray bytes after the last element also made GDCM abort
 }
 
@@ -183,14 +200,16 @@ bool native_pixel_data_complete(const std::string& file) {
   std::ifstream in(file, std::ios::binary);
   const std::string bytes((std::istreambuf_iterator<char>(in)), {});
   const std::string tag("\xE0\x7F\x10\x00", 4);
-  for (size_t at = bytes.find(tag, 132 < bytes.size() ? 132 : 0); at != std::string::npos; at = bytes.find(tag, at + 1)) {
+  for (size_t at = bytes.find(tag, 132 < bytes.size() ? 132 : 0); at != std::string::npos;
+       at = bytes.find(tag, at + 1)) {
     auto u32 = [&](size_t p) {
       return static_cast<std::uint32_t>(static_cast<unsigned char>(bytes[p])) |
              (static_cast<std::uint32_t>(static_cast<unsigned char>(bytes[p + 1])) << 8) |
              (static_cast<std::uint32_t>(static_cast<unsigned char>(bytes[p + 2])) << 16) |
              (static_cast<std::uint32_t>(static_cast<unsigned char>(bytes[p + 3])) << 24);
     };
-    if (at + 12 <= bytes.size() && (bytes.compare(at + 4, 2, "OW") == 0 || bytes.compare(at + 4, 2, "OB") == 0)) {
+    if (at + 12 <= bytes.size() &&
+        (bytes.compare(at + 4, 2, "OW") == 0 || bytes.compare(at + 4, 2, "OB") == 0)) {
       const std::uint32_t length = u32(at + 8);
       return length == 0xFFFFFFFFu || at + 12 + static_cast<size_t>(length) <= bytes.size();
     }

@@ -9,7 +9,8 @@
 
 namespace organfit::dicom::detail {
 
-void put(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const gdcm::VR& vr, std::string value) {
+void put(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const gdcm::VR& vr,
+         std::string value) {
   if (value.size() % 2) value.push_back(vr == gdcm::VR::UI ? '\0' : ' ');
   gdcm::DataElement de(gdcm::Tag(group, element));
   de.SetVR(vr);
@@ -38,10 +39,12 @@ gdcm::Item new_item() {
   return item;
 }
 
-void put_sequence(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const std::vector<gdcm::Item>& items) {
+void put_sequence(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element,
+                  const std::vector<gdcm::Item>& items) {
   gdcm::SmartPointer<gdcm::SequenceOfItems> sq = new gdcm::SequenceOfItems();
   sq->SetLengthToUndefined();
-  for (const auto& item : items) sq->AddItem(item);
+  for (const auto& item : items)
+    sq->AddItem(item);
   gdcm::DataElement de(gdcm::Tag(group, element));
   de.SetVR(gdcm::VR::SQ);
   de.SetValue(*sq);
@@ -67,8 +70,12 @@ std::string local_time(const char* format) {
 }
 }  // namespace
 
-std::string today_da(bool fixed) { return fixed ? "20000101" : local_time("%Y%m%d"); }
-std::string now_tm(bool fixed) { return fixed ? "000000" : local_time("%H%M%S"); }
+std::string today_da(bool fixed) {
+  return fixed ? "20000101" : local_time("%Y%m%d");
+}
+std::string now_tm(bool fixed) {
+  return fixed ? "000000" : local_time("%H%M%S");
+}
 
 std::string make_uid(bool fixed, const std::string& key) {
   if (!fixed) {

@@ -15,7 +15,8 @@ namespace organfit::dicom::detail {
 /// Inserts (or replaces) a string element, padded to even length (UIDs with NUL, other
 /// VRs with a space). The value is written as given: callers copy source attributes
 /// verbatim (see rtstruct_writer.cpp for why).
-void put(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const gdcm::VR& vr, std::string value);
+void put(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const gdcm::VR& vr,
+         std::string value);
 
 /// The Patient and General Study attributes of `patient`, copied verbatim (an object
 /// must agree with its study: see rtstruct_writer.cpp). Shared by the CT and RTSTRUCT writers.
@@ -25,7 +26,8 @@ void put_patient_study(gdcm::DataSet& ds, const PatientStudy& patient);
 gdcm::Item new_item();
 
 /// Inserts a sequence (undefined length) of `items`.
-void put_sequence(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const std::vector<gdcm::Item>& items);
+void put_sequence(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element,
+                  const std::vector<gdcm::Item>& items);
 
 /// A Decimal String value: at most 16 characters.
 std::string ds_number(double v);

@@ -15,7 +15,8 @@ namespace {
 
 constexpr const char* kRtstructClass = "1.2.840.10008.5.1.4.1.1.481.3";
 constexpr const char* kCtImageClass = "1.2.840.10008.5.1.4.1.1.2";
-constexpr const char* kStudyComponentClass = "1.2.840.10008.3.1.2.3.1";  // Detached Study Management (retired, as used by TPS)
+constexpr const char* kStudyComponentClass =
+    "1.2.840.10008.3.1.2.3.1";  // Detached Study Management (retired, as used by TPS)
 
 using detail::ds_number;
 using detail::new_item;
@@ -29,7 +30,9 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
   const std::string where = file.string();
   // UIDs: new under one root per run, or derived deterministically (tests).
   const bool fixed = options.fixed_uids_and_dates;
-  auto uid = [&](const std::string& what) { return detail::make_uid(fixed, ct.series_instance_uid + "|" + what); };
+  auto uid = [&](const std::string& what) {
+    return detail::make_uid(fixed, ct.series_instance_uid + "|" + what);
+  };
   const std::string date = detail::today_da(fixed), time = detail::now_tm(fixed);
   const std::string sop_uid = uid("sop"), series_uid = uid("series");
 
@@ -51,7 +54,7 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
   put(ds, 0x0020, 0x000e, V::UI, series_uid);
   put(ds, 0x0020, 0x0011, V::IS, "1");
   put(ds, 0x0020, 0x0052, V::UI, ct.frame_of_reference_uid);  // Frame of Reference at the top level
-  put(ds, 0x0020, 0x1040, V::LO, "");                         // Position Reference Indicator (Type 2)
+  put(ds, 0x0020, 0x1040, V::LO, "");  // Position Reference Indicator (Type 2)
   // Structure Set module.
   put(ds, 0x3006, 0x0002, V::SH, options.label);
   put(ds, 0x3006, 0x0008, V::DA, date);
@@ -60,7 +63,8 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
   std::vector<gdcm::Item> contour_images;
   for (const auto& slice : ct.slices) {
     gdcm::Item item = new_item();
-    put(item.GetNestedDataSet(), 0x0008, 0x1150, V::UI, slice.sop_class_uid.empty() ? kCtImageClass : slice.sop_class_uid);
+    put(item.GetNestedDataSet(), 0x0008, 0x1150, V::UI,
+        slice.sop_class_uid.empty() ? kCtImageClass : slice.sop_class_uid);
     put(item.GetNestedDataSet(), 0x0008, 0x1155, V::UI, slice.sop_instance_uid);
     contour_images.push_back(item);
   }
@@ -92,12 +96,14 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
     for (size_t c = 0; c < roi.contours.size(); ++c) {
       const auto& contour = roi.contours[c];
       if (contour.k < 0 || contour.k >= static_cast<int>(ct.slices.size()))
-        throw InputError(fmt::format("{}: contour {} of ROI '{}' is on no slice of the CT", where, c + 1, roi.name));
+        throw InputError(fmt::format("{}: contour {} of ROI '{}' is on no slice of the CT", where,
+                                     c + 1, roi.name));
       gdcm::Item item = new_item();
       gdcm::DataSet& cds = item.GetNestedDataSet();
       gdcm::Item image = new_item();
       const CtSlice& slice = ct.slices[static_cast<size_t>(contour.k)];
-      put(image.GetNestedDataSet(), 0x0008, 0x1150, V::UI, slice.sop_class_uid.empty() ? kCtImageClass : slice.sop_class_uid);
+      put(image.GetNestedDataSet(), 0x0008, 0x1150, V::UI,
+          slice.sop_class_uid.empty() ? kCtImageClass : slice.sop_class_uid);
       put(image.GetNestedDataSet(), 0x0008, 0x1155, V::UI, slice.sop_instance_uid);
       put_sequence(cds, 0x3006, 0x0016, {image});
       put(cds, 0x3006, 0x0042, V::CS, "CLOSED_PLANAR");
@@ -105,16 +111,19 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
       put(cds, 0x3006, 0x0048, V::IS, std::to_string(c + 1));
       std::string data;
       for (const auto& p : contour.points_mm)
-        for (int d = 0; d < 3; ++d) data += (data.empty() ? "" : "\\") + ds_number(p[d]);
+        for (int d = 0; d < 3; ++d)
+          data += (data.empty() ? "" : "\\") + ds_number(p[d]);
       if (data.size() > 65534)
-        throw InputError(fmt::format("{}: contour {} of ROI '{}' needs {} bytes, over the DICOM limit of 65,534",
-                                     where, c + 1, roi.name, data.size()));
+        throw InputError(
+            fmt::format("{}: contour {} of ROI '{}' needs {} bytes, over the DICOM limit of 65,534",
+                        where, c + 1, roi.name, data.size()));
       put(cds, 0x3006, 0x0050, V::DS, data);
       contours.push_back(item);
     }
     gdcm::Item contour_item = new_item();
     gdcm::DataSet& ods = contour_item.GetNestedDataSet();
-    put(ods, 0x3006, 0x002a, V::IS, fmt::format("{}\\{}\\{}", roi.colour[0], roi.colour[1], roi.colour[2]));
+    put(ods, 0x3006, 0x002a, V::IS,
+        fmt::format("{}\\{}\\{}", roi.colour[0], roi.colour[1], roi.colour[2]));
     put_sequence(ods, 0x3006, 0x0040, contours);
     put(ods, 0x3006, 0x0084, V::IS, number);
     contour_items.push_back(contour_item);

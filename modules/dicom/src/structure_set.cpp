@@ -11,8 +11,8 @@
 #include <sstream>
 
 #include "dicom_values.h"
-#include "organfit/support/interrupt.h"
 #include "organfit/support/error.h"
+#include "organfit/support/interrupt.h"
 
 namespace fs = std::filesystem;
 
@@ -31,7 +31,8 @@ std::string text(const gdcm::DataSet& ds, uint16_t group, uint16_t element) {
   return b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
 }
 
-gdcm::SmartPointer<gdcm::SequenceOfItems> sequence(const gdcm::DataSet& ds, uint16_t group, uint16_t element) {
+gdcm::SmartPointer<gdcm::SequenceOfItems> sequence(const gdcm::DataSet& ds, uint16_t group,
+                                                   uint16_t element) {
   const gdcm::Tag tag(group, element);
   if (!ds.FindDataElement(tag)) return nullptr;
   return ds.GetDataElement(tag).GetValueAsSQ();
@@ -50,7 +51,8 @@ const Roi* StructureSet::find(const std::string& name) const {
 StructureSet read_rtstruct(const fs::path& file) {
   const std::string where = file.string();
   detail::quiet_gdcm();
-  if (!detail::safe_for_gdcm(where)) throw InputError(where + ": cannot read as DICOM (missing, truncated or not DICOM)");
+  if (!detail::safe_for_gdcm(where))
+    throw InputError(where + ": cannot read as DICOM (missing, truncated or not DICOM)");
   gdcm::Reader reader;
   reader.SetFileName(where.c_str());
   bool read_ok = false;
@@ -58,10 +60,12 @@ StructureSet read_rtstruct(const fs::path& file) {
     ReadingInput guard(where.c_str(), "GDCM");
     read_ok = reader.Read();
   }
-  if (!read_ok) throw InputError(where + ": cannot read as DICOM (missing, truncated or not DICOM)");
+  if (!read_ok)
+    throw InputError(where + ": cannot read as DICOM (missing, truncated or not DICOM)");
   const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
   if (text(ds, 0x0008, 0x0060) != "RTSTRUCT")
-    throw InputError(where + ": not an RT Structure Set (Modality '" + text(ds, 0x0008, 0x0060) + "')");
+    throw InputError(where + ": not an RT Structure Set (Modality '" + text(ds, 0x0008, 0x0060) +
+                     "')");
   StructureSet rtss;
   std::map<int, Roi> by_number;
   if (auto sq = sequence(ds, 0x3006, 0x0020)) {  // Structure Set ROI Sequence
@@ -82,8 +86,10 @@ StructureSet read_rtstruct(const fs::path& file) {
       roi.number = number;
       const std::vector<double> colour = numbers(text(item, 0x3006, 0x002a));
       // Only a real colour is taken (a NaN cast to int is undefined: found by fuzzing).
-      if (colour.size() == 3 && std::all_of(colour.begin(), colour.end(), [](double v) { return v >= 0 && v <= 255; }))
-        for (int c = 0; c < 3; ++c) roi.colour[c] = static_cast<int>(colour[c]);
+      if (colour.size() == 3 &&
+          std::all_of(colour.begin(), colour.end(), [](double v) { return v >= 0 && v <= 255; }))
+        for (int c = 0; c < 3; ++c)
+          roi.colour[c] = static_cast<int>(colour[c]);
       auto contours = sequence(item, 0x3006, 0x0040);
       if (!contours) continue;
       for (size_t c = 1; c <= contours->GetNumberOfItems(); ++c) {
@@ -91,14 +97,17 @@ StructureSet read_rtstruct(const fs::path& file) {
         Contour contour;
         contour.geometric_type = text(cds, 0x3006, 0x0042);
         if (auto images = sequence(cds, 0x3006, 0x0016); images && images->GetNumberOfItems() > 0)
-          contour.referenced_sop_instance_uid = text(images->GetItem(1).GetNestedDataSet(), 0x0008, 0x1155);
+          contour.referenced_sop_instance_uid =
+              text(images->GetItem(1).GetNestedDataSet(), 0x0008, 0x1155);
         const std::vector<double> xyz = numbers(text(cds, 0x3006, 0x0050));
-        for (size_t p = 0; p + 2 < xyz.size(); p += 3) contour.points_mm.emplace_back(xyz[p], xyz[p + 1], xyz[p + 2]);
+        for (size_t p = 0; p + 2 < xyz.size(); p += 3)
+          contour.points_mm.emplace_back(xyz[p], xyz[p + 1], xyz[p + 2]);
         roi.contours.push_back(std::move(contour));
       }
     }
   }
-  for (auto& [number, roi] : by_number) rtss.rois.push_back(std::move(roi));
+  for (auto& [number, roi] : by_number)
+    rtss.rois.push_back(std::move(roi));
   if (!rtss.rois.empty()) rtss.frame_of_reference_uid = rtss.rois.front().frame_of_reference_uid;
   return rtss;
 }
@@ -108,24 +117,28 @@ namespace {
 /// The CT slice a contour lies on: the one its Referenced SOP Instance UID names, else
 /// the slice at its mean position along the normal (within a tenth of the slice gap);
 /// -1 when none.
-int slice_of_contour(const Contour& contour, const CtSeries& ct, const std::map<std::string, int>& slice_of_uid,
-                     bool& by_position) {
+int slice_of_contour(const Contour& contour, const CtSeries& ct,
+                     const std::map<std::string, int>& slice_of_uid, bool& by_position) {
   by_position = false;
   const auto it = slice_of_uid.find(contour.referenced_sop_instance_uid);
   if (it != slice_of_uid.end()) return it->second;
   if (contour.points_mm.empty()) return -1;
   double k_sum = 0;
-  for (const auto& p : contour.points_mm) k_sum += ct.geometry.physical_to_index(p).z();
+  for (const auto& p : contour.points_mm)
+    k_sum += ct.geometry.physical_to_index(p).z();
   const double k = k_sum / static_cast<double>(contour.points_mm.size());
   const long nearest = std::lround(k);
-  if (!std::isfinite(k) || nearest < 0 || nearest >= ct.geometry.size[2] || std::abs(k - nearest) > 0.1) return -1;
+  if (!std::isfinite(k) || nearest < 0 || nearest >= ct.geometry.size[2] ||
+      std::abs(k - nearest) > 0.1)
+    return -1;
   by_position = true;
   return static_cast<int>(nearest);
 }
 
 std::map<std::string, int> slices_by_uid(const CtSeries& ct) {
   std::map<std::string, int> slice_of_uid;
-  for (size_t s = 0; s < ct.slices.size(); ++s) slice_of_uid[ct.slices[s].sop_instance_uid] = static_cast<int>(s);
+  for (size_t s = 0; s < ct.slices.size(); ++s)
+    slice_of_uid[ct.slices[s].sop_instance_uid] = static_cast<int>(s);
   return slice_of_uid;
 }
 
@@ -158,10 +171,13 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
   const Roi* roi = rtss.find(name);
   if (!roi) {
     std::string names;
-    for (const auto& r : rtss.rois) names += (names.empty() ? "" : ", ") + ("'" + r.name + "'");
-    fail(fmt::format("no ROI named '{}' (the structure set has {})", name, names.empty() ? "none" : names));
+    for (const auto& r : rtss.rois)
+      names += (names.empty() ? "" : ", ") + ("'" + r.name + "'");
+    fail(fmt::format("no ROI named '{}' (the structure set has {})", name,
+                     names.empty() ? "none" : names));
   }
-  if (!roi->frame_of_reference_uid.empty() && roi->frame_of_reference_uid != ct.frame_of_reference_uid)
+  if (!roi->frame_of_reference_uid.empty() &&
+      roi->frame_of_reference_uid != ct.frame_of_reference_uid)
     fail(fmt::format("ROI '{}' is in another Frame of Reference than the CT ({} vs {})", name,
                      roi->frame_of_reference_uid, ct.frame_of_reference_uid));
   if (roi->contours.empty()) fail(fmt::format("ROI '{}' has no contours", name));
@@ -179,7 +195,8 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
     if (contour.geometric_type != "CLOSED_PLANAR")
       fail(fmt::format("{} is {} (a volume needs CLOSED_PLANAR contours)", which,
                        contour.geometric_type.empty() ? "of no type" : contour.geometric_type));
-    if (contour.points_mm.size() < 3) fail(fmt::format("{} has {} point(s), fewer than 3", which, contour.points_mm.size()));
+    if (contour.points_mm.size() < 3)
+      fail(fmt::format("{} has {} point(s), fewer than 3", which, contour.points_mm.size()));
     std::vector<Eigen::Vector2d> poly;
     for (const auto& p : contour.points_mm) {
       if (!p.allFinite()) fail(which + " has a non-finite coordinate");
@@ -192,17 +209,21 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
       fail(fmt::format("{} lies on no slice of the CT (at {:.2f} mm along the slice normal)", which,
                        g.direction.col(2).dot(contour.points_mm.front())));
     if (by_position) ++out.matched_by_position;
-    const auto [xmin, xmax] = std::minmax_element(poly.begin(), poly.end(), [](auto& a, auto& b) { return a.x() < b.x(); });
-    const auto [ymin, ymax] = std::minmax_element(poly.begin(), poly.end(), [](auto& a, auto& b) { return a.y() < b.y(); });
-    if (xmax->x() < -0.5 || ymax->y() < -0.5 || xmin->x() > g.size[0] - 0.5 || ymin->y() > g.size[1] - 0.5)
+    const auto [xmin, xmax] = std::minmax_element(poly.begin(), poly.end(),
+                                                  [](auto& a, auto& b) { return a.x() < b.x(); });
+    const auto [ymin, ymax] = std::minmax_element(poly.begin(), poly.end(),
+                                                  [](auto& a, auto& b) { return a.y() < b.y(); });
+    if (xmax->x() < -0.5 || ymax->y() < -0.5 || xmin->x() > g.size[0] - 0.5 ||
+        ymin->y() > g.size[1] - 0.5)
       fail(which + " lies outside the image");
     polygons[slice].push_back(std::move(poly));
     ++out.contours;
   }
   if (out.matched_by_position > 0)
-    out.warnings.push_back(fmt::format(
-        "{}: {} of {} contours of ROI '{}' reference CT slices that are not in this series; matched by position",
-        source, out.matched_by_position, out.contours, name));
+    out.warnings.push_back(
+        fmt::format("{}: {} of {} contours of ROI '{}' reference CT slices that are not in this "
+                    "series; matched by position",
+                    source, out.matched_by_position, out.contours, name));
 
   // Even-odd scanline fill per slice, over all the slice's contours together.
   for (int k = 0; k < g.size[2]; ++k) {
@@ -224,7 +245,8 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
       for (size_t c = 0; c + 1 < crossings.size(); c += 2) {
         const int i0 = std::max(0, static_cast<int>(std::ceil(crossings[c])));
         const int i1 = std::min(g.size[0] - 1, static_cast<int>(std::floor(crossings[c + 1])));
-        for (int i = i0; i <= i1; ++i) out.mask.at(i, j, k) = 1;
+        for (int i = i0; i <= i1; ++i)
+          out.mask.at(i, j, k) = 1;
       }
     }
   }

@@ -10,8 +10,8 @@
 #include <cstring>
 
 #include "dicom_values.h"
-#include "organfit/support/interrupt.h"
 #include "organfit/support/error.h"
+#include "organfit/support/interrupt.h"
 
 namespace organfit::dicom {
 namespace {
@@ -47,8 +47,10 @@ UsImage read_us_image(const std::filesystem::path& file, double pixel_mm) {
   gdcm::SmartPointer<gdcm::Image> input = new gdcm::Image(reader.GetImage());
   gdcm::Image image = *input;
   UsImage out;
-  out.photometric = gdcm::PhotometricInterpretation::GetPIString(image.GetPhotometricInterpretation());
-  while (!out.photometric.empty() && out.photometric.back() == ' ') out.photometric.pop_back();
+  out.photometric =
+      gdcm::PhotometricInterpretation::GetPIString(image.GetPhotometricInterpretation());
+  while (!out.photometric.empty() && out.photometric.back() == ' ')
+    out.photometric.pop_back();
   const unsigned int* dims = image.GetDimensions();
   out.width = static_cast<int>(dims[0]);
   out.height = static_cast<int>(dims[1]);
@@ -62,7 +64,8 @@ UsImage read_us_image(const std::filesystem::path& file, double pixel_mm) {
     lut.SetInput(*input);
     if (!lut.Apply()) fail("cannot apply its palette");
     image = lut.GetOutput();
-  } else if (pi == gdcm::PhotometricInterpretation::YBR_FULL || pi == gdcm::PhotometricInterpretation::YBR_FULL_422) {
+  } else if (pi == gdcm::PhotometricInterpretation::YBR_FULL ||
+             pi == gdcm::PhotometricInterpretation::YBR_FULL_422) {
     gdcm::ImageChangePhotometricInterpretation change;
     change.SetInput(*input);
     change.SetPhotometricInterpretation(gdcm::PhotometricInterpretation::RGB);
@@ -77,11 +80,13 @@ UsImage read_us_image(const std::filesystem::path& file, double pixel_mm) {
   if ((samples != 1 && samples != 3) || (bits != 8 && bits != 16))
     fail(fmt::format("{} samples of {} bits: unsupported pixel data", samples, bits));
   const size_t pixels = static_cast<size_t>(out.width) * out.height * out.frames;
-  if (buffer.size() < pixels * samples * (bits / 8)) fail("its pixel data is shorter than its size says");
+  if (buffer.size() < pixels * samples * (bits / 8))
+    fail("its pixel data is shorter than its size says");
   const bool planar = samples == 3 && image.GetPlanarConfiguration() == 1;
   auto sample = [&](size_t index) -> double {
-    if (bits == 8) return is_signed ? static_cast<double>(static_cast<signed char>(buffer[index]))
-                                    : static_cast<double>(static_cast<unsigned char>(buffer[index]));
+    if (bits == 8)
+      return is_signed ? static_cast<double>(static_cast<signed char>(buffer[index]))
+                       : static_cast<double>(static_cast<unsigned char>(buffer[index]));
     std::uint16_t v;
     std::memcpy(&v, buffer.data() + 2 * index, 2);
     return is_signed ? static_cast<double>(static_cast<std::int16_t>(v)) : static_cast<double>(v);
@@ -104,26 +109,31 @@ UsImage read_us_image(const std::filesystem::path& file, double pixel_mm) {
   const gdcm::Tag regions_tag(0x0018, 0x6011);
   if (ds.FindDataElement(regions_tag)) {
     gdcm::SmartPointer<gdcm::SequenceOfItems> sq = ds.GetDataElement(regions_tag).GetValueAsSQ();
-    for (gdcm::SequenceOfItems::SizeType i = 1; sq && i <= sq->GetNumberOfItems() && !out.calibrated; ++i) {
+    for (gdcm::SequenceOfItems::SizeType i = 1;
+         sq && i <= sq->GetNumberOfItems() && !out.calibrated; ++i) {
       const gdcm::DataSet& item = sq->GetItem(i).GetNestedDataSet();
       std::uint16_t ux = 0, uy = 0;
       double dx = 0, dy = 0;
       std::uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
-      if (value_of(item, 0x0018, 0x6024, ux) && value_of(item, 0x0018, 0x6026, uy) && ux == 3 && uy == 3 &&
-          value_of(item, 0x0018, 0x602c, dx) && value_of(item, 0x0018, 0x602e, dy) && dx > 0 && dy > 0) {
+      if (value_of(item, 0x0018, 0x6024, ux) && value_of(item, 0x0018, 0x6026, uy) && ux == 3 &&
+          uy == 3 && value_of(item, 0x0018, 0x602c, dx) && value_of(item, 0x0018, 0x602e, dy) &&
+          dx > 0 && dy > 0) {
         out.calibrated = true;
         out.pixel_mm_x = 10 * dx, out.pixel_mm_y = 10 * dy;  // cm -> mm
         value_of(item, 0x0018, 0x6018, x0), value_of(item, 0x0018, 0x601a, y0);
         value_of(item, 0x0018, 0x601c, x1), value_of(item, 0x0018, 0x601e, y1);
-        out.region = {static_cast<int>(x0), static_cast<int>(y0), static_cast<int>(x1), static_cast<int>(y1)};
+        out.region = {static_cast<int>(x0), static_cast<int>(y0), static_cast<int>(x1),
+                      static_cast<int>(y1)};
       }
     }
   }
   if (pixel_mm > 0) {
     out.pixel_mm_x = out.pixel_mm_y = pixel_mm;
   } else if (!out.calibrated) {
-    fail("no calibrated ultrasound region (a Sequence of Ultrasound Regions item with physical units in cm): "
-         "its pixel size is unknown; give it explicitly (--pixel-mm)");
+    fail(
+        "no calibrated ultrasound region (a Sequence of Ultrasound Regions item with physical "
+        "units in cm): "
+        "its pixel size is unknown; give it explicitly (--pixel-mm)");
   }
   if (!out.calibrated) out.region = {0, 0, out.width - 1, out.height - 1};
   return out;

@@ -14,9 +14,11 @@ namespace fs = std::filesystem;
 namespace organfit::dicom {
 namespace {
 
-fs::path data(const std::string& sub) { return fs::path(ORGANFIT_SHARED_DATA_DIR) / sub; }
+fs::path data(const std::string& sub) {
+  return fs::path(ORGANFIT_SHARED_DATA_DIR) / sub;
+}
 
-#define REQUIRE_DATA(sub)                                                              \
+#define REQUIRE_DATA(sub) \
   if (!fs::exists(data(sub))) GTEST_SKIP() << "real data absent: " << data(sub).string()
 
 std::string error_of(const fs::path& folder, const CtReadOptions& o = {}) {
@@ -39,10 +41,12 @@ class Scratch {
   ~Scratch() { fs::remove_all(dir_); }
   void copy_series(const fs::path& from, const std::string& prefix = "", int skip = -1) {
     std::vector<fs::path> files;
-    for (const auto& e : fs::directory_iterator(from)) files.push_back(e.path());
+    for (const auto& e : fs::directory_iterator(from))
+      files.push_back(e.path());
     std::sort(files.begin(), files.end());
     for (size_t i = 0; i < files.size(); ++i)
-      if (static_cast<int>(i) != skip) fs::copy_file(files[i], dir_ / (prefix + files[i].filename().string()));
+      if (static_cast<int>(i) != skip)
+        fs::copy_file(files[i], dir_ / (prefix + files[i].filename().string()));
   }
   const fs::path& dir() const { return dir_; }
 
@@ -59,7 +63,8 @@ TEST(CtSeries, ReadsStsCt002WithItsGeometryAndSliceUids) {
   EXPECT_NEAR(ct.geometry.spacing_mm.x(), 0.976562, 1e-6);
   EXPECT_NEAR(ct.geometry.spacing_mm.z(), 3.27, 1e-3);
   EXPECT_TRUE(ct.geometry.direction.isIdentity(1e-9));
-  EXPECT_EQ(ct.frame_of_reference_uid, "1.3.6.1.4.1.14519.5.2.1.5168.1900.114679355310645018817373178374");
+  EXPECT_EQ(ct.frame_of_reference_uid,
+            "1.3.6.1.4.1.14519.5.2.1.5168.1900.114679355310645018817373178374");
   ASSERT_EQ(ct.slices.size(), 48u);
   for (size_t s = 1; s < ct.slices.size(); ++s) {
     EXPECT_NEAR(ct.slices[s].position_mm.z() - ct.slices[s - 1].position_mm.z(), 3.27, 1e-3);
@@ -70,7 +75,8 @@ TEST(CtSeries, ReadsStsCt002WithItsGeometryAndSliceUids) {
   const auto [lo, hi] = std::minmax_element(ct.hu.begin(), ct.hu.end());
   EXPECT_GE(*lo, -1100.f);
   EXPECT_LE(*hi, 4000.f);
-  const long soft = std::count_if(ct.hu.begin(), ct.hu.end(), [](float v) { return v > -100 && v < 100; });
+  const long soft =
+      std::count_if(ct.hu.begin(), ct.hu.end(), [](float v) { return v > -100 && v < 100; });
   EXPECT_GT(soft, static_cast<long>(ct.hu.size() / 4));
   EXPECT_FALSE(ct.patient.study_instance_uid.empty());
 }
@@ -117,7 +123,8 @@ TEST(CtSeries, DuplicatePositionsAreRefused) {
   Scratch s("duplicate");
   s.copy_series(data("ct-sts-002/ct"));
   fs::copy_file(data("ct-sts-002/ct/000010.dcm"), s.dir() / "copy_of_10.dcm");
-  EXPECT_NE(error_of(s.dir()).find("duplicate slice position"), std::string::npos) << error_of(s.dir());
+  EXPECT_NE(error_of(s.dir()).find("duplicate slice position"), std::string::npos)
+      << error_of(s.dir());
 }
 
 TEST(CtSeries, TwoSeriesNeedAChoiceAndTheChoiceWorks) {
@@ -141,7 +148,8 @@ TEST(CtSeries, EmptyFolderAndNotAFolderAreRefused) {
   EXPECT_EQ(error_of(s.dir()), s.dir().string() + ": the folder is empty: no CT series");
   EXPECT_EQ(error_of("/nonexistent/ct"), "/nonexistent/ct: not a folder");
   std::ofstream(s.dir() / "notes.txt") << "x";
-  EXPECT_EQ(error_of(s.dir()), s.dir().string() + ": no CT series (no DICOM file with Modality CT)");
+  EXPECT_EQ(error_of(s.dir()),
+            s.dir().string() + ": no CT series (no DICOM file with Modality CT)");
 }
 
 }  // namespace

@@ -19,7 +19,8 @@ CtSeries ramp_ct() {
   ct.geometry.spacing_mm = Eigen::Vector3d(0.8, 0.8, 2.5);
   ct.geometry.origin_mm = Eigen::Vector3d(-4.4, 7.2, -30);
   ct.hu.resize(static_cast<size_t>(ct.geometry.voxel_count()));
-  for (size_t v = 0; v < ct.hu.size(); ++v) ct.hu[v] = static_cast<float>(-1000.0 + 1.7 * static_cast<double>(v));
+  for (size_t v = 0; v < ct.hu.size(); ++v)
+    ct.hu[v] = static_cast<float>(-1000.0 + 1.7 * static_cast<double>(v));
   ct.hu[0] = -2000;  // below the 12-bit range: clipped and counted
   ct.patient.patient_name = "Test^Ramp";
   ct.patient.patient_id = "RAMP";
@@ -48,11 +49,13 @@ TEST_F(CtWriter, RoundTripKeepsGeometryHuAndSliceUids) {
   EXPECT_TRUE(back.geometry.direction.isApprox(Eigen::Matrix3d::Identity()));
   ASSERT_EQ(back.hu.size(), ct.hu.size());
   EXPECT_EQ(back.hu[0], -1024.0f);
-  for (size_t v = 1; v < ct.hu.size(); ++v) ASSERT_NEAR(back.hu[v], ct.hu[v], 0.5) << v;
+  for (size_t v = 1; v < ct.hu.size(); ++v)
+    ASSERT_NEAR(back.hu[v], ct.hu[v], 0.5) << v;
   EXPECT_EQ(back.series_instance_uid, ct.series_instance_uid);
   EXPECT_EQ(back.frame_of_reference_uid, ct.frame_of_reference_uid);
   EXPECT_EQ(back.patient.study_instance_uid, ct.patient.study_instance_uid);
-  for (size_t k = 0; k < ct.slices.size(); ++k) EXPECT_EQ(back.slices[k].sop_instance_uid, ct.slices[k].sop_instance_uid);
+  for (size_t k = 0; k < ct.slices.size(); ++k)
+    EXPECT_EQ(back.slices[k].sop_instance_uid, ct.slices[k].sop_instance_uid);
 }
 
 TEST_F(CtWriter, FixedUidsGiveTheSameUidsAndNewOnesDiffer) {
@@ -89,10 +92,12 @@ std::string read_error(const fs::path& folder) {
 // Defective series made with the writer, each refused by the reader naming the defect.
 TEST_F(CtWriter, ATiltedSeriesIsRefused) {
   CtSeries ct = ramp_ct();
-  const double t = 10.0 * 3.14159265358979 / 180;  // slices shifted along y: a gantry tilt of 10 degrees
+  const double t =
+      10.0 * 3.14159265358979 / 180;  // slices shifted along y: a gantry tilt of 10 degrees
   ct.geometry.direction.col(2) = Eigen::Vector3d(0, std::sin(t), std::cos(t));
   write_ct_series(dir_ / "tilted", ct);
-  EXPECT_NE(read_error(dir_ / "tilted").find("do not advance along the slice normal (gantry tilt"), std::string::npos)
+  EXPECT_NE(read_error(dir_ / "tilted").find("do not advance along the slice normal (gantry tilt"),
+            std::string::npos)
       << read_error(dir_ / "tilted");
 }
 
@@ -100,7 +105,8 @@ TEST_F(CtWriter, ANonAxialSeriesIsRefused) {
   CtSeries ct = ramp_ct();
   ct.geometry.direction << 1, 0, 0, 0, 0, 1, 0, -1, 0;  // coronal: rows along -z
   write_ct_series(dir_ / "coronal", ct);
-  EXPECT_NE(read_error(dir_ / "coronal").find("non-axial slices"), std::string::npos) << read_error(dir_ / "coronal");
+  EXPECT_NE(read_error(dir_ / "coronal").find("non-axial slices"), std::string::npos)
+      << read_error(dir_ / "coronal");
 }
 
 TEST_F(CtWriter, IrregularSliceSpacingIsRefused) {
@@ -112,8 +118,10 @@ TEST_F(CtWriter, IrregularSliceSpacingIsRefused) {
   b.geometry.origin_mm.z() += 1.0;
   write_ct_series(dir_ / "a", a, fixed);
   write_ct_series(dir_ / "b", b, fixed);
-  fs::copy_file(dir_ / "b" / "CT0005.dcm", dir_ / "a" / "CT0005.dcm", fs::copy_options::overwrite_existing);
-  EXPECT_NE(read_error(dir_ / "a").find("irregular slice spacing"), std::string::npos) << read_error(dir_ / "a");
+  fs::copy_file(dir_ / "b" / "CT0005.dcm", dir_ / "a" / "CT0005.dcm",
+                fs::copy_options::overwrite_existing);
+  EXPECT_NE(read_error(dir_ / "a").find("irregular slice spacing"), std::string::npos)
+      << read_error(dir_ / "a");
 }
 
 }  // namespace

@@ -17,14 +17,17 @@ namespace fs = std::filesystem;
 namespace organfit::dicom {
 namespace {
 
-fs::path data(const std::string& sub) { return fs::path(ORGANFIT_SHARED_DATA_DIR) / sub; }
+fs::path data(const std::string& sub) {
+  return fs::path(ORGANFIT_SHARED_DATA_DIR) / sub;
+}
 
 class RtstructRoundTrip : public ::testing::Test {
  protected:
   void SetUp() override {
     if (!fs::exists(data("ct-sts-002/rtstruct.dcm"))) GTEST_SKIP() << "real data absent";
     ct_ = read_ct_series(data("ct-sts-002/ct"));
-    mask_ = rasterise_roi(read_rtstruct(data("ct-sts-002/rtstruct.dcm")), "GTV_Mass_CT", ct_, "rt").mask;
+    mask_ = rasterise_roi(read_rtstruct(data("ct-sts-002/rtstruct.dcm")), "GTV_Mass_CT", ct_, "rt")
+                .mask;
     dir_ = fs::temp_directory_path() / ("organfit_rtss_" + std::to_string(getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
@@ -54,10 +57,12 @@ TEST_F(RtstructRoundTrip, OurReaderGetsTheSameVoxelsBackWithMatchingSliceReferen
 }
 
 TEST_F(RtstructRoundTrip, PlastimatchRasterisesItToTheSameMask) {
-  if (std::system("command -v plastimatch > /dev/null 2>&1") != 0) GTEST_SKIP() << "plastimatch not installed";
+  if (std::system("command -v plastimatch > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "plastimatch not installed";
   // plastimatch writes one mask per ROI on the referenced CT's grid; compared voxel by
   // voxel (through physical positions, so a grid convention difference would show).
-  const std::string cmd = "cd '" + dir_.string() + "' && plastimatch convert --input fit.dcm --referenced-ct '" +
+  const std::string cmd = "cd '" + dir_.string() +
+                          "' && plastimatch convert --input fit.dcm --referenced-ct '" +
                           data("ct-sts-002/ct").string() + "' --output-prefix pm > pm.log 2>&1";
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   ASSERT_TRUE(fs::exists(dir_ / "pm" / "GTV_fit.mha")) << "no GTV_fit.mha from plastimatch";
@@ -78,21 +83,25 @@ TEST_F(RtstructRoundTrip, PlastimatchRasterisesItToTheSameMask) {
 }
 
 TEST_F(RtstructRoundTrip, PydicomReadsItAndEveryContourReferencesACtSlice) {
-  if (std::system("/usr/bin/python3 -c 'import pydicom' > /dev/null 2>&1") != 0) GTEST_SKIP() << "pydicom not installed";
+  if (std::system("/usr/bin/python3 -c 'import pydicom' > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "pydicom not installed";
   std::ofstream uids(dir_ / "uids.txt");
-  for (const auto& s : ct_.slices) uids << s.sop_instance_uid << "\n";
+  for (const auto& s : ct_.slices)
+    uids << s.sop_instance_uid << "\n";
   uids.close();
   const std::string script =
       "import pydicom, sys\n"
       "ds = pydicom.dcmread(sys.argv[1])\n"
       "uids = set(open(sys.argv[2]).read().split())\n"
-      "assert ds.Modality == 'RTSTRUCT' and ds.file_meta.TransferSyntaxUID == '1.2.840.10008.1.2.1'\n"
-      "refs = [c.ContourImageSequence[0].ReferencedSOPInstanceUID for r in ds.ROIContourSequence for c in r.ContourSequence]\n"
+      "assert ds.Modality == 'RTSTRUCT' and ds.file_meta.TransferSyntaxUID == "
+      "'1.2.840.10008.1.2.1'\n"
+      "refs = [c.ContourImageSequence[0].ReferencedSOPInstanceUID for r in ds.ROIContourSequence "
+      "for c in r.ContourSequence]\n"
       "assert refs and all(u in uids for u in refs), 'a contour references no CT slice'\n"
       "assert ds.StructureSetROISequence[0].ROIGenerationAlgorithm == 'AUTOMATIC'\n";
   std::ofstream(dir_ / "check.py") << script;
-  EXPECT_EQ(std::system(("/usr/bin/python3 '" + (dir_ / "check.py").string() + "' '" + out_.string() + "' '" +
-                         (dir_ / "uids.txt").string() + "'")
+  EXPECT_EQ(std::system(("/usr/bin/python3 '" + (dir_ / "check.py").string() + "' '" +
+                         out_.string() + "' '" + (dir_ / "uids.txt").string() + "'")
                             .c_str()),
             0);
 }
@@ -104,13 +113,15 @@ std::vector<std::string> errors_of(const std::string& command, const fs::path& l
   std::ifstream in(log);
   std::string line;
   while (std::getline(in, line))
-    if (line.rfind("Error", 0) == 0 && line.find("contains invalid data values") == std::string::npos)
+    if (line.rfind("Error", 0) == 0 &&
+        line.find("contains invalid data values") == std::string::npos)
       out.push_back(line);
   return out;
 }
 
 TEST_F(RtstructRoundTrip, Dicom3toolsFindNoErrorOfOursAndNoInconsistencyWithTheCt) {
-  if (std::system("command -v dciodvfy > /dev/null 2>&1") != 0) GTEST_SKIP() << "dicom3tools not installed";
+  if (std::system("command -v dciodvfy > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "dicom3tools not installed";
   // dciodvfy: every error in our file must already be in the CT it copies from (this
   // CT's Study ID has 17 characters, one more than SH allows; it is copied verbatim).
   const auto ours = errors_of("dciodvfy '" + out_.string() + "'", dir_ / "ours.txt");
@@ -118,12 +129,14 @@ TEST_F(RtstructRoundTrip, Dicom3toolsFindNoErrorOfOursAndNoInconsistencyWithTheC
   for (const auto& e : ours) {
     const std::string attribute = e.substr(0, e.find(" - Length"));
     bool inherited = false;
-    for (const auto& c : source) inherited = inherited || c.find(attribute.substr(attribute.find('('))) != std::string::npos;
+    for (const auto& c : source)
+      inherited = inherited || c.find(attribute.substr(attribute.find('('))) != std::string::npos;
     EXPECT_TRUE(inherited) << "our error: " << e;
   }
   // dcentvfy on the CT and the structure set together: consistent.
   std::string files;
-  for (const auto& slice : ct_.slices) files += "'" + slice.file.string() + "' ";
+  for (const auto& slice : ct_.slices)
+    files += "'" + slice.file.string() + "' ";
   EXPECT_TRUE(errors_of("dcentvfy " + files + "'" + out_.string() + "'", dir_ / "ent.txt").empty());
 }
 
@@ -133,7 +146,8 @@ TEST(SliceContours, ThinningKeepsContourDataUnderTheDicomLimit) {
   g.spacing_mm = {0.5, 0.5, 1};
   geometry::LabelVolume disc(g);
   for (int j = 0; j < 400; ++j)
-    for (int i = 0; i < 400; ++i) disc.at(i, j, 0) = std::hypot(i - 200.0, j - 200.0) < 190;
+    for (int i = 0; i < 400; ++i)
+      disc.at(i, j, 0) = std::hypot(i - 200.0, j - 200.0) < 190;
   const auto exact = geometry::slice_contours(disc, 1, 100000);
   const auto thin = geometry::slice_contours(disc, 1, 500);
   ASSERT_EQ(exact.size(), 1u);

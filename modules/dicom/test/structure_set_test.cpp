@@ -14,7 +14,9 @@ namespace fs = std::filesystem;
 namespace organfit::dicom {
 namespace {
 
-fs::path data(const std::string& sub) { return fs::path(ORGANFIT_SHARED_DATA_DIR) / sub; }
+fs::path data(const std::string& sub) {
+  return fs::path(ORGANFIT_SHARED_DATA_DIR) / sub;
+}
 
 /// A small synthetic CT: 40 x 40 x 3 voxels of 1 mm, slices at z = 0, 2, 4 mm.
 CtSeries small_ct() {
@@ -22,12 +24,15 @@ CtSeries small_ct() {
   ct.geometry.size = {40, 40, 3};
   ct.geometry.spacing_mm = {1, 1, 2};
   ct.frame_of_reference_uid = "1.2.3.4";
-  for (int k = 0; k < 3; ++k) ct.slices.push_back({"1.2.3.4.5." + std::to_string(k), "", {0, 0, 2.0 * k}, {}});
+  for (int k = 0; k < 3; ++k)
+    ct.slices.push_back({"1.2.3.4.5." + std::to_string(k), "", {0, 0, 2.0 * k}, {}});
   return ct;
 }
 
 Contour square(double x0, double y0, double side, double z, const std::string& uid = "") {
-  return {"CLOSED_PLANAR", uid, {{x0, y0, z}, {x0 + side, y0, z}, {x0 + side, y0 + side, z}, {x0, y0 + side, z}}};
+  return {"CLOSED_PLANAR",
+          uid,
+          {{x0, y0, z}, {x0 + side, y0, z}, {x0 + side, y0 + side, z}, {x0, y0 + side, z}}};
 }
 
 std::string error_of(const StructureSet& s, const std::string& roi, const CtSeries& ct) {
@@ -68,12 +73,14 @@ TEST(RasteriseRoi, RefusesBadStructureSetsNamingTheProblem) {
   roi.frame_of_reference_uid = "1.2.3.4";
   roi.contours = {square(4.5, 4.5, 10, 2)};
   s.rois.push_back(roi);
-  EXPECT_EQ(error_of(s, "Bladder", ct), "rt.dcm: no ROI named 'Bladder' (the structure set has 'Organ')");
+  EXPECT_EQ(error_of(s, "Bladder", ct),
+            "rt.dcm: no ROI named 'Bladder' (the structure set has 'Organ')");
   s.rois[0].frame_of_reference_uid = "9.9";
   EXPECT_NE(error_of(s, "Organ", ct).find("another Frame of Reference"), std::string::npos);
   s.rois[0].frame_of_reference_uid = "1.2.3.4";
   s.rois[0].contours = {{"OPEN_PLANAR", "", {{1, 1, 2}, {5, 1, 2}, {5, 5, 2}}}};
-  EXPECT_EQ(error_of(s, "Organ", ct), "rt.dcm: ROI 'Organ' contour 1 is OPEN_PLANAR (a volume needs CLOSED_PLANAR contours)");
+  EXPECT_EQ(error_of(s, "Organ", ct),
+            "rt.dcm: ROI 'Organ' contour 1 is OPEN_PLANAR (a volume needs CLOSED_PLANAR contours)");
   s.rois[0].contours = {{"CLOSED_PLANAR", "", {{1, 1, 2}, {5, 1, 2}}}};
   EXPECT_EQ(error_of(s, "Organ", ct), "rt.dcm: ROI 'Organ' contour 1 has 2 point(s), fewer than 3");
   s.rois[0].contours = {square(100, 100, 10, 2)};
@@ -102,13 +109,16 @@ TEST(StructureSet, ImportsTheRealGtvDespiteMismatchedSliceReferences) {
 
 TEST(StructureSet, AgreesWithPlastimatchRasterisationOnTheRealGtv) {
   if (!fs::exists(data("ct-sts-002/rtstruct.dcm"))) GTEST_SKIP() << "real data absent";
-  if (std::system("command -v plastimatch > /dev/null 2>&1") != 0) GTEST_SKIP() << "plastimatch not installed";
-  const fs::path dir = fs::temp_directory_path() / ("organfit_plastimatch_" + std::to_string(::getpid()));
+  if (std::system("command -v plastimatch > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "plastimatch not installed";
+  const fs::path dir =
+      fs::temp_directory_path() / ("organfit_plastimatch_" + std::to_string(::getpid()));
   fs::create_directories(dir);
-  const std::string cmd = "cd '" + dir.string() + "' && plastimatch convert --input '" +
-                          data("ct-sts-002/rtstruct.dcm").string() + "' --referenced-ct '" +
-                          data("ct-sts-002/ct").string() +
-                          "' --output-ss-img ss.nrrd > /dev/null 2>&1 && plastimatch stats ss.nrrd > stats.txt 2>&1";
+  const std::string cmd =
+      "cd '" + dir.string() + "' && plastimatch convert --input '" +
+      data("ct-sts-002/rtstruct.dcm").string() + "' --referenced-ct '" +
+      data("ct-sts-002/ct").string() +
+      "' --output-ss-img ss.nrrd > /dev/null 2>&1 && plastimatch stats ss.nrrd > stats.txt 2>&1";
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   std::ifstream in(dir / "stats.txt");
   std::string line;
@@ -118,27 +128,33 @@ TEST(StructureSet, AgreesWithPlastimatchRasterisationOnTheRealGtv) {
   fs::remove_all(dir);
   ASSERT_GT(theirs, 0);
   const CtSeries ct = read_ct_series(data("ct-sts-002/ct"));
-  const long ours = rasterise_roi(read_rtstruct(data("ct-sts-002/rtstruct.dcm")), "GTV_Mass_CT", ct, "rt").mask.count(1);
+  const long ours =
+      rasterise_roi(read_rtstruct(data("ct-sts-002/rtstruct.dcm")), "GTV_Mass_CT", ct, "rt")
+          .mask.count(1);
   EXPECT_NEAR(static_cast<double>(ours), static_cast<double>(theirs), 0.02 * theirs);
   std::cout << "GTV voxels: organfit " << ours << ", plastimatch " << theirs << "\n";
 }
 
 TEST(StructureSet, PlastimatchSynthFolderCtChosenByModalityRoisMatchPlastimatch) {
   // CT, RTSTRUCT and RTDOSE in one folder, written by plastimatch itself.
-  if (std::system("command -v plastimatch > /dev/null 2>&1") != 0) GTEST_SKIP() << "plastimatch not installed";
-  const fs::path dir = fs::temp_directory_path() / ("organfit_psynth_" + std::to_string(::getpid()));
+  if (std::system("command -v plastimatch > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "plastimatch not installed";
+  const fs::path dir =
+      fs::temp_directory_path() / ("organfit_psynth_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
-  const std::string cmd = "cd '" + dir.string() +
-                          "' && plastimatch synth --pattern lung --dim '64 64 48' --spacing '3 3 3' --output-dicom dcm"
-                          " > /dev/null 2>&1 && plastimatch convert --input dcm/rtss_*.dcm --referenced-ct dcm"
-                          " --output-ss-img ss.nrrd > /dev/null 2>&1 && plastimatch stats ss.nrrd > stats.txt 2>&1";
+  const std::string cmd =
+      "cd '" + dir.string() +
+      "' && plastimatch synth --pattern lung --dim '64 64 48' --spacing '3 3 3' --output-dicom dcm"
+      " > /dev/null 2>&1 && plastimatch convert --input dcm/rtss_*.dcm --referenced-ct dcm"
+      " --output-ss-img ss.nrrd > /dev/null 2>&1 && plastimatch stats ss.nrrd > stats.txt 2>&1";
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   std::map<int, long> theirs;
   std::ifstream in(dir / "stats.txt");
   std::string line;
   while (std::getline(in, line))
-    if (line.rfind("S ", 0) == 0) theirs[std::stoi(line.substr(2))] = std::stol(line.substr(line.find("NVOX") + 4));
+    if (line.rfind("S ", 0) == 0)
+      theirs[std::stoi(line.substr(2))] = std::stol(line.substr(line.find("NVOX") + 4));
   const CtSeries ct = read_ct_series(dir / "dcm");  // picked by modality among CT, RTSTRUCT, RTDOSE
   EXPECT_EQ(ct.geometry.size[2], 48);
   ASSERT_EQ(ct.warnings.size(), 1u);
@@ -161,7 +177,8 @@ TEST(StructureSet, ReadingSomethingElseIsRefused) {
     read_rtstruct(data("ct-sts-002/ct/000000.dcm"));
     FAIL();
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("not an RT Structure Set (Modality 'CT')"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("not an RT Structure Set (Modality 'CT')"),
+              std::string::npos);
   }
   EXPECT_THROW(read_rtstruct("/nonexistent.dcm"), InputError);
 }

@@ -50,12 +50,14 @@ OursResult run_ours(long long requested, long long steps, int threads) {
   for (long long k = 0; k < c; ++k)
     for (long long j = 0; j < c; ++j)
       for (long long i = 0; i < c; ++i)
-        for (const auto& b : particles::kFccBasis) x.col(idx++) = a * Eigen::Vector3d(i + b[0], j + b[1], k + b[2]);
+        for (const auto& b : particles::kFccBasis)
+          x.col(idx++) = a * Eigen::Vector3d(i + b[0], j + b[1], k + b[2]);
   State s(x);
   std::mt19937_64 rng(87287);
   std::normal_distribution<double> g(0.0, std::sqrt(kTemperature));
   for (long long i = 0; i < n; ++i)
-    for (int d = 0; d < 3; ++d) s.v(d, i) = g(rng);
+    for (int d = 0; d < 3; ++d)
+      s.v(d, i) = g(rng);
   s.v.colwise() -= s.v.rowwise().mean();
 
   CohesionParams p;  // LJ 12-6 in sigma units: r0 = 2^(1/6) sigma
@@ -96,7 +98,8 @@ struct LammpsResult {
 LammpsResult run_lammps(const std::string& binary, long long requested, long long steps,
                         bool checked) {
   LammpsResult r;
-  const fs::path dir = fs::temp_directory_path() / ("organfit-bench-lmp-" + std::to_string(getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("organfit-bench-lmp-" + std::to_string(getpid()));
   fs::create_directories(dir);
   const long long c = cells_for(requested);
   {
@@ -104,16 +107,20 @@ LammpsResult run_lammps(const std::string& binary, long long requested, long lon
     in << "# organfit bench cohesion: LAMMPS bench/in.lj with open boundaries\n"
        << "units lj\natom_style atomic\nboundary s s s\n"
        << "lattice fcc " << kDensity << "\n"
-       << "region box block 0 " << c << " 0 " << c << " 0 " << c << "\n"
+       << "region box block 0 " << c << " 0 " << c << " 0 " << c
+       << "\n"
        // Atoms from a region a quarter cell inside the box: exactly 4 c^3 lattice sites
        // (with shrink-wrapped boundaries `create_atoms 1 box` also fills the far faces).
        << "create_box 1 box\n"
-       << "region sites block -0.25 " << c - 0.25 << " -0.25 " << c - 0.25 << " -0.25 " << c - 0.25 << "\n"
+       << "region sites block -0.25 " << c - 0.25 << " -0.25 " << c - 0.25 << " -0.25 " << c - 0.25
+       << "\n"
        << "create_atoms 1 region sites\nmass 1 1.0\n"
        << "velocity all create " << kTemperature << " 87287 loop geom\n"
-       << "pair_style lj/cut " << kCutoffSigma << "\npair_coeff 1 1 1.0 1.0 " << kCutoffSigma << "\n"
+       << "pair_style lj/cut " << kCutoffSigma << "\npair_coeff 1 1 1.0 1.0 " << kCutoffSigma
+       << "\n"
        << "neighbor " << kSkinSigma << " bin\n"
-       << (checked ? "neigh_modify delay 0 every 1 check yes\n" : "neigh_modify delay 0 every 20 check no\n")
+       << (checked ? "neigh_modify delay 0 every 1 check yes\n"
+                   : "neigh_modify delay 0 every 20 check no\n")
        << "fix 1 all nve\ntimestep " << kTimeStep << "\nthermo " << steps << "\n"
        << "run " << steps << "\n";
   }
@@ -126,7 +133,8 @@ LammpsResult run_lammps(const std::string& binary, long long requested, long lon
   const std::string text = ss.str();
   std::smatch m;
   if (status == 0 &&
-      std::regex_search(text, m, std::regex(R"(Loop time of ([0-9.eE+-]+) on .* with ([0-9]+) atoms)"))) {
+      std::regex_search(text, m,
+                        std::regex(R"(Loop time of ([0-9.eE+-]+) on .* with ([0-9]+) atoms)"))) {
     r.ran = true;
     r.loop_s = std::stod(m[1]);
     r.atoms = std::stoll(m[2]);
@@ -154,18 +162,20 @@ bool on_path(const std::string& binary) {
 nlohmann::json run_cohesion_benchmark(const CohesionBenchOptions& o) {
   const OursResult ours = run_ours(o.particles, o.steps, o.threads);
   const double us = ours.loop_s / (double(ours.particles) * o.steps) * 1e6;
-  nlohmann::json j = {{"benchmark", "cohesion"},
-                      {"system", "LAMMPS bench/in.lj, open boundaries (boundary s s s)"},
-                      {"particles", ours.particles},
-                      {"steps", o.steps},
-                      {"threads", o.threads},
-                      {"wall_s", ours.loop_s},
-                      {"us_per_particle_step", us},
-                      {"neighbour_list_builds", ours.list_builds},
-                      {"pair_us_per_particle_step", ours.pair_s / (double(ours.particles) * o.steps) * 1e6},
-                      {"neighbour_us_per_particle_step", ours.neighbour_s / (double(ours.particles) * o.steps) * 1e6},
-                      {"lammps_us_per_particle_step", nullptr},
-                      {"ratio_vs_lammps", nullptr}};
+  nlohmann::json j = {
+      {"benchmark", "cohesion"},
+      {"system", "LAMMPS bench/in.lj, open boundaries (boundary s s s)"},
+      {"particles", ours.particles},
+      {"steps", o.steps},
+      {"threads", o.threads},
+      {"wall_s", ours.loop_s},
+      {"us_per_particle_step", us},
+      {"neighbour_list_builds", ours.list_builds},
+      {"pair_us_per_particle_step", ours.pair_s / (double(ours.particles) * o.steps) * 1e6},
+      {"neighbour_us_per_particle_step",
+       ours.neighbour_s / (double(ours.particles) * o.steps) * 1e6},
+      {"lammps_us_per_particle_step", nullptr},
+      {"ratio_vs_lammps", nullptr}};
   if (o.run_lammps) {
     if (!on_path(o.lammps_binary)) {
       j["lammps_note"] = o.lammps_binary + " not found on PATH (Debian package lammps)";
@@ -205,13 +215,14 @@ nlohmann::json run_cohesion_scaling(int threads) {
     const OursResult r = run_ours(n, steps, threads);
     const double us = r.loop_s / (double(r.particles) * steps) * 1e6;
     // Pairs per particle show the surface effect: small open blocks have fewer.
-    rows.push_back({{"particles", r.particles},
-                    {"steps", steps},
-                    {"us_per_particle_step", us},
-                    {"pair_us_per_particle_step", r.pair_s / (double(r.particles) * steps) * 1e6},
-                    {"neighbour_us_per_particle_step", r.neighbour_s / (double(r.particles) * steps) * 1e6},
-                    {"neighbour_list_builds", r.list_builds},
-                    {"pairs_per_particle", r.pairs_per_particle}});
+    rows.push_back(
+        {{"particles", r.particles},
+         {"steps", steps},
+         {"us_per_particle_step", us},
+         {"pair_us_per_particle_step", r.pair_s / (double(r.particles) * steps) * 1e6},
+         {"neighbour_us_per_particle_step", r.neighbour_s / (double(r.particles) * steps) * 1e6},
+         {"neighbour_list_builds", r.list_builds},
+         {"pairs_per_particle", r.pairs_per_particle}});
     if (r.particles >= 9000) lo = std::min(lo, us), hi = std::max(hi, us);
   }
   return {{"benchmark", "cohesion_scaling"},

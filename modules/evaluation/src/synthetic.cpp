@@ -80,8 +80,12 @@ Eigen::Vector3d Deformation::apply(const Eigen::Vector3d& p) const {
     q.y() = c.y() + ca * y - sa * z, q.z() = c.z() + sa * y + ca * z;
   }
   const double two_s2 = 2 * bump_sigma_mm * bump_sigma_mm;
-  if (indent_mm != 0) q.y() += indent_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.z() - c.z(), 2)) / two_s2);
-  if (push_mm != 0) q.z() += push_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.y() - c.y(), 2)) / two_s2);
+  if (indent_mm != 0)
+    q.y() +=
+        indent_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.z() - c.z(), 2)) / two_s2);
+  if (push_mm != 0)
+    q.z() +=
+        push_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.y() - c.y(), 2)) / two_s2);
   return q;
 }
 
@@ -89,8 +93,12 @@ Eigen::Vector3d Deformation::inverse(const Eigen::Vector3d& p) const {
   const Eigen::Vector3d& c = centre_mm;
   Eigen::Vector3d q = p;
   const double two_s2 = 2 * bump_sigma_mm * bump_sigma_mm;
-  if (push_mm != 0) q.z() -= push_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.y() - c.y(), 2)) / two_s2);
-  if (indent_mm != 0) q.y() -= indent_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.z() - c.z(), 2)) / two_s2);
+  if (push_mm != 0)
+    q.z() -=
+        push_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.y() - c.y(), 2)) / two_s2);
+  if (indent_mm != 0)
+    q.y() -=
+        indent_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.z() - c.z(), 2)) / two_s2);
   const double u = (q.x() - c.x()) / half_length_mm;
   if (twist_rad != 0) {
     const double a = -twist_rad * u, ca = std::cos(a), sa = std::sin(a);
@@ -146,16 +154,19 @@ std::vector<fitting::AttractivePoint> sample_deformed_surface(const Shape& shape
   return points;
 }
 
-geometry::SurfaceComparison compare_with_body(const Eigen::Matrix3Xd& particles, double radius_mm,
-                                              const std::function<bool(const Eigen::Vector3d&)>& inside,
-                                              const geometry::Aabb& body_bounds, double voxel_mm) {
+geometry::SurfaceComparison compare_with_body(
+    const Eigen::Matrix3Xd& particles, double radius_mm,
+    const std::function<bool(const Eigen::Vector3d&)>& inside, const geometry::Aabb& body_bounds,
+    double voxel_mm) {
   geometry::Aabb box = body_bounds;
   if (particles.cols() > 0) {
     box.min_mm = box.min_mm.cwiseMin(particles.rowwise().minCoeff());
     box.max_mm = box.max_mm.cwiseMax(particles.rowwise().maxCoeff());
   }
-  const geometry::ImageGeometry g = geometry::grid_covering(box, voxel_mm, 2 * radius_mm + 2 * voxel_mm);
-  const geometry::LabelVolume model = geometry::closed_body_on_grid(particles, radius_mm, radius_mm, g);
+  const geometry::ImageGeometry g =
+      geometry::grid_covering(box, voxel_mm, 2 * radius_mm + 2 * voxel_mm);
+  const geometry::LabelVolume model =
+      geometry::closed_body_on_grid(particles, radius_mm, radius_mm, g);
   geometry::LabelVolume truth(g);
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
@@ -164,22 +175,24 @@ geometry::SurfaceComparison compare_with_body(const Eigen::Matrix3Xd& particles,
   return geometry::compare_masks(model, truth);
 }
 
-geometry::SurfaceComparison compare_with_body(const fitting::EmbeddedBody& organ,
-                                              const std::function<bool(const Eigen::Vector3d&)>& inside,
-                                              const geometry::Aabb& body_bounds, double voxel_mm) {
+geometry::SurfaceComparison compare_with_body(
+    const fitting::EmbeddedBody& organ, const std::function<bool(const Eigen::Vector3d&)>& inside,
+    const geometry::Aabb& body_bounds, double voxel_mm) {
   geometry::Aabb box = organ.bounds();
   box.min_mm = box.min_mm.cwiseMin(body_bounds.min_mm);
   box.max_mm = box.max_mm.cwiseMax(body_bounds.max_mm);
-  return compare_mask_with_body(organ.on_grid(geometry::grid_covering(box, voxel_mm, 2 * voxel_mm)), inside);
+  return compare_mask_with_body(organ.on_grid(geometry::grid_covering(box, voxel_mm, 2 * voxel_mm)),
+                                inside);
 }
 
-geometry::SurfaceComparison compare_mask_with_body(const geometry::LabelVolume& body,
-                                                   const std::function<bool(const Eigen::Vector3d&)>& inside) {
+geometry::SurfaceComparison compare_mask_with_body(
+    const geometry::LabelVolume& body, const std::function<bool(const Eigen::Vector3d&)>& inside) {
   const geometry::ImageGeometry& g = body.geometry;
   geometry::LabelVolume truth(g);
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i) truth.at(i, j, k) = inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+      for (int i = 0; i < g.size[0]; ++i)
+        truth.at(i, j, k) = inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
   return geometry::compare_masks(body, truth);
 }
 

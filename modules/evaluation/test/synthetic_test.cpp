@@ -30,7 +30,8 @@ TEST(Deformation, IsVolumePreservingAndExactlyInvertible) {
   long long n = 0;
   for (double z = -30; z < 30; z += 0.5)
     for (double y = -30; y < 30; y += 0.5)
-      for (double x = -40; x < 40; x += 0.5) n += in1({x, y, z});
+      for (double x = -40; x < 40; x += 0.5)
+        n += in1({x, y, z});
   EXPECT_NEAR(n * 0.125, v0, 0.005 * v0);
 }
 
@@ -39,17 +40,20 @@ TEST(Deformation, EveryFamilyIsVolumePreservingAndExactlyInvertible) {
     const char* name;
     void (*set)(Deformation&);
   };
-  const Family families[] = {
-      {"twist", [](Deformation& d) { d.twist_rad = 0.4; }},
-      {"indent", [](Deformation& d) { d.indent_mm = -8; }},
-      {"push", [](Deformation& d) { d.push_mm = -6; }},
-      {"all", [](Deformation& d) { d.stretch = 1.1, d.bend_mm = 2, d.twist_rad = 0.2, d.indent_mm = -5, d.push_mm = 4; }}};
+  const Family families[] = {{"twist", [](Deformation& d) { d.twist_rad = 0.4; }},
+                             {"indent", [](Deformation& d) { d.indent_mm = -8; }},
+                             {"push", [](Deformation& d) { d.push_mm = -6; }},
+                             {"all", [](Deformation& d) {
+                                d.stretch = 1.1, d.bend_mm = 2, d.twist_rad = 0.2, d.indent_mm = -5,
+                                d.push_mm = 4;
+                              }}};
   for (const auto& f : families) {
     Deformation d;
     d.centre_mm = {1, -2, 3};
     d.half_length_mm = 25;
     f.set(d);
-    for (const Eigen::Vector3d& p : {Eigen::Vector3d(7, -4, 9), Eigen::Vector3d(-12, 10, -3), Eigen::Vector3d(20, 1, 0)}) {
+    for (const Eigen::Vector3d& p :
+         {Eigen::Vector3d(7, -4, 9), Eigen::Vector3d(-12, 10, -3), Eigen::Vector3d(20, 1, 0)}) {
       EXPECT_LT((d.inverse(d.apply(p)) - p).norm(), 1e-10) << f.name;
       Eigen::Matrix3d j;
       for (int c = 0; c < 3; ++c) {
@@ -79,7 +83,8 @@ TEST(Sampling, PointsLieOnTheDeformedSurfaceWithinTheNoise) {
     EXPECT_NEAR(q.norm(), 1.0, 0.002);
   }
   o.half_coverage = true;
-  for (const auto& p : sample_deformed_surface(s, d, o)) EXPECT_GE(p.p_mm.y(), -1e-9);
+  for (const auto& p : sample_deformed_surface(s, d, o))
+    EXPECT_GE(p.p_mm.y(), -1e-9);
   const auto a = sample_deformed_surface(s, d, o), b = sample_deformed_surface(s, d, o);
   EXPECT_EQ(a[17].p_mm, b[17].p_mm);  // deterministic for a seed
 }
@@ -88,7 +93,8 @@ TEST(Shapes, LungHasItsNotchAndUnknownShapesAreRefused) {
   const Shape lung = make_shape("lung", {40, 30, 60}, {0, 0, 0});
   EXPECT_TRUE(lung.inside({10, 0, 0}));
   EXPECT_FALSE(lung.inside({-18, 0, -6}));
-  EXPECT_LT(shape_volume_mm3(lung, 1.0), shape_volume_mm3(make_shape("ellipsoid", {40, 30, 60}, {0, 0, 0}), 1.0));
+  EXPECT_LT(shape_volume_mm3(lung, 1.0),
+            shape_volume_mm3(make_shape("ellipsoid", {40, 30, 60}, {0, 0, 0}), 1.0));
   EXPECT_THROW(make_shape("donut", {1, 1, 1}, {0, 0, 0}), std::invalid_argument);
 }
 

@@ -26,8 +26,8 @@ std::vector<int> first_shell_counts(const particles::Positions& x, double shell_
   return w;
 }
 
-void cap_by_cohesion(particles::Forces& g, const std::vector<int>& touched, const std::vector<int>& w,
-                     double f_max) {
+void cap_by_cohesion(particles::Forces& g, const std::vector<int>& touched,
+                     const std::vector<int>& w, double f_max) {
   for (int i : touched) {
     const double cap = 0.5 * std::max(1, w[i]) * f_max;
     const double mag = g.col(i).norm();
@@ -35,7 +35,8 @@ void cap_by_cohesion(particles::Forces& g, const std::vector<int>& touched, cons
   }
 }
 
-std::pair<int, double> nearest_particle(const particles::Positions& x, const std::vector<int>& candidates,
+std::pair<int, double> nearest_particle(const particles::Positions& x,
+                                        const std::vector<int>& candidates,
                                         const Eigen::Vector3d& p_mm) {
   std::pair<int, double> best{-1, std::numeric_limits<double>::infinity()};
   for (int i : candidates) {
@@ -52,10 +53,12 @@ double default_outlier_distance(const particles::Positions& x) {
 void validate_points(const std::vector<AttractivePoint>& points) {
   for (size_t k = 0; k < points.size(); ++k) {
     if (!points[k].p_mm.allFinite()) {
-      throw std::invalid_argument("attractive point " + std::to_string(k) + " has a non-finite coordinate");
+      throw std::invalid_argument("attractive point " + std::to_string(k) +
+                                  " has a non-finite coordinate");
     }
     if (!(points[k].confidence > 0 && points[k].confidence <= 1)) {
-      throw std::invalid_argument("attractive point " + std::to_string(k) + " has a confidence outside (0, 1]");
+      throw std::invalid_argument("attractive point " + std::to_string(k) +
+                                  " has a confidence outside (0, 1]");
     }
   }
 }
@@ -71,10 +74,13 @@ PaperAttractiveForce::PaperAttractiveForce(std::vector<AttractivePoint> points,
       skin_(skin_voxel_mm, radius_mm) {
   validate_points(points_);
   if (!(params.alpha >= 1)) throw std::invalid_argument("attractive force: alpha must be >= 1");
-  if (!(params.influence_radius_min_r0 > 0) || !(params.influence_radius_max_r0 >= params.influence_radius_min_r0))
+  if (!(params.influence_radius_min_r0 > 0) ||
+      !(params.influence_radius_max_r0 >= params.influence_radius_min_r0))
     throw std::invalid_argument("attractive force: need 0 < influence radius min <= max");
-  if (!(params.influence_growth >= 0)) throw std::invalid_argument("attractive force: influence growth must be >= 0");
-  if (!(params.total_force_factor >= 1)) throw std::invalid_argument("attractive force: total force factor must be >= 1");
+  if (!(params.influence_growth >= 0))
+    throw std::invalid_argument("attractive force: influence growth must be >= 0");
+  if (!(params.total_force_factor >= 1))
+    throw std::invalid_argument("attractive force: total force factor must be >= 1");
   status_.resize(points_.size());
   influence_.resize(points_.size());
   k_.assign(points_.size(), 0.0);
@@ -84,7 +90,8 @@ void PaperAttractiveForce::assign(const particles::Positions& x) {
   const auto& skin = skin_.skin();
   w_ = first_shell_counts(x, params_.first_shell_r0 * r0_);
   // Default outlier distance: half the model's diameter.
-  const double outlier = params_.outlier_distance_mm > 0 ? params_.outlier_distance_mm : default_outlier_distance(x);
+  const double outlier =
+      params_.outlier_distance_mm > 0 ? params_.outlier_distance_mm : default_outlier_distance(x);
   for (size_t k = 0; k < points_.size(); ++k) {
     PointStatus& st = status_[k];
     st = PointStatus{};
@@ -103,9 +110,9 @@ void PaperAttractiveForce::assign(const particles::Positions& x) {
       st.reached = true;
       continue;
     }
-    const double radius = std::min(params_.influence_radius_max_r0 * r0_,
-                                   params_.influence_radius_min_r0 * r0_ +
-                                       params_.influence_growth * (st.d_min_mm - rho_));
+    const double radius = std::min(
+        params_.influence_radius_max_r0 * r0_,
+        params_.influence_radius_min_r0 * r0_ + params_.influence_growth * (st.d_min_mm - rho_));
     const Eigen::Vector3d e = x.col(st.epicentre);
     for (int i : skin)
       if ((x.col(i) - e).squaredNorm() <= radius * radius) influence_[k].push_back(i);
@@ -126,7 +133,8 @@ double PaperAttractiveForce::add_forces(const particles::State& state, particles
     const Eigen::Vector3d& p = points_[k].p_mm;
     // d_min now: the smallest distance from the point over its influence set.
     double d_min = std::numeric_limits<double>::infinity();
-    for (int i : influence_[k]) d_min = std::min(d_min, (p - state.x.col(i)).norm());
+    for (int i : influence_[k])
+      d_min = std::min(d_min, (p - state.x.col(i)).norm());
     st.d_min_mm = d_min;
     st.reached = d_min <= rho_;
     if (st.reached) continue;
@@ -155,7 +163,8 @@ double PaperAttractiveForce::add_forces(const particles::State& state, particles
   std::sort(touched_.begin(), touched_.end());
   touched_.erase(std::unique(touched_.begin(), touched_.end()), touched_.end());
   cap_by_cohesion(g_, touched_, w_, f_max_);
-  for (int i : touched_) f.col(i) += g_.col(i);
+  for (int i : touched_)
+    f.col(i) += g_.col(i);
   return 0.0;
 }
 

@@ -15,9 +15,13 @@ constexpr double kMaxExtentMm = 2000;  // larger than any organ: grids over it a
 }  // namespace
 
 EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> reference, GlobalMap map,
-                           particles::Positions placed, particles::Positions current, double support_mm)
-    : reference_(std::move(reference)), map_(std::move(map)), placed_(std::move(placed)),
-      current_(std::move(current)), h_(support_mm) {
+                           particles::Positions placed, particles::Positions current,
+                           double support_mm)
+    : reference_(std::move(reference)),
+      map_(std::move(map)),
+      placed_(std::move(placed)),
+      current_(std::move(current)),
+      h_(support_mm) {
   if (!reference_) throw std::invalid_argument("embedded body: no reference body");
   if (placed_.cols() != current_.cols())
     throw std::invalid_argument("embedded body: placed and current particle counts differ");
@@ -28,19 +32,21 @@ EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> referenc
   map_inverse_a_ = map_.affine.a.inverse();
   if (current_.cols() > 0 &&
       (current_.rowwise().maxCoeff() - current_.rowwise().minCoeff()).maxCoeff() > kMaxExtentMm)
-    throw std::invalid_argument("embedded body: the particles span more than 2 m (the model has come apart)");
-  lo_ = current_.cols() > 0 ? Eigen::Vector3d(current_.rowwise().minCoeff()) : Eigen::Vector3d::Zero();
+    throw std::invalid_argument(
+        "embedded body: the particles span more than 2 m (the model has come apart)");
+  lo_ = current_.cols() > 0 ? Eigen::Vector3d(current_.rowwise().minCoeff())
+                            : Eigen::Vector3d::Zero();
   for (Eigen::Index i = 0; i < current_.cols(); ++i) {
     const Eigen::Vector3d c = ((current_.col(i) - lo_) / h_).array().floor();
-    cells_[key(static_cast<int>(c.x()), static_cast<int>(c.y()), static_cast<int>(c.z()))].push_back(
-        static_cast<int>(i));
+    cells_[key(static_cast<int>(c.x()), static_cast<int>(c.y()), static_cast<int>(c.z()))]
+        .push_back(static_cast<int>(i));
   }
 }
 
 long long EmbeddedBody::key(int i, int j, int k) const {
   // Cells are within a few hundred of the origin for any organ; 21 bits per axis.
-  return (static_cast<long long>(i + (1 << 20)) << 42) | (static_cast<long long>(j + (1 << 20)) << 21) |
-         static_cast<long long>(k + (1 << 20));
+  return (static_cast<long long>(i + (1 << 20)) << 42) |
+         (static_cast<long long>(j + (1 << 20)) << 21) | static_cast<long long>(k + (1 << 20));
 }
 
 Eigen::Vector3d EmbeddedBody::unmove_locally(const Eigen::Vector3d& q, bool widen_if_needed) const {
@@ -48,7 +54,8 @@ Eigen::Vector3d EmbeddedBody::unmove_locally(const Eigen::Vector3d& q, bool wide
   if (!q.allFinite()) return nan;
   const Eigen::Vector3d c = ((q - lo_) / h_).array().floor();
   if ((c.array().abs() > 1e5).any()) return nan;  // far from every particle
-  const int ci = static_cast<int>(c.x()), cj = static_cast<int>(c.y()), ck = static_cast<int>(c.z());
+  const int ci = static_cast<int>(c.x()), cj = static_cast<int>(c.y()),
+            ck = static_cast<int>(c.z());
   // Weighted least squares for u(x) = c0 + B (x - q) / h over the neighbours within h.
   // Where they spread too little in some direction to fix the gradient (a tip of the
   // body, where they may all lie in one lattice plane), h grows: the field is
@@ -126,7 +133,8 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   const geometry::Aabb b = bounds();
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = Eigen::Vector3d::Constant(-1e300);
   for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d corner((c & 1) ? b.max_mm.x() : b.min_mm.x(), (c & 2) ? b.max_mm.y() : b.min_mm.y(),
+    const Eigen::Vector3d corner((c & 1) ? b.max_mm.x() : b.min_mm.x(),
+                                 (c & 2) ? b.max_mm.y() : b.min_mm.y(),
                                  (c & 4) ? b.max_mm.z() : b.min_mm.z());
     const Eigen::Vector3d idx = grid.physical_to_index(corner);
     lo = lo.cwiseMin(idx), hi = hi.cwiseMax(idx);
@@ -151,7 +159,8 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   const Eigen::Vector3d l0 = v_lo.cwiseMax(b.min_mm).array() - lattice;
   const Eigen::Vector3d l1 = v_hi.cwiseMin(b.max_mm);
   int nl[3];
-  for (int d = 0; d < 3; ++d) nl[d] = std::max(2, static_cast<int>(std::ceil((l1[d] - l0[d]) / lattice)) + 2);
+  for (int d = 0; d < 3; ++d)
+    nl[d] = std::max(2, static_cast<int>(std::ceil((l1[d] - l0[d]) / lattice)) + 2);
   const long long nodes = 1LL * nl[0] * nl[1] * nl[2];
   std::vector<Eigen::Vector3d> q0(static_cast<size_t>(nodes));
 #pragma omp parallel for schedule(dynamic, 16)
@@ -171,14 +180,17 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
         const Eigen::Vector3d t = (q - l0) / lattice;
         const Eigen::Vector3d base = t.array().floor();
         Eigen::Vector3d local = Eigen::Vector3d::Constant(std::nan(""));
-        if ((base.array() >= 0).all() && base.x() < nl[0] - 1 && base.y() < nl[1] - 1 && base.z() < nl[2] - 1) {
-          const int a = static_cast<int>(base.x()), bb = static_cast<int>(base.y()), c = static_cast<int>(base.z());
+        if ((base.array() >= 0).all() && base.x() < nl[0] - 1 && base.y() < nl[1] - 1 &&
+            base.z() < nl[2] - 1) {
+          const int a = static_cast<int>(base.x()), bb = static_cast<int>(base.y()),
+                    c = static_cast<int>(base.z());
           const Eigen::Vector3d f = t - base;
           Eigen::Vector3d sum = Eigen::Vector3d::Zero();
           for (int corner = 0; corner < 8; ++corner) {
             const int di = corner & 1, dj = (corner >> 1) & 1, dk = (corner >> 2) & 1;
             const Eigen::Vector3d& n = node(a + di, bb + dj, c + dk);
-            const double w = (di ? f.x() : 1 - f.x()) * (dj ? f.y() : 1 - f.y()) * (dk ? f.z() : 1 - f.z());
+            const double w =
+                (di ? f.x() : 1 - f.x()) * (dj ? f.y() : 1 - f.y()) * (dk ? f.z() : 1 - f.z());
             // The displacement (node value minus node position) is what is interpolated.
             sum += w * (n - (l0 + lattice * Eigen::Vector3d(a + di, bb + dj, c + dk)));
           }
@@ -187,7 +199,10 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
         // A lattice corner beyond the particles' reach (the edge of the support, or a
         // thin tip): evaluated directly.
         if (!local.allFinite()) local = unmove_locally(q);
-        out.at(i, j, k) = local.allFinite() && geometry::inside_interpolated(*reference_, unmap_globally(local)) ? 1 : 0;
+        out.at(i, j, k) =
+            local.allFinite() && geometry::inside_interpolated(*reference_, unmap_globally(local))
+                ? 1
+                : 0;
       }
   return out;
 }
@@ -207,11 +222,13 @@ std::vector<double> surface_depths(const particles::Positions& x, const Eigen::M
     return c.cwiseMax(-1e6).cwiseMin(1e6).cast<int>();
   };
   auto key = [](const Eigen::Vector3i& c) {
-    return (static_cast<long long>(c.x() + (1 << 20)) << 42) | (static_cast<long long>(c.y() + (1 << 20)) << 21) |
+    return (static_cast<long long>(c.x() + (1 << 20)) << 42) |
+           (static_cast<long long>(c.y() + (1 << 20)) << 21) |
            static_cast<long long>(c.z() + (1 << 20));
   };
   std::unordered_map<long long, std::vector<int>> cells;
-  for (Eigen::Index j = 0; j < surface.cols(); ++j) cells[key(cell_of(surface.col(j)))].push_back(static_cast<int>(j));
+  for (Eigen::Index j = 0; j < surface.cols(); ++j)
+    cells[key(cell_of(surface.col(j)))].push_back(static_cast<int>(j));
 #pragma omp parallel for schedule(static)
   for (Eigen::Index i = 0; i < x.cols(); ++i) {
     const Eigen::Vector3i c = cell_of(x.col(i));
@@ -221,7 +238,8 @@ std::vector<double> surface_depths(const particles::Positions& x, const Eigen::M
         for (int dx = -1; dx <= 1; ++dx) {
           const auto it = cells.find(key(c + Eigen::Vector3i(dx, dy, dz)));
           if (it == cells.end()) continue;
-          for (int j : it->second) best2 = std::min(best2, (surface.col(j) - x.col(i)).squaredNorm());
+          for (int j : it->second)
+            best2 = std::min(best2, (surface.col(j) - x.col(i)).squaredNorm());
         }
     depth[static_cast<size_t>(i)] = std::sqrt(best2);
   }

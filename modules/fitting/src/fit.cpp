@@ -24,22 +24,28 @@ std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
       continue;
     }
     double best = std::numeric_limits<double>::infinity();
-    for (int i : skin) best = std::min(best, (x.col(i) - points[k].p_mm).norm() - (*depths_mm)[static_cast<size_t>(i)]);
+    for (int i : skin)
+      best =
+          std::min(best, (x.col(i) - points[k].p_mm).norm() - (*depths_mm)[static_cast<size_t>(i)]);
     if (std::isfinite(best)) out[k] = std::abs(best);
   }
   return out;
 }
 
-FitResult run_fit(particles::Model& model, particles::State& state,
-                  const particles::IntegratorOptions& integrator_options,
-                  const std::vector<AttractivePoint>& points,
-                  const std::function<const std::vector<int>&(const particles::Positions&)>& skin_of,
-                  const std::vector<PointStatus>* status, const FitOptions& o, const std::function<void(const HistoryRow&)>& on_row,
-                  const std::function<void(particles::State&)>& after_row) {
+FitResult run_fit(
+    particles::Model& model, particles::State& state,
+    const particles::IntegratorOptions& integrator_options,
+    const std::vector<AttractivePoint>& points,
+    const std::function<const std::vector<int>&(const particles::Positions&)>& skin_of,
+    const std::vector<PointStatus>* status, const FitOptions& o,
+    const std::function<void(const HistoryRow&)>& on_row,
+    const std::function<void(particles::State&)>& after_row) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   double instrument_s = 0;
-  auto now_s = [&] { return std::chrono::duration<double>(Clock::now() - start).count() - instrument_s; };
+  auto now_s = [&] {
+    return std::chrono::duration<double>(Clock::now() - start).count() - instrument_s;
+  };
 
   FitResult result;
   const double rho = model.radius_mm();
@@ -58,8 +64,9 @@ FitResult run_fit(particles::Model& model, particles::State& state,
   for (int row = 0;; ++row) {
     HistoryRow h;
     h.step = integ.stats().steps;
-    const std::vector<double> r = data_residuals(points, state.x, skin_of(state.x), rho, status,
-                                                 o.surface_depths_mm.empty() ? nullptr : &o.surface_depths_mm);
+    const std::vector<double> r =
+        data_residuals(points, state.x, skin_of(state.x), rho, status,
+                       o.surface_depths_mm.empty() ? nullptr : &o.surface_depths_mm);
     double sum = 0, mx = 0;
     std::vector<double> kept;
     for (double v : r)

@@ -29,7 +29,8 @@ SurfaceSamples surface_samples(const particles::Positions& x, const std::vector<
     for (int j = 0; j < x.cols(); ++j) {
       if (j != i && (x.col(j) - x.col(i)).squaredNorm() < reach2) sum += x.col(j), ++count;
     }
-    Eigen::Vector3d n = count > 0 ? Eigen::Vector3d(x.col(i) - sum / count) : Eigen::Vector3d::Zero();
+    Eigen::Vector3d n =
+        count > 0 ? Eigen::Vector3d(x.col(i) - sum / count) : Eigen::Vector3d::Zero();
     if (n.norm() < 1e-6 * r0) n = x.col(i) - body_centre;  // flat spot: point away from the centre
     n.normalize();
     out.normals.col(static_cast<Eigen::Index>(s)) = n;
@@ -42,12 +43,14 @@ SurfaceSamples reference_surface(const geometry::LabelVolume& reference, int str
   const geometry::ImageGeometry& g = reference.geometry;
   const size_t total = reference.labels.size();
   std::vector<std::uint8_t> in(total), out(total);
-  for (size_t i = 0; i < total; ++i) in[i] = reference.labels[i] != 0, out[i] = !in[i];
+  for (size_t i = 0; i < total; ++i)
+    in[i] = reference.labels[i] != 0, out[i] = !in[i];
   const std::vector<double> to_in = geometry::squared_distance_transform(in, g);
   const std::vector<double> to_out = geometry::squared_distance_transform(out, g);
   // Signed distance at voxel centres, positive outside (half a voxel at the boundary).
   auto sd = [&](int i, int j, int k) {
-    i = std::clamp(i, 0, g.size[0] - 1), j = std::clamp(j, 0, g.size[1] - 1), k = std::clamp(k, 0, g.size[2] - 1);
+    i = std::clamp(i, 0, g.size[0] - 1), j = std::clamp(j, 0, g.size[1] - 1),
+    k = std::clamp(k, 0, g.size[2] - 1);
     const long long v = g.linear_index(i, j, k);
     const double h = 0.5 * g.spacing_mm.minCoeff();
     return in[v] ? -(std::sqrt(to_out[v]) - h) : std::sqrt(to_in[v]) - h;
@@ -71,7 +74,8 @@ SurfaceSamples reference_surface(const geometry::LabelVolume& reference, int str
   SurfaceSamples s;
   s.points.resize(3, static_cast<Eigen::Index>(pts.size()));
   s.normals.resize(3, static_cast<Eigen::Index>(pts.size()));
-  for (size_t q = 0; q < pts.size(); ++q) s.points.col(q) = pts[q], s.normals.col(q) = nrm[q];
+  for (size_t q = 0; q < pts.size(); ++q)
+    s.points.col(q) = pts[q], s.normals.col(q) = nrm[q];
   return s;
 }
 
@@ -103,7 +107,8 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
   // least change that reaches them (two points: a stretch along their axis).
   if (m < 1 || surface.points.cols() == 0) return fit;
   Eigen::Matrix3Xd p(3, m);
-  for (int k = 0; k < m; ++k) p.col(k) = points[k].p_mm;
+  for (int k = 0; k < m; ++k)
+    p.col(k) = points[k].p_mm;
   const Eigen::Vector3d sc = surface.points.rowwise().mean();
   const double spread2 = (surface.points.colwise() - sc).squaredNorm() / surface.points.cols();
   const double lambda = o.regularisation * spread2 * m;
@@ -145,20 +150,24 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
       }
     }
     for (int c = 0; c < 3; ++c) {
-      for (int d = 0; d < 3; ++d) nrm(3 * c + d, 3 * c + d) += lambda;
+      for (int d = 0; d < 3; ++d)
+        nrm(3 * c + d, 3 * c + d) += lambda;
       rhs(3 * c + c) += lambda;
     }
     const Eigen::Matrix<double, 12, 1> theta = nrm.ldlt().solve(rhs);
     Eigen::Matrix3d a;
-    a << theta.segment<3>(0).transpose(), theta.segment<3>(3).transpose(), theta.segment<3>(6).transpose();
+    a << theta.segment<3>(0).transpose(), theta.segment<3>(3).transpose(),
+        theta.segment<3>(6).transpose();
     Eigen::Vector3d t = theta.segment<3>(9);
     const double det = a.determinant();
-    if (!(det > 0) || !a.allFinite() || !t.allFinite()) break;  // degenerate: keep the last good map
+    if (!(det > 0) || !a.allFinite() || !t.allFinite())
+      break;  // degenerate: keep the last good map
     // det(a) = 1, scaling about the matched surface's centroid so the fit stays in place.
     const double scale = 1.0 / std::cbrt(det);
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     double wsum = 0;
-    for (int k = 0; k < m; ++k) centroid += w[k] * surface.points.col(match[k]), wsum += w[k];
+    for (int k = 0; k < m; ++k)
+      centroid += w[k] * surface.points.col(match[k]), wsum += w[k];
     centroid /= std::max(wsum, 1e-12);
     const Eigen::Vector3d image = a * centroid + t;
     a *= scale;
@@ -195,7 +204,6 @@ Eigen::Vector3d GlobalMap::inverse(const Eigen::Vector3d& q) const {
   return affine.a.inverse() * (shears.inverse(q) - affine.t);
 }
 
-
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
                          const AffineFitOptions& o) {
   GlobalMap map;
@@ -205,7 +213,8 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   if (m < 21 || surface.points.cols() == 0) return map;  // 21 unknowns below
   map.shears.centre = ((map.affine.a * surface.points).colwise() + map.affine.t).rowwise().mean();
   Eigen::Matrix3Xd p(3, m);
-  for (int k = 0; k < m; ++k) p.col(k) = points[k].p_mm;
+  for (int k = 0; k < m; ++k)
+    p.col(k) = points[k].p_mm;
   const double extent2 = (p.colwise() - map.shears.centre).colwise().squaredNorm().mean();
   const double lambda_a = o.regularisation * m * extent2;
   const double lambda_c = o.shear_regularisation * m * extent2 * extent2;  // coefficients are 1/mm
@@ -224,7 +233,8 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   for (int it = 0; it < o.iterations; ++it) {
     const Eigen::Matrix3Xd affine_img = (map.affine.a * surface.points).colwise() + map.affine.t;
     Eigen::Matrix3Xd moved(3, affine_img.cols());
-    for (Eigen::Index j = 0; j < affine_img.cols(); ++j) moved.col(j) = map.shears.apply(affine_img.col(j));
+    for (Eigen::Index j = 0; j < affine_img.cols(); ++j)
+      moved.col(j) = map.shears.apply(affine_img.col(j));
     for (int k = 0; k < m; ++k) {
       Eigen::Index j;
       r[k] = std::sqrt((moved.colwise() - p.col(k)).colwise().squaredNorm().minCoeff(&j));
@@ -259,16 +269,19 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
       }
     }
     for (int c = 0; c < 3; ++c) {
-      for (int d = 0; d < 3; ++d) nrm(3 * c + d, 3 * c + d) += lambda_a;
+      for (int d = 0; d < 3; ++d)
+        nrm(3 * c + d, 3 * c + d) += lambda_a;
       rhs(3 * c + c) += lambda_a;
     }
-    for (int c = 0; c < 9; ++c) nrm(12 + c, 12 + c) += lambda_c;
+    for (int c = 0; c < 9; ++c)
+      nrm(12 + c, 12 + c) += lambda_c;
     const Vec21 theta = nrm.ldlt().solve(rhs);
     Eigen::Matrix3d a;
-    a << theta.segment<3>(0).transpose(), theta.segment<3>(3).transpose(), theta.segment<3>(6).transpose();
+    a << theta.segment<3>(0).transpose(), theta.segment<3>(3).transpose(),
+        theta.segment<3>(6).transpose();
     Eigen::Vector3d t = theta.segment<3>(9);
     const double det = a.determinant();
-    if (!(det > 0) || !theta.allFinite()) break;  // degenerate: keep the last good map
+    if (!(det > 0) || !theta.allFinite()) break;     // degenerate: keep the last good map
     const Eigen::Vector3d image = a * centroid + t;  // det(a) = 1 about the body's centre
     a /= std::cbrt(det);
     t = image - a * centroid;
@@ -279,13 +292,15 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   map.affine.rms_after_mm = map.rms_after_mm;
   // Plausibility: bounded stretches and shear displacements, else the identity.
   const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(map.affine.a).singularValues();
-  const double size = (surface.points.rowwise().maxCoeff() - surface.points.rowwise().minCoeff()).norm();
+  const double size =
+      (surface.points.rowwise().maxCoeff() - surface.points.rowwise().minCoeff()).norm();
   double shear_move = 0;
   for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
     const Eigen::Vector3d q = map.affine.a * surface.points.col(j) + map.affine.t;
     shear_move = std::max(shear_move, (map.shears.apply(q) - q).norm());
   }
-  if (!(sv[0] <= o.max_stretch) || !(sv[2] >= 1.0 / o.max_stretch) || !(shear_move <= o.max_shear_mm * size)) {
+  if (!(sv[0] <= o.max_stretch) || !(sv[2] >= 1.0 / o.max_stretch) ||
+      !(shear_move <= o.max_shear_mm * size)) {
     GlobalMap identity;
     identity.refused = true;
     identity.rms_after_mm = identity.affine.rms_after_mm = map.affine.rms_before_mm;
@@ -303,15 +318,18 @@ particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, 
   // minus the distance to the body outside. Ranking sites by it selects a level set
   // of the mapped body, which can sit a little outside it when the count asks so.
   std::vector<std::uint8_t> outside(reference.labels.size()), inside_mask(reference.labels.size());
-  for (size_t i = 0; i < outside.size(); ++i) outside[i] = reference.labels[i] == 0, inside_mask[i] = !outside[i];
+  for (size_t i = 0; i < outside.size(); ++i)
+    outside[i] = reference.labels[i] == 0, inside_mask[i] = !outside[i];
   const std::vector<double> depth2 = geometry::squared_distance_transform(outside, g);
   const std::vector<double> away2 = geometry::squared_distance_transform(inside_mask, g);
   const double off_grid = -std::numeric_limits<double>::infinity();
   auto depth_at = [&](const Eigen::Vector3d& q) {
     const Eigen::Vector3d idx = g.physical_to_index(q);
-    const int i = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
+    const int i = static_cast<int>(std::lround(idx.x())),
+              j = static_cast<int>(std::lround(idx.y())),
               k = static_cast<int>(std::lround(idx.z()));
-    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) return off_grid;
+    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2])
+      return off_grid;
     const long long v = g.linear_index(i, j, k);
     return inside_mask[v] ? std::sqrt(depth2[v]) : -std::sqrt(away2[v]);
   };
@@ -324,7 +342,8 @@ particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, 
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
       for (int i = 0; i < g.size[0]; ++i)
-        if (reference.at(i, j, k)) centroid += g.index_to_physical(Eigen::Vector3d(i, j, k)), ++inside;
+        if (reference.at(i, j, k))
+          centroid += g.index_to_physical(Eigen::Vector3d(i, j, k)), ++inside;
   centroid /= static_cast<double>(std::max<long long>(1, inside));
   for (int c = 0; c < 8; ++c) {
     const Eigen::Vector3d corner((c & 1) ? box.max_mm.x() : box.min_mm.x(),
@@ -339,7 +358,8 @@ particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, 
   const particles::Positions sites = particles::fcc_lattice_points(
       mapped, map.apply(centroid), a_nn_mm, [](const Eigen::Vector3d&) { return true; });
   std::vector<double> d(sites.cols());
-  for (Eigen::Index s = 0; s < sites.cols(); ++s) d[s] = depth_at(map.inverse(sites.col(s)));
+  for (Eigen::Index s = 0; s < sites.cols(); ++s)
+    d[s] = depth_at(map.inverse(sites.col(s)));
   // Sites by signed depth, deepest first (ties by index: deterministic); sites off the
   // reference's grid are never taken.
   std::vector<int> idx;
@@ -351,11 +371,13 @@ particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, 
   // topped up with the next deepest sites that touch it.
   const double link2 = (1.2 * a_nn_mm) * (1.2 * a_nn_mm);
   particles::Positions chosen(3, keep);
-  for (int s = 0; s < keep; ++s) chosen.col(s) = sites.col(idx[s]);
+  for (int s = 0; s < keep; ++s)
+    chosen.col(s) = sites.col(idx[s]);
   const std::vector<int> body = particles::largest_component(chosen, 1.2 * a_nn_mm);
   std::vector<char> taken(sites.cols(), 0);
   std::vector<int> result;
-  for (int b : body) result.push_back(idx[b]), taken[idx[b]] = 1;
+  for (int b : body)
+    result.push_back(idx[b]), taken[idx[b]] = 1;
   for (size_t q = keep; q < idx.size() && static_cast<int>(result.size()) < keep; ++q) {
     const int s = idx[q];
     for (int r : result)
@@ -366,7 +388,8 @@ particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, 
   }
   std::sort(result.begin(), result.end());
   particles::Positions out(3, static_cast<Eigen::Index>(result.size()));
-  for (size_t s = 0; s < result.size(); ++s) out.col(static_cast<Eigen::Index>(s)) = sites.col(result[s]);
+  for (size_t s = 0; s < result.size(); ++s)
+    out.col(static_cast<Eigen::Index>(s)) = sites.col(result[s]);
   return out;
 }
 

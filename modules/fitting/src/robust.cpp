@@ -11,7 +11,8 @@ double outlier_cutoff(std::vector<double> values, double mads, double min_mad) {
   const size_t mid = values.size() / 2;
   std::nth_element(values.begin(), values.begin() + mid, values.end());
   const double median = values[mid];
-  for (double& v : values) v = std::abs(v - median);
+  for (double& v : values)
+    v = std::abs(v - median);
   std::nth_element(values.begin(), values.begin() + mid, values.end());
   return median + mads * 1.4826 * std::max(values[mid], min_mad);
 }

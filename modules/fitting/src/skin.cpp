@@ -8,7 +8,8 @@ namespace organfit::fitting {
 
 SkinDetector::SkinDetector(double voxel_mm, double radius_mm, double recompute_fraction)
     : voxel_mm_(voxel_mm), radius_mm_(radius_mm), recompute_fraction_(recompute_fraction) {
-  if (!(voxel_mm > 0) || !std::isfinite(voxel_mm)) throw std::invalid_argument("skin: voxel size must be > 0 mm");
+  if (!(voxel_mm > 0) || !std::isfinite(voxel_mm))
+    throw std::invalid_argument("skin: voxel size must be > 0 mm");
   if (!(radius_mm > 0)) throw std::invalid_argument("skin: particle radius must be > 0 mm");
   if (!(recompute_fraction > 0 && recompute_fraction <= 1))
     throw std::invalid_argument("skin: recompute fraction must be in (0, 1]");
@@ -44,7 +45,8 @@ void SkinDetector::compute(const Eigen::Matrix3Xd& x) {
   grid_ = {};
   grid_.spacing_mm = Eigen::Vector3d::Constant(h);
   grid_.origin_mm = lo.array() + 0.5 * h;  // voxel centres
-  for (int d = 0; d < 3; ++d) grid_.size[d] = static_cast<int>(std::ceil((hi[d] - lo[d]) / h));
+  for (int d = 0; d < 3; ++d)
+    grid_.size[d] = static_cast<int>(std::ceil((hi[d] - lo[d]) / h));
   const int nx = grid_.size[0], ny = grid_.size[1], nz = grid_.size[2];
   const size_t total = static_cast<size_t>(grid_.voxel_count());
   std::vector<std::uint8_t> kept(total, 0);
@@ -56,7 +58,8 @@ void SkinDetector::compute(const Eigen::Matrix3Xd& x) {
     int a[3], b[3];
     for (int d = 0; d < 3; ++d) {
       a[d] = std::max(0, static_cast<int>(std::floor((c[d] - radius_mm_ - lo[d]) / h)));
-      b[d] = std::min(grid_.size[d] - 1, static_cast<int>(std::floor((c[d] + radius_mm_ - lo[d]) / h)));
+      b[d] = std::min(grid_.size[d] - 1,
+                      static_cast<int>(std::floor((c[d] + radius_mm_ - lo[d]) / h)));
     }
     for (int k = a[2]; k <= b[2]; ++k)
       for (int j = a[1]; j <= b[1]; ++j)
@@ -71,7 +74,8 @@ void SkinDetector::compute(const Eigen::Matrix3Xd& x) {
           if (d2 <= r2) visit(grid_.linear_index(v, j, k));
         }
   };
-  for (int i = 0; i < n; ++i) for_each_voxel_of(i, [&](long long v) { kept[v] = 1; });
+  for (int i = 0; i < n; ++i)
+    for_each_voxel_of(i, [&](long long v) { kept[v] = 1; });
 
   // 3. Boundary voxels: kept, with at least one of the 26 neighbours not kept. The
   // margin guarantees every kept voxel has all 26 neighbours on the grid.
@@ -132,7 +136,8 @@ bool SkinDetector::inside(const Eigen::Vector3d& p) const {
   const Eigen::Vector3d idx = (p - grid_.origin_mm) / voxel_mm_;
   const int v = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
             k = static_cast<int>(std::lround(idx.z()));
-  if (v < 0 || j < 0 || k < 0 || v >= grid_.size[0] || j >= grid_.size[1] || k >= grid_.size[2]) return false;
+  if (v < 0 || j < 0 || k < 0 || v >= grid_.size[0] || j >= grid_.size[1] || k >= grid_.size[2])
+    return false;
   return closed_[grid_.linear_index(v, j, k)] != 0;
 }
 

@@ -1,10 +1,10 @@
 #include "organfit/fitting/spread_force.h"
 
-#include "organfit/fitting/robust.h"
-
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+
+#include "organfit/fitting/robust.h"
 
 namespace organfit::fitting {
 
@@ -19,7 +19,8 @@ SpreadAttractiveForce::SpreadAttractiveForce(std::vector<AttractivePoint> points
       params_(params),
       skin_(skin_voxel_mm, radius_mm) {
   validate_points(points_);
-  if (!(params.stiffness_fraction > 0)) throw std::invalid_argument("spread force: stiffness must be > 0");
+  if (!(params.stiffness_fraction > 0))
+    throw std::invalid_argument("spread force: stiffness must be > 0");
   if (!(params.patch_sigma_r0 > 0) || !(params.patch_radius_r0 > 0))
     throw std::invalid_argument("spread force: patch sizes must be > 0");
   status_.resize(points_.size());
@@ -28,7 +29,8 @@ SpreadAttractiveForce::SpreadAttractiveForce(std::vector<AttractivePoint> points
 
 void SpreadAttractiveForce::set_surface_depths(std::vector<double> depth_mm) {
   for (double d : depth_mm)
-    if (!(d >= 0) || !std::isfinite(d)) throw std::invalid_argument("spread force: surface depths must be finite and >= 0");
+    if (!(d >= 0) || !std::isfinite(d))
+      throw std::invalid_argument("spread force: surface depths must be finite and >= 0");
   depth_ = std::move(depth_mm);
   skin_.invalidate();  // re-assign the epicentres with the new depths
 }
@@ -36,7 +38,8 @@ void SpreadAttractiveForce::set_surface_depths(std::vector<double> depth_mm) {
 void SpreadAttractiveForce::assign(const particles::Positions& x) {
   const auto& skin = skin_.skin();
   w_ = first_shell_counts(x, 1.3 * r0_);
-  const double outlier = params_.outlier_distance_mm > 0 ? params_.outlier_distance_mm : default_outlier_distance(x);
+  const double outlier =
+      params_.outlier_distance_mm > 0 ? params_.outlier_distance_mm : default_outlier_distance(x);
   const double sigma = params_.patch_sigma_r0 * r0_, radius = params_.patch_radius_r0 * r0_;
   for (size_t k = 0; k < points_.size(); ++k) {
     PointStatus& st = status_[k];
@@ -67,7 +70,8 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
   // more than 2 r0) are not boundary data: e.g. a point deep inside the organ.
   std::vector<double> off;
   for (const auto& st : status_)
-    if (!st.rejected && st.epicentre >= 0) off.push_back(std::abs(st.d_min_mm - depth(st.epicentre)));
+    if (!st.rejected && st.epicentre >= 0)
+      off.push_back(std::abs(st.d_min_mm - depth(st.epicentre)));
   if (off.size() >= 5) {
     const double cut = std::max(2.0 * r0_, outlier_cutoff(off, 5.0));
     for (size_t k = 0; k < status_.size(); ++k) {
@@ -80,7 +84,8 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
   }
 }
 
-double SpreadAttractiveForce::add_forces(const particles::State& state, particles::Forces& f, bool) {
+double SpreadAttractiveForce::add_forces(const particles::State& state, particles::Forces& f,
+                                         bool) {
   if (skin_.update(state.x)) assign(state.x);
   const int n = state.size();
   num_.assign(n, Eigen::Vector3d::Zero());
@@ -116,7 +121,8 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
   }
   if (!skin.empty() && params_.hold_volume) {
     const double pressure = inflation / static_cast<double>(skin.size());
-    for (int i : skin) f.col(i) -= pressure * (state.x.col(i) - centroid).normalized();
+    for (int i : skin)
+      f.col(i) -= pressure * (state.x.col(i) - centroid).normalized();
   }
   return 0.0;
 }

@@ -41,7 +41,9 @@ TEST_F(PaperForceTest, EpicentreReceivesExactlyFMaxKTowardsThePoint) {
   // W of the epicentre by brute force: the reference for the O(N) count the force uses.
   int w = 0;
   for (int j = 0; j < state_.size(); ++j)
-    if (j != st.epicentre && (state_.x.col(j) - state_.x.col(st.epicentre)).norm() < 1.3 * params_.r0_mm) ++w;
+    if (j != st.epicentre &&
+        (state_.x.col(j) - state_.x.col(st.epicentre)).norm() < 1.3 * params_.r0_mm)
+      ++w;
   EXPECT_EQ(w, first_shell_counts(state_.x, 1.3 * params_.r0_mm)[st.epicentre]);
   EXPECT_GE(w, 5);
   EXPECT_LE(w, 12);
@@ -67,7 +69,8 @@ TEST_F(PaperForceTest, OthersFallOffAsTheRatioToThePowerAlphaMinusOne) {
     const double r = (p - state_.x.col(i)).norm();
     // Eq. 5's fall-off, capped by what the particle's own neighbours hold (W(i) F_max / 2).
     const double cap = 0.5 * shells[i] * law_->f_max();
-    const double expected = std::min(cap, st.f_max_k * std::pow((st.d_min_mm - rho()) / (r - rho()), 2.0));
+    const double expected =
+        std::min(cap, st.f_max_k * std::pow((st.d_min_mm - rho()) / (r - rho()), 2.0));
     EXPECT_NEAR(f.col(i).norm(), expected, 1e-9 * st.f_max_k) << i;
     EXPECT_LT(f.col(i).norm(), st.f_max_k);
     capped += expected == cap;
@@ -84,7 +87,8 @@ TEST_F(PaperForceTest, TotalForceCapScalesTheOthersNotTheEpicentre) {
   const Forces f = forces_of(term);
   const PointStatus& st = term.status()[0];
   double total = 0;
-  for (int i = 0; i < state_.size(); ++i) total += f.col(i).norm();
+  for (int i = 0; i < state_.size(); ++i)
+    total += f.col(i).norm();
   EXPECT_NEAR(total, 1.5 * st.f_max_k, 1e-9 * st.f_max_k);
   EXPECT_NEAR(f.col(st.epicentre).norm(), st.f_max_k, 1e-9 * st.f_max_k);
 }
@@ -97,7 +101,8 @@ TEST_F(PaperForceTest, ZeroOnArrivalAndForAPointOnAParticle) {
   EXPECT_TRUE(on_particle.status()[0].reached);
   // Arrival: the epicentre moved onto its point (the skin not recomputed): all forces vanish.
   const Eigen::Vector3d p(15 + 1.5, 0, 0);
-  PaperAttractiveForce term({{p, 1.0}}, *law_, rho(), force_params_, 10.0 /* coarse skin: no recompute */);
+  PaperAttractiveForce term({{p, 1.0}}, *law_, rho(), force_params_,
+                            10.0 /* coarse skin: no recompute */);
   forces_of(term);
   const int e = term.status()[0].epicentre;
   state_.x.col(e) = p + Eigen::Vector3d(0.5 * rho(), 0, 0);
@@ -135,8 +140,10 @@ TEST(PaperForce, BadPointsAndParametersAreRefused) {
   particles::LennardJones law{particles::CohesionParams{}};
   PaperForceParams p;
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_THROW(PaperAttractiveForce({{Eigen::Vector3d(nan, 0, 0), 1.0}}, law, 0.5, p, 0.5), std::invalid_argument);
-  EXPECT_THROW(PaperAttractiveForce({{Eigen::Vector3d(0, 0, 0), 0.0}}, law, 0.5, p, 0.5), std::invalid_argument);
+  EXPECT_THROW(PaperAttractiveForce({{Eigen::Vector3d(nan, 0, 0), 1.0}}, law, 0.5, p, 0.5),
+               std::invalid_argument);
+  EXPECT_THROW(PaperAttractiveForce({{Eigen::Vector3d(0, 0, 0), 0.0}}, law, 0.5, p, 0.5),
+               std::invalid_argument);
   p.alpha = 0.5;
   EXPECT_THROW(PaperAttractiveForce({}, law, 0.5, p, 0.5), std::invalid_argument);
 }

@@ -42,11 +42,14 @@ particles::Positions fill(const geometry::LabelVolume& mask) {
         const Eigen::Vector3d p(x, y, z);
         bool deep = true;
         for (int d = 0; d < 3 && deep; ++d)
-          for (double s : {-0.5, 0.5}) deep = deep && geometry::inside_interpolated(mask, p + s * kSpacing * Eigen::Vector3d::Unit(d));
+          for (double s : {-0.5, 0.5})
+            deep = deep &&
+                   geometry::inside_interpolated(mask, p + s * kSpacing * Eigen::Vector3d::Unit(d));
         if (deep) pts.push_back(p);
       }
   particles::Positions x(3, static_cast<Eigen::Index>(pts.size()));
-  for (size_t i = 0; i < pts.size(); ++i) x.col(static_cast<Eigen::Index>(i)) = pts[i];
+  for (size_t i = 0; i < pts.size(); ++i)
+    x.col(static_cast<Eigen::Index>(i)) = pts[i];
   return x;
 }
 
@@ -81,8 +84,9 @@ TEST(EmbeddedBody, FollowsAnAffineMotionOfTheParticlesExactly) {
   const EmbeddedBody body(mask, GlobalMap{}, x0, x1, embedding_support_mm(kSpacing));
   // Pulled back through the moving-least-squares field: exact for affine motion, also
   // beyond the outermost particles (on and just outside the surface).
-  for (const Eigen::Vector3d r : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(19.5, 0, 0), Eigen::Vector3d(0, -14.2, 0),
-                                  Eigen::Vector3d(8, 7, -8), Eigen::Vector3d(-12, 3, 8.5)}) {
+  for (const Eigen::Vector3d r :
+       {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(19.5, 0, 0), Eigen::Vector3d(0, -14.2, 0),
+        Eigen::Vector3d(8, 7, -8), Eigen::Vector3d(-12, 3, 8.5)}) {
     const Eigen::Vector3d q = a * r + t;
     EXPECT_LT((body.pull_back(q) - r).norm(), 1e-6) << r.transpose();
   }
@@ -97,9 +101,11 @@ TEST(EmbeddedBody, AppliesTheGlobalMapsInverse) {
   map.affine.t = Eigen::Vector3d(1, 2, 3);
   map.shears.c(3) = 0.004;  // y += 0.004 u_x^2: a bend
   particles::Positions placed(3, x0.cols());
-  for (Eigen::Index i = 0; i < x0.cols(); ++i) placed.col(i) = map.apply(x0.col(i));
+  for (Eigen::Index i = 0; i < x0.cols(); ++i)
+    placed.col(i) = map.apply(x0.col(i));
   const EmbeddedBody body(mask, map, placed, placed, embedding_support_mm(kSpacing));
-  for (const Eigen::Vector3d r : {Eigen::Vector3d(15, 2, 1), Eigen::Vector3d(-19.5, 0, 0), Eigen::Vector3d(0, 13.8, 0)})
+  for (const Eigen::Vector3d r :
+       {Eigen::Vector3d(15, 2, 1), Eigen::Vector3d(-19.5, 0, 0), Eigen::Vector3d(0, 13.8, 0)})
     EXPECT_LT((body.pull_back(map.apply(r)) - r).norm(), 1e-9);
   // Volume-preserving map: the same volume.
   EXPECT_NEAR(body.volume_mm3(0.75) / mask->volume_mm3(1), 1.0, 0.01);
@@ -128,7 +134,8 @@ TEST(SurfaceDepths, AreDistancesToTheNearestSampleCappedAtTheReach) {
   // Samples on the plane z = 0 (0.5 mm apart); particles below it.
   Eigen::Matrix3Xd plane(3, 41 * 41);
   for (int j = 0, k = 0; j < 41; ++j)
-    for (int i = 0; i < 41; ++i, ++k) plane.col(k) = Eigen::Vector3d(-10 + 0.5 * i, -10 + 0.5 * j, 0);
+    for (int i = 0; i < 41; ++i, ++k)
+      plane.col(k) = Eigen::Vector3d(-10 + 0.5 * i, -10 + 0.5 * j, 0);
   particles::Positions x(3, 3);
   x.col(0) = Eigen::Vector3d(0.25, 0, -1.5);
   x.col(1) = Eigen::Vector3d(3, -2, -0.2);

@@ -15,11 +15,13 @@ TEST(RunFit, OneFarPointDoesNotKeepAFitFromConverging) {
   // 95th percentile does not.
   const double rho = 2.0;
   particles::Positions x(3, 20);
-  for (int i = 0; i < 20; ++i) x.col(i) = Eigen::Vector3d(10.0 * i, 0, 0);
+  for (int i = 0; i < 20; ++i)
+    x.col(i) = Eigen::Vector3d(10.0 * i, 0, 0);
   particles::Model model(20, 1.0, rho);
   particles::State state(x);
   std::vector<AttractivePoint> points;
-  for (int i = 0; i < 20; ++i) points.push_back({x.col(i) + Eigen::Vector3d(0, 0, i == 7 ? 2.5 * rho : rho), 1.0});
+  for (int i = 0; i < 20; ++i)
+    points.push_back({x.col(i) + Eigen::Vector3d(0, 0, i == 7 ? 2.5 * rho : rho), 1.0});
   std::vector<int> all(20);
   std::iota(all.begin(), all.end(), 0);
   particles::IntegratorOptions io;
@@ -27,8 +29,9 @@ TEST(RunFit, OneFarPointDoesNotKeepAFitFromConverging) {
   FitOptions fo;
   fo.record_every = 5;
   fo.max_steps = 200;
-  const FitResult r = run_fit(model, state, io, points, [&](const particles::Positions&) -> const std::vector<int>& { return all; },
-                              nullptr, fo);
+  const FitResult r = run_fit(
+      model, state, io, points,
+      [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr, fo);
   EXPECT_TRUE(r.converged) << r.stop_reason;
   EXPECT_NEAR(r.residual_max_mm, 1.5 * rho, 1e-12);
   EXPECT_NEAR(r.residual_p95_mm, 0.0, 1e-12);
@@ -36,8 +39,9 @@ TEST(RunFit, OneFarPointDoesNotKeepAFitFromConverging) {
   // Two such points out of 20 (10%) are beyond the 95th percentile's tolerance: no.
   points[3].p_mm = x.col(3) + Eigen::Vector3d(0, 0, 2.5 * rho);
   particles::State again(x);
-  const FitResult s = run_fit(model, again, io, points, [&](const particles::Positions&) -> const std::vector<int>& { return all; },
-                              nullptr, fo);
+  const FitResult s = run_fit(
+      model, again, io, points,
+      [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr, fo);
   EXPECT_FALSE(s.converged);
   EXPECT_NEAR(s.residual_p95_mm, 1.5 * rho, 1e-12);
 }

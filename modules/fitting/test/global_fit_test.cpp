@@ -24,7 +24,8 @@ Body ellipsoid_body() {
   return {particles::fill_ellipsoid({50, 40, 34}, {0, 0, 0}, a), 2.0, a};
 }
 
-/// Points on the ellipsoid x^2/25^2 + y^2/20^2 + z^2/17^2 = 1 mapped by diag(s, 1/sqrt s, 1/sqrt s).
+/// Points on the ellipsoid x^2/25^2 + y^2/20^2 + z^2/17^2 = 1 mapped by diag(s, 1/sqrt s, 1/sqrt
+/// s).
 std::vector<AttractivePoint> stretched_points(double s, int count, unsigned seed) {
   std::mt19937 rng(seed);
   std::normal_distribution<double> g;

@@ -13,7 +13,8 @@ Eigen::Matrix3Xd cubic_lattice(int n, double rho) {
   int c = 0;
   for (int k = 0; k < n; ++k)
     for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i) x.col(c++) = 2 * rho * Eigen::Vector3d(i, j, k) + Eigen::Vector3d(0.3, -0.2, 0.1);
+      for (int i = 0; i < n; ++i)
+        x.col(c++) = 2 * rho * Eigen::Vector3d(i, j, k) + Eigen::Vector3d(0.3, -0.2, 0.1);
   return x;
 }
 
@@ -77,10 +78,12 @@ TEST(SkinDetector, HollowShellHasInsideCavityNotReachableFromOutside) {
   for (int t = 0; t < 40; ++t)
     for (int u = 0; u < 80; ++u) {
       const double th = M_PI * (t + 0.5) / 40, ph = 2 * M_PI * u / 80;
-      pts.push_back(10 * Eigen::Vector3d(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th)));
+      pts.push_back(10 * Eigen::Vector3d(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph),
+                                         std::cos(th)));
     }
   Eigen::Matrix3Xd x(3, pts.size());
-  for (size_t i = 0; i < pts.size(); ++i) x.col(i) = pts[i];
+  for (size_t i = 0; i < pts.size(); ++i)
+    x.col(i) = pts[i];
   SkinDetector skin(0.5, 1.0);
   skin.update(x);
   EXPECT_TRUE(skin.inside(Eigen::Vector3d::Zero()));

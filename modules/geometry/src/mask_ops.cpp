@@ -29,8 +29,9 @@ void edt_1d(const double* f, double* d, int n, double step, std::vector<int>& v,
     }
     ++k;
     v[k] = q;
-    z[k] = k == 0 ? -kInf : ((f[q] + pq * pq) - (f[v[k - 1]] + (v[k - 1] * step) * (v[k - 1] * step))) /
-                                (2 * pq - 2 * v[k - 1] * step);
+    z[k] = k == 0 ? -kInf
+                  : ((f[q] + pq * pq) - (f[v[k - 1]] + (v[k - 1] * step) * (v[k - 1] * step))) /
+                        (2 * pq - 2 * v[k - 1] * step);
     z[k + 1] = kInf;
   }
   if (k < 0) {
@@ -39,7 +40,8 @@ void edt_1d(const double* f, double* d, int n, double step, std::vector<int>& v,
   }
   int j = 0;
   for (int q = 0; q < n; ++q) {
-    while (z[j + 1] < q * step) ++j;
+    while (z[j + 1] < q * step)
+      ++j;
     const double dq = (q - v[j]) * step;
     d[q] = dq * dq + f[v[j]];
   }
@@ -53,7 +55,8 @@ std::vector<double> squared_distance_transform(const std::vector<std::uint8_t>& 
   const size_t total = static_cast<size_t>(g.voxel_count());
   if (feature.size() != total) throw std::invalid_argument("distance transform: size mismatch");
   std::vector<double> d(total);
-  for (size_t i = 0; i < total; ++i) d[i] = feature[i] ? 0.0 : kInf;
+  for (size_t i = 0; i < total; ++i)
+    d[i] = feature[i] ? 0.0 : kInf;
   const int dims[3] = {nx, ny, nz};
   const long long strides[3] = {1, nx, 1LL * nx * ny};
   for (int axis = 0; axis < 3; ++axis) {
@@ -65,9 +68,11 @@ std::vector<double> squared_distance_transform(const std::vector<std::uint8_t>& 
     for (int p = 0; p < dims[a1]; ++p)
       for (int q = 0; q < dims[a2]; ++q) {
         const long long base = p * strides[a1] + q * strides[a2];
-        for (int t = 0; t < n; ++t) line[t] = d[base + t * stride];
+        for (int t = 0; t < n; ++t)
+          line[t] = d[base + t * stride];
         edt_1d(line.data(), out.data(), n, g.spacing_mm[axis], v, z);
-        for (int t = 0; t < n; ++t) d[base + t * stride] = out[t];
+        for (int t = 0; t < n; ++t)
+          d[base + t * stride] = out[t];
       }
   }
   return d;
@@ -79,7 +84,8 @@ ImageGeometry grid_covering(const Aabb& box, double voxel_mm, double margin_mm) 
   g.spacing_mm = Eigen::Vector3d::Constant(voxel_mm);
   const Eigen::Vector3d lo = box.min_mm.array() - margin_mm;
   const Eigen::Vector3d hi = box.max_mm.array() + margin_mm;
-  for (int d = 0; d < 3; ++d) g.size[d] = std::max(1, static_cast<int>(std::ceil((hi[d] - lo[d]) / voxel_mm)) + 1);
+  for (int d = 0; d < 3; ++d)
+    g.size[d] = std::max(1, static_cast<int>(std::ceil((hi[d] - lo[d]) / voxel_mm)) + 1);
   g.origin_mm = lo;
   return g;
 }
@@ -112,13 +118,15 @@ void close_mask(LabelVolume& mask, double radius_mm) {
   const double r2 = radius_mm * radius_mm;
   const auto to_body = squared_distance_transform(mask.labels, mask.geometry);
   std::vector<std::uint8_t> outside(mask.labels.size());
-  for (size_t i = 0; i < outside.size(); ++i) outside[i] = to_body[i] > r2;  // complement of dilation
+  for (size_t i = 0; i < outside.size(); ++i)
+    outside[i] = to_body[i] > r2;  // complement of dilation
   const auto to_outside = squared_distance_transform(outside, mask.geometry);
-  for (size_t i = 0; i < outside.size(); ++i) mask.labels[i] = to_outside[i] > r2;
+  for (size_t i = 0; i < outside.size(); ++i)
+    mask.labels[i] = to_outside[i] > r2;
 }
 
-LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm, double closing_mm,
-                                const ImageGeometry& grid) {
+LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm,
+                                double closing_mm, const ImageGeometry& grid) {
   LabelVolume out(grid);
   if (centres.cols() == 0) return out;
   // Index box of the balls grown by the closing (and a voxel), clamped to the grid.
@@ -138,13 +146,15 @@ LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_m
     if (lo[d] > hi[d]) return out;  // entirely off the grid
   }
   ImageGeometry sub = grid;
-  for (int d = 0; d < 3; ++d) sub.size[d] = hi[d] - lo[d] + 1;
+  for (int d = 0; d < 3; ++d)
+    sub.size[d] = hi[d] - lo[d] + 1;
   sub.origin_mm = grid.index_to_physical(Eigen::Vector3d(lo[0], lo[1], lo[2]));
   LabelVolume part = rasterize_balls(centres, radius_mm, sub);
   close_mask(part, closing_mm);
   for (int k = 0; k < sub.size[2]; ++k)
     for (int j = 0; j < sub.size[1]; ++j)
-      for (int i = 0; i < sub.size[0]; ++i) out.at(lo[0] + i, lo[1] + j, lo[2] + k) = part.at(i, j, k);
+      for (int i = 0; i < sub.size[0]; ++i)
+        out.at(lo[0] + i, lo[1] + j, lo[2] + k) = part.at(i, j, k);
   return out;
 }
 
@@ -186,7 +196,8 @@ SurfaceComparison compare_masks(const LabelVolume& a, const LabelVolume& b) {
   r.dice = na + nb > 0 ? 2.0 * inter / static_cast<double>(na + nb) : 1.0;
   if (!dist.empty()) {
     double sum = 0;
-    for (double d : dist) sum += d;
+    for (double d : dist)
+      sum += d;
     r.msd_mm = sum / static_cast<double>(dist.size());
     const size_t k = static_cast<size_t>(std::ceil(0.95 * dist.size())) - 1;
     std::nth_element(dist.begin(), dist.begin() + k, dist.end());
@@ -204,7 +215,8 @@ Aabb bounds_of(const Eigen::Matrix3Xd& x) {
 double particle_body_volume_mm3(const Eigen::Matrix3Xd& centres, double radius_mm, double voxel_mm,
                                 double closing_mm) {
   if (centres.cols() == 0) return 0.0;
-  const ImageGeometry g = grid_covering(bounds_of(centres), voxel_mm, radius_mm + closing_mm + 2 * voxel_mm);
+  const ImageGeometry g =
+      grid_covering(bounds_of(centres), voxel_mm, radius_mm + closing_mm + 2 * voxel_mm);
   return closed_body_on_grid(centres, radius_mm, closing_mm, g).volume_mm3(1);
 }
 
@@ -215,7 +227,8 @@ SurfaceComparison compare_particle_bodies(const Eigen::Matrix3Xd& a, const Eigen
   box.min_mm = box.min_mm.cwiseMin(bb.min_mm);
   box.max_mm = box.max_mm.cwiseMax(bb.max_mm);
   const ImageGeometry g = grid_covering(box, voxel_mm, radius_mm + closing_mm + 2 * voxel_mm);
-  return compare_masks(closed_body_on_grid(a, radius_mm, closing_mm, g), closed_body_on_grid(b, radius_mm, closing_mm, g));
+  return compare_masks(closed_body_on_grid(a, radius_mm, closing_mm, g),
+                       closed_body_on_grid(b, radius_mm, closing_mm, g));
 }
 
 bool inside_interpolated(const LabelVolume& mask, const Eigen::Vector3d& p_mm) {
@@ -223,11 +236,14 @@ bool inside_interpolated(const LabelVolume& mask, const Eigen::Vector3d& p_mm) {
   const Eigen::Vector3d idx = g.physical_to_index(p_mm);
   if (!idx.allFinite()) return false;
   const Eigen::Vector3d base = idx.array().floor();
-  if ((base.array() < -1).any() || base.x() >= g.size[0] || base.y() >= g.size[1] || base.z() >= g.size[2]) return false;
+  if ((base.array() < -1).any() || base.x() >= g.size[0] || base.y() >= g.size[1] ||
+      base.z() >= g.size[2])
+    return false;
   const Eigen::Vector3d t = idx - base;
   double value = 0;
   for (int c = 0; c < 8; ++c) {
-    const int i = static_cast<int>(base.x()) + (c & 1), j = static_cast<int>(base.y()) + ((c >> 1) & 1),
+    const int i = static_cast<int>(base.x()) + (c & 1),
+              j = static_cast<int>(base.y()) + ((c >> 1) & 1),
               k = static_cast<int>(base.z()) + ((c >> 2) & 1);
     if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) continue;
     if (mask.at(i, j, k) != 1) continue;

@@ -11,13 +11,15 @@ using Point = Eigen::Vector2d;
 
 /// Douglas-Peucker on a closed loop (split at its first and farthest point).
 std::vector<Point> thin(const std::vector<Point>& loop, double tol) {
-  auto dp = [&](auto&& self, const std::vector<Point>& pts, size_t a, size_t b, std::vector<char>& keep) -> void {
+  auto dp = [&](auto&& self, const std::vector<Point>& pts, size_t a, size_t b,
+                std::vector<char>& keep) -> void {
     double worst = -1;
     size_t at = a;
     const Point ab = pts[b % pts.size()] - pts[a];
     for (size_t i = a + 1; i < b; ++i) {
       const Point ap = pts[i] - pts[a];
-      const double d = ab.norm() > 0 ? std::abs(ab.x() * ap.y() - ab.y() * ap.x()) / ab.norm() : ap.norm();
+      const double d =
+          ab.norm() > 0 ? std::abs(ab.x() * ap.y() - ab.y() * ap.x()) / ab.norm() : ap.norm();
       if (d > worst) worst = d, at = i;
     }
     if (worst > tol) {
@@ -41,7 +43,8 @@ std::vector<Point> thin(const std::vector<Point>& loop, double tol) {
 
 }  // namespace
 
-std::vector<SliceContour> slice_contours(const LabelVolume& mask, std::uint8_t label, int max_points) {
+std::vector<SliceContour> slice_contours(const LabelVolume& mask, std::uint8_t label,
+                                         int max_points) {
   const ImageGeometry& g = mask.geometry;
   std::vector<SliceContour> out;
   auto in = [&](int i, int j, int k) {
@@ -54,7 +57,8 @@ std::vector<SliceContour> slice_contours(const LabelVolume& mask, std::uint8_t l
     bool any = false;
     for (int j = -1; j < g.size[1]; ++j)
       for (int i = -1; i < g.size[0]; ++i) {
-        const bool a = in(i, j, k), b = in(i + 1, j, k), c = in(i + 1, j + 1, k), d = in(i, j + 1, k);
+        const bool a = in(i, j, k), b = in(i + 1, j, k), c = in(i + 1, j + 1, k),
+                   d = in(i, j + 1, k);
         const int code = a | (b << 1) | (c << 2) | (d << 3);
         if (code == 0 || code == 15) continue;
         any = true;
@@ -65,14 +69,36 @@ std::vector<SliceContour> slice_contours(const LabelVolume& mask, std::uint8_t l
           links.insert({q, p});
         };
         switch (code) {
-          case 1: case 14: seg(left, bottom); break;
-          case 2: case 13: seg(bottom, right); break;
-          case 4: case 11: seg(right, top); break;
-          case 8: case 7: seg(top, left); break;
-          case 3: case 12: seg(left, right); break;
-          case 6: case 9: seg(bottom, top); break;
-          case 5: seg(left, bottom), seg(right, top); break;   // saddles: inside corners kept apart
-          case 10: seg(bottom, right), seg(top, left); break;
+          case 1:
+          case 14:
+            seg(left, bottom);
+            break;
+          case 2:
+          case 13:
+            seg(bottom, right);
+            break;
+          case 4:
+          case 11:
+            seg(right, top);
+            break;
+          case 8:
+          case 7:
+            seg(top, left);
+            break;
+          case 3:
+          case 12:
+            seg(left, right);
+            break;
+          case 6:
+          case 9:
+            seg(bottom, top);
+            break;
+          case 5:
+            seg(left, bottom), seg(right, top);
+            break;  // saddles: inside corners kept apart
+          case 10:
+            seg(bottom, right), seg(top, left);
+            break;
         }
       }
     if (!any) continue;
@@ -102,13 +128,15 @@ std::vector<SliceContour> slice_contours(const LabelVolume& mask, std::uint8_t l
       }
       // To continuous voxel indices; drop vertices on straight runs (exact).
       std::vector<Point> pts;
-      for (const auto& key : loop) pts.emplace_back(0.5 * key.first, 0.5 * key.second);
+      for (const auto& key : loop)
+        pts.emplace_back(0.5 * key.first, 0.5 * key.second);
       std::vector<Point> kept;
       for (size_t p = 0; p < pts.size(); ++p) {
         const Point& a = pts[(p + pts.size() - 1) % pts.size()];
         const Point& b = pts[p];
         const Point& c = pts[(p + 1) % pts.size()];
-        if (std::abs((b - a).x() * (c - b).y() - (b - a).y() * (c - b).x()) > 1e-12) kept.push_back(b);
+        if (std::abs((b - a).x() * (c - b).y() - (b - a).y() * (c - b).x()) > 1e-12)
+          kept.push_back(b);
       }
       SliceContour contour;
       contour.k = k;
@@ -118,7 +146,8 @@ std::vector<SliceContour> slice_contours(const LabelVolume& mask, std::uint8_t l
         contour.thinning_tolerance_mm = tol * g.spacing_mm.head<2>().maxCoeff();
         tol *= 2;
       }
-      for (const auto& p : kept) contour.points_mm.push_back(g.index_to_physical(Eigen::Vector3d(p.x(), p.y(), k)));
+      for (const auto& p : kept)
+        contour.points_mm.push_back(g.index_to_physical(Eigen::Vector3d(p.x(), p.y(), k)));
       if (contour.points_mm.size() >= 3) out.push_back(std::move(contour));
     }
   }

@@ -14,7 +14,8 @@ TEST(DistanceTransform, MatchesBruteForceOnAnisotropicGrid) {
   g.spacing_mm = {0.5, 0.8, 1.3};
   std::vector<std::uint8_t> f(g.voxel_count(), 0);
   std::mt19937 rng(3);
-  for (auto& v : f) v = (rng() % 37) == 0;
+  for (auto& v : f)
+    v = (rng() % 37) == 0;
   const auto d = squared_distance_transform(f, g);
   for (int k = 0; k < 7; ++k)
     for (int j = 0; j < 9; ++j)
@@ -24,7 +25,8 @@ TEST(DistanceTransform, MatchesBruteForceOnAnisotropicGrid) {
           for (int b = 0; b < 9; ++b)
             for (int a = 0; a < 13; ++a)
               if (f[g.linear_index(a, b, c)]) {
-                const Eigen::Vector3d dv = g.spacing_mm.cwiseProduct(Eigen::Vector3d(a - i, b - j, c - k));
+                const Eigen::Vector3d dv =
+                    g.spacing_mm.cwiseProduct(Eigen::Vector3d(a - i, b - j, c - k));
                 best = std::min(best, dv.squaredNorm());
               }
         EXPECT_NEAR(d[g.linear_index(i, j, k)], best, 1e-9);
@@ -32,7 +34,8 @@ TEST(DistanceTransform, MatchesBruteForceOnAnisotropicGrid) {
 }
 
 TEST(MaskOps, BallVolumeAndSurfaceDistanceOfConcentricSpheres) {
-  const ImageGeometry g = grid_covering({Eigen::Vector3d::Constant(-12), Eigen::Vector3d::Constant(12)}, 0.25, 1);
+  const ImageGeometry g =
+      grid_covering({Eigen::Vector3d::Constant(-12), Eigen::Vector3d::Constant(12)}, 0.25, 1);
   Eigen::Matrix3Xd c = Eigen::Matrix3Xd::Zero(3, 1);
   const LabelVolume a = rasterize_balls(c, 10.0, g), b = rasterize_balls(c, 8.0, g);
   EXPECT_NEAR(a.volume_mm3(1), 4.0 / 3 * M_PI * 1000, 0.01 * 4.0 / 3 * M_PI * 1000);
@@ -57,7 +60,8 @@ TEST(MaskOps, BallsOnARotatedGridLandWhereThePhysicalBallIs) {
   for (int k = 0; k < 30; ++k)
     for (int j = 0; j < 30; ++j)
       for (int i = 0; i < 30; ++i)
-        if (m.at(i, j, k)) EXPECT_LE((g.index_to_physical(Eigen::Vector3d(i, j, k)) - centre).norm(), 5.0 + 1e-9);
+        if (m.at(i, j, k))
+          EXPECT_LE((g.index_to_physical(Eigen::Vector3d(i, j, k)) - centre).norm(), 5.0 + 1e-9);
 }
 
 TEST(MaskOps, ClosedBodyOnALargeGridEqualsClosingTheWholeGrid) {
@@ -69,13 +73,15 @@ TEST(MaskOps, ClosedBodyOnALargeGridEqualsClosingTheWholeGrid) {
   int n = 0;
   for (int k = 0; k < 3; ++k)
     for (int j = 0; j < 3; ++j)
-      for (int i = 0; i < 3; ++i) c.col(n++) = Eigen::Vector3d(2.0 * i, 2.0 * j, 2.0 * k + 20);
+      for (int i = 0; i < 3; ++i)
+        c.col(n++) = Eigen::Vector3d(2.0 * i, 2.0 * j, 2.0 * k + 20);
   LabelVolume whole = rasterize_balls(c, 1.0, g);
   close_mask(whole, 1.0);
   const LabelVolume cropped = closed_body_on_grid(c, 1.0, 1.0, g);
   EXPECT_GT(whole.count(1), 0);
   EXPECT_EQ(cropped.labels, whole.labels);
-  EXPECT_EQ(closed_body_on_grid(Eigen::Matrix3Xd::Constant(3, 1, 1e4), 1.0, 1.0, g).count(1), 0);  // off the grid
+  EXPECT_EQ(closed_body_on_grid(Eigen::Matrix3Xd::Constant(3, 1, 1e4), 1.0, 1.0, g).count(1),
+            0);  // off the grid
 }
 
 TEST(MaskOps, ClosingFillsTheGapsOfAPackingButNotItsOutline) {
@@ -85,7 +91,8 @@ TEST(MaskOps, ClosingFillsTheGapsOfAPackingButNotItsOutline) {
   int n = 0;
   for (int k = 0; k < 10; ++k)
     for (int j = 0; j < 10; ++j)
-      for (int i = 0; i < 10; ++i) c.col(n++) = Eigen::Vector3d(2 * i + 1, 2 * j + 1, 2 * k + 1);
+      for (int i = 0; i < 10; ++i)
+        c.col(n++) = Eigen::Vector3d(2 * i + 1, 2 * j + 1, 2 * k + 1);
   const double open = particle_body_volume_mm3(c, 1.0, 0.2, 0.0);
   const double closed = particle_body_volume_mm3(c, 1.0, 0.2, 1.5);
   // Discretisation: a ball of radius 5 voxels holds 515 voxel centres (523.6 in the

@@ -31,7 +31,8 @@ typename Image::Pointer allocate(const PlainGeometry& g) {
     size[d] = static_cast<itk::SizeValueType>(g.size[d]);
     spacing[d] = g.spacing_mm[d];
     origin[d] = g.origin_mm[d];
-    for (unsigned e = 0; e < 3; ++e) direction(d, e) = g.direction[3 * d + e];
+    for (unsigned e = 0; e < 3; ++e)
+      direction(d, e) = g.direction[3 * d + e];
   }
   region.SetSize(size);
   image->SetRegions(region);
@@ -50,7 +51,8 @@ PlainGeometry geometry_of(const Image* image) {
     g.size[d] = static_cast<int>(size[d]);
     g.spacing_mm[d] = image->GetSpacing()[d];
     g.origin_mm[d] = image->GetOrigin()[d];
-    for (unsigned e = 0; e < 3; ++e) g.direction[3 * d + e] = image->GetDirection()(d, e);
+    for (unsigned e = 0; e < 3; ++e)
+      g.direction[3 * d + e] = image->GetDirection()(d, e);
   }
   return g;
 }
@@ -96,8 +98,10 @@ PlainMask to_plain(const MaskImage* image) {
 void write_mask(const fs::path& file, const PlainMask& mask) {
   const std::string name = file.filename().string();
   const char* known[] = {".nrrd", ".nhdr", ".mha", ".mhd", ".nii", ".nii.gz"};
-  if (std::none_of(std::begin(known), std::end(known), [&](const char* e) { return ends_with(name, e); }))
-    throw InputError(file.string() + ": unknown image format (use .nrrd, .nhdr, .mha, .mhd, .nii or .nii.gz)");
+  if (std::none_of(std::begin(known), std::end(known),
+                   [&](const char* e) { return ends_with(name, e); }))
+    throw InputError(file.string() +
+                     ": unknown image format (use .nrrd, .nhdr, .mha, .mhd, .nii or .nii.gz)");
   register_formats();
   TempPath temp(file);
   auto writer = itk::ImageFileWriter<MaskImage>::New();

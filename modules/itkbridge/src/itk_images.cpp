@@ -9,7 +9,8 @@ PlainGeometry to_plain(const geometry::ImageGeometry& g) {
   for (int d = 0; d < 3; ++d) {
     p.spacing_mm[d] = g.spacing_mm[d];
     p.origin_mm[d] = g.origin_mm[d];
-    for (int e = 0; e < 3; ++e) p.direction[3 * d + e] = g.direction(d, e);
+    for (int e = 0; e < 3; ++e)
+      p.direction[3 * d + e] = g.direction(d, e);
   }
   return p;
 }
@@ -20,12 +21,15 @@ geometry::ImageGeometry from_plain(const PlainGeometry& p) {
   for (int d = 0; d < 3; ++d) {
     g.spacing_mm[d] = p.spacing_mm[d];
     g.origin_mm[d] = p.origin_mm[d];
-    for (int e = 0; e < 3; ++e) g.direction(d, e) = p.direction[3 * d + e];
+    for (int e = 0; e < 3; ++e)
+      g.direction(d, e) = p.direction[3 * d + e];
   }
   return g;
 }
 
-PlainMask to_plain(const geometry::LabelVolume& labels) { return {to_plain(labels.geometry), labels.labels}; }
+PlainMask to_plain(const geometry::LabelVolume& labels) {
+  return {to_plain(labels.geometry), labels.labels};
+}
 
 geometry::LabelVolume from_plain(const PlainMask& mask) {
   geometry::LabelVolume out(from_plain(mask.geometry));
@@ -37,7 +41,9 @@ void write_label_volume(const std::filesystem::path& file, const geometry::Label
   write_mask(file, to_plain(labels));
 }
 
-geometry::LabelVolume read_label_volume(const std::filesystem::path& file) { return from_plain(read_mask(file)); }
+geometry::LabelVolume read_label_volume(const std::filesystem::path& file) {
+  return from_plain(read_mask(file));
+}
 
 ScalarImage read_scalar_image(const std::filesystem::path& file) {
   PlainFloatImage plain = read_float_image(file);

@@ -19,7 +19,8 @@ TEST(ThinPlateSpline, InterpolatesItsLandmarksAndRefusesTooFew) {
   const ThinPlateSpline tps(src, dst);
   for (size_t i = 0; i < src.size(); ++i) {
     const auto q = tps.apply(src[i]);
-    for (int d = 0; d < 3; ++d) EXPECT_NEAR(q[d], dst[i][d], 1e-6);
+    for (int d = 0; d < 3; ++d)
+      EXPECT_NEAR(q[d], dst[i][d], 1e-6);
   }
   EXPECT_THROW(ThinPlateSpline({{0, 0, 0}}, {{1, 1, 1}}), InputError);
 }

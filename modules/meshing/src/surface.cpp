@@ -14,7 +14,8 @@ PlainMask plain(const geometry::LabelVolume& mask) {
   for (int d = 0; d < 3; ++d) {
     m.spacing_mm[d] = g.spacing_mm[d];
     m.origin_mm[d] = g.origin_mm[d];
-    for (int e = 0; e < 3; ++e) m.direction[3 * d + e] = g.direction(d, e);
+    for (int e = 0; e < 3; ++e)
+      m.direction[3 * d + e] = g.direction(d, e);
   }
   m.labels = mask.labels;
   return m;

@@ -43,8 +43,10 @@ PlainPointSet vtk_read_points(const std::string& file) {
     throw InputError(file + ": unknown point-set format (use .csv, .ply, .vtk or .vtp)");
   }
   PlainPointSet out;
-  if (!poly || poly->GetNumberOfPoints() == 0) throw InputError(file + ": no points (or not readable)");
-  vtkDataArray* confidence = poly->GetPointData() ? poly->GetPointData()->GetArray("confidence") : nullptr;
+  if (!poly || poly->GetNumberOfPoints() == 0)
+    throw InputError(file + ": no points (or not readable)");
+  vtkDataArray* confidence =
+      poly->GetPointData() ? poly->GetPointData()->GetArray("confidence") : nullptr;
   for (vtkIdType i = 0; i < poly->GetNumberOfPoints(); ++i) {
     double p[3];
     poly->GetPoint(i, p);

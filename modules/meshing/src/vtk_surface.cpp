@@ -8,12 +8,12 @@
 #include <vtkNew.h>
 #include <vtkOBJWriter.h>
 #include <vtkPLYWriter.h>
+#include <vtkPointData.h>
 #include <vtkPolyData.h>
 #include <vtkPolyDataNormals.h>
 #include <vtkSTLWriter.h>
 #include <vtkTriangleFilter.h>
 #include <vtkUnsignedCharArray.h>
-#include <vtkPointData.h>
 #include <vtkWindowedSincPolyDataFilter.h>
 #include <vtkXMLPolyDataWriter.h>
 
@@ -46,7 +46,9 @@ double signed_volume(vtkPolyData* poly) {
     poly->GetPoint(ids[0], a);
     poly->GetPoint(ids[1], b);
     poly->GetPoint(ids[2], c);
-    v += (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])) / 6.0;
+    v += (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+          a[2] * (b[0] * c[1] - b[1] * c[0])) /
+         6.0;
   }
   return v;
 }
@@ -54,9 +56,10 @@ double signed_volume(vtkPolyData* poly) {
 }  // namespace
 
 PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file, bool keep_mesh) {
-  const bool stl = ends_with(file, ".stl"), vtp = ends_with(file, ".vtp"), ply = ends_with(file, ".ply"),
-             obj = ends_with(file, ".obj");
-  if (!file.empty() && !stl && !vtp && !ply && !obj) throw InputError(file + ": unknown mesh format (use .stl, .vtp, .ply or .obj)");
+  const bool stl = ends_with(file, ".stl"), vtp = ends_with(file, ".vtp"),
+             ply = ends_with(file, ".ply"), obj = ends_with(file, ".obj");
+  if (!file.empty() && !stl && !vtp && !ply && !obj)
+    throw InputError(file + ": unknown mesh format (use .stl, .vtp, .ply or .obj)");
   // Pad by one empty voxel all round so the surface closes at the grid border.
   const int nx = m.size[0] + 2, ny = m.size[1] + 2, nz = m.size[2] + 2;
   vtkNew<vtkImageData> image;
@@ -65,12 +68,14 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
   double origin[3];
   for (int d = 0; d < 3; ++d) {  // origin of the padded grid: one voxel back along each axis
     origin[d] = m.origin_mm[d];
-    for (int e = 0; e < 3; ++e) origin[d] -= m.direction[3 * d + e] * m.spacing_mm[e];
+    for (int e = 0; e < 3; ++e)
+      origin[d] -= m.direction[3 * d + e] * m.spacing_mm[e];
   }
   image->SetOrigin(origin);
   vtkNew<vtkMatrix3x3> direction;
   for (int d = 0; d < 3; ++d)
-    for (int e = 0; e < 3; ++e) direction->SetElement(d, e, m.direction[3 * d + e]);
+    for (int e = 0; e < 3; ++e)
+      direction->SetElement(d, e, m.direction[3 * d + e]);
   image->SetDirectionMatrix(direction);
   vtkNew<vtkUnsignedCharArray> scalars;
   scalars->SetNumberOfTuples(static_cast<vtkIdType>(nx) * ny * nz);
@@ -79,9 +84,12 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
   for (int k = 0; k < m.size[2]; ++k)
     for (int j = 0; j < m.size[1]; ++j)
       for (int i = 0; i < m.size[0]; ++i) {
-        const unsigned char v = m.labels[i + static_cast<size_t>(m.size[0]) * (j + static_cast<size_t>(m.size[1]) * k)] == 1;
+        const unsigned char v = m.labels[i + static_cast<size_t>(m.size[0]) *
+                                                 (j + static_cast<size_t>(m.size[1]) * k)] == 1;
         inside += v;
-        scalars->SetValue((i + 1) + static_cast<vtkIdType>(nx) * ((j + 1) + static_cast<vtkIdType>(ny) * (k + 1)), v);
+        scalars->SetValue(
+            (i + 1) + static_cast<vtkIdType>(nx) * ((j + 1) + static_cast<vtkIdType>(ny) * (k + 1)),
+            v);
       }
   if (inside == 0) throw InputError(file + ": the organ mask is empty, no surface to write");
   image->GetPointData()->SetScalars(scalars);
@@ -134,7 +142,8 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
     for (vtkIdType p = 0; p < surface->GetNumberOfPoints(); ++p) {
       double x[3];
       surface->GetPoint(p, x);
-      for (double v : x) report.vertex_mm.push_back(static_cast<float>(v));
+      for (double v : x)
+        report.vertex_mm.push_back(static_cast<float>(v));
     }
     vtkCellArray* polys = surface->GetPolys();
     vtkIdType n = 0;
@@ -142,7 +151,8 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
     polys->InitTraversal();
     while (polys->GetNextCell(n, ids))
       if (n == 3)
-        for (int c = 0; c < 3; ++c) report.triangle_ids.push_back(static_cast<int>(ids[c]));
+        for (int c = 0; c < 3; ++c)
+          report.triangle_ids.push_back(static_cast<int>(ids[c]));
   }
   if (file.empty()) return report;
 

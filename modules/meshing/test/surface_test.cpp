@@ -34,7 +34,8 @@ TEST(Surface, WatertightManifoldOutwardAndEnclosingTheMasksVolume) {
   fs::create_directories(dir);
   for (const Eigen::Matrix3d& dir_matrix :
        {Eigen::Matrix3d(Eigen::Matrix3d::Identity()),
-        Eigen::Matrix3d(Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix())}) {
+        Eigen::Matrix3d(
+            Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix())}) {
     const geometry::LabelVolume mask = ellipsoid_mask(dir_matrix);
     for (const char* name : {"s.stl", "s.vtp", "s.ply", "s.obj"}) {
       const SurfaceReport r = write_surface(mask, dir / name);
@@ -45,11 +46,13 @@ TEST(Surface, WatertightManifoldOutwardAndEnclosingTheMasksVolume) {
       EXPECT_GT(fs::file_size(dir / name), 1000u);
     }
   }
-  EXPECT_THROW(write_surface(ellipsoid_mask(Eigen::Matrix3d::Identity()), dir / "s.xyz"), InputError);
+  EXPECT_THROW(write_surface(ellipsoid_mask(Eigen::Matrix3d::Identity()), dir / "s.xyz"),
+               InputError);
   geometry::ImageGeometry g;
   g.size = {4, 4, 4};
   EXPECT_THROW(write_surface(geometry::LabelVolume(g), dir / "e.stl"), InputError);
-  EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()), 4);  // no temporaries
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()),
+            4);  // no temporaries
   fs::remove_all(dir);
 }
 

@@ -20,8 +20,9 @@ LennardJones::LennardJones(const CohesionParams& p) : p_(p) {
   if (!(p.E0 > 0) || !std::isfinite(p.E0)) bad("E0 must be > 0");
   if (!(p.r0_mm > 0) || !std::isfinite(p.r0_mm)) bad("r0 must be > 0 mm");
   if (p.m < 1) bad("m must be >= 1");
-  if (p.n <= p.m) bad("n must be greater than m (got m=" + std::to_string(p.m) +
-                      ", n=" + std::to_string(p.n) + ")");
+  if (p.n <= p.m)
+    bad("n must be greater than m (got m=" + std::to_string(p.m) + ", n=" + std::to_string(p.n) +
+        ")");
   if (p.n > 64) bad("n must be <= 64");
   if (!(p.floor_r0 > 0 && p.floor_r0 < 1)) bad("floor must be in (0, 1) r0");
   const double rmin = cohesion_r_min(p.m, p.n, 1.0);

@@ -158,8 +158,13 @@ void block_pairs(int s_begin, int s_end, const Kernel kernel, const PairArrays a
 
 template <class Kernel, bool kDamped>
 double CohesionForce::pair_loop(const Kernel& kernel, bool want_energy) {
-  const PairArrays arrays{list_.neighbours().data(), list_.first().data(), list_.order().data(),
-                          xs_.data(), vs_.data(), fs_.data(), es_.data()};
+  const PairArrays arrays{list_.neighbours().data(),
+                          list_.first().data(),
+                          list_.order().data(),
+                          xs_.data(),
+                          vs_.data(),
+                          fs_.data(),
+                          es_.data()};
   const double rc2 = law_.cutoff() * law_.cutoff();
   const double rf2 = law_.floor_distance() * law_.floor_distance();
   const double eps = 1e-9 * law_.r0();
@@ -180,7 +185,8 @@ double CohesionForce::pair_loop(const Kernel& kernel, bool want_energy) {
   }
   double energy = 0;
   if (want_energy)
-    for (double e : es_) energy += e;  // serial: the same order for any thread count
+    for (double e : es_)
+      energy += e;  // serial: the same order for any thread count
   return energy;
 }
 
@@ -197,9 +203,11 @@ double CohesionForce::add_forces(const State& state, Forces& f, bool want_energy
 #pragma omp parallel for schedule(static) if (n >= kParallelMinParticles)
   for (int s = 0; s < n; ++s) {
     const int i = order[s];
-    for (int d = 0; d < 3; ++d) xs_[3 * s + d] = state.x(d, i);
+    for (int d = 0; d < 3; ++d)
+      xs_[3 * s + d] = state.x(d, i);
     if (damped)
-      for (int d = 0; d < 3; ++d) vs_[3 * s + d] = state.v(d, i);
+      for (int d = 0; d < 3; ++d)
+        vs_[3 * s + d] = state.v(d, i);
   }
 
   const auto& p = law_.params();
@@ -223,7 +231,8 @@ double CohesionForce::add_forces(const State& state, Forces& f, bool want_energy
 #pragma omp parallel for schedule(static) if (n >= kParallelMinParticles)
   for (int s = 0; s < n; ++s) {
     const int i = order[s];
-    for (int d = 0; d < 3; ++d) f(d, i) += fs_[3 * s + d];
+    for (int d = 0; d < 3; ++d)
+      f(d, i) += fs_[3 * s + d];
   }
   return energy;
 }

@@ -12,7 +12,8 @@
 namespace organfit::particles {
 namespace {
 int find_root(std::vector<int>& parent, int i) {
-  while (parent[i] != i) i = parent[i] = parent[parent[i]];
+  while (parent[i] != i)
+    i = parent[i] = parent[parent[i]];
   return i;
 }
 }  // namespace
@@ -36,7 +37,8 @@ std::vector<int> component_roots(const Positions& x, double link_mm) {
       parent[find_root(parent, i)] = find_root(parent, j);
     }
   }
-  for (int i = 0; i < n; ++i) parent[i] = find_root(parent, i);
+  for (int i = 0; i < n; ++i)
+    parent[i] = find_root(parent, i);
   return parent;
 }
 }  // namespace
@@ -44,14 +46,16 @@ std::vector<int> component_roots(const Positions& x, double link_mm) {
 int connected_components(const Positions& x, double link_mm) {
   const std::vector<int> root = component_roots(x, link_mm);
   int components = 0;
-  for (int i = 0; i < static_cast<int>(root.size()); ++i) components += root[i] == i;
+  for (int i = 0; i < static_cast<int>(root.size()); ++i)
+    components += root[i] == i;
   return components;
 }
 
 std::vector<int> largest_component(const Positions& x, double link_mm) {
   const std::vector<int> root = component_roots(x, link_mm);
   std::vector<int> size(root.size(), 0);
-  for (int r : root) ++size[r];
+  for (int r : root)
+    ++size[r];
   const int biggest = static_cast<int>(std::max_element(size.begin(), size.end()) - size.begin());
   std::vector<int> members;
   for (int i = 0; i < static_cast<int>(root.size()); ++i)

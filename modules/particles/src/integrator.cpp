@@ -63,8 +63,8 @@ Integrator::Integrator(Model& model, const IntegratorOptions& options)
   }
   if (!(dt > 0) || !std::isfinite(dt)) bad("time step must be > 0 s");
   if (dt >= limit) {
-    bad("time step " + std::to_string(dt) + " s is at or beyond the stability limit 2 sqrt(M/k) = " +
-        std::to_string(limit) + " s");
+    bad("time step " + std::to_string(dt) +
+        " s is at or beyond the stability limit 2 sqrt(M/k) = " + std::to_string(limit) + " s");
   }
   stats_.time_step_s = dt;
 }
@@ -109,7 +109,8 @@ void Integrator::run(State& state, long long steps,
   if (!forces_ready_ || f_.cols() != n) refresh_forces(state);
   const double inv_m = 1.0 / model_.mass();
   const long long target = stats_.steps + steps;
-  const long long allowed = std::max<long long>(kCapCountTolerated, std::llround(kCapFractionUnstable * n));
+  const long long allowed =
+      std::max<long long>(kCapCountTolerated, std::llround(kCapFractionUnstable * n));
   State checkpoint = state;
   Forces checkpoint_f = f_;
   long long checkpoint_steps = stats_.steps;
@@ -122,7 +123,7 @@ void Integrator::run(State& state, long long steps,
     const double dt = stats_.time_step_s;
     const double half = 0.5 * dt;
     long long capped = 0;
-    state.v += (half * inv_m) * f_;  // B
+    state.v += (half * inv_m) * f_;   // B
     drift_half(state, half, capped);  // A
     if (options_.damping > 0) {       // O: exact -K_a v (and Langevin noise if kT > 0)
       const double c = std::exp(-options_.damping * dt * inv_m);
@@ -146,10 +147,9 @@ void Integrator::run(State& state, long long steps,
 
     const bool finite = std::isfinite(state.x.sum()) && std::isfinite(state.v.sum());
     if (!finite || capped > allowed) {
-      const std::string why =
-          !finite ? "the state became non-finite"
-                  : "the displacement cap acted on " + std::to_string(capped) + " of " +
-                        std::to_string(n) + " particles in one step";
+      const std::string why = !finite ? "the state became non-finite"
+                                      : "the displacement cap acted on " + std::to_string(capped) +
+                                            " of " + std::to_string(n) + " particles in one step";
       if (!options_.adapt_time_step || stats_.time_step_halvings >= kMaxHalvings) {
         throw StabilityError("unstable at step " + std::to_string(stats_.steps) + ": " + why +
                              " (time step " + std::to_string(dt) + " s); reduce the time step");
@@ -166,8 +166,8 @@ void Integrator::run(State& state, long long steps,
   }
 }
 
-RelaxResult relax(Model& model, State& state, const IntegratorOptions& options,
-                  long long max_steps, double ke_tolerance) {
+RelaxResult relax(Model& model, State& state, const IntegratorOptions& options, long long max_steps,
+                  double ke_tolerance) {
   Integrator integrator(model, options);
   RelaxResult result;
   const int n = std::max(1, state.size());

@@ -48,7 +48,8 @@ Positions fcc_lattice_points(const geometry::Aabb& box, const Eigen::Vector3d& c
     for (int j = lo.y(); j <= hi.y(); ++j)
       for (int i = lo.x(); i <= hi.x(); ++i)
         for (const auto& b : kFccBasis) {
-          const Eigen::Vector3d p = centre_mm + cube * Eigen::Vector3d(i + b[0], j + b[1], k + b[2]);
+          const Eigen::Vector3d p =
+              centre_mm + cube * Eigen::Vector3d(i + b[0], j + b[1], k + b[2]);
           if ((p.array() < box.min_mm.array() - tol).any() ||
               (p.array() > box.max_mm.array() + tol).any())
             continue;
@@ -61,7 +62,8 @@ Positions fcc_lattice_points(const geometry::Aabb& box, const Eigen::Vector3d& c
     return a.x() < b.x();
   });
   Positions out(3, static_cast<Eigen::Index>(pts.size()));
-  for (size_t i = 0; i < pts.size(); ++i) out.col(static_cast<Eigen::Index>(i)) = pts[i];
+  for (size_t i = 0; i < pts.size(); ++i)
+    out.col(static_cast<Eigen::Index>(i)) = pts[i];
   return out;
 }
 
@@ -100,9 +102,8 @@ Positions fill_mask(const geometry::LabelVolume& mask, std::uint8_t label, doubl
       }
   if (count == 0) return Positions(3, 0);
   const Eigen::Vector3d centre = sum / static_cast<double>(count);
-  return fcc_lattice_points({lo, hi}, centre, a_nn_mm, [&](const Eigen::Vector3d& p) {
-    return mask.at_physical(p) == label;
-  });
+  return fcc_lattice_points({lo, hi}, centre, a_nn_mm,
+                            [&](const Eigen::Vector3d& p) { return mask.at_physical(p) == label; });
 }
 
 }  // namespace organfit::particles

@@ -29,7 +29,8 @@ constexpr long long kMinCellBudget = 4096;
 
 }  // namespace
 
-NeighbourList::NeighbourList(double cutoff_mm, double skin_mm) : cutoff_(cutoff_mm), skin_(skin_mm) {
+NeighbourList::NeighbourList(double cutoff_mm, double skin_mm)
+    : cutoff_(cutoff_mm), skin_(skin_mm) {
   if (!(cutoff_mm > 0) || !std::isfinite(cutoff_mm)) {
     throw std::invalid_argument("neighbour list: cutoff must be > 0 mm");
   }
@@ -81,7 +82,8 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
   const long long budget =
       std::max<long long>(kMinCellBudget, static_cast<long long>(kMaxCellsPerParticle * n));
   for (;;) {
-    for (int d = 0; d < 3; ++d) dims[d] = std::max<long long>(1, std::floor(extent[d] / cell));
+    for (int d = 0; d < 3; ++d)
+      dims[d] = std::max<long long>(1, std::floor(extent[d] / cell));
     if (dims[0] * dims[1] * dims[2] <= budget) break;
     cell *= 1.25;
   }
@@ -110,13 +112,18 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
       const int cy = static_cast<int>((c / nx) % ny), cz = static_cast<int>(c / (1LL * nx * ny));
       return (cy / kBlock) + by * (cz / kBlock);
     };
-    for (long long c = 0; c < ncells; ++c) ++block_fill[block_of(c) + 1];
-    for (long long b = 0; b < nblocks; ++b) block_fill[b + 1] += block_fill[b];
-    for (long long c = 0; c < ncells; ++c) rank[c] = block_fill[block_of(c)]++;
+    for (long long c = 0; c < ncells; ++c)
+      ++block_fill[block_of(c) + 1];
+    for (long long b = 0; b < nblocks; ++b)
+      block_fill[b + 1] += block_fill[b];
+    for (long long c = 0; c < ncells; ++c)
+      rank[c] = block_fill[block_of(c)]++;
   }
   std::vector<int> count(ncells + 1, 0);
-  for (int i = 0; i < n; ++i) ++count[rank[cell_of[i]] + 1];
-  for (long long r = 0; r < ncells; ++r) count[r + 1] += count[r];
+  for (int i = 0; i < n; ++i)
+    ++count[rank[cell_of[i]] + 1];
+  for (long long r = 0; r < ncells; ++r)
+    count[r + 1] += count[r];
   cell_begin_.resize(ncells);
   cell_end_.resize(ncells);
   for (long long c = 0; c < ncells; ++c) {
@@ -125,7 +132,8 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
   }
   {
     std::vector<int> fill(cell_begin_);
-    for (int i = 0; i < n; ++i) order_[fill[cell_of[i]]++] = i;
+    for (int i = 0; i < n; ++i)
+      order_[fill[cell_of[i]]++] = i;
   }
   // Slot range of each block, and the blocks of each colour (block coordinates mod 2).
   block_begin_.assign(nblocks, n);
@@ -206,7 +214,9 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
     const size_t stride = static_cast<size_t>(stride_);
     scratch_.resize(stride * n);
     int overflow = 0;
-#pragma omp parallel for schedule(dynamic, 256) reduction(max : overflow) if (n >= kParallelMinParticles)
+#pragma omp parallel for schedule(dynamic, 256) \
+    reduction(max                               \
+              : overflow) if (n >= kParallelMinParticles)
     for (int s = 0; s < n; ++s) {
       // A rejected candidate may land one past the count: room for it at `last`.
       const int k = visit(s, scratch_.data() + stride * s, stride_ - 1);
@@ -216,7 +226,8 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
     if (overflow <= stride_) break;
     stride_ = overflow + 8;  // rare: denser than ever before; redo with room
   }
-  for (int s = 0; s < n; ++s) first_[s + 1] = first_[s] + counts[s];
+  for (int s = 0; s < n; ++s)
+    first_[s + 1] = first_[s] + counts[s];
   neighbours_.resize(first_[n]);
 #pragma omp parallel for schedule(static) if (n >= kParallelMinParticles)
   for (int s = 0; s < n; ++s) {

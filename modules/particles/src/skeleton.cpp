@@ -46,8 +46,8 @@ namespace {
 /// `graph` joins each point to its close neighbours, `surface` marks the points on the
 /// body's surface, `min_lambda_mm` is the sampling's own scale (see below).
 Skeleton medial_nodes(const Positions& rest, const std::vector<std::vector<int>>& graph,
-                      const std::vector<char>& surface_flags, double min_lambda_mm, double node_spacing_mm,
-                      double cell_mm) {
+                      const std::vector<char>& surface_flags, double min_lambda_mm,
+                      double node_spacing_mm, double cell_mm) {
   const int n = static_cast<int>(rest.cols());
   Skeleton skeleton;
   // Depth and feature: the Euclidean distance to, and index of, the nearest surface
@@ -64,11 +64,21 @@ Skeleton medial_nodes(const Positions& rest, const std::vector<std::vector<int>>
     const Eigen::Vector3d hi = rest.rowwise().maxCoeff();
     const Eigen::Vector3i dims = ((hi - lo) / cell).array().floor().cast<int>() + 1;
     auto cell_of = [&](const Eigen::Vector3d& p) {
-      return ((p - lo) / cell).array().floor().cast<int>().min(dims.array() - 1).max(0).matrix().eval();
+      return ((p - lo) / cell)
+          .array()
+          .floor()
+          .cast<int>()
+          .min(dims.array() - 1)
+          .max(0)
+          .matrix()
+          .eval();
     };
     std::vector<std::vector<int>> bins(static_cast<size_t>(dims.prod()));
-    auto bin_index = [&](const Eigen::Vector3i& c) { return c.x() + dims.x() * (c.y() + dims.y() * c.z()); };
-    for (int i : surface) bins[bin_index(cell_of(rest.col(i)))].push_back(i);
+    auto bin_index = [&](const Eigen::Vector3i& c) {
+      return c.x() + dims.x() * (c.y() + dims.y() * c.z());
+    };
+    for (int i : surface)
+      bins[bin_index(cell_of(rest.col(i)))].push_back(i);
 #pragma omp parallel for schedule(dynamic, 64) if (n >= kParallelMinParticles)
     for (int i = 0; i < n; ++i) {
       const Eigen::Vector3i c = cell_of(rest.col(i));
@@ -76,13 +86,17 @@ Skeleton medial_nodes(const Positions& rest, const std::vector<std::vector<int>>
       int best = -1;
       for (int ring = 0;; ++ring) {
         // Everything within ring * cell has been seen once ring rings are searched.
-        if (best >= 0 && (ring - 1) * cell > 0 && ((ring - 1) * cell) * ((ring - 1) * cell) >= best2) break;
+        if (best >= 0 && (ring - 1) * cell > 0 &&
+            ((ring - 1) * cell) * ((ring - 1) * cell) >= best2)
+          break;
         if (ring > dims.maxCoeff()) break;
         for (int z = c.z() - ring; z <= c.z() + ring; ++z)
           for (int y = c.y() - ring; y <= c.y() + ring; ++y)
             for (int x = c.x() - ring; x <= c.x() + ring; ++x) {
-              if (std::max({std::abs(x - c.x()), std::abs(y - c.y()), std::abs(z - c.z())}) != ring) continue;
-              if (x < 0 || y < 0 || z < 0 || x >= dims.x() || y >= dims.y() || z >= dims.z()) continue;
+              if (std::max({std::abs(x - c.x()), std::abs(y - c.y()), std::abs(z - c.z())}) != ring)
+                continue;
+              if (x < 0 || y < 0 || z < 0 || x >= dims.x() || y >= dims.y() || z >= dims.z())
+                continue;
               for (int j : bins[bin_index({x, y, z})]) {
                 const double d2 = (rest.col(j) - rest.col(i)).squaredNorm();
                 if (d2 < best2 || (d2 == best2 && j < best)) best2 = d2, best = j;
@@ -116,7 +130,8 @@ Skeleton medial_nodes(const Positions& rest, const std::vector<std::vector<int>>
   for (int i = 0; i < n; ++i)
     if (medial[i]) candidates.push_back(i);
   if (candidates.empty()) {  // too thin for a medial axis: one node at the deepest point
-    candidates.push_back(static_cast<int>(std::max_element(depth.begin(), depth.end()) - depth.begin()));
+    candidates.push_back(
+        static_cast<int>(std::max_element(depth.begin(), depth.end()) - depth.begin()));
   }
   // Farthest-point sampling, starting from the deepest ridge point (lowest index on ties).
   std::vector<int> chosen;
@@ -136,7 +151,8 @@ Skeleton medial_nodes(const Positions& rest, const std::vector<std::vector<int>>
     chosen.push_back(candidates[best]);
   }
   skeleton.nodes_mm.resize(3, static_cast<Eigen::Index>(chosen.size()));
-  for (size_t k = 0; k < chosen.size(); ++k) skeleton.nodes_mm.col(k) = rest.col(chosen[k]);
+  for (size_t k = 0; k < chosen.size(); ++k)
+    skeleton.nodes_mm.col(k) = rest.col(chosen[k]);
   return skeleton;
 }
 
@@ -159,7 +175,8 @@ Skeleton medial_skeleton(const Positions& rest, double a_nn_mm, double node_spac
     graph[j].push_back(i);
   });
   std::vector<char> surface(n, 0);
-  for (int i = 0; i < n; ++i) surface[i] = graph[i].size() < 12;
+  for (int i = 0; i < n; ++i)
+    surface[i] = graph[i].size() < 12;
   // Neighbours may pick features up to a + 1.2 a + a apart: lambda >= 2 a.
   return medial_nodes(rest, graph, surface, 2.0 * a_nn_mm, node_spacing_mm, a_nn_mm);
 }
@@ -170,7 +187,8 @@ Skeleton medial_skeleton(const geometry::LabelVolume& mask, double node_spacing_
   std::vector<long long> voxel;  // inside voxels, in index order
   std::vector<int> index_of(mask.labels.size(), -1);
   for (long long v = 0; v < g.voxel_count(); ++v)
-    if (mask.labels[static_cast<size_t>(v)]) index_of[static_cast<size_t>(v)] = static_cast<int>(voxel.size()), voxel.push_back(v);
+    if (mask.labels[static_cast<size_t>(v)])
+      index_of[static_cast<size_t>(v)] = static_cast<int>(voxel.size()), voxel.push_back(v);
   const int n = static_cast<int>(voxel.size());
   if (n == 0) throw std::invalid_argument("skeleton: the mask is empty");
   Positions rest(3, n);
@@ -179,16 +197,20 @@ Skeleton medial_skeleton(const geometry::LabelVolume& mask, double node_spacing_
   const long long sx = g.size[0], sxy = sx * g.size[1];
   for (int a = 0; a < n; ++a) {
     const long long v = voxel[a];
-    const int i = static_cast<int>(v % sx), j = static_cast<int>((v / sx) % g.size[1]), k = static_cast<int>(v / sxy);
+    const int i = static_cast<int>(v % sx), j = static_cast<int>((v / sx) % g.size[1]),
+              k = static_cast<int>(v / sxy);
     rest.col(a) = g.index_to_physical(Eigen::Vector3d(i, j, k));
     const int idx[3] = {i, j, k};
     const long long stride[3] = {1, sx, sxy};
     for (int d = 0; d < 3; ++d)
       for (int s = -1; s <= 1; s += 2) {
         const int at = idx[d] + s;
-        const int b = (at < 0 || at >= g.size[d]) ? -1 : index_of[static_cast<size_t>(v + s * stride[d])];
-        if (b < 0) surface[a] = 1;  // a face neighbour outside (or off the grid)
-        else graph[a].push_back(b);
+        const int b =
+            (at < 0 || at >= g.size[d]) ? -1 : index_of[static_cast<size_t>(v + s * stride[d])];
+        if (b < 0)
+          surface[a] = 1;  // a face neighbour outside (or off the grid)
+        else
+          graph[a].push_back(b);
       }
   }
   const double voxel_mm = g.spacing_mm.maxCoeff();
@@ -238,17 +260,21 @@ void SkeletonForce::compute_offsets(const Positions& rest) {
     }
     if (c.weight_sum > 0) centre /= c.weight_sum;
     c.offsets.resize(3, static_cast<Eigen::Index>(c.members.size()));
-    for (size_t m = 0; m < c.members.size(); ++m) c.offsets.col(m) = rest.col(c.members[m]) - centre;
+    for (size_t m = 0; m < c.members.size(); ++m)
+      c.offsets.col(m) = rest.col(c.members[m]) - centre;
   }
   centres_.assign(clusters_.size(), Eigen::Vector3d::Zero());
   rotations_.assign(clusters_.size(), Eigen::Matrix3d::Identity());
 }
 
-void SkeletonForce::set_rest_shape(const Positions& rest) { compute_offsets(rest); }
+void SkeletonForce::set_rest_shape(const Positions& rest) {
+  compute_offsets(rest);
+}
 
 std::vector<int> SkeletonForce::cluster_sizes() const {
   std::vector<int> sizes;
-  for (const auto& c : clusters_) sizes.push_back(static_cast<int>(c.members.size()));
+  for (const auto& c : clusters_)
+    sizes.push_back(static_cast<int>(c.members.size()));
   return sizes;
 }
 
@@ -257,8 +283,10 @@ Eigen::Matrix3Xd SkeletonForce::node_positions(const Positions& x) const {
   for (size_t k = 0; k < clusters_.size(); ++k) {
     const auto& c = clusters_[k];
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-    for (size_t m = 0; m < c.members.size(); ++m) centre += c.weights[m] * x.col(c.members[m]);
-    nodes.col(k) = c.weight_sum > 0 ? Eigen::Vector3d(centre / c.weight_sum) : skeleton_.nodes_mm.col(k);
+    for (size_t m = 0; m < c.members.size(); ++m)
+      centre += c.weights[m] * x.col(c.members[m]);
+    nodes.col(k) =
+        c.weight_sum > 0 ? Eigen::Vector3d(centre / c.weight_sum) : skeleton_.nodes_mm.col(k);
   }
   return nodes;
 }
@@ -271,7 +299,8 @@ double SkeletonForce::add_forces(const State& state, Forces& f, bool want_energy
     const auto& c = clusters_[k];
     if (c.members.empty()) continue;
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-    for (size_t m = 0; m < c.members.size(); ++m) centre += c.weights[m] * state.x.col(c.members[m]);
+    for (size_t m = 0; m < c.members.size(); ++m)
+      centre += c.weights[m] * state.x.col(c.members[m]);
     centre /= c.weight_sum;
     Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
     for (size_t m = 0; m < c.members.size(); ++m)

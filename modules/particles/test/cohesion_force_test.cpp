@@ -53,7 +53,8 @@ TEST_P(CohesionForceOnRandomSystems, ForceIsMinusEnergyGradientByFiniteDifferenc
       State plus = s, minus = s;
       plus.x(d, i) += h;
       minus.x(d, i) -= h;
-      const double grad = (all_pairs_energy(law, plus.x) - all_pairs_energy(law, minus.x)) / (2 * h);
+      const double grad =
+          (all_pairs_energy(law, plus.x) - all_pairs_energy(law, minus.x)) / (2 * h);
       EXPECT_NEAR(f(d, i), -grad, 1e-5 * (1 + std::abs(grad))) << "particle " << i << " axis " << d;
     }
   }

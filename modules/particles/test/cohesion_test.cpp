@@ -71,8 +71,7 @@ TEST(CohesionLaw, FloorKeepsCoincidentPairsFiniteAndContinuous) {
   EXPECT_TRUE(std::isfinite(law.energy(0.0)));
   EXPECT_GT(law.force(0.0), law.force(law.floor_distance()));
   const double rf = law.floor_distance();
-  EXPECT_NEAR(law.force(rf * (1 - 1e-12)), law.force(rf * (1 + 1e-12)),
-              1e-6 * law.force(rf));
+  EXPECT_NEAR(law.force(rf * (1 - 1e-12)), law.force(rf * (1 + 1e-12)), 1e-6 * law.force(rf));
 }
 
 TEST(CohesionLaw, EnergyShiftedToZeroAtCutoffAndNothingBeyond) {

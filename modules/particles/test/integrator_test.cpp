@@ -17,7 +17,8 @@ State warm_block(const LennardJones& law, Eigen::Vector3d size_r0, double speed,
   std::mt19937 rng(seed);
   std::normal_distribution<double> g(0, speed);
   for (int i = 0; i < s.size(); ++i)
-    for (int d = 0; d < 3; ++d) s.v(d, i) = g(rng);
+    for (int d = 0; d < 3; ++d)
+      s.v(d, i) = g(rng);
   s.v.colwise() -= s.v.rowwise().mean();  // no drift of the whole body
   return s;
 }

@@ -61,7 +61,8 @@ TEST(LatticeFill, MaskWithRotatedDirectionMatchesTheAnalyticBody) {
   const Positions x = fill_mask(mask, 3, a);
   const double expected = mask.volume_mm3(3) / fcc_volume_per_particle(a);
   EXPECT_NEAR(x.cols(), expected, 0.06 * expected);
-  for (int i = 0; i < x.cols(); ++i) EXPECT_EQ(mask.at_physical(x.col(i)), 3);
+  for (int i = 0; i < x.cols(); ++i)
+    EXPECT_EQ(mask.at_physical(x.col(i)), 3);
   EXPECT_EQ(fill_mask(mask, 7, a).cols(), 0);
 }
 

@@ -49,12 +49,14 @@ void expect_exact_half_list(const Eigen::Matrix3Xd& x, double cutoff, double ski
   // Blocks of one colour cover disjoint slot ranges, and all blocks cover every slot.
   long long covered = 0;
   for (const auto& colour : list.colours())
-    for (int b : colour) covered += list.block_end()[b] - list.block_begin()[b];
+    for (int b : colour)
+      covered += list.block_end()[b] - list.block_begin()[b];
   EXPECT_EQ(covered, x.cols());
 }
 
 TEST(NeighbourList, ListsExactlyThePairsWithinReachInARandomCloud) {
-  for (unsigned seed : {1u, 2u}) expect_exact_half_list(testing::random_cloud(2000, 20.0, 0.5, seed), 2.5, 0.3);
+  for (unsigned seed : {1u, 2u})
+    expect_exact_half_list(testing::random_cloud(2000, 20.0, 0.5, seed), 2.5, 0.3);
 }
 
 TEST(NeighbourList, ListsExactlyThePairsWithinReachOnCellBoundaries) {
@@ -64,7 +66,8 @@ TEST(NeighbourList, ListsExactlyThePairsWithinReachOnCellBoundaries) {
   int i = 0;
   for (int k = 0; k < 12; ++k)
     for (int j = 0; j < 12; ++j)
-      for (int l = 0; l < 12; ++l) x.col(i++) = a * Eigen::Vector3d(l, j, k);
+      for (int l = 0; l < 12; ++l)
+        x.col(i++) = a * Eigen::Vector3d(l, j, k);
   expect_exact_half_list(x, 2.5, 0.3);
   // Pairs at exactly the reach are not listed (strictly closer only).
   expect_exact_half_list(x, 2.5, 0.3 + 1e-9);
@@ -74,8 +77,10 @@ TEST(NeighbourList, ListsExactlyThePairsWithinReachInFlatAndThinBodies) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(0, 30.0);
   Eigen::Matrix3Xd plane(3, 1500), line(3, 300);
-  for (int i = 0; i < plane.cols(); ++i) plane.col(i) = Eigen::Vector3d(u(rng), u(rng), 4.0);
-  for (int i = 0; i < line.cols(); ++i) line.col(i) = Eigen::Vector3d(1.0, u(rng), -2.0);
+  for (int i = 0; i < plane.cols(); ++i)
+    plane.col(i) = Eigen::Vector3d(u(rng), u(rng), 4.0);
+  for (int i = 0; i < line.cols(); ++i)
+    line.col(i) = Eigen::Vector3d(1.0, u(rng), -2.0);
   expect_exact_half_list(plane, 2.5, 0.3);
   expect_exact_half_list(line, 2.5, 0.3);
 }

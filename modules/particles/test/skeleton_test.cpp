@@ -50,8 +50,10 @@ TEST(MedialSkeleton, FromAMaskNodesLieAlongTheLongAxisOfAnEllipsoid) {
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
       for (int i = 0; i < g.size[0]; ++i) {
-        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k)) - Eigen::Vector3d(1, 2, 3);
-        mask.at(i, j, k) = std::pow(p.x() / 20, 2) + std::pow(p.y() / 8, 2) + std::pow(p.z() / 8, 2) < 1;
+        const Eigen::Vector3d p =
+            g.index_to_physical(Eigen::Vector3d(i, j, k)) - Eigen::Vector3d(1, 2, 3);
+        mask.at(i, j, k) =
+            std::pow(p.x() / 20, 2) + std::pow(p.y() / 8, 2) + std::pow(p.z() / 8, 2) < 1;
       }
   const Skeleton s = medial_skeleton(mask, 6.0);
   ASSERT_GE(s.node_count(), 3);
@@ -85,9 +87,11 @@ class SkeletonForceTest : public ::testing::Test {
     std::mt19937 rng(seed);
     std::normal_distribution<double> g(0, amplitude);
     for (int i = 0; i < s.size(); ++i)
-      for (int d = 0; d < 3; ++d) s.x(d, i) += g(rng);
+      for (int d = 0; d < 3; ++d)
+        s.x(d, i) += g(rng);
     // and a bend, so clusters turn differently
-    for (int i = 0; i < s.size(); ++i) s.x(1, i) += 0.01 * s.x(0, i) * s.x(0, i);
+    for (int i = 0; i < s.size(); ++i)
+      s.x(1, i) += 0.01 * s.x(0, i) * s.x(0, i);
     return s;
   }
   Body body_;
@@ -134,13 +138,15 @@ TEST_F(SkeletonForceTest, NoNetForceNoNetTorque) {
   ASSERT_GT(scale, 0.1);
   EXPECT_LT(f.rowwise().sum().norm(), 1e-9 * scale * s.size());
   Eigen::Vector3d torque = Eigen::Vector3d::Zero();
-  for (int i = 0; i < s.size(); ++i) torque += s.x.col(i).cross(f.col(i));
+  for (int i = 0; i < s.size(); ++i)
+    torque += s.x.col(i).cross(f.col(i));
   EXPECT_LT(torque.norm(), 1e-8 * scale * s.size() * 20);
 }
 
 TEST_F(SkeletonForceTest, RigidMotionCostsNothingAndTheNodesFollowIt) {
   SkeletonForce force(skeleton_, body_.rest, params_);
-  const Eigen::Matrix3d r = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, -2, 0.5).normalized()).toRotationMatrix();
+  const Eigen::Matrix3d r =
+      Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, -2, 0.5).normalized()).toRotationMatrix();
   const Eigen::Vector3d t(10, -4, 7);
   State s((r * body_.rest).colwise() + t);
   Forces f = Forces::Zero(3, s.size());

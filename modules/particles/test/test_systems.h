@@ -17,7 +17,8 @@ inline Positions random_cloud(int n, double side, double min_gap, unsigned seed)
     for (int tries = 0;; ++tries) {
       const Eigen::Vector3d p(u(rng), u(rng), u(rng));
       bool ok = true;
-      for (int j = 0; j < i && ok; ++j) ok = (x.col(j) - p).norm() >= min_gap;
+      for (int j = 0; j < i && ok; ++j)
+        ok = (x.col(j) - p).norm() >= min_gap;
       if (ok || tries > 1000) {
         x.col(i) = p;
         break;
@@ -31,7 +32,8 @@ inline Positions random_cloud(int n, double side, double min_gap, unsigned seed)
 inline double all_pairs_energy(const LennardJones& law, const Positions& x) {
   double e = 0;
   for (int i = 0; i < x.cols(); ++i)
-    for (int j = i + 1; j < x.cols(); ++j) e += law.energy((x.col(i) - x.col(j)).norm());
+    for (int j = i + 1; j < x.cols(); ++j)
+      e += law.energy((x.col(i) - x.col(j)).norm());
   return e;
 }
 

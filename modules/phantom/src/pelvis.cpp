@@ -15,9 +15,9 @@ struct Tissue {
 };
 
 // Tissue values (HU) as in a pelvic planning CT.
-constexpr float kHuAir = -1000, kHuFat = -95, kHuMuscle = 55, kHuCortical = 1100, kHuCancellous = 260,
-                kHuFemurCancellous = 300, kHuProstate = 42, kHuUrine = 12, kHuRectalWall = 38, kHuGas = -880,
-                kHuFaeces = 15;
+constexpr float kHuAir = -1000, kHuFat = -95, kHuMuscle = 55, kHuCortical = 1100,
+                kHuCancellous = 260, kHuFemurCancellous = 300, kHuProstate = 42, kHuUrine = 12,
+                kHuRectalWall = 38, kHuGas = -880, kHuFaeces = 15;
 
 /// Distance (mm) outside an axis-aligned ellipse of semi-axes (a, b) centred at c,
 /// measured along the ray from c (negative inside).
@@ -29,11 +29,15 @@ double radial_excess(double x, double y, double cx, double cy, double a, double 
   return r - boundary;
 }
 
-double sq(double v) { return v * v; }
+double sq(double v) {
+  return v * v;
+}
 
 // --- the anatomy, one function per structure -------------------------------------------
 
-bool in_body(const Eigen::Vector3d& p) { return radial_excess(p.x(), p.y(), 0, 5, 175 + 0.2 * p.z(), 115) < 0; }
+bool in_body(const Eigen::Vector3d& p) {
+  return radial_excess(p.x(), p.y(), 0, 5, 175 + 0.2 * p.z(), 115) < 0;
+}
 
 bool in_muscle_layer(const Eigen::Vector3d& p) {  // inside the subcutaneous fat
   return radial_excess(p.x(), p.y(), 0, 5, 157 + 0.2 * p.z(), 97) < 0;
@@ -51,7 +55,8 @@ double cavity_excess(const Eigen::Vector3d& p) {
 double pelvic_bone_hu(const Eigen::Vector3d& p) {
   const double d = cavity_excess(p);
   if (d < 0 || d >= 10) return std::nan("");
-  const double angle = std::atan2(std::abs(p.x()), p.y() - 8) * 180 / kPi;  // 0 = posterior, 180 = anterior
+  const double angle =
+      std::atan2(std::abs(p.x()), p.y() - 8) * 180 / kPi;  // 0 = posterior, 180 = anterior
   bool present = false;
   if (angle >= 75 && angle <= 150) present = p.z() > -45;  // ischium and ilium
   if (angle > 150) present = p.z() > -30 && p.z() < 10;    // pubis and symphysis
@@ -103,9 +108,12 @@ Tissue tissue_at(const Eigen::Vector3d& p) {
   if (in_prostate(p)) return {kProstate, kHuProstate};
   if (const double hu = rectum_hu(p); !std::isnan(hu)) return {kRectum, static_cast<float>(hu)};
   if (in_bladder(p)) return {kBladder, kHuUrine};
-  if (const double hu = femur_hu(p, +1); !std::isnan(hu)) return {kFemurLeft, static_cast<float>(hu)};
-  if (const double hu = femur_hu(p, -1); !std::isnan(hu)) return {kFemurRight, static_cast<float>(hu)};
-  if (const double hu = pelvic_bone_hu(p); !std::isnan(hu)) return {kPelvicBone, static_cast<float>(hu)};
+  if (const double hu = femur_hu(p, +1); !std::isnan(hu))
+    return {kFemurLeft, static_cast<float>(hu)};
+  if (const double hu = femur_hu(p, -1); !std::isnan(hu))
+    return {kFemurRight, static_cast<float>(hu)};
+  if (const double hu = pelvic_bone_hu(p); !std::isnan(hu))
+    return {kPelvicBone, static_cast<float>(hu)};
   if (cavity_excess(p) < 0) return {kSoftTissue, kHuFat};  // pelvic fat around the organs
   if (in_muscle_layer(p)) return {kMuscle, kHuMuscle};
   return {kSoftTissue, kHuFat};  // subcutaneous fat
@@ -120,8 +128,10 @@ double gaussian(std::uint64_t seed, std::uint64_t index) {
     z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
     return z ^ (z >> 31);
   };
-  const std::uint64_t a = mix(seed * 0x100000001b3ULL ^ mix(2 * index)), b = mix(a ^ mix(2 * index + 1));
-  const double u1 = (static_cast<double>(a >> 11) + 0.5) * 0x1.0p-53, u2 = static_cast<double>(b >> 11) * 0x1.0p-53;
+  const std::uint64_t a = mix(seed * 0x100000001b3ULL ^ mix(2 * index)),
+                      b = mix(a ^ mix(2 * index + 1));
+  const double u1 = (static_cast<double>(a >> 11) + 0.5) * 0x1.0p-53,
+               u2 = static_cast<double>(b >> 11) * 0x1.0p-53;
   return std::sqrt(-2 * std::log(u1)) * std::cos(2 * kPi * u2);
 }
 
@@ -145,10 +155,13 @@ const std::vector<PelvisStructure>& pelvis_structures() {
   return structures;
 }
 
-std::uint8_t pelvis_label_at(const Eigen::Vector3d& p_mm) { return tissue_at(p_mm).label; }
+std::uint8_t pelvis_label_at(const Eigen::Vector3d& p_mm) {
+  return tissue_at(p_mm).label;
+}
 
 PelvisPhantom make_pelvis_phantom(const PelvisOptions& o) {
-  if (o.columns < 8 || o.rows < 8 || o.slices < 8) throw std::invalid_argument("phantom: at least 8 voxels per axis");
+  if (o.columns < 8 || o.rows < 8 || o.slices < 8)
+    throw std::invalid_argument("phantom: at least 8 voxels per axis");
   if (!(o.pixel_mm > 0) || !(o.slice_mm > 0) || !(o.noise_hu >= 0))
     throw std::invalid_argument("phantom: spacing must be positive and noise non-negative");
   PelvisPhantom ph;
@@ -156,8 +169,9 @@ PelvisPhantom make_pelvis_phantom(const PelvisOptions& o) {
   g.size = {o.columns, o.rows, o.slices};
   g.spacing_mm = Eigen::Vector3d(o.pixel_mm, o.pixel_mm, o.slice_mm);
   // Field of view centred on (0, 5) in-plane (the body's centre), slices on the prostate.
-  g.origin_mm = Eigen::Vector3d(-0.5 * (o.columns - 1) * o.pixel_mm, 5 - 0.5 * (o.rows - 1) * o.pixel_mm,
-                                -0.5 * (o.slices - 1) * o.slice_mm);
+  g.origin_mm =
+      Eigen::Vector3d(-0.5 * (o.columns - 1) * o.pixel_mm, 5 - 0.5 * (o.rows - 1) * o.pixel_mm,
+                      -0.5 * (o.slices - 1) * o.slice_mm);
   ph.labels = geometry::LabelVolume(g);
   ph.hu.assign(static_cast<size_t>(g.voxel_count()), 0.0f);
   std::vector<float> centre_hu(ph.hu.size());
@@ -172,17 +186,19 @@ PelvisPhantom make_pelvis_phantom(const PelvisOptions& o) {
         ph.labels.labels[v] = t.label;
         centre_hu[v] = t.hu;
       }
-  // Pass 2: partial volume where a face neighbour's tissue differs, then noise.
+      // Pass 2: partial volume where a face neighbour's tissue differs, then noise.
 #pragma omp parallel for schedule(dynamic, 1)
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
       for (int i = 0; i < g.size[0]; ++i) {
         const auto v = static_cast<size_t>(g.linear_index(i, j, k));
         bool boundary = false;
-        const int di[6] = {1, -1, 0, 0, 0, 0}, dj[6] = {0, 0, 1, -1, 0, 0}, dk[6] = {0, 0, 0, 0, 1, -1};
+        const int di[6] = {1, -1, 0, 0, 0, 0}, dj[6] = {0, 0, 1, -1, 0, 0},
+                  dk[6] = {0, 0, 0, 0, 1, -1};
         for (int n = 0; n < 6 && !boundary; ++n) {
           const int a = i + di[n], b = j + dj[n], c = k + dk[n];
-          if (a < 0 || b < 0 || c < 0 || a >= g.size[0] || b >= g.size[1] || c >= g.size[2]) continue;
+          if (a < 0 || b < 0 || c < 0 || a >= g.size[0] || b >= g.size[1] || c >= g.size[2])
+            continue;
           boundary = centre_hu[static_cast<size_t>(g.linear_index(a, b, c))] != centre_hu[v];
         }
         double value = centre_hu[v];
@@ -191,17 +207,21 @@ PelvisPhantom make_pelvis_phantom(const PelvisOptions& o) {
           for (int c = -1; c <= 1; ++c)
             for (int b = -1; b <= 1; ++b)
               for (int a = -1; a <= 1; ++a)
-                sum += tissue_at(g.index_to_physical(Eigen::Vector3d(i + a / 3.0, j + b / 3.0, k + c / 3.0))).hu;
+                sum += tissue_at(g.index_to_physical(
+                                     Eigen::Vector3d(i + a / 3.0, j + b / 3.0, k + c / 3.0)))
+                           .hu;
           value = sum / 27;
         }
-        if (o.noise_hu > 0 && ph.labels.labels[v] != kAir) value += o.noise_hu * gaussian(o.seed, v);
+        if (o.noise_hu > 0 && ph.labels.labels[v] != kAir)
+          value += o.noise_hu * gaussian(o.seed, v);
         ph.hu[v] = static_cast<float>(value);
       }
   return ph;
 }
 
 std::vector<geometry::SliceContour> pelvis_true_contours(const geometry::LabelVolume& labels,
-                                                         const PelvisStructure& structure, int supersample) {
+                                                         const PelvisStructure& structure,
+                                                         int supersample) {
   const geometry::ImageGeometry& g = labels.geometry;
   supersample = std::max(1, supersample);
   std::vector<geometry::SliceContour> contours;
@@ -211,7 +231,8 @@ std::vector<geometry::SliceContour> pelvis_true_contours(const geometry::LabelVo
     int i0 = g.size[0], i1 = -1, j0 = g.size[1], j1 = -1;
     for (int j = 0; j < g.size[1]; ++j)
       for (int i = 0; i < g.size[0]; ++i)
-        if (structure.label == kAir ? labels.at(i, j, k) != kAir : labels.at(i, j, k) == structure.label) {
+        if (structure.label == kAir ? labels.at(i, j, k) != kAir
+                                    : labels.at(i, j, k) == structure.label) {
           i0 = std::min(i0, i), i1 = std::max(i1, i), j0 = std::min(j0, j), j1 = std::max(j1, j);
         }
     if (i1 < 0) continue;
@@ -220,14 +241,16 @@ std::vector<geometry::SliceContour> pelvis_true_contours(const geometry::LabelVo
     // A fine grid over that extent, on the slice plane (one voxel thick).
     geometry::ImageGeometry fg;
     fg.size = {(i1 - i0) * supersample + 1, (j1 - j0) * supersample + 1, 1};
-    fg.spacing_mm = Eigen::Vector3d(g.spacing_mm[0] * fine, g.spacing_mm[1] * fine, g.spacing_mm[2]);
+    fg.spacing_mm =
+        Eigen::Vector3d(g.spacing_mm[0] * fine, g.spacing_mm[1] * fine, g.spacing_mm[2]);
     fg.direction = g.direction;
     fg.origin_mm = g.index_to_physical(Eigen::Vector3d(i0, j0, k));
     geometry::LabelVolume mask(fg);
 #pragma omp parallel for schedule(static)
     for (int b = 0; b < fg.size[1]; ++b)
       for (int a = 0; a < fg.size[0]; ++a)
-        mask.at(a, b, 0) = in_structure(fg.index_to_physical(Eigen::Vector3d(a, b, 0)), structure.label) ? 1 : 0;
+        mask.at(a, b, 0) =
+            in_structure(fg.index_to_physical(Eigen::Vector3d(a, b, 0)), structure.label) ? 1 : 0;
     for (auto& c : geometry::slice_contours(mask, 1)) {
       c.k = k;
       contours.push_back(std::move(c));

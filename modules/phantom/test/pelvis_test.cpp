@@ -26,17 +26,18 @@ TEST(PelvisPhantom, ProstateIsAbout35Cm3AtTheDefaultResolution) {
 
 TEST(PelvisPhantom, OrgansSitWhereTheAnatomySays) {
   EXPECT_EQ(pelvis_label_at({0, 0, 0}), kProstate);
-  EXPECT_EQ(pelvis_label_at({0, 0, 30}), kBladder);        // bladder above the base
-  EXPECT_EQ(pelvis_label_at({0, 38 + 13, 0}), kRectum);    // rectal wall behind
-  EXPECT_EQ(pelvis_label_at({0, 20.5, 0}), kSoftTissue);   // fat between prostate and rectum
-  EXPECT_EQ(pelvis_label_at({98, 8, -5}), kFemurLeft);     // +x is the patient's left
+  EXPECT_EQ(pelvis_label_at({0, 0, 30}), kBladder);       // bladder above the base
+  EXPECT_EQ(pelvis_label_at({0, 38 + 13, 0}), kRectum);   // rectal wall behind
+  EXPECT_EQ(pelvis_label_at({0, 20.5, 0}), kSoftTissue);  // fat between prostate and rectum
+  EXPECT_EQ(pelvis_label_at({98, 8, -5}), kFemurLeft);    // +x is the patient's left
   EXPECT_EQ(pelvis_label_at({-98, 8, -5}), kFemurRight);
   EXPECT_EQ(pelvis_label_at({0, -40 - 5, 0}), kPelvicBone);  // pubis in front
   EXPECT_EQ(pelvis_label_at({0, 200, 0}), kAir);
 }
 
 TEST(PelvisPhantom, NoiseHasTheRequestedSpreadAndFollowsTheSeed) {
-  const PelvisPhantom a = make_pelvis_phantom(small_options(7)), b = make_pelvis_phantom(small_options(7)),
+  const PelvisPhantom a = make_pelvis_phantom(small_options(7)),
+                      b = make_pelvis_phantom(small_options(7)),
                       c = make_pelvis_phantom(small_options(8));
   EXPECT_EQ(a.hu, b.hu);
   EXPECT_NE(a.hu, c.hu);
@@ -51,7 +52,8 @@ TEST(PelvisPhantom, NoiseHasTheRequestedSpreadAndFollowsTheSeed) {
       for (int i = 1; i + 1 < g.size[0]; ++i) {
         bool all_fat = a.labels.at(i, j, k) == kSoftTissue;
         for (int d = -1; d <= 1; d += 2)
-          all_fat = all_fat && a.labels.at(i + d, j, k) == kSoftTissue && a.labels.at(i, j + d, k) == kSoftTissue &&
+          all_fat = all_fat && a.labels.at(i + d, j, k) == kSoftTissue &&
+                    a.labels.at(i, j + d, k) == kSoftTissue &&
                     a.labels.at(i, j, k + d) == kSoftTissue;
         if (!all_fat) continue;
         const double v = a.hu[static_cast<size_t>(g.linear_index(i, j, k))];
@@ -80,7 +82,8 @@ TEST(PelvisPhantom, TrueContoursEncloseTheTrueLabelsArea) {
       area += p.x() * q.y() - q.x() * p.y();
     }
     contour_volume += std::abs(area) / 2 * ph.geometry.spacing_mm[2];
-    EXPECT_NEAR(c.points_mm.front().z(), ph.geometry.index_to_physical(Eigen::Vector3d(0, 0, c.k)).z(), 1e-9);
+    EXPECT_NEAR(c.points_mm.front().z(),
+                ph.geometry.index_to_physical(Eigen::Vector3d(0, 0, c.k)).z(), 1e-9);
   }
   EXPECT_NEAR(contour_volume / ph.labels.volume_mm3(kProstate), 1.0, 0.02);
 }

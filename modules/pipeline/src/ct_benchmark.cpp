@@ -15,7 +15,8 @@ namespace fs = std::filesystem;
 namespace organfit::pipeline {
 
 nlohmann::json run_ct_benchmark(const CtBenchOptions& o) {
-  if (o.seed_mm.size() != 3 || o.hu_window.size() != 2) throw InputError("bench ct: --seed takes X,Y,Z and --hu LO,HI");
+  if (o.seed_mm.size() != 3 || o.hu_window.size() != 2)
+    throw InputError("bench ct: --seed takes X,Y,Z and --hu LO,HI");
   const fs::path work = fs::temp_directory_path() / fmt::format("organfit_bench_ct_{}", getpid());
   fs::remove_all(work);
   fs::create_directories(work);
@@ -31,20 +32,24 @@ nlohmann::json run_ct_benchmark(const CtBenchOptions& o) {
   double synth_s = 0;
   if (ct.empty()) {
     Stopwatch clock;
-    const std::string cmd =
-        fmt::format("'{}' --quiet synth pelvis --out '{}' --columns {} --rows {} --slices {} --pixel-mm {} > /dev/null",
-                    fs::read_symlink("/proc/self/exe").string(), (work / "phantom").string(), o.columns, o.rows,
-                    o.slices, 400.0 / std::max(o.columns, o.rows));
-    if (std::system(cmd.c_str()) != 0) throw InputError("bench ct: making the phantom failed: " + cmd);
+    const std::string cmd = fmt::format(
+        "'{}' --quiet synth pelvis --out '{}' --columns {} --rows {} --slices {} --pixel-mm {} > "
+        "/dev/null",
+        fs::read_symlink("/proc/self/exe").string(), (work / "phantom").string(), o.columns, o.rows,
+        o.slices, 400.0 / std::max(o.columns, o.rows));
+    if (std::system(cmd.c_str()) != 0)
+      throw InputError("bench ct: making the phantom failed: " + cmd);
     synth_s = clock.elapsed_s();
     ct = work / "phantom" / "ct";
   }
   const std::string scene_text = fmt::format(
-      "scene:\n  name: bench-ct\n  threads: {}\nct:\n  folder: '{}'\norgan:\n  source: seed\n  roi: organ\n"
+      "scene:\n  name: bench-ct\n  threads: {}\nct:\n  folder: '{}'\norgan:\n  source: seed\n  "
+      "roi: organ\n"
       "  seed_mm: [{}, {}, {}]\n  hu_low: {}\n  hu_high: {}\nmodel:\n  radius_mm: {}\n",
-      o.threads, fs::absolute(ct).string(), o.seed_mm[0], o.seed_mm[1], o.seed_mm[2], o.hu_window[0], o.hu_window[1],
-      o.radius_mm);
-  const config::Scene scene = config::parse_scene(scene_text, work / "bench-ct.yaml", scene_schema());
+      o.threads, fs::absolute(ct).string(), o.seed_mm[0], o.seed_mm[1], o.seed_mm[2],
+      o.hu_window[0], o.hu_window[1], o.radius_mm);
+  const config::Scene scene =
+      config::parse_scene(scene_text, work / "bench-ct.yaml", scene_schema());
   check_scene_rules(scene);
   const nlohmann::json run = run_scene(scene, work / "out");
 

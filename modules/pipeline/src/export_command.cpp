@@ -32,10 +32,12 @@ nlohmann::json run_export_command(const ExportCommand& c) {
     ct = dicom::read_ct_series(folder, o);
     if (saved.ct && (ct->frame_of_reference_uid != saved.ct->frame_of_reference_uid ||
                      ct->series_instance_uid != saved.ct->series_instance_uid))
-      throw InputError(fmt::format("{}: this CT series (or its Frame of Reference) is not the model's: the model "
-                                   "was built on another CT",
-                                   folder.string()));
-    for (const auto& w : ct->warnings) spdlog::warn(w);
+      throw InputError(fmt::format(
+          "{}: this CT series (or its Frame of Reference) is not the model's: the model "
+          "was built on another CT",
+          folder.string()));
+    for (const auto& w : ct->warnings)
+      spdlog::warn(w);
   }
   std::optional<dicom::StructureSet> other;
   if (!c.copy_rois_from.empty()) {
@@ -44,9 +46,10 @@ nlohmann::json run_export_command(const ExportCommand& c) {
     request.copy_rois_from = &*other;
     request.skip_roi = saved.organ_name;
   }
-  PendingExport pending =
-      prepare_export(organ_body(saved.model), saved.model.model->radius_mm(), ct ? &*ct : nullptr, request);
-  for (const auto& w : pending.warnings) spdlog::warn(w);
+  PendingExport pending = prepare_export(organ_body(saved.model), saved.model.model->radius_mm(),
+                                         ct ? &*ct : nullptr, request);
+  for (const auto& w : pending.warnings)
+    spdlog::warn(w);
   for (const auto& f : {c.rtstruct, c.labels, c.mesh}) {
     std::error_code ec;
     if (!f.empty() && !f.parent_path().empty()) fs::create_directories(f.parent_path(), ec);

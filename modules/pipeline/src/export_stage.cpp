@@ -12,18 +12,20 @@
 namespace organfit::pipeline {
 
 void PendingExport::commit() {
-  for (auto& write : writes_) write(summary);
+  for (auto& write : writes_)
+    write(summary);
   writes_.clear();
 }
 
-PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho, const dicom::CtSeries* ct,
-                             const ExportRequest& r) {
+PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
+                             const dicom::CtSeries* ct, const ExportRequest& r) {
   PendingExport out;
   out.summary = nlohmann::json::object();
   if (!r.rtstruct.empty() || !r.labels.empty()) {
     if (!ct) throw InputError("export: an RT Structure Set or label map needs the planning CT");
     auto mask = std::make_shared<geometry::LabelVolume>(organ.on_grid(ct->geometry));
-    if (mask->count(1) == 0) throw InputError("export: the model lies outside the planning CT's grid");
+    if (mask->count(1) == 0)
+      throw InputError("export: the model lies outside the planning CT's grid");
     auto contours = geometry::slice_contours(*mask, 1);
     out.summary["roi"] = r.roi_name;
     out.summary["contours"] = contours.size();
@@ -37,9 +39,10 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho, con
           if (roi.name == r.skip_roi || roi.name == r.roi_name) continue;
           dicom::RoiOnSlices placed = dicom::roi_on_slices(roi, *ct);
           if (placed.skipped > 0)
-            out.warnings.push_back(fmt::format("export: ROI '{}': {} contour(s) not copied (not CLOSED_PLANAR or on no "
-                                               "slice of the CT)",
-                                               roi.name, placed.skipped));
+            out.warnings.push_back(fmt::format(
+                "export: ROI '{}': {} contour(s) not copied (not CLOSED_PLANAR or on no "
+                "slice of the CT)",
+                roi.name, placed.skipped));
           if (placed.contours.empty()) continue;
           dicom::RtstructRoi copy{roi.name, roi.colour, std::move(placed.contours)};
           copy.generation_algorithm = "";  // copied: not ours to call AUTOMATIC
@@ -52,12 +55,15 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho, con
       const std::filesystem::path file = r.rtstruct;
       dicom::RtstructWriteOptions options;
       options.fixed_uids_and_dates = r.fixed_uids;
-      out.writes_.push_back([file, rois, ct, options](nlohmann::json&) { dicom::write_rtstruct(file, *ct, *rois, options); });
+      out.writes_.push_back([file, rois, ct, options](nlohmann::json&) {
+        dicom::write_rtstruct(file, *ct, *rois, options);
+      });
     }
     if (!r.labels.empty()) {
       out.files.push_back(r.labels.filename().string());
       const std::filesystem::path file = r.labels;
-      out.writes_.push_back([file, mask](nlohmann::json&) { itkbridge::write_label_volume(file, *mask); });
+      out.writes_.push_back(
+          [file, mask](nlohmann::json&) { itkbridge::write_label_volume(file, *mask); });
     }
   }
   if (!r.mesh.empty()) {
@@ -71,12 +77,12 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho, con
     out.writes_.push_back([file, body](nlohmann::json& summary) {
       const meshing::SurfaceReport m = meshing::write_surface(*body, file);
       summary["mesh"] = {{"file", file.filename().string()},
-                             {"triangles", m.triangles},
-                             {"boundary_edges", m.boundary_edges},
-                             {"non_manifold_edges", m.non_manifold_edges},
-                             {"outward", m.outward},
-                             {"enclosed_volume_mm3", m.enclosed_volume_mm3},
-                             {"area_mm2", m.area_mm2}};
+                         {"triangles", m.triangles},
+                         {"boundary_edges", m.boundary_edges},
+                         {"non_manifold_edges", m.non_manifold_edges},
+                         {"outward", m.outward},
+                         {"enclosed_volume_mm3", m.enclosed_volume_mm3},
+                         {"area_mm2", m.area_mm2}};
     });
   }
   return out;

@@ -12,11 +12,11 @@
 
 #include "organfit/dicom/structure_set.h"
 #include "organfit/evaluation/baselines.h"
-#include "organfit/phantom/pelvis.h"
 #include "organfit/fitting/embedded_body.h"
 #include "organfit/fitting/global_fit.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/itkbridge/tps.h"
+#include "organfit/phantom/pelvis.h"
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/atomic_file.h"
@@ -38,7 +38,8 @@ struct ShapeCase {
 evaluation::Shape phantom_prostate() {
   const phantom::PelvisPhantom ph = phantom::make_pelvis_phantom(phantom::PelvisOptions{});
   auto mask = std::make_shared<geometry::LabelVolume>(ph.labels.geometry);
-  for (size_t v = 0; v < mask->labels.size(); ++v) mask->labels[v] = ph.labels.labels[v] == phantom::kProstate;
+  for (size_t v = 0; v < mask->labels.size(); ++v)
+    mask->labels[v] = ph.labels.labels[v] == phantom::kProstate;
   return evaluation::make_mask_shape(mask);
 }
 
@@ -47,7 +48,8 @@ std::optional<evaluation::Shape> real_gtv(const fs::path& data) {
   std::error_code ec;
   if (!fs::exists(data / "ct-sts-004" / "rtstruct.dcm", ec)) return std::nullopt;
   const dicom::CtSeries ct = dicom::read_ct_series(data / "ct-sts-004" / "ct");
-  auto roi = dicom::rasterise_roi(dicom::read_rtstruct(data / "ct-sts-004" / "rtstruct.dcm"), "GTV_Mass_CT", ct, "ct-sts-004");
+  auto roi = dicom::rasterise_roi(dicom::read_rtstruct(data / "ct-sts-004" / "rtstruct.dcm"),
+                                  "GTV_Mass_CT", ct, "ct-sts-004");
   return evaluation::make_mask_shape(std::make_shared<geometry::LabelVolume>(std::move(roi.mask)));
 }
 
@@ -57,7 +59,8 @@ struct Row {
   int points = 0;
   double noise_mm = 0, outliers = 0;
   double wall_s = 0, msd_mm = 0, hd95_mm = 0, dice = 0, volume_change_pct = 0, residual_mm = 0;
-  double msd_balls_mm = 0, volume_change_balls_pct = 0;  ///< the particles' own body (balls closed by rho)
+  double msd_balls_mm = 0,
+         volume_change_balls_pct = 0;  ///< the particles' own body (balls closed by rho)
   bool converged = true;
 };
 
@@ -75,14 +78,17 @@ ModelStageResult clone(const ModelStageResult& m) {
   return c;
 }
 
-double residual_of(const std::vector<fitting::AttractivePoint>& points, const particles::Positions& x, double rho) {
+double residual_of(const std::vector<fitting::AttractivePoint>& points,
+                   const particles::Positions& x, double rho) {
   double sum = 0;
-  for (const auto& p : points) sum += std::abs((x.colwise() - p.p_mm).colwise().norm().minCoeff() - rho);
+  for (const auto& p : points)
+    sum += std::abs((x.colwise() - p.p_mm).colwise().norm().minCoeff() - rho);
   return points.empty() ? 0 : sum / static_cast<double>(points.size());
 }
 
 /// The deformation of a family with the given largest displacement (mm).
-evaluation::Deformation family_deformation(const std::string& family, double m, const evaluation::Shape& s) {
+evaluation::Deformation family_deformation(const std::string& family, double m,
+                                           const evaluation::Shape& s) {
   evaluation::Deformation d;
   d.centre_mm = s.centre_mm;
   const double half_x = 0.5 * s.size_mm.x(), radius = 0.5 * std::max(s.size_mm.y(), s.size_mm.z());
@@ -101,42 +107,69 @@ std::string svg_work_precision(const std::vector<Row>& all_rows) {
   std::vector<Row> rows;
   for (const auto& r : all_rows)
     if (std::isfinite(r.msd_mm) && std::isfinite(r.wall_s)) rows.push_back(r);
-  if (rows.empty()) return R"(<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"></svg>)" "\n";
-  const std::map<std::string, const char*> colours = {
-      {"spread", "#1f77b4"}, {"paper", "#ff7f0e"}, {"tps", "#2ca02c"}, {"cpd", "#d62728"}, {"icp", "#9467bd"}};
+  if (rows.empty())
+    return R"(<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"></svg>)"
+           "\n";
+  const std::map<std::string, const char*> colours = {{"spread", "#1f77b4"},
+                                                      {"paper", "#ff7f0e"},
+                                                      {"tps", "#2ca02c"},
+                                                      {"cpd", "#d62728"},
+                                                      {"icp", "#9467bd"}};
   double tmin = 1e9, tmax = 1e-9, emin = 1e9, emax = 1e-9;
   for (const auto& r : rows) {
     tmin = std::min(tmin, std::max(r.wall_s, 1e-4)), tmax = std::max(tmax, r.wall_s);
     emin = std::min(emin, std::max(r.msd_mm, 1e-2)), emax = std::max(emax, r.msd_mm);
   }
-  const double lt0 = std::floor(std::log10(tmin)), lt1 = std::ceil(std::log10(tmax)) + (tmax == tmin);
-  const double le0 = std::floor(std::log10(emin) * 2) / 2, le1 = std::ceil(std::log10(emax) * 2) / 2 + 0.5;
+  const double lt0 = std::floor(std::log10(tmin)),
+               lt1 = std::ceil(std::log10(tmax)) + (tmax == tmin);
+  const double le0 = std::floor(std::log10(emin) * 2) / 2,
+               le1 = std::ceil(std::log10(emax) * 2) / 2 + 0.5;
   const double w = 640, h = 420, l = 70, r = 130, t = 20, b = 50;
-  auto X = [&](double s) { return l + (w - l - r) * (std::log10(std::max(s, 1e-4)) - lt0) / (lt1 - lt0); };
-  auto Y = [&](double e) { return t + (h - t - b) * (1 - (std::log10(std::max(e, 1e-2)) - le0) / (le1 - le0)); };
-  std::string svg = fmt::format(R"x(<svg xmlns="http://www.w3.org/2000/svg" width="{}" height="{}" viewBox="0 0 {} {}"><rect x="{}" y="{}" width="{}" height="{}" fill="#fafafa" stroke="#888"/>)x",
-                                w, h, w, h, l, t, w - l - r, h - t - b);
+  auto X = [&](double s) {
+    return l + (w - l - r) * (std::log10(std::max(s, 1e-4)) - lt0) / (lt1 - lt0);
+  };
+  auto Y = [&](double e) {
+    return t + (h - t - b) * (1 - (std::log10(std::max(e, 1e-2)) - le0) / (le1 - le0));
+  };
+  std::string svg = fmt::format(
+      R"x(<svg xmlns="http://www.w3.org/2000/svg" width="{}" height="{}" viewBox="0 0 {} {}"><rect x="{}" y="{}" width="{}" height="{}" fill="#fafafa" stroke="#888"/>)x",
+      w, h, w, h, l, t, w - l - r, h - t - b);
   for (double e = lt0; e <= lt1 + 1e-9; e += 1)
-    svg += fmt::format(R"x(<text x="{:.1f}" y="{}" font-size="11" text-anchor="middle">1e{:.0f}</text>)x", X(std::pow(10, e)), h - b + 16, e);
+    svg += fmt::format(
+        R"x(<text x="{:.1f}" y="{}" font-size="11" text-anchor="middle">1e{:.0f}</text>)x",
+        X(std::pow(10, e)), h - b + 16, e);
   for (double e = le0; e <= le1 + 1e-9; e += 0.5)
-    svg += fmt::format(R"x(<text x="{}" y="{:.1f}" font-size="11" text-anchor="end">{:.2g}</text>)x", l - 4, Y(std::pow(10, e)) + 4, std::pow(10, e));
-  svg += fmt::format(R"x(<text x="{}" y="{}" font-size="12" text-anchor="middle">wall time per fit (s, log)</text>)x", l + (w - l - r) / 2, h - 12);
-  svg += fmt::format(R"x(<text x="16" y="{0}" font-size="12" transform="rotate(-90 16 {0})" text-anchor="middle">mean surface distance (mm, log)</text>)x", t + (h - t - b) / 2);
+    svg +=
+        fmt::format(R"x(<text x="{}" y="{:.1f}" font-size="11" text-anchor="end">{:.2g}</text>)x",
+                    l - 4, Y(std::pow(10, e)) + 4, std::pow(10, e));
+  svg += fmt::format(
+      R"x(<text x="{}" y="{}" font-size="12" text-anchor="middle">wall time per fit (s, log)</text>)x",
+      l + (w - l - r) / 2, h - 12);
+  svg += fmt::format(
+      R"x(<text x="16" y="{0}" font-size="12" transform="rotate(-90 16 {0})" text-anchor="middle">mean surface distance (mm, log)</text>)x",
+      t + (h - t - b) / 2);
   int legend = 0;
   for (const auto& [method, colour] : colours) {
     std::vector<double> ts, es;
     for (const auto& row : rows)
       if (row.method == method) {
-        svg += fmt::format(R"x(<circle cx="{:.1f}" cy="{:.1f}" r="3" fill="{}" fill-opacity="0.45"/>)x", X(row.wall_s), Y(row.msd_mm), colour);
+        svg += fmt::format(
+            R"x(<circle cx="{:.1f}" cy="{:.1f}" r="3" fill="{}" fill-opacity="0.45"/>)x",
+            X(row.wall_s), Y(row.msd_mm), colour);
         ts.push_back(row.wall_s), es.push_back(row.msd_mm);
       }
     if (ts.empty()) continue;
     std::sort(ts.begin(), ts.end()), std::sort(es.begin(), es.end());
-    svg += fmt::format(R"x(<rect x="{:.1f}" y="{:.1f}" width="10" height="10" fill="{}" stroke="black"/>)x", X(ts[ts.size() / 2]) - 5, Y(es[es.size() / 2]) - 5, colour);
-    svg += fmt::format(R"x(<rect x="{}" y="{}" width="12" height="12" fill="{}"/><text x="{}" y="{}" font-size="12">{}</text>)x", w - r + 14, t + 20 * legend, colour, w - r + 32, t + 20 * legend + 11, method);
+    svg += fmt::format(
+        R"x(<rect x="{:.1f}" y="{:.1f}" width="10" height="10" fill="{}" stroke="black"/>)x",
+        X(ts[ts.size() / 2]) - 5, Y(es[es.size() / 2]) - 5, colour);
+    svg += fmt::format(
+        R"x(<rect x="{}" y="{}" width="12" height="12" fill="{}"/><text x="{}" y="{}" font-size="12">{}</text>)x",
+        w - r + 14, t + 20 * legend, colour, w - r + 32, t + 20 * legend + 11, method);
     ++legend;
   }
-  svg += fmt::format(R"x(<text x="{}" y="{}" font-size="11">squares: medians</text>)x", w - r + 14, t + 20 * legend + 11);
+  svg += fmt::format(R"x(<text x="{}" y="{}" font-size="11">squares: medians</text>)x", w - r + 14,
+                     t + 20 * legend + 11);
   return svg + "</svg>\n";
 }
 
@@ -152,14 +185,19 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
 
   std::vector<ShapeCase> shapes = {
       {"phantom_prostate", "body:\nmodel:\n  radius_mm: 1.92\n", phantom_prostate()},
-      {"cube", "body:\n  shape: box\n  size_mm: [30, 30, 30]\nmodel:\n  radius_mm: 1.75\n", std::nullopt}};
+      {"cube", "body:\n  shape: box\n  size_mm: [30, 30, 30]\nmodel:\n  radius_mm: 1.75\n",
+       std::nullopt}};
   std::vector<std::string> families = {"stretch", "bend", "twist", "indent", "push"};
   std::vector<double> magnitudes = {5, 10};
   std::vector<int> counts = {87};
   std::vector<double> noises = {0.5}, outliers = {0.0};
   if (!o.quick) {
-    shapes.push_back({"egg", "body:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\n", std::nullopt});
-    shapes.push_back({"lung", "body:\n  shape: lung\n  size_mm: [40, 30, 60]\nmodel:\n  radius_mm: 1.9\n", std::nullopt});
+    shapes.push_back({"egg",
+                      "body:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\n",
+                      std::nullopt});
+    shapes.push_back({"lung",
+                      "body:\n  shape: lung\n  size_mm: [40, 30, 60]\nmodel:\n  radius_mm: 1.9\n",
+                      std::nullopt});
     if (auto gtv = real_gtv(ORGANFIT_SHARED_DATA_DIR_STRING))
       shapes.push_back({"real_gtv_sts004", "body:\nmodel:\n  radius_mm: 3.0\n", std::move(gtv)});
     magnitudes = {2, 5, 10, 15};
@@ -170,29 +208,34 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   const std::vector<std::string> methods = {"spread", "paper", "tps", "cpd", "icp"};
   // --sample N: a seeded, uniform subset of the grid's cases (each keeps its number and
   // seed from the whole grid, so a sampled case is the same case as in a full run).
-  const long long grid_cases = static_cast<long long>(shapes.size() * families.size() * magnitudes.size() *
-                                                      counts.size() * noises.size() * outliers.size());
+  const long long grid_cases =
+      static_cast<long long>(shapes.size() * families.size() * magnitudes.size() * counts.size() *
+                             noises.size() * outliers.size());
   std::vector<char> selected(static_cast<size_t>(grid_cases) + 1, 1);
   if (o.sample > 0 && o.sample < grid_cases) {
     std::vector<long long> ids(static_cast<size_t>(grid_cases));
-    for (long long i = 0; i < grid_cases; ++i) ids[static_cast<size_t>(i)] = i + 1;
+    for (long long i = 0; i < grid_cases; ++i)
+      ids[static_cast<size_t>(i)] = i + 1;
     std::mt19937_64 rng(20261122);
     std::shuffle(ids.begin(), ids.end(), rng);
     std::fill(selected.begin(), selected.end(), 0);
-    for (long long i = 0; i < o.sample; ++i) selected[static_cast<size_t>(ids[static_cast<size_t>(i)])] = 1;
+    for (long long i = 0; i < o.sample; ++i)
+      selected[static_cast<size_t>(ids[static_cast<size_t>(i)])] = 1;
   }
   std::vector<Row> rows;
   std::string curves = "case,method,step,wall_s,residual_mean_mm,volume_change_pct\n";
   int case_id = 0, cases_run = 0;
   for (const auto& shape : shapes) {
-    const config::Scene base = config::parse_scene("scene:\n  seed: 1\n" + shape.yaml, o.out / "bench.yaml", scene_schema());
+    const config::Scene base = config::parse_scene("scene:\n  seed: 1\n" + shape.yaml,
+                                                   o.out / "bench.yaml", scene_schema());
     const ModelStageResult model = run_model_stage(base, shape.organ ? &*shape.organ : nullptr);
     const double rho = model.model->radius_mm();
     const fitting::SurfaceSamples full = fitting::reference_surface(model.reference, 1);
     // ~400 surface samples for the baselines (CPD's M x M system).
     const Eigen::Index stride = std::max<Eigen::Index>(1, full.points.cols() / 400);
     Eigen::Matrix3Xd surface(3, (full.points.cols() + stride - 1) / stride);
-    for (Eigen::Index j = 0, k = 0; j < full.points.cols(); j += stride, ++k) surface.col(k) = full.points.col(j);
+    for (Eigen::Index j = 0, k = 0; j < full.points.cols(); j += stride, ++k)
+      surface.col(k) = full.points.col(j);
     const double v0 = geometry::particle_body_volume_mm3(model.state.x, rho, 0.5 * rho, rho);
     const auto reference = std::make_shared<const geometry::LabelVolume>(model.reference);
     const double support = fitting::embedding_support_mm(model.lattice_spacing_mm);
@@ -201,7 +244,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
       box.min_mm = box.min_mm.cwiseMin(also.min_mm), box.max_mm = box.max_mm.cwiseMax(also.max_mm);
       return body.on_grid(geometry::grid_covering(box, 0.5 * rho, rho));
     };
-    const fitting::EmbeddedBody rest(reference, fitting::GlobalMap{}, model.state.x, model.state.x, support);
+    const fitting::EmbeddedBody rest(reference, fitting::GlobalMap{}, model.state.x, model.state.x,
+                                     support);
     const double v0_embedded = embedded_on_grid(rest, rest.bounds()).volume_mm3(1);
     for (const auto& family : families)
       for (double magnitude : magnitudes)
@@ -214,7 +258,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
               ++cases_run;
               const evaluation::Deformation d = family_deformation(family, magnitude, model.shape);
               evaluation::SamplingOptions so;
-              so.count = count, so.noise_mm = noise, so.outlier_fraction = outlier, so.half_coverage = true;
+              so.count = count, so.noise_mm = noise, so.outlier_fraction = outlier,
+              so.half_coverage = true;
               so.seed = static_cast<unsigned>(case_id);
               PointsStageResult pts;
               pts.points = evaluation::sample_deformed_surface(model.shape, d, so);
@@ -223,7 +268,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
               const auto inside = evaluation::deformed_inside(model.shape, d);
               const geometry::Aabb bounds = deformed_bounds(model.shape, d);
               Eigen::Matrix3Xd xs(3, static_cast<Eigen::Index>(pts.points.size()));
-              for (size_t i = 0; i < pts.points.size(); ++i) xs.col(static_cast<Eigen::Index>(i)) = pts.points[i].p_mm;
+              for (size_t i = 0; i < pts.points.size(); ++i)
+                xs.col(static_cast<Eigen::Index>(i)) = pts.points[i].p_mm;
               for (const auto& method : methods) {
                 Row row{method, shape.name, family, magnitude, count, noise, outlier};
                 particles::Positions moved;
@@ -231,7 +277,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                 particles::Positions placed = model.state.x;
                 if (method == "spread" || method == "paper") {
                   const config::Scene scene = config::parse_scene(
-                      fmt::format("scene:\n  seed: {}\n{}points:\n  source: generate\nfit:\n  method: {}\n  max_wall_s: 20\n",
+                      fmt::format("scene:\n  seed: {}\n{}points:\n  source: generate\nfit:\n  "
+                                  "method: {}\n  max_wall_s: 20\n",
                                   case_id, shape.yaml, method),
                       o.out / "bench.yaml", scene_schema());
                   ModelStageResult m = clone(model);
@@ -245,10 +292,12 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                   row.wall_s = fit.fit.wall_s;
                   row.converged = row.converged && fit.fit.converged;
                   moved = m.state.x;
-                  if (fit.placed.cols() == moved.cols()) global_map = fit.global_map, placed = fit.placed;
+                  if (fit.placed.cols() == moved.cols())
+                    global_map = fit.global_map, placed = fit.placed;
                   for (const auto& h : fit.fit.history)
-                    curves += fmt::format("{},{},{},{:.6f},{:.6f},{:.6f}\n", case_id, method, h.step, h.wall_s, h.residual_mean_mm,
-                                          h.volume_change_pct);
+                    curves +=
+                        fmt::format("{},{},{},{:.6f},{:.6f},{:.6f}\n", case_id, method, h.step,
+                                    h.wall_s, h.residual_mean_mm, h.volume_change_pct);
                 } else {
                   Stopwatch clock;
                   evaluation::PointMap map;
@@ -267,7 +316,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                       for (Eigen::Index i = 0; i < xs.cols(); ++i) {
                         Eigen::Index at = 0;
                         (current.colwise() - xs.col(i)).colwise().squaredNorm().minCoeff(&at);
-                        if (used[static_cast<size_t>(at)]) continue;  // one landmark per surface sample
+                        if (used[static_cast<size_t>(at)])
+                          continue;  // one landmark per surface sample
                         used[static_cast<size_t>(at)] = 1;
                         src.push_back({surface(0, at), surface(1, at), surface(2, at)});
                         dst.push_back({xs(0, i), xs(1, i), xs(2, i)});
@@ -289,38 +339,47 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                     };
                   }
                   moved.resize(3, model.state.x.cols());
-                  for (Eigen::Index j = 0; j < moved.cols(); ++j) moved.col(j) = map(model.state.x.col(j));
+                  for (Eigen::Index j = 0; j < moved.cols(); ++j)
+                    moved.col(j) = map(model.state.x.col(j));
                   row.wall_s = clock.elapsed_s();
                 }
                 // Every method is measured on the organ it carries: the reference moved by its
                 // displacement of the particles (fitting/embedded_body.h), the particle fits
                 // with their global map; the balls' body is kept for comparison.
-                if (placed.cols() != moved.cols()) placed = moved, global_map = fitting::GlobalMap{};
+                if (placed.cols() != moved.cols())
+                  placed = moved, global_map = fitting::GlobalMap{};
                 const fitting::EmbeddedBody organ(reference, global_map, placed, moved, support);
                 const geometry::LabelVolume mask = embedded_on_grid(organ, bounds);
                 const auto cmp = evaluation::compare_mask_with_body(mask, inside);
                 row.msd_mm = cmp.msd_mm, row.hd95_mm = cmp.hd95_mm, row.dice = cmp.dice;
                 row.volume_change_pct = 100 * (mask.volume_mm3(1) / v0_embedded - 1);
-                const auto balls = evaluation::compare_with_body(moved, rho, inside, bounds, 0.5 * rho);
+                const auto balls =
+                    evaluation::compare_with_body(moved, rho, inside, bounds, 0.5 * rho);
                 row.msd_balls_mm = balls.msd_mm;
-                row.volume_change_balls_pct = 100 * (geometry::particle_body_volume_mm3(moved, rho, 0.5 * rho, rho) / v0 - 1);
+                row.volume_change_balls_pct =
+                    100 * (geometry::particle_body_volume_mm3(moved, rho, 0.5 * rho, rho) / v0 - 1);
                 row.residual_mm = residual_of(pts.points, moved, rho);
                 rows.push_back(row);
               }
-              spdlog::info("bench fit: case {} ({} {} {} mm, {} points): spread {:.2f} mm, paper {:.2f}, tps {:.2f}, cpd {:.2f}, icp {:.2f}",
-                           case_id, shape.name, family, magnitude, count, rows[rows.size() - 5].msd_mm,
-                           rows[rows.size() - 4].msd_mm, rows[rows.size() - 3].msd_mm, rows[rows.size() - 2].msd_mm,
-                           rows.back().msd_mm);
+              spdlog::info(
+                  "bench fit: case {} ({} {} {} mm, {} points): spread {:.2f} mm, paper {:.2f}, "
+                  "tps {:.2f}, cpd {:.2f}, icp {:.2f}",
+                  case_id, shape.name, family, magnitude, count, rows[rows.size() - 5].msd_mm,
+                  rows[rows.size() - 4].msd_mm, rows[rows.size() - 3].msd_mm,
+                  rows[rows.size() - 2].msd_mm, rows.back().msd_mm);
             }
   }
 
   std::string csv =
-      "method,shape,family,magnitude_mm,points,noise_mm,outliers,wall_s,msd_mm,hd95_mm,dice,volume_change_pct,residual_mm,"
+      "method,shape,family,magnitude_mm,points,noise_mm,outliers,wall_s,msd_mm,hd95_mm,dice,volume_"
+      "change_pct,residual_mm,"
       "converged,msd_balls_mm,volume_change_balls_pct\n";
   for (const auto& r : rows)
-    csv += fmt::format("{},{},{},{},{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{:.4f},{:.4f}\n", r.method, r.shape,
-                       r.family, r.magnitude_mm, r.points, r.noise_mm, r.outliers, r.wall_s, r.msd_mm, r.hd95_mm, r.dice,
-                       r.volume_change_pct, r.residual_mm, r.converged ? 1 : 0, r.msd_balls_mm, r.volume_change_balls_pct);
+    csv += fmt::format(
+        "{},{},{},{},{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{:.4f},{:.4f}\n",
+        r.method, r.shape, r.family, r.magnitude_mm, r.points, r.noise_mm, r.outliers, r.wall_s,
+        r.msd_mm, r.hd95_mm, r.dice, r.volume_change_pct, r.residual_mm, r.converged ? 1 : 0,
+        r.msd_balls_mm, r.volume_change_balls_pct);
   write_file_atomically(o.out / "results.csv", csv);
   write_file_atomically(o.out / "curves.csv", curves);
   write_file_atomically(o.out / "work_precision.svg", svg_work_precision(rows));
@@ -331,27 +390,41 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
     std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
     return v[v.size() / 2];
   };
-  nlohmann::json summary = {{"benchmark", "fit"}, {"cases", cases_run}, {"grid_cases", grid_cases}, {"rows", rows.size()},
+  nlohmann::json summary = {{"benchmark", "fit"},
+                            {"cases", cases_run},
+                            {"grid_cases", grid_cases},
+                            {"rows", rows.size()},
                             {"out", o.out.string()}};
-  std::string md = fmt::format("# organfit bench fit{}{}\n\n{} cases{} x {} methods; points on the posterior half of the "
-                               "deformed surface. Metrics: fit_benchmark.h.\n\n",
-                               o.quick ? " --quick" : "", o.sample > 0 ? fmt::format(" --sample {}", o.sample) : "",
-                               cases_run, cases_run < grid_cases ? fmt::format(" (a seeded uniform sample of the grid's {})", grid_cases) : "",
-                               methods.size());
-  md += "| method | median MSD (mm) | median HD95 (mm) | median Dice | median |volume change| (%) | median wall (s) | converged |\n|---|---|---|---|---|---|---|\n";
+  std::string md = fmt::format(
+      "# organfit bench fit{}{}\n\n{} cases{} x {} methods; points on the posterior half of the "
+      "deformed surface. Metrics: fit_benchmark.h.\n\n",
+      o.quick ? " --quick" : "", o.sample > 0 ? fmt::format(" --sample {}", o.sample) : "",
+      cases_run,
+      cases_run < grid_cases
+          ? fmt::format(" (a seeded uniform sample of the grid's {})", grid_cases)
+          : "",
+      methods.size());
+  md +=
+      "| method | median MSD (mm) | median HD95 (mm) | median Dice | median |volume change| (%) | "
+      "median wall (s) | converged |\n|---|---|---|---|---|---|---|\n";
   for (const auto& m : methods) {
     std::vector<double> msd, hd, dice, vol, wall;
     int conv = 0, n = 0;
     for (const auto& r : rows)
       if (r.method == m)
-        msd.push_back(r.msd_mm), hd.push_back(r.hd95_mm), dice.push_back(r.dice), vol.push_back(std::abs(r.volume_change_pct)),
-            wall.push_back(r.wall_s), conv += r.converged, ++n;
-    md += fmt::format("| {} | {:.2f} | {:.2f} | {:.3f} | {:.2f} | {:.3f} | {}/{} |\n", m, median(msd), median(hd), median(dice),
-                      median(vol), median(wall), conv, n);
-    summary[m] = {{"median_msd_mm", median(msd)}, {"median_hd95_mm", median(hd)}, {"median_volume_change_pct", median(vol)},
+        msd.push_back(r.msd_mm), hd.push_back(r.hd95_mm), dice.push_back(r.dice),
+            vol.push_back(std::abs(r.volume_change_pct)), wall.push_back(r.wall_s),
+            conv += r.converged, ++n;
+    md += fmt::format("| {} | {:.2f} | {:.2f} | {:.3f} | {:.2f} | {:.3f} | {}/{} |\n", m,
+                      median(msd), median(hd), median(dice), median(vol), median(wall), conv, n);
+    summary[m] = {{"median_msd_mm", median(msd)},
+                  {"median_hd95_mm", median(hd)},
+                  {"median_volume_change_pct", median(vol)},
                   {"median_wall_s", median(wall)}};
   }
-  md += "\n## Per family, magnitude <= 10 mm, median MSD (mm)\n\n| family | spread | paper | tps | cpd | icp |\n|---|---|---|---|---|---|\n";
+  md +=
+      "\n## Per family, magnitude <= 10 mm, median MSD (mm)\n\n| family | spread | paper | tps | "
+      "cpd | icp |\n|---|---|---|---|---|---|\n";
   for (const auto& f : families) {
     md += "| " + f;
     for (const auto& m : methods) {
@@ -365,17 +438,24 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   // Targets: sparse partial data (<= 87 points, half the surface, 0.5 mm noise), <= 10 mm.
   int n = 0, meet_msd = 0, meet_hd = 0, meet_vol = 0;
   for (const auto& r : rows)
-    if (r.method == "spread" && r.points <= 87 && r.noise_mm == 0.5 && r.magnitude_mm <= 10 && r.outliers == 0)
-      ++n, meet_msd += r.msd_mm <= 1.0, meet_hd += r.hd95_mm <= 2.5, meet_vol += std::abs(r.volume_change_pct) <= 1.0;
-  md += fmt::format("\n## Targets (ours, sparse partial data: <= 87 points on half the surface, 0.5 mm noise, <= 10 mm)\n\n"
-                    "- MSD <= 1.0 mm: {}/{} cases\n- HD95 <= 2.5 mm: {}/{} cases\n- |volume change| <= 1%: {}/{} cases\n",
-                    meet_msd, n, meet_hd, n, meet_vol, n);
+    if (r.method == "spread" && r.points <= 87 && r.noise_mm == 0.5 && r.magnitude_mm <= 10 &&
+        r.outliers == 0)
+      ++n, meet_msd += r.msd_mm <= 1.0, meet_hd += r.hd95_mm <= 2.5,
+          meet_vol += std::abs(r.volume_change_pct) <= 1.0;
+  md += fmt::format(
+      "\n## Targets (ours, sparse partial data: <= 87 points on half the surface, 0.5 mm noise, <= "
+      "10 mm)\n\n"
+      "- MSD <= 1.0 mm: {}/{} cases\n- HD95 <= 2.5 mm: {}/{} cases\n- |volume change| <= 1%: {}/{} "
+      "cases\n",
+      meet_msd, n, meet_hd, n, meet_vol, n);
   // Side by side on the same cases: ours against TPS and CPD, with the wall times.
   std::map<std::string, std::vector<double>> ratio, wall_ratio;
   std::map<std::string, int> half, smaller_volume, cases;
   for (size_t i = 0; i < rows.size(); ++i) {
     const Row& r = rows[i];
-    if (r.method != "spread" || !(r.points <= 87 && r.noise_mm == 0.5 && r.magnitude_mm <= 10 && r.outliers == 0)) continue;
+    if (r.method != "spread" ||
+        !(r.points <= 87 && r.noise_mm == 0.5 && r.magnitude_mm <= 10 && r.outliers == 0))
+      continue;
     for (size_t j = i + 1; j < rows.size() && j < i + methods.size(); ++j) {
       const Row& b = rows[j];
       if (b.method != "tps" && b.method != "cpd") continue;
@@ -386,20 +466,30 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
       ++cases[b.method];
     }
   }
-  md += "\n## Side by side (same cases): ours against the baselines\n\n| baseline | median MSD ratio (ours / theirs) | "
-        "cases with ours <= half theirs | cases with a smaller volume change | median wall-time ratio (ours / theirs) "
-        "|\n|---|---|---|---|---|\n";
+  md +=
+      "\n## Side by side (same cases): ours against the baselines\n\n| baseline | median MSD ratio "
+      "(ours / theirs) | "
+      "cases with ours <= half theirs | cases with a smaller volume change | median wall-time "
+      "ratio (ours / theirs) "
+      "|\n|---|---|---|---|---|\n";
   for (const std::string b : {"tps", "cpd"}) {
-    md += fmt::format("| {} | {:.2f} | {}/{} | {}/{} | {:.2f} |\n", b, median(ratio[b]), half[b], cases[b],
-                      smaller_volume[b], cases[b], median(wall_ratio[b]));
-    summary["versus_" + b] = {{"median_msd_ratio", median(ratio[b])}, {"msd_at_most_half", half[b]},
-                              {"smaller_volume_change", smaller_volume[b]}, {"cases", cases[b]},
+    md += fmt::format("| {} | {:.2f} | {}/{} | {}/{} | {:.2f} |\n", b, median(ratio[b]), half[b],
+                      cases[b], smaller_volume[b], cases[b], median(wall_ratio[b]));
+    summary["versus_" + b] = {{"median_msd_ratio", median(ratio[b])},
+                              {"msd_at_most_half", half[b]},
+                              {"smaller_volume_change", smaller_volume[b]},
+                              {"cases", cases[b]},
                               {"median_wall_ratio", median(wall_ratio[b])}};
   }
-  md += "\nFiles: results.csv (one row per case and method), curves.csv (the particle fits' residual and volume "
-        "against wall time), work_precision.svg.\n";
+  md +=
+      "\nFiles: results.csv (one row per case and method), curves.csv (the particle fits' residual "
+      "and volume "
+      "against wall time), work_precision.svg.\n";
   write_file_atomically(o.out / "RESULTS.md", md);
-  summary["targets"] = {{"cases", n}, {"msd_le_1mm", meet_msd}, {"hd95_le_2_5mm", meet_hd}, {"volume_le_1pct", meet_vol}};
+  summary["targets"] = {{"cases", n},
+                        {"msd_le_1mm", meet_msd},
+                        {"hd95_le_2_5mm", meet_hd},
+                        {"volume_le_1pct", meet_vol}};
   summary["wall_s"] = total.elapsed_s();
   return summary;
 }

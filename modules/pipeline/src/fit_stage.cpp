@@ -36,7 +36,8 @@ std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
     std::vector<std::string> cells;
     std::stringstream ss(line);
     std::string cell;
-    while (std::getline(ss, cell, ',')) cells.push_back(cell);
+    while (std::getline(ss, cell, ','))
+      cells.push_back(cell);
     auto fail = [&](const std::string& why) {
       throw InputError(fmt::format("{}:{}: {}", file.string(), line_no, why));
     };
@@ -56,7 +57,8 @@ std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
       if (!std::isfinite(d)) fail("non-finite coordinate");
       v.push_back(d);
     }
-    if (v.size() != 3 && v.size() != 4) fail(fmt::format("expected x,y,z[,confidence], got {} columns", v.size()));
+    if (v.size() != 3 && v.size() != 4)
+      fail(fmt::format("expected x,y,z[,confidence], got {} columns", v.size()));
     if (v.size() == 4 && !(v[3] > 0 && v[3] <= 1)) fail("confidence must be in (0, 1]");
     points.push_back({Eigen::Vector3d(v[0], v[1], v[2]), v.size() == 4 ? v[3] : 1.0});
   next_line:;
@@ -72,7 +74,8 @@ std::vector<fitting::AttractivePoint> read_points_file(const fs::path& file) {
     for (const auto& p : meshing::read_point_set(file)) {
       if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])))
         throw InputError(file.string() + ": a point has a non-finite coordinate");
-      if (!(p[3] > 0 && p[3] <= 1)) throw InputError(file.string() + ": a confidence is outside (0, 1]");
+      if (!(p[3] > 0 && p[3] <= 1))
+        throw InputError(file.string() + ": a confidence is outside (0, 1]");
       points.push_back({Eigen::Vector3d(p[0], p[1], p[2]), p[3]});
     }
   } else {
@@ -82,7 +85,8 @@ std::vector<fitting::AttractivePoint> read_points_file(const fs::path& file) {
   return points;
 }
 
-evaluation::Deformation deformation_from(const config::Scene& scene, const evaluation::Shape& shape) {
+evaluation::Deformation deformation_from(const config::Scene& scene,
+                                         const evaluation::Shape& shape) {
   evaluation::Deformation d;
   d.stretch = scene.number("points", "stretch");
   d.bend_mm = scene.number("points", "bend_mm");
@@ -106,7 +110,8 @@ PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageR
   r.truth_shape = model.shape;
   const std::string target = scene.text("points", "target_shape");
   if (target != "same") {
-    evaluation::Shape t = evaluation::make_shape(target, scene.vec3("points", "target_size_mm"), model.shape.centre_mm);
+    evaluation::Shape t = evaluation::make_shape(target, scene.vec3("points", "target_size_mm"),
+                                                 model.shape.centre_mm);
     const double voxel = 0.25 * model.cohesion.r0_mm;
     const double scale = std::cbrt(evaluation::shape_volume_mm3(model.shape, voxel) /
                                    evaluation::shape_volume_mm3(t, voxel));
@@ -122,11 +127,19 @@ PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageR
   o.seed = static_cast<unsigned>(scene.integer("scene", "seed"));
   r.points = evaluation::sample_deformed_surface(r.truth_shape, d, o);
   r.truth = d;
-  r.summary = {{"source", "generate"}, {"count", r.points.size()}, {"noise_mm", o.noise_mm},
-               {"outlier_fraction", o.outlier_fraction}, {"coverage", scene.text("points", "coverage")},
-               {"stretch", d.stretch}, {"bend_mm", d.bend_mm}, {"twist_rad", d.twist_rad}, {"indent_mm", d.indent_mm},
-               {"push_mm", d.push_mm}, {"target_shape", r.truth_shape.kind},
-               {"target_size_mm", {r.truth_shape.size_mm.x(), r.truth_shape.size_mm.y(), r.truth_shape.size_mm.z()}}};
+  r.summary = {{"source", "generate"},
+               {"count", r.points.size()},
+               {"noise_mm", o.noise_mm},
+               {"outlier_fraction", o.outlier_fraction},
+               {"coverage", scene.text("points", "coverage")},
+               {"stretch", d.stretch},
+               {"bend_mm", d.bend_mm},
+               {"twist_rad", d.twist_rad},
+               {"indent_mm", d.indent_mm},
+               {"push_mm", d.push_mm},
+               {"target_shape", r.truth_shape.kind},
+               {"target_size_mm",
+                {r.truth_shape.size_mm.x(), r.truth_shape.size_mm.y(), r.truth_shape.size_mm.z()}}};
   return r;
 }
 
@@ -142,7 +155,8 @@ geometry::Aabb deformed_bounds(const evaluation::Shape& s, const evaluation::Def
   const geometry::Aabb b = s.bounds();
   geometry::Aabb out{Eigen::Vector3d::Constant(1e300), Eigen::Vector3d::Constant(-1e300)};
   for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d corner((c & 1) ? b.max_mm.x() : b.min_mm.x(), (c & 2) ? b.max_mm.y() : b.min_mm.y(),
+    const Eigen::Vector3d corner((c & 1) ? b.max_mm.x() : b.min_mm.x(),
+                                 (c & 2) ? b.max_mm.y() : b.min_mm.y(),
                                  (c & 4) ? b.max_mm.z() : b.min_mm.z());
     const Eigen::Vector3d q = d.apply(corner);
     out.min_mm = out.min_mm.cwiseMin(q);
@@ -155,7 +169,6 @@ geometry::Aabb deformed_bounds(const evaluation::Shape& s, const evaluation::Def
   out.max_mm.array() += margin;
   return out;
 }
-
 
 FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model,
                              const PointsStageResult& pts) {
@@ -181,10 +194,12 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   std::optional<geometry::SurfaceComparison> floor, undeformed;
   Stopwatch truth_clock;
   if (pts.truth) {
-    floor = evaluation::compare_with_body(organ_before, [&](const Eigen::Vector3d& p) { return model.shape.inside(p); },
-                                          model.shape.bounds(), truth_voxel);
-    undeformed = evaluation::compare_with_body(organ_before, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
-                                               deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
+    floor = evaluation::compare_with_body(
+        organ_before, [&](const Eigen::Vector3d& p) { return model.shape.inside(p); },
+        model.shape.bounds(), truth_voxel);
+    undeformed = evaluation::compare_with_body(
+        organ_before, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
+        deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
   }
   out.truth_wall_s = truth_clock.elapsed_s();
   const double v0 = body_volume(start, rho);
@@ -203,9 +218,11 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     skin0.update(start);
     const fitting::SurfaceSamples ref = fitting::reference_surface(model.reference, 4);
     std::vector<fitting::AttractivePoint> probes;
-    for (Eigen::Index j = 0; j < ref.points.cols(); ++j) probes.push_back({ref.points.col(j), 1.0});
+    for (Eigen::Index j = 0; j < ref.points.cols(); ++j)
+      probes.push_back({ref.points.col(j), 1.0});
     const std::vector<double> r = fitting::data_residuals(probes, start, skin0.skin(), rho);
-    for (double v : r) residual_floor += v;
+    for (double v : r)
+      residual_floor += v;
     residual_floor /= std::max<size_t>(1, r.size());
   }
   const double tolerance = scene.number("fit", "residual_tolerance_mm");
@@ -233,8 +250,11 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     pp.influence_radius_max_r0 = scene.number("fit", "influence_radius_max_r0");
     pp.total_force_factor = scene.number("fit", "total_force_factor");
     pp.outlier_distance_mm = scene.number("fit", "outlier_distance_mm");
-    auto& term = m.add(std::make_unique<fitting::PaperAttractiveForce>(points, law, rho, pp, skin_voxel));
-    skin_of = [&term](const particles::Positions&) -> const std::vector<int>& { return term.skin().skin(); };
+    auto& term =
+        m.add(std::make_unique<fitting::PaperAttractiveForce>(points, law, rho, pp, skin_voxel));
+    skin_of = [&term](const particles::Positions&) -> const std::vector<int>& {
+      return term.skin().skin();
+    };
     status = &term.status();
   } else {
     // Global stage: a volume-preserving map of the whole organ (affine with det 1, then
@@ -265,45 +285,54 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     double settled_change_pct = 0;
     while (passes < 3) {
       ++passes;
-      state = particles::State(fitting::refill_mapped_body(model.reference, count, model.lattice_spacing_mm, map));
+      state = particles::State(
+          fitting::refill_mapped_body(model.reference, count, model.lattice_spacing_mm, map));
       particles::relax(m, state, opt, 300, scene.number("fit", "kinetic_tolerance"));
       const double v = body_volume(state.x, rho);
       settled_change_pct = 100.0 * (v - v0) / v0;
-      spdlog::debug("fit: re-fill pass {}: {} particles asked, {} placed, settled volume {:+.2f}%", passes,
-                    count, state.size(), settled_change_pct);
+      spdlog::debug("fit: re-fill pass {}: {} particles asked, {} placed, settled volume {:+.2f}%",
+                    passes, count, state.size(), settled_change_pct);
       if (std::abs(settled_change_pct) <= 0.25) break;
       count = static_cast<int>(std::lround(count * v0 / v));
     }
     const Eigen::Vector3d stretches = Eigen::JacobiSVD<Eigen::Matrix3d>(affine.a).singularValues();
-    global = {{"rms_before_mm", affine.rms_before_mm}, {"rms_after_mm", map.rms_after_mm},
+    global = {{"rms_before_mm", affine.rms_before_mm},
+              {"rms_after_mm", map.rms_after_mm},
               {"iterations", affine.iterations},
               {"principal_stretches", {stretches.x(), stretches.y(), stretches.z()}},
               {"translation_mm", {affine.t.x(), affine.t.y(), affine.t.z()}},
-              {"shear_coefficients_per_mm", std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
+              {"shear_coefficients_per_mm",
+               std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
               {"refill_passes", passes},
               {"particles_after_refill", state.size()},
               {"volume_change_after_settling_pct", settled_change_pct},
               {"wall_s", clock.elapsed_s()}};
     if (model.settings.skeleton) {
-      const particles::Skeleton sk =
-          particles::medial_skeleton(state.x, model.lattice_spacing_mm, model.skeleton_node_spacing_mm);
-      model.skeleton = &m.add(std::make_unique<particles::SkeletonForce>(sk, state.x, model.skeleton_params));
+      const particles::Skeleton sk = particles::medial_skeleton(state.x, model.lattice_spacing_mm,
+                                                                model.skeleton_node_spacing_mm);
+      model.skeleton =
+          &m.add(std::make_unique<particles::SkeletonForce>(sk, state.x, model.skeleton_params));
     }
     // Local stage: smooth patches; the skeleton's rest shape follows the fit (it keeps
     // the global shape between rows but does not pull the body back to where it was).
-    auto& term = m.add(std::make_unique<fitting::SpreadAttractiveForce>(points, law, rho,
-                                                                        fitting::SpreadForceParams{}, skin_voxel));
+    auto& term = m.add(std::make_unique<fitting::SpreadAttractiveForce>(
+        points, law, rho, fitting::SpreadForceParams{}, skin_voxel));
     // The surface the local stage fits is the organ's embedded surface (the reference
     // moved with the particles, fitting/embedded_body.h): each particle's depth below
     // the mapped reference surface replaces the balls' radius.
     {
-      const fitting::SurfaceSamples reference_surface = fitting::reference_surface(model.reference, 1);
+      const fitting::SurfaceSamples reference_surface =
+          fitting::reference_surface(model.reference, 1);
       Eigen::Matrix3Xd mapped(3, reference_surface.points.cols());
-      for (Eigen::Index j = 0; j < mapped.cols(); ++j) mapped.col(j) = map.apply(reference_surface.points.col(j));
-      fo.surface_depths_mm = fitting::surface_depths(state.x, mapped, 3.0 * model.lattice_spacing_mm);
+      for (Eigen::Index j = 0; j < mapped.cols(); ++j)
+        mapped.col(j) = map.apply(reference_surface.points.col(j));
+      fo.surface_depths_mm =
+          fitting::surface_depths(state.x, mapped, 3.0 * model.lattice_spacing_mm);
       term.set_surface_depths(fo.surface_depths_mm);
     }
-    skin_of = [&term](const particles::Positions&) -> const std::vector<int>& { return term.skin().skin(); };
+    skin_of = [&term](const particles::Positions&) -> const std::vector<int>& {
+      return term.skin().skin();
+    };
     status = &term.status();
     if (model.skeleton) {
       after_row = [&model](particles::State& s) { model.skeleton->set_rest_shape(s.x); };
@@ -313,12 +342,13 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   out.placed = state.x;
   model.placed = state.x;
   Progress progress("fit", fo.max_steps);
-  out.fit = fitting::run_fit(m, state, opt, points, skin_of, status, fo,
-                             [&](const fitting::HistoryRow& h) {
-                               throw_if_interrupted();
-                               progress.update(h.step, fmt::format("residual {:.2f} mm", h.residual_mean_mm));
-                             },
-                             after_row);
+  out.fit = fitting::run_fit(
+      m, state, opt, points, skin_of, status, fo,
+      [&](const fitting::HistoryRow& h) {
+        throw_if_interrupted();
+        progress.update(h.step, fmt::format("residual {:.2f} mm", h.residual_mean_mm));
+      },
+      after_row);
   progress.finish();
   out.fit.wall_s += global.is_null() ? 0.0 : global["wall_s"].get<double>();
 
@@ -332,7 +362,8 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   }();
   const double organ_v1 = organ_after.volume_mm3(truth_voxel);
   int rejected = 0;
-  for (const auto& st : *status) rejected += st.rejected;
+  for (const auto& st : *status)
+    rejected += st.rejected;
   out.fit_summary = {{"method", method},
                      {"attractive_points", points.size()},
                      {"rejected_points", rejected},
@@ -356,46 +387,58 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   if (!global.is_null()) out.fit_summary["global"] = global;
   if (pts.truth) {
     Stopwatch after_clock;
-    const auto fitted = evaluation::compare_with_body(organ_after, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
-                                                      deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
-    const auto fitted_balls = evaluation::compare_with_body(state.x, rho, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
-                                                            deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
+    const auto fitted = evaluation::compare_with_body(
+        organ_after, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
+        deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
+    const auto fitted_balls = evaluation::compare_with_body(
+        state.x, rho, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
+        deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
     const double denom = undeformed->msd_mm - floor->msd_mm;
-    out.truth_summary = {{"msd_mm", fitted.msd_mm},
-                         {"hd95_mm", fitted.hd95_mm},
-                         {"dice", fitted.dice},
-                         {"msd_undeformed_mm", undeformed->msd_mm},
-                         {"hd95_undeformed_mm", undeformed->hd95_mm},
-                         {"msd_floor_mm", floor->msd_mm},
-                         {"recovery", denom > 0 ? (undeformed->msd_mm - fitted.msd_mm) / denom : 0.0},
-                         {"voxel_mm", truth_voxel},
-                         {"surface", "the reference moved with the particles (fitting/embedded_body.h)"},
-                         {"particle_balls", {{"msd_mm", fitted_balls.msd_mm}, {"hd95_mm", fitted_balls.hd95_mm},
-                                             {"dice", fitted_balls.dice}}}};
+    out.truth_summary = {
+        {"msd_mm", fitted.msd_mm},
+        {"hd95_mm", fitted.hd95_mm},
+        {"dice", fitted.dice},
+        {"msd_undeformed_mm", undeformed->msd_mm},
+        {"hd95_undeformed_mm", undeformed->hd95_mm},
+        {"msd_floor_mm", floor->msd_mm},
+        {"recovery", denom > 0 ? (undeformed->msd_mm - fitted.msd_mm) / denom : 0.0},
+        {"voxel_mm", truth_voxel},
+        {"surface", "the reference moved with the particles (fitting/embedded_body.h)"},
+        {"particle_balls",
+         {{"msd_mm", fitted_balls.msd_mm},
+          {"hd95_mm", fitted_balls.hd95_mm},
+          {"dice", fitted_balls.dice}}}};
     out.truth_wall_s += after_clock.elapsed_s();
     out.truth_summary["wall_s"] = out.truth_wall_s;
   }
   std::ostringstream csv;
-  csv << "step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,kinetic_energy_per_particle\n";
+  csv << "step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,kinetic_energy_per_"
+         "particle\n";
   for (const auto& h : out.fit.history) {
     csv << fmt::format("{},{:.6f},{:.6f},{:.6f},{},{:.6g}\n", h.step, h.wall_s, h.residual_mean_mm,
-                       h.residual_max_mm, std::isnan(h.volume_change_pct) ? std::string() : fmt::format("{:.4f}", h.volume_change_pct),
+                       h.residual_max_mm,
+                       std::isnan(h.volume_change_pct) ? std::string()
+                                                       : fmt::format("{:.4f}", h.volume_change_pct),
                        h.kinetic_energy_per_particle);
   }
   out.history_csv = csv.str();
   if (!out.fit.converged) {
     std::vector<std::pair<double, int>> worst;
-    for (size_t k = 0; k < out.fit.residuals_mm.size(); ++k) worst.push_back({out.fit.residuals_mm[k], static_cast<int>(k)});
+    for (size_t k = 0; k < out.fit.residuals_mm.size(); ++k)
+      worst.push_back({out.fit.residuals_mm[k], static_cast<int>(k)});
     std::sort(worst.rbegin(), worst.rend());
     int far = 0;
-    for (const auto& [r, k] : worst) far += r > rho;
+    for (const auto& [r, k] : worst)
+      far += r > rho;
     std::string list;
     for (size_t w = 0; w < std::min<size_t>(5, worst.size()); ++w)
       list += fmt::format("{}#{} ({:.2f} mm)", w ? ", " : "", worst[w].second, worst[w].first);
     out.not_converged_message = fmt::format(
-        "fit did not converge ({}): mean residual {:.2f} mm (tolerance {:.2f}), {} of {} points farther than "
+        "fit did not converge ({}): mean residual {:.2f} mm (tolerance {:.2f}), {} of {} points "
+        "farther than "
         "{:.2f} mm; worst: {}",
-        out.fit.stop_reason, out.fit.residual_mean_mm, fo.residual_mean_tolerance_mm, far, points.size(), rho, list);
+        out.fit.stop_reason, out.fit.residual_mean_mm, fo.residual_mean_tolerance_mm, far,
+        points.size(), rho, list);
   }
   return out;
 }

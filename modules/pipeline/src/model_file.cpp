@@ -3,7 +3,6 @@
 #include <fmt/format.h>
 
 #include <Eigen/LU>
-
 #include <cmath>
 #include <fstream>
 
@@ -18,7 +17,9 @@ namespace {
 constexpr const char* kFormat = "organfit-model";
 constexpr int kFormatVersion = 1;
 
-nlohmann::json vec(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
+nlohmann::json vec(const Eigen::Vector3d& v) {
+  return {v.x(), v.y(), v.z()};
+}
 
 nlohmann::json flat(const Eigen::Matrix3Xd& m) {
   return std::vector<double>(m.data(), m.data() + m.size());
@@ -34,7 +35,8 @@ nlohmann::json mask_to_json(const geometry::LabelVolume& mask) {
       for (int i = 0; i < g.size[0]; ++i)
         if (mask.at(i, j, k) == 1) {
           const int idx[3] = {i, j, k};
-          for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], idx[d]), hi[d] = std::max(hi[d], idx[d]);
+          for (int d = 0; d < 3; ++d)
+            lo[d] = std::min(lo[d], idx[d]), hi[d] = std::max(hi[d], idx[d]);
         }
   geometry::ImageGeometry crop = g;
   for (int d = 0; d < 3; ++d) {
@@ -71,7 +73,9 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
   j["provenance"] = provenance;
   j["organ"] = {{"name", organ_name}, {"reference_volume_mm3", m.reference.volume_mm3(1)}};
   j["settings"] = to_json(m.settings);
-  nlohmann::json shape = {{"kind", m.shape.kind}, {"size_mm", vec(m.shape.size_mm)}, {"centre_mm", vec(m.shape.centre_mm)}};
+  nlohmann::json shape = {{"kind", m.shape.kind},
+                          {"size_mm", vec(m.shape.size_mm)},
+                          {"centre_mm", vec(m.shape.centre_mm)}};
   if (m.shape.mask) shape["mask"] = mask_to_json(*m.shape.mask);
   j["shape"] = shape;
   j["ct"] = ct ? nlohmann::json{{"folder", ct->folder},
@@ -89,11 +93,12 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
   // A fitted model: how its reference follows the particles (fitting/embedded_body.h).
   if (m.placed.cols() == m.state.x.cols() && m.placed.cols() > 0) {
     const auto& map = m.global_map;
-    j["embedding"] = {{"placed_positions_mm", flat(m.placed)},
-                      {"global_affine", std::vector<double>(map.affine.a.data(), map.affine.a.data() + 9)},
-                      {"global_translation_mm", vec(map.affine.t)},
-                      {"global_shear_centre_mm", vec(map.shears.centre)},
-                      {"global_shears", std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)}};
+    j["embedding"] = {
+        {"placed_positions_mm", flat(m.placed)},
+        {"global_affine", std::vector<double>(map.affine.a.data(), map.affine.a.data() + 9)},
+        {"global_translation_mm", vec(map.affine.t)},
+        {"global_shear_centre_mm", vec(map.shears.centre)},
+        {"global_shears", std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)}};
   } else {
     j["embedding"] = nullptr;
   }
@@ -111,7 +116,8 @@ SavedModel load_model(const fs::path& file) {
   } catch (const nlohmann::json::exception&) {
     fail("not an organfit model (not JSON)");
   }
-  if (!j.is_object() || j.value("format", "") != kFormat) fail("not an organfit model (no 'format: organfit-model')");
+  if (!j.is_object() || j.value("format", "") != kFormat)
+    fail("not an organfit model (no 'format: organfit-model')");
   if (j.value("format_version", 0) != kFormatVersion)
     fail(fmt::format("model format version {} is not {} (made by another organfit version)",
                      j.value("format_version", 0), kFormatVersion));
@@ -133,23 +139,28 @@ SavedModel load_model(const fs::path& file) {
     if (!(m.lattice_spacing_mm > 0)) fail("lattice_spacing_mm must be > 0");
 
     const auto& shape = j.at("shape");
-    auto read_vec = [](const nlohmann::json& v) { return Eigen::Vector3d(v.at(0), v.at(1), v.at(2)); };
+    auto read_vec = [](const nlohmann::json& v) {
+      return Eigen::Vector3d(v.at(0), v.at(1), v.at(2));
+    };
     if (shape.contains("mask")) {
       const auto& mj = shape.at("mask");
       geometry::ImageGeometry g;
-      for (int d = 0; d < 3; ++d) g.size[d] = mj.at("size").at(d).get<int>();
+      for (int d = 0; d < 3; ++d)
+        g.size[d] = mj.at("size").at(d).get<int>();
       g.spacing_mm = read_vec(mj.at("spacing_mm"));
       g.origin_mm = read_vec(mj.at("origin_mm"));
       const std::vector<double> r = mj.at("direction").get<std::vector<double>>();
       if (r.size() != 9) fail("shape.mask.direction needs 9 numbers");
       g.direction = Eigen::Map<const Eigen::Matrix3d>(r.data());
-      if (g.voxel_count() <= 0 || !(g.spacing_mm.array() > 0).all()) fail("shape.mask has no voxels");
+      if (g.voxel_count() <= 0 || !(g.spacing_mm.array() > 0).all())
+        fail("shape.mask has no voxels");
       auto mask = std::make_shared<geometry::LabelVolume>(g);
       size_t v = 0;
       std::uint8_t value = 0;
       for (const auto& run : mj.at("runs")) {
         const long long length = run.get<long long>();
-        if (length < 0 || v + static_cast<size_t>(length) > mask->labels.size()) fail("shape.mask runs overflow the grid");
+        if (length < 0 || v + static_cast<size_t>(length) > mask->labels.size())
+          fail("shape.mask runs overflow the grid");
         std::fill_n(mask->labels.begin() + static_cast<long>(v), length, value);
         v += static_cast<size_t>(length);
         value ^= 1;
@@ -157,8 +168,9 @@ SavedModel load_model(const fs::path& file) {
       if (v != mask->labels.size()) fail("shape.mask runs do not cover the grid");
       m.shape = evaluation::make_mask_shape(std::move(mask));
     } else {
-      m.shape = evaluation::make_shape(shape.at("kind").get<std::string>(), read_vec(shape.at("size_mm")),
-                                       read_vec(shape.at("centre_mm")));
+      m.shape =
+          evaluation::make_shape(shape.at("kind").get<std::string>(), read_vec(shape.at("size_mm")),
+                                 read_vec(shape.at("centre_mm")));
     }
     const particles::CohesionParams cp = cohesion_params_from(m.settings);
     m.reference = reference_body(m.shape, cp.r0_mm);
@@ -167,7 +179,8 @@ SavedModel load_model(const fs::path& file) {
       const auto nodes = j.at("skeleton").at("nodes_mm").get<std::vector<double>>();
       if (nodes.empty() || nodes.size() % 3) fail("skeleton.nodes_mm needs x, y, z per node");
       skeleton.emplace();
-      skeleton->nodes_mm = Eigen::Map<const Eigen::Matrix3Xd>(nodes.data(), 3, static_cast<Eigen::Index>(nodes.size() / 3));
+      skeleton->nodes_mm = Eigen::Map<const Eigen::Matrix3Xd>(
+          nodes.data(), 3, static_cast<Eigen::Index>(nodes.size() / 3));
     }
     build_model_terms(m, skeleton ? &*skeleton : nullptr);
     if (j.contains("embedding") && !j.at("embedding").is_null()) {
@@ -175,21 +188,25 @@ SavedModel load_model(const fs::path& file) {
       const auto placed = e.at("placed_positions_mm").get<std::vector<double>>();
       const auto a = e.at("global_affine").get<std::vector<double>>();
       const auto c = e.at("global_shears").get<std::vector<double>>();
-      if (placed.size() != static_cast<size_t>(3 * n)) fail("embedding.placed_positions_mm needs x, y, z per particle");
-      if (a.size() != 9 || c.size() != 9) fail("embedding.global_affine and global_shears need 9 numbers each");
+      if (placed.size() != static_cast<size_t>(3 * n))
+        fail("embedding.placed_positions_mm needs x, y, z per particle");
+      if (a.size() != 9 || c.size() != 9)
+        fail("embedding.global_affine and global_shears need 9 numbers each");
       m.placed = Eigen::Map<const Eigen::Matrix3Xd>(placed.data(), 3, static_cast<Eigen::Index>(n));
       m.global_map.affine.a = Eigen::Map<const Eigen::Matrix3d>(a.data());
       m.global_map.affine.t = read_vec(e.at("global_translation_mm"));
       m.global_map.shears.centre = read_vec(e.at("global_shear_centre_mm"));
       m.global_map.shears.c = Eigen::Map<const Eigen::Matrix<double, 9, 1>>(c.data());
-      if (!m.placed.allFinite() || !m.global_map.affine.a.allFinite() || !m.global_map.shears.c.allFinite() ||
+      if (!m.placed.allFinite() || !m.global_map.affine.a.allFinite() ||
+          !m.global_map.shears.c.allFinite() ||
           std::abs(m.global_map.affine.a.determinant() - 1) > 1e-6)
         fail("embedding: not finite, or the global map does not keep volume (det != 1)");
     }
     saved.organ_name = j.at("organ").at("name").get<std::string>();
     if (!j.at("ct").is_null()) {
       const auto& c = j.at("ct");
-      saved.ct = CtReference{c.at("folder").get<std::string>(), c.at("series_instance_uid").get<std::string>(),
+      saved.ct = CtReference{c.at("folder").get<std::string>(),
+                             c.at("series_instance_uid").get<std::string>(),
                              c.at("frame_of_reference_uid").get<std::string>()};
     }
     saved.provenance = j.value("provenance", nlohmann::json::object());

@@ -72,11 +72,12 @@ ModelSettings model_settings_from_json(const nlohmann::json& j, const std::strin
   visit_settings(s, [&](const char* key, auto& value) {
     using T = std::decay_t<decltype(value)>;
     const auto it = j.find(key);
-    const bool ok = it != j.end() && (std::is_same_v<T, bool> ? it->is_boolean()
+    const bool ok = it != j.end() && (std::is_same_v<T, bool>       ? it->is_boolean()
                                       : std::is_floating_point_v<T> ? it->is_number()
-                                                                     : it->is_number_integer());
-    if (!ok) throw InputError(fmt::format("{}: model setting '{}' is missing or not a {}", where, key,
-                                          std::is_same_v<T, bool> ? "true/false" : "number"));
+                                                                    : it->is_number_integer());
+    if (!ok)
+      throw InputError(fmt::format("{}: model setting '{}' is missing or not a {}", where, key,
+                                   std::is_same_v<T, bool> ? "true/false" : "number"));
     value = it->template get<T>();
   });
   return s;
@@ -93,7 +94,8 @@ particles::CohesionParams cohesion_params_from(const ModelSettings& s) {
   return p;
 }
 
-particles::IntegratorOptions integrator_options_from(const ModelSettings& s, const particles::Model& model) {
+particles::IntegratorOptions integrator_options_from(const ModelSettings& s,
+                                                     const particles::Model& model) {
   particles::IntegratorOptions opt;
   opt.time_step_fraction = s.time_step_fraction;
   opt.damping = s.damping_ratio * 2.0 * std::sqrt(model.stiffness() * model.mass());
@@ -105,11 +107,13 @@ particles::IntegratorOptions integrator_options_from(const ModelSettings& s, con
 }
 
 geometry::LabelVolume reference_body(const evaluation::Shape& shape, double r0_mm) {
-  const geometry::ImageGeometry g = geometry::grid_covering(shape.bounds(), 0.25 * r0_mm, 0.5 * r0_mm);
+  const geometry::ImageGeometry g =
+      geometry::grid_covering(shape.bounds(), 0.25 * r0_mm, 0.5 * r0_mm);
   geometry::LabelVolume reference(g);
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i) reference.at(i, j, k) = shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+      for (int i = 0; i < g.size[0]; ++i)
+        reference.at(i, j, k) = shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
   return reference;
 }
 
@@ -119,8 +123,8 @@ void build_model_terms(ModelStageResult& result, const particles::Skeleton* skel
   const particles::LennardJones law(cp);
   result.cohesion = cp;
   result.model = std::make_unique<particles::Model>(result.state.size(), s.mass, 0.5 * cp.r0_mm);
-  result.model->add(
-      std::make_unique<particles::CohesionForce>(law, s.neighbour_skin_r0 * cp.r0_mm, s.pair_damping));
+  result.model->add(std::make_unique<particles::CohesionForce>(law, s.neighbour_skin_r0 * cp.r0_mm,
+                                                               s.pair_damping));
   result.skeleton_node_spacing_mm = s.skeleton_node_spacing_r0 * cp.r0_mm;
   result.skeleton_params.stiffness = s.skeleton_stiffness * law.stiffness();
   result.skeleton_params.overlap_mm = s.skeleton_overlap_r0 * cp.r0_mm;
@@ -130,8 +134,8 @@ void build_model_terms(ModelStageResult& result, const particles::Skeleton* skel
 
 fitting::EmbeddedBody organ_body(const ModelStageResult& m) {
   const bool fitted = m.placed.cols() == m.state.x.cols() && m.placed.cols() > 0;
-  return fitting::EmbeddedBody(std::make_shared<const geometry::LabelVolume>(m.reference), m.global_map,
-                               fitted ? m.placed : m.state.x, m.state.x,
+  return fitting::EmbeddedBody(std::make_shared<const geometry::LabelVolume>(m.reference),
+                               m.global_map, fitted ? m.placed : m.state.x, m.state.x,
                                fitting::embedding_support_mm(m.lattice_spacing_mm));
 }
 
@@ -161,7 +165,8 @@ ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::S
   ModelStageResult result;
   result.settings = settings;
   result.shape = shape;
-  result.reference = reference_body(shape, cp.r0_mm);  // what the particles stand for, for re-filling
+  result.reference =
+      reference_body(shape, cp.r0_mm);  // what the particles stand for, for re-filling
   result.lattice_spacing_mm = spacing;
   result.state = particles::State(std::move(x));
   const int n = result.state.size();
@@ -202,9 +207,9 @@ ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::S
     const double node_spacing_mm = settings.skeleton_node_spacing_r0 * cp.r0_mm;
     const bool from_mask = organ && organ->mask;
     skeleton_source = from_mask ? "organ mask" : "particles";
-    const particles::Skeleton skeleton = from_mask
-                                             ? particles::medial_skeleton(*organ->mask, node_spacing_mm)
-                                             : particles::medial_skeleton(result.state.x, spacing, node_spacing_mm);
+    const particles::Skeleton skeleton =
+        from_mask ? particles::medial_skeleton(*organ->mask, node_spacing_mm)
+                  : particles::medial_skeleton(result.state.x, spacing, node_spacing_mm);
     add_skeleton_term(result, skeleton);  // the relaxed body becomes the skeleton's rest shape
     skeleton_nodes = result.skeleton->skeleton().node_count();
     spdlog::info("model: skeleton of {} nodes, {} edges (from the {})", skeleton_nodes,
@@ -212,8 +217,8 @@ ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::S
   }
   const Eigen::Vector3d extents = particles::principal_extents(result.state.x);
   // The particles' body (balls closed by rho, as in the fit) against what they stand for.
-  const double body_volume = geometry::particle_body_volume_mm3(result.state.x, 0.5 * cp.r0_mm, 0.25 * cp.r0_mm,
-                                                                0.5 * cp.r0_mm);
+  const double body_volume = geometry::particle_body_volume_mm3(result.state.x, 0.5 * cp.r0_mm,
+                                                                0.25 * cp.r0_mm, 0.5 * cp.r0_mm);
   const double reference_volume = result.reference.volume_mm3(1);
   result.summary = {
       {"particles", n},

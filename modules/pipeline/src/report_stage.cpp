@@ -13,22 +13,26 @@ namespace organfit::pipeline {
 namespace {
 
 /// A shape's inside test at the CT's voxel centres (only within the shape's bounds).
-geometry::LabelVolume shape_on_grid(const evaluation::Shape& shape, const geometry::ImageGeometry& g) {
+geometry::LabelVolume shape_on_grid(const evaluation::Shape& shape,
+                                    const geometry::ImageGeometry& g) {
   geometry::LabelVolume mask(g);
   const geometry::Aabb box = shape.bounds();
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
   for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d corner((c & 1) ? box.max_mm.x() : box.min_mm.x(), (c & 2) ? box.max_mm.y() : box.min_mm.y(),
+    const Eigen::Vector3d corner((c & 1) ? box.max_mm.x() : box.min_mm.x(),
+                                 (c & 2) ? box.max_mm.y() : box.min_mm.y(),
                                  (c & 4) ? box.max_mm.z() : box.min_mm.z());
     const Eigen::Vector3d idx = g.physical_to_index(corner);
     lo = lo.cwiseMin(idx), hi = hi.cwiseMax(idx);
   }
   int a[3], b[3];
   for (int d = 0; d < 3; ++d)
-    a[d] = std::max(0, static_cast<int>(std::floor(lo[d])) - 1), b[d] = std::min(g.size[d] - 1, static_cast<int>(std::ceil(hi[d])) + 1);
+    a[d] = std::max(0, static_cast<int>(std::floor(lo[d])) - 1),
+    b[d] = std::min(g.size[d] - 1, static_cast<int>(std::ceil(hi[d])) + 1);
   for (int k = a[2]; k <= b[2]; ++k)
     for (int j = a[1]; j <= b[1]; ++j)
-      for (int i = a[0]; i <= b[0]; ++i) mask.at(i, j, k) = shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+      for (int i = a[0]; i <= b[0]; ++i)
+        mask.at(i, j, k) = shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
   return mask;
 }
 
@@ -45,7 +49,8 @@ std::string build_report(const ReportContext& c) {
     in.patient = c.ct->patient.patient_name + " (ID " + c.ct->patient.patient_id + ")";
   if (c.fitted) {
     // The fitted surface as the mesh export makes it (the organ on a grid of rho).
-    const geometry::LabelVolume body = c.fitted->on_grid(geometry::grid_covering(c.fitted->bounds(), c.rho_mm, c.rho_mm));
+    const geometry::LabelVolume body =
+        c.fitted->on_grid(geometry::grid_covering(c.fitted->bounds(), c.rho_mm, c.rho_mm));
     meshing::SurfaceMesh mesh = meshing::surface_mesh(body);
     in.surface_vertex_mm = std::move(mesh.vertex_mm);
     in.surface_triangles = std::move(mesh.triangle_ids);
@@ -53,7 +58,8 @@ std::string build_report(const ReportContext& c) {
   if (c.ct && c.fitted) {
     const auto& g = c.ct->geometry;
     const geometry::LabelVolume fitted = c.fitted->on_grid(g);
-    const geometry::LabelVolume planning = c.planning ? shape_on_grid(*c.planning, g) : geometry::LabelVolume(g);
+    const geometry::LabelVolume planning =
+        c.planning ? shape_on_grid(*c.planning, g) : geometry::LabelVolume(g);
     std::array<int, 3> lo{g.size[0], g.size[1], g.size[2]}, hi{-1, -1, -1};
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     long long n = 0;
@@ -63,7 +69,8 @@ std::string build_report(const ReportContext& c) {
           const bool f = fitted.at(i, j, k) == 1, p = planning.at(i, j, k) == 1;
           if (!f && !p) continue;
           const int idx[3] = {i, j, k};
-          for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], idx[d]), hi[d] = std::max(hi[d], idx[d]);
+          for (int d = 0; d < 3; ++d)
+            lo[d] = std::min(lo[d], idx[d]), hi[d] = std::max(hi[d], idx[d]);
           if (f) centroid += Eigen::Vector3d(i, j, k), ++n;
         }
     if (n > 0) {
@@ -74,9 +81,11 @@ std::string build_report(const ReportContext& c) {
       }
       const geometry::LabelVolume* plan = c.planning ? &planning : nullptr;
       const double slab = 0.5 * g.spacing_mm.maxCoeff() + 1.0;
-      for (auto [plane, axis] : {std::pair{report::Plane::kAxial, 2}, std::pair{report::Plane::kCoronal, 1},
-                                 std::pair{report::Plane::kSagittal, 0}})
-        in.views.push_back(report::slice_view(g, c.ct->hu, plane, static_cast<int>(std::lround(centroid[axis])), lo, hi,
+      for (auto [plane, axis] :
+           {std::pair{report::Plane::kAxial, 2}, std::pair{report::Plane::kCoronal, 1},
+            std::pair{report::Plane::kSagittal, 0}})
+        in.views.push_back(report::slice_view(g, c.ct->hu, plane,
+                                              static_cast<int>(std::lround(centroid[axis])), lo, hi,
                                               plan, &fitted, c.points_mm, c.residuals_mm, slab));
     }
   }

@@ -2,10 +2,10 @@
 
 #include <fmt/format.h>
 #include <omp.h>
+#include <spdlog/spdlog.h>
 
 #include <functional>
 #include <optional>
-#include <spdlog/spdlog.h>
 
 #include "organfit/dicom/rtstruct_writer.h"
 #include "organfit/dicom/structure_set.h"
@@ -16,10 +16,10 @@
 #include "organfit/pipeline/export_stage.h"
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_file.h"
-#include "organfit/pipeline/report_stage.h"
-#include "organfit/pipeline/ultrasound_stage.h"
 #include "organfit/pipeline/model_stage.h"
+#include "organfit/pipeline/report_stage.h"
 #include "organfit/pipeline/synth_command.h"
+#include "organfit/pipeline/ultrasound_stage.h"
 #include "organfit/segmentation/segment.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
@@ -29,11 +29,13 @@ namespace fs = std::filesystem;
 
 namespace organfit::pipeline {
 
-const char* version() { return ORGANFIT_VERSION; }
+const char* version() {
+  return ORGANFIT_VERSION;
+}
 
 const std::vector<StageInfo>& pipeline_stages() {
   static const std::vector<StageInfo> stages = {
-      {"phantom", true}, {"ct", true},  {"organ", true},  {"model", true},  {"points", true},
+      {"phantom", true},    {"ct", true},  {"organ", true},  {"model", true}, {"points", true},
       {"ultrasound", true}, {"fit", true}, {"export", true}, {"report", true}};
   return stages;
 }
@@ -57,7 +59,8 @@ void prepare_output_folder(const config::Scene& scene, const fs::path& out_dir) 
 
 }  // namespace
 
-nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, const RunOptions& run_options) {
+nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
+                         const RunOptions& run_options) {
   prepare_output_folder(scene, out_dir);
   const long long threads = scene.integer("scene", "threads");
   if (threads > 0) omp_set_num_threads(static_cast<int>(threads));
@@ -122,13 +125,14 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
     }
     ct = dicom::read_ct_series(ct_folder, o);
     record_stage("ct", clock.elapsed_s());
-    for (const auto& w : ct->warnings) warn(w);
+    for (const auto& w : ct->warnings)
+      warn(w);
     const auto& g = ct->geometry;
     run["ct"] = {{"slices", g.size[2]},
                  {"size", {g.size[0], g.size[1], g.size[2]}},
                  {"spacing_mm", {g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z()}}};
-    spdlog::info("ct: {} x {} x {} voxels of {:.3f} x {:.3f} x {:.3f} mm", g.size[0], g.size[1], g.size[2],
-                 g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z());
+    spdlog::info("ct: {} x {} x {} voxels of {:.3f} x {:.3f} x {:.3f} mm", g.size[0], g.size[1],
+                 g.size[2], g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z());
   }
   std::optional<evaluation::Shape> organ;
   if (scene.has_section("organ") && ct) {
@@ -144,32 +148,40 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
       s.opening_radius_voxels = static_cast<int>(scene.integer("organ", "opening_radius_voxels"));
       s.search_box_mm = scene.number("organ", "search_box_mm");
       segmentation::SeededOrgan grown = segmentation::segment_from_seed(ct->geometry, ct->hu, s);
-      for (const auto& w : grown.warnings) warn(w);
+      for (const auto& w : grown.warnings)
+        warn(w);
       mask = std::move(grown.mask);
-      run["organ"] = {{"roi", roi}, {"source", "seed"}, {"volume_cm3", mask.volume_mm3(1) / 1000.0}};
+      run["organ"] = {
+          {"roi", roi}, {"source", "seed"}, {"volume_cm3", mask.volume_mm3(1) / 1000.0}};
       spdlog::info("organ: '{}' grown from the seed, {:.2f} cm3", roi, mask.volume_mm3(1) / 1000.0);
     } else {
-      const fs::path file = scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct") : phantom_rtstruct;
-      dicom::RasterisedRoi r = dicom::rasterise_roi(dicom::read_rtstruct(file), roi, *ct, file.string());
-      for (const auto& w : r.warnings) warn(w);
+      const fs::path file =
+          scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct") : phantom_rtstruct;
+      dicom::RasterisedRoi r =
+          dicom::rasterise_roi(dicom::read_rtstruct(file), roi, *ct, file.string());
+      for (const auto& w : r.warnings)
+        warn(w);
       run["organ"] = {{"roi", roi},
                       {"source", "rtstruct"},
                       {"contours", r.contours},
                       {"matched_by_position", r.matched_by_position},
                       {"volume_cm3", r.mask.volume_mm3(1) / 1000.0}};
-      spdlog::info("organ: ROI '{}', {} contours, {:.2f} cm3", roi, r.contours, r.mask.volume_mm3(1) / 1000.0);
+      spdlog::info("organ: ROI '{}', {} contours, {:.2f} cm3", roi, r.contours,
+                   r.mask.volume_mm3(1) / 1000.0);
       mask = std::move(r.mask);
     }
-    if (mask.count(1) == 0) scene.fail("organ", "roi", "the organ '" + roi + "' covers no voxel of the CT");
-    organ = evaluation::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(mask)));
+    if (mask.count(1) == 0)
+      scene.fail("organ", "roi", "the organ '" + roi + "' covers no voxel of the CT");
+    organ =
+        evaluation::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(mask)));
     record_stage("organ", clock.elapsed_s());
   }
   std::optional<ModelStageResult> model;
   std::string organ_name = scene.has_section("organ") ? scene.text("organ", "roi") : "organ";
   std::optional<CtReference> ct_reference;
   if (ct)
-    ct_reference = CtReference{fs::absolute(ct_folder).lexically_normal().string(), ct->series_instance_uid,
-                               ct->frame_of_reference_uid};
+    ct_reference = CtReference{fs::absolute(ct_folder).lexically_normal().string(),
+                               ct->series_instance_uid, ct->frame_of_reference_uid};
   double planning_modelling_s = -1;  // the saved model's own modelling time, for a session
   if (scene.has_section("planning")) {
     Stopwatch clock;
@@ -179,15 +191,17 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
     organ_name = saved.organ_name;
     ct_reference = saved.ct;
     planning_modelling_s = saved.provenance.value("modelling_wall_s", -1.0);
-    model->summary = {{"particles", model->state.size()},
-                      {"radius_mm", model->model->radius_mm()},
-                      {"skeleton_nodes", model->skeleton ? model->skeleton->skeleton().node_count() : 0},
-                      {"from_planning_model", file.filename().string()},
-                      {"planning_scene", saved.provenance.value("scene", "")}};
+    model->summary = {
+        {"particles", model->state.size()},
+        {"radius_mm", model->model->radius_mm()},
+        {"skeleton_nodes", model->skeleton ? model->skeleton->skeleton().node_count() : 0},
+        {"from_planning_model", file.filename().string()},
+        {"planning_scene", saved.provenance.value("scene", "")}};
     record_stage("planning_model", clock.elapsed_s());
     run["model"] = model->summary;
-    spdlog::info("planning model: {} particles of {} from {} (built in {:.2f} s by its planning run)",
-                 model->state.size(), organ_name, file.filename().string(), planning_modelling_s);
+    spdlog::info(
+        "planning model: {} particles of {} from {} (built in {:.2f} s by its planning run)",
+        model->state.size(), organ_name, file.filename().string(), planning_modelling_s);
   }
   // The modelling this run did itself (phantom, CT, organ, model), for the comparison
   // of initial modelling against a session's update.
@@ -216,7 +230,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
     spdlog::info("the scene names no model");
   }
   std::optional<PointsStageResult> points;
-  std::vector<std::function<void()>> deferred_writes;  // files of the stages above, written at the end
+  std::vector<std::function<void()>>
+      deferred_writes;  // files of the stages above, written at the end
   std::vector<std::string> deferred_outputs;
   if (scene.has_section("points") && model) {
     Stopwatch clock;
@@ -224,10 +239,11 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
       // The phantom's true anatomy, when there is one, is what the probe images.
       std::optional<geometry::LabelVolume> anatomy;
       if (!phantom_rtstruct.empty())
-        anatomy = pelvis_tissue_classes(itkbridge::read_label_volume(phantom_rtstruct.parent_path() / "labels.nrrd"));
-      UltrasoundStageResult us = run_ultrasound_stage(scene, *model, ct ? &*ct : nullptr,
-                                                      organ && organ->mask ? organ->mask.get() : nullptr,
-                                                      anatomy ? &*anatomy : nullptr);
+        anatomy = pelvis_tissue_classes(
+            itkbridge::read_label_volume(phantom_rtstruct.parent_path() / "labels.nrrd"));
+      UltrasoundStageResult us = run_ultrasound_stage(
+          scene, *model, ct ? &*ct : nullptr, organ && organ->mask ? organ->mask.get() : nullptr,
+          anatomy ? &*anatomy : nullptr);
       record_stage("ultrasound", clock.elapsed_s());
       points = std::move(us.points);
       if (points->truth) {
@@ -236,18 +252,23 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
         evaluation::SamplingOptions dense;
         dense.count = 40000;
         dense.noise_mm = 0;
-        const auto surface = evaluation::sample_deformed_surface(points->truth_shape, *points->truth, dense);
+        const auto surface =
+            evaluation::sample_deformed_surface(points->truth_shape, *points->truth, dense);
         std::vector<double> d;
         for (const auto& p : points->points) {
           double best = 1e300;
-          for (const auto& q : surface) best = std::min(best, (p.p_mm - q.p_mm).squaredNorm());
+          for (const auto& q : surface)
+            best = std::min(best, (p.p_mm - q.p_mm).squaredNorm());
           d.push_back(std::sqrt(best));
           if (d.back() > 1.5)
-            spdlog::debug("ultrasound: point ({:.1f}, {:.1f}, {:.1f}) mm, confidence {:.2f}, is {:.2f} mm off", p.p_mm.x(),
-                          p.p_mm.y(), p.p_mm.z(), p.confidence, d.back());
+            spdlog::debug(
+                "ultrasound: point ({:.1f}, {:.1f}, {:.1f}) mm, confidence {:.2f}, is {:.2f} mm "
+                "off",
+                p.p_mm.x(), p.p_mm.y(), p.p_mm.z(), p.confidence, d.back());
         }
         std::sort(d.begin(), d.end());
-        const double within = static_cast<double>(std::upper_bound(d.begin(), d.end(), 1.5) - d.begin()) / d.size();
+        const double within =
+            static_cast<double>(std::upper_bound(d.begin(), d.end(), 1.5) - d.begin()) / d.size();
         points->summary["median_distance_to_true_surface_mm"] = d[d.size() / 2];
         points->summary["fraction_within_1_5_mm"] = within;
         points->summary["distance_to_true_surface_p90_mm"] = d[d.size() * 9 / 10];
@@ -257,17 +278,22 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
         int on_visible = 0;
         for (const auto& p : points->points) {
           double best = 1e300;
-          for (const auto& q : us.true_boundary_mm) best = std::min(best, (p.p_mm - q).squaredNorm());
+          for (const auto& q : us.true_boundary_mm)
+            best = std::min(best, (p.p_mm - q).squaredNorm());
           on_visible += best <= 1.5 * 1.5;
         }
-        points->summary["fraction_on_visible_surface"] = static_cast<double>(on_visible) / points->points.size();
-        spdlog::info("ultrasound: points lie {:.2f} mm (median) from the true surface; {:.0f}% within 1.5 mm",
-                     d[d.size() / 2], 100 * within);
+        points->summary["fraction_on_visible_surface"] =
+            static_cast<double>(on_visible) / points->points.size();
+        spdlog::info(
+            "ultrasound: points lie {:.2f} mm (median) from the true surface; {:.0f}% within 1.5 "
+            "mm",
+            d[d.size() / 2], 100 * within);
       }
       const std::string save = scene.text("ultrasound", "save_volume");
       if (!save.empty() && us.bmode) {
         auto volume = std::make_shared<geometry::LabelVolume>(std::move(*us.bmode));
-        deferred_writes.push_back([volume, file = out_dir / save] { itkbridge::write_label_volume(file, *volume); });
+        deferred_writes.push_back(
+            [volume, file = out_dir / save] { itkbridge::write_label_volume(file, *volume); });
         deferred_outputs.push_back(save);
       }
     } else {
@@ -285,25 +311,32 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
     try {
       fit = run_fit_stage(scene, *model, *points);
     } catch (const particles::StabilityError& e) {
-      throw TargetNotMetError(std::string("fit: the simulation could not continue stably: ") + e.what());
+      throw TargetNotMetError(std::string("fit: the simulation could not continue stably: ") +
+                              e.what());
     }
     record_stage("fit", clock.elapsed_s() - fit.truth_wall_s);
-    if (fit.truth_wall_s > 0) record_stage("truth", fit.truth_wall_s);  // evaluation, not the update
+    if (fit.truth_wall_s > 0)
+      record_stage("truth", fit.truth_wall_s);  // evaluation, not the update
     run["fit"] = fit.fit_summary;
     run["model"]["skin_particles"] = fit.fit_summary["skin_particles"];
     if (!fit.truth_summary.is_null()) run["truth"] = fit.truth_summary;
     files.push_back({"history.csv", fit.history_csv});
     residuals_mm = fit.fit.residuals_mm;
-    spdlog::info("fit ({}): {} in {} steps, {:.3f} s; residual mean {:.3f} mm, max {:.3f} mm; volume {:+.2f}%",
-                 fit.fit_summary["method"].get<std::string>(), fit.fit.stop_reason, fit.fit.steps,
-                 fit.fit.wall_s, fit.fit.residual_mean_mm, fit.fit.residual_max_mm,
-                 fit.fit_summary["volume_change_pct"].get<double>());
+    spdlog::info(
+        "fit ({}): {} in {} steps, {:.3f} s; residual mean {:.3f} mm, max {:.3f} mm; volume "
+        "{:+.2f}%",
+        fit.fit_summary["method"].get<std::string>(), fit.fit.stop_reason, fit.fit.steps,
+        fit.fit.wall_s, fit.fit.residual_mean_mm, fit.fit.residual_max_mm,
+        fit.fit_summary["volume_change_pct"].get<double>());
     if (!fit.truth_summary.is_null()) {
-      spdlog::info("truth: mean surface distance {:.3f} mm (undeformed {:.3f}, floor {:.3f}), HD95 {:.3f} mm, "
-                   "recovery {:.2f}",
-                   fit.truth_summary["msd_mm"].get<double>(), fit.truth_summary["msd_undeformed_mm"].get<double>(),
-                   fit.truth_summary["msd_floor_mm"].get<double>(), fit.truth_summary["hd95_mm"].get<double>(),
-                   fit.truth_summary["recovery"].get<double>());
+      spdlog::info(
+          "truth: mean surface distance {:.3f} mm (undeformed {:.3f}, floor {:.3f}), HD95 {:.3f} "
+          "mm, "
+          "recovery {:.2f}",
+          fit.truth_summary["msd_mm"].get<double>(),
+          fit.truth_summary["msd_undeformed_mm"].get<double>(),
+          fit.truth_summary["msd_floor_mm"].get<double>(),
+          fit.truth_summary["hd95_mm"].get<double>(), fit.truth_summary["recovery"].get<double>());
     }
     if (fit.fit_summary["rejected_points"].get<int>() > 0) {
       const std::string w = fmt::format("fit: {} points rejected as outliers",
@@ -333,26 +366,34 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
     request.fixed_uids = scene.flag("export", "fixed_uids");
     if (request.roi_name.empty()) request.roi_name = organ_name + "_fit";
     if ((!request.rtstruct.empty() || !request.labels.empty() ||
-         (scene.has_section("report") && ct_reference)) && !ct) {
+         (scene.has_section("report") && ct_reference)) &&
+        !ct) {
       // A session: the planning CT named in the model file, checked to be the same series.
-      if (!ct_reference) throw InputError(scene.path("planning", "model").string() + ": the model has no planning CT to export on");
+      if (!ct_reference)
+        throw InputError(scene.path("planning", "model").string() +
+                         ": the model has no planning CT to export on");
       Stopwatch ct_clock;
       dicom::CtReadOptions o;
       o.series_instance_uid = ct_reference->series_instance_uid;
       ct = dicom::read_ct_series(ct_reference->folder, o);
       if (ct->frame_of_reference_uid != ct_reference->frame_of_reference_uid)
-        throw InputError(ct_reference->folder + ": the CT's Frame of Reference is not the planning model's");
+        throw InputError(ct_reference->folder +
+                         ": the CT's Frame of Reference is not the planning model's");
       record_stage("ct", ct_clock.elapsed_s());
     }
     std::optional<dicom::StructureSet> input_rtss;
     if (scene.flag("export", "copy_other_rois")) {
-      const fs::path file = scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct") : phantom_rtstruct;
+      const fs::path file =
+          scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct") : phantom_rtstruct;
       input_rtss = dicom::read_rtstruct(file);
       request.copy_rois_from = &*input_rtss;
     }
-    pending = prepare_export(organ_body(*model), model->model->radius_mm(), ct ? &*ct : nullptr, request);
-    for (const auto& w : pending->warnings) warn(w);
-    for (const auto& f : pending->files) exported.push_back(f);
+    pending =
+        prepare_export(organ_body(*model), model->model->radius_mm(), ct ? &*ct : nullptr, request);
+    for (const auto& w : pending->warnings)
+      warn(w);
+    for (const auto& f : pending->files)
+      exported.push_back(f);
     model_file = scene.text("export", "model");
     if (!model_file.empty()) exported.push_back(model_file);
     record_stage("export", clock.elapsed_s());
@@ -369,37 +410,45 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
     if (scene.has_section("fit")) timing["update_s"] = update;
     run["timing"] = timing;
     if (planning_modelling_s >= 0 && scene.has_section("fit"))
-      spdlog::info("timing: initial modelling {:.2f} s (planning run), update {:.2f} s (this session)",
-                   planning_modelling_s, update);
+      spdlog::info(
+          "timing: initial modelling {:.2f} s (planning run), update {:.2f} s (this session)",
+          planning_modelling_s, update);
   }
   if (!skipped.empty()) {
     std::string list;
-    for (const auto& s : skipped) list += (list.empty() ? "" : ", ") + s;
-    spdlog::info("not built yet in organfit {}: the {} stages; this run did what exists",
-                 version(), list);
+    for (const auto& s : skipped)
+      list += (list.empty() ? "" : ", ") + s;
+    spdlog::info("not built yet in organfit {}: the {} stages; this run did what exists", version(),
+                 list);
     run["stages_not_built_yet"] = skipped;
   }
 
   run["wall_s"] = total.elapsed_s();
   run["peak_memory_mib"] = peak_memory_mib();
   run["outputs"] = {"resolved.yaml", "run.json"};
-  for (const auto& f : files) run["outputs"].push_back(f.first);
-  for (const auto& f : exported) run["outputs"].push_back(f);
-  for (const auto& f : deferred_outputs) run["outputs"].push_back(f);
+  for (const auto& f : files)
+    run["outputs"].push_back(f.first);
+  for (const auto& f : exported)
+    run["outputs"].push_back(f);
+  for (const auto& f : deferred_outputs)
+    run["outputs"].push_back(f);
   run["status"] = not_converged.empty() ? "ok" : "target_not_met";
   // Files are committed only now: a run that fails with an error leaves none. A fit
   // that did not converge still writes its results (run.json says so), then exits 3.
-  for (const auto& f : files) write_file_atomically(out_dir / f.first, f.second);
-  for (const auto& write : deferred_writes) write();
+  for (const auto& f : files)
+    write_file_atomically(out_dir / f.first, f.second);
+  for (const auto& write : deferred_writes)
+    write();
   if (pending) {
     pending->commit();  // each file atomic; the mesh adds its report
     run["export"] = pending->summary;
   }
   if (!model_file.empty()) {
-    const nlohmann::json provenance = {{"organfit_version", version()},
-                                       {"scene", name},
-                                       {"modelling_wall_s", planning_modelling_s >= 0 ? planning_modelling_s : modelling_s()},
-                                       {"fitted", scene.has_section("fit")}};
+    const nlohmann::json provenance = {
+        {"organfit_version", version()},
+        {"scene", name},
+        {"modelling_wall_s", planning_modelling_s >= 0 ? planning_modelling_s : modelling_s()},
+        {"fitted", scene.has_section("fit")}};
     save_model(out_dir / model_file, *model, organ_name, ct_reference, provenance);
   }
   if (scene.has_section("report")) {
@@ -415,11 +464,14 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir, co
     context.fitted = organ ? &*organ : nullptr;
     context.rho_mm = model ? model->model->radius_mm() : 0;
     if (points)
-      for (const auto& p : points->points) context.points_mm.push_back(p.p_mm);
+      for (const auto& p : points->points)
+        context.points_mm.push_back(p.p_mm);
     context.residuals_mm = residuals_mm;
     context.show_patient = scene.flag("report", "show_patient") && run_options.show_phi;
     if (scene.flag("report", "show_patient") && !run_options.show_phi)
-      warn("report: the patient's name and ID are not shown: report.show_patient needs --show-phi on the command line");
+      warn(
+          "report: the patient's name and ID are not shown: report.show_patient needs --show-phi "
+          "on the command line");
     const std::string file = scene.text("report", "file");
     run["outputs"].push_back(file);
     record_stage("report", clock.elapsed_s());  // the page's own time is shown without itself

@@ -2,9 +2,9 @@
 
 #include <fmt/format.h>
 
-#include "organfit/pipeline/fit_stage.h"
-
 #include <Eigen/LU>
+
+#include "organfit/pipeline/fit_stage.h"
 
 namespace organfit::pipeline {
 namespace {
@@ -23,8 +23,10 @@ config::Schema build_schema() {
   s.section("planning", "start from a saved planning model instead of building one (a session)")
       .input_path("model", "model file written by a planning scene's export.model");
 
-  s.section("phantom", "a synthetic planning CT with known organs, written to OUT/phantom/ and read as the CT")
-      .choice("kind", "pelvis", {"pelvis"}, "pelvis: body, bones, bladder, rectum, a 35 cm3 prostate")
+  s.section("phantom",
+            "a synthetic planning CT with known organs, written to OUT/phantom/ and read as the CT")
+      .choice("kind", "pelvis", {"pelvis"},
+              "pelvis: body, bones, bladder, rectum, a 35 cm3 prostate")
       .integer("seed", 1, 0, none, "seed of the CT noise (the anatomy is fixed)")
       .integer("columns", 320, 8, 2048, "voxels along x")
       .integer("rows", 320, 8, 2048, "voxels along y")
@@ -38,18 +40,26 @@ config::Schema build_schema() {
       .text("series_uid", "", "Series Instance UID to use when the folder holds several CT series")
       .text("series_description", "", "or the Series Description to use");
 
-  s.section("organ", "the organ on the planning CT: imported from an RT Structure Set, or grown from a seed")
+  s.section("organ",
+            "the organ on the planning CT: imported from an RT Structure Set, or grown from a seed")
       .choice("source", "rtstruct", {"rtstruct", "seed"},
-              "rtstruct: a physician's contour (organ.rtstruct, organ.roi); seed: region growing from organ.seed_mm")
-      .input_path("rtstruct", "the RT Structure Set file (default with a phantom: its true structures)", false)
-      .text("roi", std::nullopt, "the organ's ROI name: the one imported, or the name given to the segmented organ")
-      .vec3("seed_mm", Vector3d(0, 0, 0), "mm", none, "seed inside the organ, patient coordinates (source: seed)")
+              "rtstruct: a physician's contour (organ.rtstruct, organ.roi); seed: region growing "
+              "from organ.seed_mm")
+      .input_path("rtstruct",
+                  "the RT Structure Set file (default with a phantom: its true structures)", false)
+      .text("roi", std::nullopt,
+            "the organ's ROI name: the one imported, or the name given to the segmented organ")
+      .vec3("seed_mm", Vector3d(0, 0, 0), "mm", none,
+            "seed inside the organ, patient coordinates (source: seed)")
       .number("hu_low", 20.0, "HU", -1024.0, 3071.0, "lowest HU grown into (source: seed)")
       .number("hu_high", 80.0, "HU", -1024.0, 3071.0, "highest HU grown into (source: seed)")
-      .integer("smoothing_iterations", 5, 0, 100, "curvature-flow iterations before growing (source: seed)")
-      .integer("opening_radius_voxels", 1, 0, 10, "morphological opening that cuts thin leaks (source: seed)")
+      .integer("smoothing_iterations", 5, 0, 100,
+               "curvature-flow iterations before growing (source: seed)")
+      .integer("opening_radius_voxels", 1, 0, 10,
+               "morphological opening that cuts thin leaks (source: seed)")
       .number("search_box_mm", 200.0, "mm", 0.0, 2000.0,
-              "side of the cube around the seed the organ is grown in; 0 = the whole CT (source: seed)");
+              "side of the cube around the seed the organ is grown in; 0 = the whole CT (source: "
+              "seed)");
 
   s.section("body", "an analytic organ shape, for scenes without CT")
       .choice("shape", "ellipsoid", {"ellipsoid", "box", "egg", "lung"},
@@ -75,7 +85,8 @@ config::Schema build_schema() {
       .number("neighbour_skin_r0", 0.3, "r0", 0.0, 2.0, "Verlet skin of the neighbour list", true)
       .number("time_step_fraction", 0.1, "", 0.0, 0.9,
               "time step as a fraction of the stability limit 2 sqrt(M/k)", true)
-      .integer("relax_steps", 5000, 0, 10000000, "most steps of the damped relaxation after filling")
+      .integer("relax_steps", 5000, 0, 10000000,
+               "most steps of the damped relaxation after filling")
       .number("relax_tolerance", 1e-6, "E", 0.0, none,
               "relaxation ends when kinetic energy per particle falls below this", true)
       .flag("skeleton", true, "tie the particles to a medial skeleton that keeps the global shape")
@@ -87,47 +98,77 @@ config::Schema build_schema() {
               "a particle also joins nodes this much farther than its nearest one");
   s.section("points", "attractive points: generated on a known deformation of the body, or read")
       .choice("source", "generate", {"generate", "file", "ultrasound"},
-              "generate on the deformed body (truth known), read from points.file, or segment the 'ultrasound'")
-      .input_path("file", "points in mm: CSV x,y,z[,confidence], or the vertices of a .ply/.vtk/.vtp (source: file)", false)
+              "generate on the deformed body (truth known), read from points.file, or segment the "
+              "'ultrasound'")
+      .input_path("file",
+                  "points in mm: CSV x,y,z[,confidence], or the vertices of a .ply/.vtk/.vtp "
+                  "(source: file)",
+                  false)
       .integer("count", 87, 1, 100000, "number of points to generate")
       .number("noise_mm", 0.5, "mm", 0.0, 20.0, "Gaussian noise added to generated points")
-      .number("outlier_fraction", 0.0, "", 0.0, 0.5, "fraction of generated points moved 5-15 mm off")
+      .number("outlier_fraction", 0.0, "", 0.0, 0.5,
+              "fraction of generated points moved 5-15 mm off")
       .choice("coverage", "full", {"full", "half"}, "surface the points cover (half: the +y side)")
-      .number("stretch", 1.0, "", 0.5, 2.0, "volume-preserving stretch along x of the true deformation")
-      .number("bend_mm", 0.0, "mm", -30.0, 30.0, "sideways (y) displacement of the ends in the true deformation")
-      .number("twist_deg", 0.0, "deg", -90.0, 90.0, "turn of the ends about the x axis in the true deformation")
-      .number("indent_mm", 0.0, "mm", -20.0, 20.0, "Gaussian column shift along y (rectal filling: < 0 moves it anteriorly)")
-      .number("push_mm", 0.0, "mm", -20.0, 20.0, "Gaussian column shift along z (bladder push: < 0 moves it inferiorly)")
+      .number("stretch", 1.0, "", 0.5, 2.0,
+              "volume-preserving stretch along x of the true deformation")
+      .number("bend_mm", 0.0, "mm", -30.0, 30.0,
+              "sideways (y) displacement of the ends in the true deformation")
+      .number("twist_deg", 0.0, "deg", -90.0, 90.0,
+              "turn of the ends about the x axis in the true deformation")
+      .number("indent_mm", 0.0, "mm", -20.0, 20.0,
+              "Gaussian column shift along y (rectal filling: < 0 moves it anteriorly)")
+      .number("push_mm", 0.0, "mm", -20.0, 20.0,
+              "Gaussian column shift along z (bladder push: < 0 moves it inferiorly)")
       .number("bump_sigma_mm", 8.0, "mm", 1.0, 100.0, "width of the indent and push bumps", true)
       .choice("target_shape", "same", {"same", "ellipsoid", "box", "egg", "lung"},
               "sample a different shape than the body (same = the body, deformed)")
       .vec3("target_size_mm", Eigen::Vector3d(40, 30, 60), "mm", 0.0,
             "target_shape's proportions; scaled to the body's volume", true);
 
-  s.section("ultrasound", "the day's ultrasound, segmented into attractive points (points.source: ultrasound)")
+  s.section("ultrasound",
+            "the day's ultrasound, segmented into attractive points (points.source: ultrasound)")
       .choice("source", "simulate", {"simulate", "volume", "sweep", "dicom"},
-              "simulate: B-mode of the planning CT with the organ deformed by points.stretch/bend_mm (truth "
-              "known); volume: a 3D image; sweep: a tracked 2D sweep (PLUS sequence metafile); dicom: DICOM US")
-      .input_path("file", "the ultrasound input (volume .mha/.nrrd/.nii, sequence metafile, or .dcm)", false)
-      .input_path("tracker", "sequence metafile with the probe's poses, matched by timestamp (source: sweep)", false)
-      .text("transform", "", "tracked transform name (default: the file's own, e.g. ProbeToTrackerTransform)")
+              "simulate: B-mode of the planning CT with the organ deformed by "
+              "points.stretch/bend_mm (truth "
+              "known); volume: a 3D image; sweep: a tracked 2D sweep (PLUS sequence metafile); "
+              "dicom: DICOM US")
+      .input_path("file",
+                  "the ultrasound input (volume .mha/.nrrd/.nii, sequence metafile, or .dcm)",
+                  false)
+      .input_path("tracker",
+                  "sequence metafile with the probe's poses, matched by timestamp (source: sweep)",
+                  false)
+      .text("transform", "",
+            "tracked transform name (default: the file's own, e.g. ProbeToTrackerTransform)")
       .matrix4("calibration", "image (mm) to probe: the probe's calibration (sweep, dicom)")
-      .matrix4("registration", "tracker (or volume) to CT patient coordinates; rigid (volume, sweep, dicom)")
-      .number("pixel_mm", 0.0, "mm", 0.0, 10.0, "pixel size of a DICOM image without a calibrated region (0: from it)")
-      .vec3("probe_offset_mm", Vector3d(0, 38, 0), "mm", none, "probe position from the organ's centre (simulate)")
-      .vec3("probe_axis", Vector3d(0, -1, 0), "", none, "beam direction (simulate; default: anterior, transrectal)")
-      .vec3("probe_lateral", Vector3d(1, 0, 0), "", none, "image's lateral direction, perpendicular to the axis")
+      .matrix4("registration",
+               "tracker (or volume) to CT patient coordinates; rigid (volume, sweep, dicom)")
+      .number("pixel_mm", 0.0, "mm", 0.0, 10.0,
+              "pixel size of a DICOM image without a calibrated region (0: from it)")
+      .vec3("probe_offset_mm", Vector3d(0, 38, 0), "mm", none,
+            "probe position from the organ's centre (simulate)")
+      .vec3("probe_axis", Vector3d(0, -1, 0), "", none,
+            "beam direction (simulate; default: anterior, transrectal)")
+      .vec3("probe_lateral", Vector3d(1, 0, 0), "", none,
+            "image's lateral direction, perpendicular to the axis")
       .number("probe_radius_mm", 12.0, "mm", 0.0, 50.0,
               "imaging starts this far from the probe's centre (its face; it displaces rectal gas)")
-      .number("max_depth_mm", 70.0, "mm", 10.0, 300.0, "imaging depth from the probe's centre (simulate)")
-      .number("half_angle_deg", 50.0, "deg", 5.0, 80.0, "half-angle of the field of view (simulate)")
-      .number("speckle", 1.0, "", 0.0, 1.0, "speckle level: 0 none, 1 fully developed Rayleigh (simulate)")
+      .number("max_depth_mm", 70.0, "mm", 10.0, 300.0,
+              "imaging depth from the probe's centre (simulate)")
+      .number("half_angle_deg", 50.0, "deg", 5.0, 80.0,
+              "half-angle of the field of view (simulate)")
+      .number("speckle", 1.0, "", 0.0, 1.0,
+              "speckle level: 0 none, 1 fully developed Rayleigh (simulate)")
       .number("voxel_mm", 0.5, "mm", 0.1, 5.0, "voxel size of the simulated volume", true)
       .integer("rays", 2000, 16, 100000, "edge-search rays from the organ's centre")
-      .number("band_mm", 8.0, "mm", 1.0, 100.0, "search band around the model's surface along each ray")
-      .number("smoothing_mm", 1.0, "mm", 0.0, 10.0, "Gaussian speckle reduction before the edge search")
-      .number("mad_threshold", 3.0, "", 1.0, 20.0, "a ray's boundary radius this many MADs off its neighbours' is rejected")
-      .text("save_volume", "", "file name inside --out for the ultrasound volume used (.mha, .nrrd; empty: none)");
+      .number("band_mm", 8.0, "mm", 1.0, 100.0,
+              "search band around the model's surface along each ray")
+      .number("smoothing_mm", 1.0, "mm", 0.0, 10.0,
+              "Gaussian speckle reduction before the edge search")
+      .number("mad_threshold", 3.0, "", 1.0, 20.0,
+              "a ray's boundary radius this many MADs off its neighbours' is rejected")
+      .text("save_volume", "",
+            "file name inside --out for the ultrasound volume used (.mha, .nrrd; empty: none)");
 
   s.section("fit", "deform the model onto the attractive points (paper s.3)")
       .choice("method", "spread", {"paper", "spread"},
@@ -139,16 +180,20 @@ config::Schema build_schema() {
       .integer("max_steps", 20000, 1, 100000000, "step budget")
       .number("max_wall_s", 60.0, "s", 0.0, none, "wall-time budget", true)
       .integer("record_every", 20, 1, 100000, "steps between history rows")
-      .number("damping_ratio", 0.5, "", 0.0, none, "damping during the fit, fraction of critical", true)
-      .number("kinetic_tolerance", 1e-4, "E", 0.0, none, "settled when KE per particle is below this", true)
+      .number("damping_ratio", 0.5, "", 0.0, none, "damping during the fit, fraction of critical",
+              true)
+      .number("kinetic_tolerance", 1e-4, "E", 0.0, none,
+              "settled when KE per particle is below this", true)
       .number("alpha", 2.0, "", 1.0, 20.0, "fall-off exponent alpha_k of eq. 5")
       .number("influence_radius_min_r0", 1.2, "r0", 0.0, none, "influence radius at contact", true)
       .number("influence_growth", 0.5, "", 0.0, none, "extra influence radius per mm of distance")
-      .number("influence_radius_max_r0", 4.0, "r0", 0.0, none, "bound on the influence radius", true)
+      .number("influence_radius_max_r0", 4.0, "r0", 0.0, none, "bound on the influence radius",
+              true)
       .number("total_force_factor", 3.0, "", 1.0, none, "a point's total force <= this x F_max_k")
       .number("outlier_distance_mm", 0.0, "mm", 0.0, none,
               "reject points farther than this from the model (0 = half its diameter)")
-      .number("skin_voxel_r0", 0.5, "r0", 0.0, none, "voxel size of skin detection (0.5 r0 = rho)", true)
+      .number("skin_voxel_r0", 0.5, "r0", 0.0, none, "voxel size of skin detection (0.5 r0 = rho)",
+              true)
       .number("max_global_stretch", 1.5, "", 1.0, 10.0,
               "spread: refuse points that ask the whole organ to stretch more than this");
   s.section("export", "what to write for the planning system, on the planning CT's grid")
@@ -156,13 +201,17 @@ config::Schema build_schema() {
       .text("labels", "", "label map file name inside --out: .nrrd, .mha, .nii(.gz) (empty: none)")
       .text("mesh", "", "surface mesh file name inside --out: .stl, .vtp, .ply, .obj (empty: none)")
       .text("roi_name", "", "name of the exported ROI (default: the organ's ROI name + _fit)")
-      .flag("copy_other_rois", false, "copy the input structure set's other ROIs into the exported one")
-      .flag("fixed_uids", false, "derive the RT Structure Set's UIDs from the CT's and fix its dates (tests)")
-      .text("model", "", "model file name inside --out (empty: none): the model as built, or as fitted, "
-                         "for session scenes (planning.model) and organfit export");
+      .flag("copy_other_rois", false,
+            "copy the input structure set's other ROIs into the exported one")
+      .flag("fixed_uids", false,
+            "derive the RT Structure Set's UIDs from the CT's and fix its dates (tests)")
+      .text("model", "",
+            "model file name inside --out (empty: none): the model as built, or as fitted, "
+            "for session scenes (planning.model) and organfit export");
   s.section("report", "report.html: one self-contained page a physicist reads at a glance")
       .text("file", "report.html", "report file name inside --out")
-      .flag("show_patient", false, "show the CT's patient name and ID in the report (also needs --show-phi)");
+      .flag("show_patient", false,
+            "show the CT's patient name and ID in the report (also needs --show-phi)");
   return s;
 }
 
@@ -177,14 +226,17 @@ void check_scene_rules(const config::Scene& scene) {
   if (scene.has_section("planning")) {
     for (const char* section : {"phantom", "organ", "body", "model"})
       if (scene.has_section(section))
-        scene.fail(section, "", fmt::format("a session starts from planning.model: it has no '{}' section", section));
+        scene.fail(
+            section, "",
+            fmt::format("a session starts from planning.model: it has no '{}' section", section));
   }
   if (scene.has_section("model")) {
     const auto m = scene.integer("model", "exponent_m");
     const auto n = scene.integer("model", "exponent_n");
     if (m >= n) {
-      scene.fail("model", scene.is_given("model", "exponent_n") ? "exponent_n" : "exponent_m",
-                 fmt::format("the repulsive exponent n ({}) must exceed the attractive m ({})", n, m));
+      scene.fail(
+          "model", scene.is_given("model", "exponent_n") ? "exponent_n" : "exponent_m",
+          fmt::format("the repulsive exponent n ({}) must exceed the attractive m ({})", n, m));
     }
     const double rmin = std::pow(double(n + 1) / double(m + 1), 1.0 / double(n - m));
     if (scene.number("model", "cutoff_r0") <= rmin) {
@@ -194,12 +246,14 @@ void check_scene_rules(const config::Scene& scene) {
                              rmin, m, n));
     }
     if (!scene.has_section("body") && !scene.has_section("organ")) {
-      scene.fail("model", "radius_mm", "the model needs a body to fill: add an 'organ' or a 'body' section");
+      scene.fail("model", "radius_mm",
+                 "the model needs a body to fill: add an 'organ' or a 'body' section");
     }
   }
   const bool has_model = scene.has_section("model") || scene.has_section("planning");
   if (scene.has_section("phantom") && scene.has_section("ct"))
-    scene.fail("phantom", "kind", "a scene has either a 'phantom' or a 'ct' section: the phantom is the CT");
+    scene.fail("phantom", "kind",
+               "a scene has either a 'phantom' or a 'ct' section: the phantom is the CT");
   const bool has_ct = scene.has_section("ct") || scene.has_section("phantom");
   if (scene.has_section("organ")) {
     if (!has_ct) scene.fail("organ", "roi", "an organ needs the 'ct' (or 'phantom') it is on");
@@ -216,26 +270,33 @@ void check_scene_rules(const config::Scene& scene) {
       scene.fail("points", "source", "source is 'file' but points.file is not given");
     }
     // The file's contents are checked now, before any work (a bad line fails validate).
-    if (scene.text("points", "source") == "file") (void)read_points_file(scene.path("points", "file"));
+    if (scene.text("points", "source") == "file")
+      (void)read_points_file(scene.path("points", "file"));
     if (scene.text("points", "source") == "ultrasound" && !scene.has_section("ultrasound"))
-      scene.fail("points", "source", "source is 'ultrasound' but the scene has no 'ultrasound' section");
-    if (scene.text("points", "source") == "generate" && !scene.has_section("body") && !scene.has_section("organ") &&
-        !scene.has_section("planning")) {
-      scene.fail("points", "source", "generated points need the 'organ' or 'body' they are sampled from");
+      scene.fail("points", "source",
+                 "source is 'ultrasound' but the scene has no 'ultrasound' section");
+    if (scene.text("points", "source") == "generate" && !scene.has_section("body") &&
+        !scene.has_section("organ") && !scene.has_section("planning")) {
+      scene.fail("points", "source",
+                 "generated points need the 'organ' or 'body' they are sampled from");
     }
   }
   if (scene.has_section("export")) {
     // A session finds its planning CT through the model file.
     if (!has_ct && !scene.has_section("planning") &&
         !(scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty()))
-      scene.fail("export", "rtstruct", "an RTSTRUCT or label map is written on the planning CT: add a 'ct' section");
-    if (!has_model) scene.fail("export", "rtstruct", "export needs a 'model' (or 'planning') to export");
+      scene.fail("export", "rtstruct",
+                 "an RTSTRUCT or label map is written on the planning CT: add a 'ct' section");
+    if (!has_model)
+      scene.fail("export", "rtstruct", "export needs a 'model' (or 'planning') to export");
     if (scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty() &&
         scene.text("export", "mesh").empty() && scene.text("export", "model").empty())
-      scene.fail("export", "rtstruct", "the export section names nothing to write (rtstruct, labels, mesh or model)");
+      scene.fail("export", "rtstruct",
+                 "the export section names nothing to write (rtstruct, labels, mesh or model)");
     if (scene.flag("export", "copy_other_rois") &&
         !(scene.has_section("organ") && scene.text("organ", "source") == "rtstruct"))
-      scene.fail("export", "copy_other_rois", "copies from the organ's structure set: needs organ.source rtstruct");
+      scene.fail("export", "copy_other_rois",
+                 "copies from the organ's structure set: needs organ.source rtstruct");
     for (const char* key : {"rtstruct", "labels", "mesh", "model"}) {
       const std::string& name = scene.text("export", key);
       if (name.find('/') != std::string::npos || name == "." || name == "..")
@@ -247,14 +308,18 @@ void check_scene_rules(const config::Scene& scene) {
     if (!scene.has_section("points") || scene.text("points", "source") != "ultrasound")
       scene.fail("ultrasound", "source", "the ultrasound is used by points.source: ultrasound");
     if (simulate && !(has_ct && scene.has_section("organ")))
-      scene.fail("ultrasound", "source", "simulating needs the planning CT (ct or phantom) and the organ");
+      scene.fail("ultrasound", "source",
+                 "simulating needs the planning CT (ct or phantom) and the organ");
     if (!simulate && !scene.is_given("ultrasound", "file"))
-      scene.fail("ultrasound", "file", "source is '" + scene.text("ultrasound", "source") + "' but ultrasound.file is not given");
+      scene.fail("ultrasound", "file",
+                 "source is '" + scene.text("ultrasound", "source") +
+                     "' but ultrasound.file is not given");
     const Eigen::Matrix4d reg = scene.matrix4("ultrasound", "registration");
     const Eigen::Matrix3d rot = reg.topLeftCorner<3, 3>();
-    if ((rot.transpose() * rot - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-3 || rot.determinant() < 0 ||
-        reg.row(3) != Eigen::RowVector4d(0, 0, 0, 1))
-      scene.fail("ultrasound", "registration", "not a rigid transform (a rotation and a translation, last row 0 0 0 1)");
+    if ((rot.transpose() * rot - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-3 ||
+        rot.determinant() < 0 || reg.row(3) != Eigen::RowVector4d(0, 0, 0, 1))
+      scene.fail("ultrasound", "registration",
+                 "not a rigid transform (a rotation and a translation, last row 0 0 0 1)");
     const std::string& name = scene.text("ultrasound", "save_volume");
     if (name.find('/') != std::string::npos || name == "." || name == "..")
       scene.fail("ultrasound", "save_volume", "a file name inside --out, without folders");

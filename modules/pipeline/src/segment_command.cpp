@@ -10,8 +10,10 @@ namespace organfit::pipeline {
 SegmentResult run_segment(const SegmentRequest& r) {
   const bool import = !r.rtstruct.empty() || !r.roi.empty();
   const bool grow = !r.seed_mm.empty() || !r.hu_window.empty();
-  if (import == grow) throw InputError("segment: give either --rtstruct and --roi, or --seed and --hu");
-  if (import && (r.rtstruct.empty() || r.roi.empty())) throw InputError("segment: --rtstruct and --roi go together");
+  if (import == grow)
+    throw InputError("segment: give either --rtstruct and --roi, or --seed and --hu");
+  if (import && (r.rtstruct.empty() || r.roi.empty()))
+    throw InputError("segment: --rtstruct and --roi go together");
   if (grow && (r.seed_mm.size() != 3 || r.hu_window.size() != 2))
     throw InputError("segment: --seed takes X,Y,Z (mm) and --hu takes LOW,HIGH");
   dicom::CtReadOptions o;
@@ -21,7 +23,8 @@ SegmentResult run_segment(const SegmentRequest& r) {
   result.warnings = ct.warnings;
   geometry::LabelVolume mask;
   if (import) {
-    dicom::RasterisedRoi roi = dicom::rasterise_roi(dicom::read_rtstruct(r.rtstruct), r.roi, ct, r.rtstruct.string());
+    dicom::RasterisedRoi roi =
+        dicom::rasterise_roi(dicom::read_rtstruct(r.rtstruct), r.roi, ct, r.rtstruct.string());
     result.warnings.insert(result.warnings.end(), roi.warnings.begin(), roi.warnings.end());
     mask = std::move(roi.mask);
   } else {

@@ -35,7 +35,8 @@ std::vector<Eigen::Vector3d> egg_surface(int n, std::mt19937_64& rng) {
 
 void write_points(const fs::path& file, const std::vector<Eigen::Vector3d>& pts) {
   std::string csv = "x,y,z\n";
-  for (const auto& p : pts) csv += fmt::format("{:.4f},{:.4f},{:.4f}\n", p.x(), p.y(), p.z());
+  for (const auto& p : pts)
+    csv += fmt::format("{:.4f},{:.4f},{:.4f}\n", p.x(), p.y(), p.z());
   write_file_atomically(file, csv);
 }
 
@@ -58,10 +59,12 @@ nlohmann::json run_stability_benchmark(const StabilityBenchOptions& o) {
   std::mt19937_64 rng(3);
   const fs::path dir = o.out / "runs";
   auto far = egg_surface(40, rng);
-  far.insert(far.end(), {Eigen::Vector3d(500, 0, 0), Eigen::Vector3d(0, -480, 0), Eigen::Vector3d(0, 0, 520)});
+  far.insert(far.end(),
+             {Eigen::Vector3d(500, 0, 0), Eigen::Vector3d(0, -480, 0), Eigen::Vector3d(0, 0, 520)});
   std::vector<Eigen::Vector3d> inside;
   std::uniform_real_distribution<double> u(-3, 3);
-  for (int i = 0; i < 30; ++i) inside.emplace_back(u(rng), u(rng), u(rng));
+  for (int i = 0; i < 30; ++i)
+    inside.emplace_back(u(rng), u(rng), u(rng));
   auto centre = egg_surface(30, rng);
   centre.emplace_back(0, 0, 0);  // the body's centre is a lattice site
   std::vector<Eigen::Vector3d> dup(25, Eigen::Vector3d(27, 0, 0));
@@ -75,33 +78,47 @@ nlohmann::json run_stability_benchmark(const StabilityBenchOptions& o) {
 
   const std::string generated = "  count: 87\n  noise_mm: 0.5\n  stretch: 1.15\n  bend_mm: 2\n";
   std::vector<Case> cases = {
-      {"exponents_20_40", Case{}.body, "model:\n  radius_mm: 1.92\n  exponent_m: 20\n  exponent_n: 40\n", generated},
-      {"time_step_at_limit", Case{}.body, "model:\n  radius_mm: 1.92\n  time_step_fraction: 0.9\n", generated},
-      {"time_step_beyond_limit", Case{}.body, "model:\n  radius_mm: 1.92\n  time_step_fraction: 1.5\n", generated},
+      {"exponents_20_40", Case{}.body,
+       "model:\n  radius_mm: 1.92\n  exponent_m: 20\n  exponent_n: 40\n", generated},
+      {"time_step_at_limit", Case{}.body, "model:\n  radius_mm: 1.92\n  time_step_fraction: 0.9\n",
+       generated},
+      {"time_step_beyond_limit", Case{}.body,
+       "model:\n  radius_mm: 1.92\n  time_step_fraction: 1.5\n", generated},
       {"points_10x_organ_away", Case{}.body, Case{}.model, "  source: file\n  file: far.csv\n"},
-      {"points_deep_inside", Case{}.body, Case{}.model, "  source: file\n  file: deep_inside.csv\n"},
-      {"point_on_particle_centre", Case{}.body, Case{}.model, "  source: file\n  file: on_particle_centre.csv\n"},
+      {"points_deep_inside", Case{}.body, Case{}.model,
+       "  source: file\n  file: deep_inside.csv\n"},
+      {"point_on_particle_centre", Case{}.body, Case{}.model,
+       "  source: file\n  file: on_particle_centre.csv\n"},
       {"points_duplicated", Case{}.body, Case{}.model, "  source: file\n  file: duplicates.csv\n"},
       {"one_point", Case{}.body, Case{}.model, "  source: file\n  file: single.csv\n"},
-      {"points_10000", Case{}.body, Case{}.model, "  count: 10000\n  noise_mm: 0.5\n  stretch: 1.1\n"},
-      {"tiny_radius", "body:\n  shape: egg\n  size_mm: [10, 8, 6]\n", "model:\n  radius_mm: 0.3\n", generated},
+      {"points_10000", Case{}.body, Case{}.model,
+       "  count: 10000\n  noise_mm: 0.5\n  stretch: 1.1\n"},
+      {"tiny_radius", "body:\n  shape: egg\n  size_mm: [10, 8, 6]\n", "model:\n  radius_mm: 0.3\n",
+       generated},
       {"huge_radius", Case{}.body, "model:\n  radius_mm: 40\n", generated},
   };
-  std::string csv = "case,method,outcome,reason,finite,components,max_kinetic_energy_per_particle,volume_change_pct,wall_s,pass\n";
-  std::string md = "# organfit bench stability\n\nEach row a scene run in full (`organfit run`), both fitting methods.\n"
-                   "Outcomes: converged (exit 0), stopped (exit 3: the fit did not meet its target and says why),\n"
-                   "refused (exit 2: bad input, named). A row passes when it ends in one of those and any model it\n"
-                   "produced is finite, in one piece, and its kinetic energy per particle stayed below 5 E0.\n\n"
-                   "| case | method | outcome | finite | components | max KE/particle (E0) | volume change (%) | wall (s) | pass |\n"
-                   "|---|---|---|---|---|---|---|---|---|\n";
+  std::string csv =
+      "case,method,outcome,reason,finite,components,max_kinetic_energy_per_particle,volume_change_"
+      "pct,wall_s,pass\n";
+  std::string md =
+      "# organfit bench stability\n\nEach row a scene run in full (`organfit run`), both fitting "
+      "methods.\n"
+      "Outcomes: converged (exit 0), stopped (exit 3: the fit did not meet its target and says "
+      "why),\n"
+      "refused (exit 2: bad input, named). A row passes when it ends in one of those and any model "
+      "it\n"
+      "produced is finite, in one piece, and its kinetic energy per particle stayed below 5 E0.\n\n"
+      "| case | method | outcome | finite | components | max KE/particle (E0) | volume change (%) "
+      "| wall (s) | pass |\n"
+      "|---|---|---|---|---|---|---|---|---|\n";
   bool all_pass = true;
   int rows = 0;
   for (const auto& c : cases)
     for (const char* method : {"spread", "paper"}) {
       throw_if_interrupted();
-      const std::string text =
-          fmt::format("scene:\n  name: {}-{}\n{}{}points:\n{}fit:\n  method: {}\n  max_wall_s: 20\n", c.name, method, c.body,
-                      c.model, c.points, method);
+      const std::string text = fmt::format(
+          "scene:\n  name: {}-{}\n{}{}points:\n{}fit:\n  method: {}\n  max_wall_s: 20\n", c.name,
+          method, c.body, c.model, c.points, method);
       const fs::path run_dir = dir / fmt::format("{}-{}", c.name, method);
       std::string outcome, reason;
       Stopwatch clock;
@@ -135,7 +152,8 @@ nlohmann::json run_stability_benchmark(const StabilityBenchOptions& o) {
         std::getline(h, line);
         while (std::getline(h, line)) {
           const auto comma = line.rfind(',');
-          if (comma != std::string::npos) max_ke = std::max(max_ke, std::atof(line.c_str() + comma + 1));
+          if (comma != std::string::npos)
+            max_ke = std::max(max_ke, std::atof(line.c_str() + comma + 1));
         }
       }
       const bool pass = finite && components == 1 && max_ke < 5.0 && std::isfinite(volume);
@@ -144,15 +162,20 @@ nlohmann::json run_stability_benchmark(const StabilityBenchOptions& o) {
       std::string short_reason = reason.substr(0, std::min<size_t>(reason.size(), 160));
       for (auto& ch : short_reason)
         if (ch == ',' || ch == '|' || ch == '\n') ch = ';';
-      csv += fmt::format("{},{},{},{},{},{},{:.3g},{:.3f},{:.2f},{}\n", c.name, method, outcome, short_reason, finite, components,
-                         max_ke, volume, wall, pass);
-      md += fmt::format("| {} | {} | {}{} | {} | {} | {:.3g} | {:+.2f} | {:.2f} | {} |\n", c.name, method, outcome,
-                        reason.empty() ? "" : ": " + short_reason, finite ? "yes" : "NO", components, max_ke, volume, wall,
+      csv += fmt::format("{},{},{},{},{},{},{:.3g},{:.3f},{:.2f},{}\n", c.name, method, outcome,
+                         short_reason, finite, components, max_ke, volume, wall, pass);
+      md += fmt::format("| {} | {} | {}{} | {} | {} | {:.3g} | {:+.2f} | {:.2f} | {} |\n", c.name,
+                        method, outcome, reason.empty() ? "" : ": " + short_reason,
+                        finite ? "yes" : "NO", components, max_ke, volume, wall,
                         pass ? "yes" : "**NO**");
     }
   write_file_atomically(o.out / "stability.csv", csv);
   write_file_atomically(o.out / "STABILITY.md", md);
-  return {{"benchmark", "stability"}, {"rows", rows}, {"all_pass", all_pass}, {"wall_s", total.elapsed_s()}, {"out", o.out.string()}};
+  return {{"benchmark", "stability"},
+          {"rows", rows},
+          {"all_pass", all_pass},
+          {"wall_s", total.elapsed_s()},
+          {"out", o.out.string()}};
 }
 
 }  // namespace organfit::pipeline

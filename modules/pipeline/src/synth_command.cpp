@@ -22,9 +22,9 @@ SynthResult run_synth_pelvis(const fs::path& out, const phantom::PelvisOptions& 
   if (ec) throw InputError(out.string() + ": cannot create the folder: " + ec.message());
 
   phantom::PelvisPhantom ph = phantom::make_pelvis_phantom(options);
-  const std::string key = fmt::format("organfit-pelvis|{}|{}x{}x{}|{}|{}|{}", options.seed, options.columns,
-                                      options.rows, options.slices, options.pixel_mm, options.slice_mm,
-                                      options.noise_hu);
+  const std::string key = fmt::format("organfit-pelvis|{}|{}x{}x{}|{}|{}|{}", options.seed,
+                                      options.columns, options.rows, options.slices,
+                                      options.pixel_mm, options.slice_mm, options.noise_hu);
   dicom::CtSeries ct;
   ct.geometry = ph.geometry;
   ct.hu = std::move(ph.hu);
@@ -64,12 +64,14 @@ SynthResult run_synth_pelvis(const fs::path& out, const phantom::PelvisOptions& 
   j["size"] = {options.columns, options.rows, options.slices};
   j["spacing_mm"] = {options.pixel_mm, options.pixel_mm, options.slice_mm};
   j["noise_hu"] = options.noise_hu;
-  j["prostate_centre_mm"] = {ph.prostate_centre_mm.x(), ph.prostate_centre_mm.y(), ph.prostate_centre_mm.z()};
+  j["prostate_centre_mm"] = {ph.prostate_centre_mm.x(), ph.prostate_centre_mm.y(),
+                             ph.prostate_centre_mm.z()};
   nlohmann::ordered_json structures = nlohmann::ordered_json::array();
   for (const auto& s : phantom::pelvis_structures()) {
-    const double voxels = s.label == phantom::kAir
-                              ? static_cast<double>(ph.labels.labels.size() - ph.labels.count(phantom::kAir))
-                              : static_cast<double>(ph.labels.count(s.label));
+    const double voxels =
+        s.label == phantom::kAir
+            ? static_cast<double>(ph.labels.labels.size() - ph.labels.count(phantom::kAir))
+            : static_cast<double>(ph.labels.count(s.label));
     structures.push_back({{"roi", s.name},
                           {"label", s.label == phantom::kAir ? nlohmann::ordered_json("all but 0")
                                                              : nlohmann::ordered_json(s.label)},

@@ -32,21 +32,26 @@ nlohmann::json run_synth_ultrasound(const SynthUltrasoundCommand& c) {
   std::vector<float> hu(labels.labels.size(), 0.0f);
   if (!c.ct.empty()) {
     const dicom::CtSeries ct = dicom::read_ct_series(c.ct);
-    if (ct.geometry.size != g.size) throw InputError(c.ct.string() + ": the CT's grid is not the labels'");
+    if (ct.geometry.size != g.size)
+      throw InputError(c.ct.string() + ": the CT's grid is not the labels'");
     hu = ct.hu;
   } else {
     for (size_t v = 0; v < hu.size(); ++v) {
       const auto l = labels.labels[v];
-      hu[v] = l == phantom::kPelvicBone || l == phantom::kFemurLeft || l == phantom::kFemurRight ? 1000.0f
-              : l == phantom::kAir                                                           ? -1000.0f
-                                                                                             : 0.0f;
+      hu[v] = l == phantom::kPelvicBone || l == phantom::kFemurLeft || l == phantom::kFemurRight
+                  ? 1000.0f
+              : l == phantom::kAir ? -1000.0f
+                                   : 0.0f;
     }
   }
   geometry::LabelVolume organ_mask(g);
-  for (size_t v = 0; v < labels.labels.size(); ++v) organ_mask.labels[v] = labels.labels[v] == c.organ_label;
+  for (size_t v = 0; v < labels.labels.size(); ++v)
+    organ_mask.labels[v] = labels.labels[v] == c.organ_label;
   if (organ_mask.count(1) == 0)
-    throw InputError(fmt::format("{}: no voxel has the organ label {}", c.labels.string(), c.organ_label));
-  const evaluation::Shape organ = evaluation::make_mask_shape(std::make_shared<const geometry::LabelVolume>(organ_mask));
+    throw InputError(
+        fmt::format("{}: no voxel has the organ label {}", c.labels.string(), c.organ_label));
+  const evaluation::Shape organ =
+      evaluation::make_mask_shape(std::make_shared<const geometry::LabelVolume>(organ_mask));
   evaluation::Deformation d;
   d.stretch = c.stretch, d.bend_mm = c.bend_mm, d.centre_mm = organ.centre_mm;
   d.half_length_mm = 0.5 * organ.size_mm.x() * d.stretch;
@@ -55,8 +60,10 @@ nlohmann::json run_synth_ultrasound(const SynthUltrasoundCommand& c) {
   ultrasound::ProbePose probe;
   probe.position_mm = organ.centre_mm + Eigen::Vector3d(0, 38, 0);
   if (c.probe.size() >= 3) probe.position_mm = Eigen::Vector3d(c.probe[0], c.probe[1], c.probe[2]);
-  if (c.probe.size() >= 6) probe.axis = Eigen::Vector3d(c.probe[3], c.probe[4], c.probe[5]).normalized();
-  if (c.probe.size() == 9) probe.lateral = Eigen::Vector3d(c.probe[6], c.probe[7], c.probe[8]).normalized();
+  if (c.probe.size() >= 6)
+    probe.axis = Eigen::Vector3d(c.probe[3], c.probe[4], c.probe[5]).normalized();
+  if (c.probe.size() == 9)
+    probe.lateral = Eigen::Vector3d(c.probe[6], c.probe[7], c.probe[8]).normalized();
   ultrasound::SimulatorOptions so = tissue_class_simulator_options();
   so.probe_radius_mm = 12;
   so.speckle = c.speckle;
@@ -72,12 +79,14 @@ nlohmann::json run_synth_ultrasound(const SynthUltrasoundCommand& c) {
   // The tracked sweep: a fan of planes through the probe, tilted about its lateral
   // direction, each sampled from the volume (nearest voxel) at the volume's spacing.
   const double px = so.voxel_mm;
-  const int width = static_cast<int>(std::ceil(2 * so.max_depth_mm * std::tan(so.lateral_half_angle_deg * M_PI / 180) / px));
+  const int width = static_cast<int>(
+      std::ceil(2 * so.max_depth_mm * std::tan(so.lateral_half_angle_deg * M_PI / 180) / px));
   const int height = static_cast<int>(std::ceil(so.max_depth_mm / px));
   const Eigen::Vector3d elevation = probe.axis.cross(probe.lateral);
   ultrasound::TrackedSweep sweep;
   for (int f = 0; f < c.sweep_frames; ++f) {
-    const double tilt = c.sweep_frames == 1 ? 0.0 : (-40.0 + 80.0 * f / (c.sweep_frames - 1)) * M_PI / 180;
+    const double tilt =
+        c.sweep_frames == 1 ? 0.0 : (-40.0 + 80.0 * f / (c.sweep_frames - 1)) * M_PI / 180;
     const Eigen::Vector3d beam = std::cos(tilt) * probe.axis + std::sin(tilt) * elevation;
     ultrasound::TrackedFrame frame;
     frame.index = f;
@@ -93,11 +102,14 @@ nlohmann::json run_synth_ultrasound(const SynthUltrasoundCommand& c) {
       for (int col = 0; col < width; ++col) {
         const Eigen::Vector3d p = (frame.pixel_to_ct_mm * Eigen::Vector4d(col, r, 0, 1)).head<3>();
         const Eigen::Vector3d idx = sim.geometry.physical_to_index(p);
-        const int i = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
+        const int i = static_cast<int>(std::lround(idx.x())),
+                  j = static_cast<int>(std::lround(idx.y())),
                   k = static_cast<int>(std::lround(idx.z()));
-        if (i < 0 || j < 0 || k < 0 || i >= sim.geometry.size[0] || j >= sim.geometry.size[1] || k >= sim.geometry.size[2])
+        if (i < 0 || j < 0 || k < 0 || i >= sim.geometry.size[0] || j >= sim.geometry.size[1] ||
+            k >= sim.geometry.size[2])
           continue;
-        frame.pixels[static_cast<size_t>(r) * width + col] = sim.bmode[static_cast<size_t>(sim.geometry.linear_index(i, j, k))];
+        frame.pixels[static_cast<size_t>(r) * width + col] =
+            sim.bmode[static_cast<size_t>(sim.geometry.linear_index(i, j, k))];
       }
     sweep.frames.push_back(std::move(frame));
   }
@@ -109,21 +121,23 @@ nlohmann::json run_synth_ultrasound(const SynthUltrasoundCommand& c) {
   itkbridge::write_label_volume(c.out / "volume.mha", volume);
   ultrasound::write_sequence_metafile(c.out / "sweep.igs.mha", sweep, px);
   std::string csv = "x_mm,y_mm,z_mm\n";
-  for (const auto& p : sim.true_boundary_mm) csv += fmt::format("{:.3f},{:.3f},{:.3f}\n", p.x(), p.y(), p.z());
+  for (const auto& p : sim.true_boundary_mm)
+    csv += fmt::format("{:.3f},{:.3f},{:.3f}\n", p.x(), p.y(), p.z());
   write_file_atomically(c.out / "true_boundary.csv", csv);
-  nlohmann::json summary = {{"labels", c.labels.string()},
-                            {"seed", c.seed},
-                            {"speckle", c.speckle},
-                            {"organ_label", c.organ_label},
-                            {"organ_centre_mm", {organ.centre_mm.x(), organ.centre_mm.y(), organ.centre_mm.z()}},
-                            {"deformation", {{"stretch", c.stretch}, {"bend_mm", c.bend_mm}}},
-                            {"probe_mm", {probe.position_mm.x(), probe.position_mm.y(), probe.position_mm.z()}},
-                            {"probe_axis", {probe.axis.x(), probe.axis.y(), probe.axis.z()}},
-                            {"volume_size", {sim.geometry.size[0], sim.geometry.size[1], sim.geometry.size[2]}},
-                            {"sweep_frames", sweep.frames.size()},
-                            {"frame_size", {width, height}},
-                            {"true_boundary_points", sim.true_boundary_mm.size()},
-                            {"files", {"volume.mha", "sweep.igs.mha", "true_boundary.csv"}}};
+  nlohmann::json summary = {
+      {"labels", c.labels.string()},
+      {"seed", c.seed},
+      {"speckle", c.speckle},
+      {"organ_label", c.organ_label},
+      {"organ_centre_mm", {organ.centre_mm.x(), organ.centre_mm.y(), organ.centre_mm.z()}},
+      {"deformation", {{"stretch", c.stretch}, {"bend_mm", c.bend_mm}}},
+      {"probe_mm", {probe.position_mm.x(), probe.position_mm.y(), probe.position_mm.z()}},
+      {"probe_axis", {probe.axis.x(), probe.axis.y(), probe.axis.z()}},
+      {"volume_size", {sim.geometry.size[0], sim.geometry.size[1], sim.geometry.size[2]}},
+      {"sweep_frames", sweep.frames.size()},
+      {"frame_size", {width, height}},
+      {"true_boundary_points", sim.true_boundary_mm.size()},
+      {"files", {"volume.mha", "sweep.igs.mha", "true_boundary.csv"}}};
   write_file_atomically(c.out / "ultrasound.json", summary.dump(2) + "\n");
   return summary;
 }

@@ -3,19 +3,18 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
-#include <cmath>
-
 #include <Eigen/Geometry>
 #include <Eigen/LU>
+#include <cmath>
 #include <optional>
 
 #include "organfit/dicom/us_image.h"
 #include "organfit/itkbridge/itk_images.h"
-#include "organfit/ultrasound/sequence_metafile.h"
 #include "organfit/phantom/pelvis.h"
 #include "organfit/support/error.h"
 #include "organfit/support/resources.h"
 #include "organfit/ultrasound/boundary_points.h"
+#include "organfit/ultrasound/sequence_metafile.h"
 #include "organfit/ultrasound/simulator.h"
 
 namespace organfit::pipeline {
@@ -35,12 +34,24 @@ geometry::LabelVolume pelvis_tissue_classes(const geometry::LabelVolume& labels)
   geometry::LabelVolume t(labels.geometry);
   for (size_t v = 0; v < labels.labels.size(); ++v) {
     switch (labels.labels[v]) {
-      case phantom::kAir: t.labels[v] = 1; break;
-      case phantom::kSoftTissue: t.labels[v] = 2; break;  // fat
-      case phantom::kBladder: t.labels[v] = 3; break;     // urine
-      case phantom::kMuscle: case phantom::kRectum: t.labels[v] = 4; break;  // rectal gas: shadow from HU
-      case phantom::kProstate: t.labels[v] = 7; break;
-      default: t.labels[v] = 6;                          // bone
+      case phantom::kAir:
+        t.labels[v] = 1;
+        break;
+      case phantom::kSoftTissue:
+        t.labels[v] = 2;
+        break;  // fat
+      case phantom::kBladder:
+        t.labels[v] = 3;
+        break;  // urine
+      case phantom::kMuscle:
+      case phantom::kRectum:
+        t.labels[v] = 4;
+        break;  // rectal gas: shadow from HU
+      case phantom::kProstate:
+        t.labels[v] = 7;
+        break;
+      default:
+        t.labels[v] = 6;  // bone
     }
   }
   return t;
@@ -50,14 +61,16 @@ ultrasound::SimulatorOptions tissue_class_simulator_options() {
   ultrasound::SimulatorOptions so;
   // Echogenicity: anechoic fluid, hyperechoic fat, a hypoechoic gland.
   so.echogenicity.fill(0.5f);
-  so.echogenicity[1] = 0.0f, so.echogenicity[2] = 0.9f, so.echogenicity[3] = 0.04f, so.echogenicity[4] = 0.5f;
+  so.echogenicity[1] = 0.0f, so.echogenicity[2] = 0.9f, so.echogenicity[3] = 0.04f,
+  so.echogenicity[4] = 0.5f;
   so.echogenicity[5] = 0.7f, so.echogenicity[6] = 1.0f, so.echogenicity[7] = 0.3f;
   so.organ_label = 7;
   return so;
 }
 
-ultrasound::TissueAt deformed_anatomy(const geometry::LabelVolume& tissue, const std::vector<float>& hu,
-                                      const evaluation::Shape& organ, const evaluation::Deformation& d) {
+ultrasound::TissueAt deformed_anatomy(const geometry::LabelVolume& tissue,
+                                      const std::vector<float>& hu, const evaluation::Shape& organ,
+                                      const evaluation::Deformation& d) {
   // The organ by its smooth shape pulled back through the map, everything else where the
   // planning CT has it, fat where the organ was and is no more. Deforming the whole
   // pelvis instead would also stretch the rectal gas round the probe and shadow half the
@@ -67,17 +80,20 @@ ultrasound::TissueAt deformed_anatomy(const geometry::LabelVolume& tissue, const
     if (organ.inside(d.inverse(p))) return ultrasound::TissueSample{7, 40.0f};
     const auto& g = tissue->geometry;
     const Eigen::Vector3d idx = g.physical_to_index(p);
-    const int i = static_cast<int>(std::lround(idx.x())), j = static_cast<int>(std::lround(idx.y())),
+    const int i = static_cast<int>(std::lround(idx.x())),
+              j = static_cast<int>(std::lround(idx.y())),
               k = static_cast<int>(std::lround(idx.z()));
-    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) return ultrasound::TissueSample{};
+    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2])
+      return ultrasound::TissueSample{};
     const auto v = static_cast<size_t>(g.linear_index(i, j, k));
     if (tissue->labels[v] == 7) return ultrasound::TissueSample{2, -95.0f};  // vacated: fat
     return ultrasound::TissueSample{tissue->labels[v], (*hu)[v]};
   };
 }
 
-UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const ModelStageResult& model,
-                                           const dicom::CtSeries* ct, const geometry::LabelVolume* organ_mask,
+UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene,
+                                           const ModelStageResult& model, const dicom::CtSeries* ct,
+                                           const geometry::LabelVolume* organ_mask,
                                            const geometry::LabelVolume* anatomy) {
   UltrasoundStageResult r;
   PointsStageResult& pts = r.points;
@@ -90,10 +106,12 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const Mod
   const std::string source = scene.text("ultrasound", "source");
   if (source == "simulate") {
     if (!ct || !organ_mask)
-      scene.fail("ultrasound", "source", "simulating ultrasound needs the planning CT and the organ (ct/phantom, organ)");
+      scene.fail("ultrasound", "source",
+                 "simulating ultrasound needs the planning CT and the organ (ct/phantom, organ)");
     Stopwatch clock;
     const evaluation::Deformation d = deformation_from(scene, model.shape);
-    const geometry::LabelVolume tissue = anatomy ? *anatomy : tissue_classes(ct->geometry, ct->hu, organ_mask);
+    const geometry::LabelVolume tissue =
+        anatomy ? *anatomy : tissue_classes(ct->geometry, ct->hu, organ_mask);
     const ultrasound::TissueAt today = deformed_anatomy(tissue, ct->hu, model.shape, d);
     ultrasound::ProbePose probe;
     probe.position_mm = model.shape.centre_mm + scene.vec3("ultrasound", "probe_offset_mm");
@@ -102,7 +120,8 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const Mod
     ultrasound::SimulatorOptions so = tissue_class_simulator_options();
     so.probe_radius_mm = scene.number("ultrasound", "probe_radius_mm");
     so.max_depth_mm = scene.number("ultrasound", "max_depth_mm");
-    so.lateral_half_angle_deg = so.elevation_half_angle_deg = scene.number("ultrasound", "half_angle_deg");
+    so.lateral_half_angle_deg = so.elevation_half_angle_deg =
+        scene.number("ultrasound", "half_angle_deg");
     so.speckle = scene.number("ultrasound", "speckle");
     so.voxel_mm = scene.number("ultrasound", "voxel_mm");
     so.seed = static_cast<std::uint64_t>(scene.integer("scene", "seed"));
@@ -133,7 +152,8 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const Mod
     const auto image = itkbridge::read_scalar_image(scene.path("ultrasound", "file"));
     us_geometry = image.geometry;
     intensity = image.values;
-    summary = {{"source", "volume"}, {"volume_size", {us_geometry.size[0], us_geometry.size[1], us_geometry.size[2]}}};
+    summary = {{"source", "volume"},
+               {"volume_size", {us_geometry.size[0], us_geometry.size[1], us_geometry.size[2]}}};
   } else {
     // 2D frames: a tracked sweep, or DICOM frames placed by the calibration alone.
     const Eigen::Matrix4d calibration = scene.matrix4("ultrasound", "calibration");
@@ -147,20 +167,25 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const Mod
       so.image_to_probe = calibration;
       so.tracker_to_ct = registration;
       sweep = ultrasound::assemble_sweep(video, tracker ? &*tracker : nullptr, so);
-      summary = {{"source", "sweep"}, {"frames", video.frames.size()}, {"frames_used", sweep.frames.size()}};
+      summary = {{"source", "sweep"},
+                 {"frames", video.frames.size()},
+                 {"frames_used", sweep.frames.size()}};
     } else {
-      const dicom::UsImage us = dicom::read_us_image(scene.path("ultrasound", "file"), scene.number("ultrasound", "pixel_mm"));
+      const dicom::UsImage us = dicom::read_us_image(scene.path("ultrasound", "file"),
+                                                     scene.number("ultrasound", "pixel_mm"));
       Eigen::Matrix4d scale = Eigen::Matrix4d::Identity();
       scale(0, 0) = us.pixel_mm_x, scale(1, 1) = us.pixel_mm_y;
       const size_t n = static_cast<size_t>(us.width) * us.height;
       for (int f = 0; f < us.frames; ++f) {
         ultrasound::TrackedFrame frame;
         frame.index = f, frame.width = us.width, frame.height = us.height;
-        frame.pixels.assign(us.grey.begin() + static_cast<long>(f * n), us.grey.begin() + static_cast<long>((f + 1) * n));
+        frame.pixels.assign(us.grey.begin() + static_cast<long>(f * n),
+                            us.grey.begin() + static_cast<long>((f + 1) * n));
         frame.pixel_to_ct_mm = registration * calibration * scale;
         sweep.frames.push_back(std::move(frame));
       }
-      summary = {{"source", "dicom"}, {"frames", us.frames}, {"pixel_mm", {us.pixel_mm_x, us.pixel_mm_y}}};
+      summary = {
+          {"source", "dicom"}, {"frames", us.frames}, {"pixel_mm", {us.pixel_mm_x, us.pixel_mm_y}}};
     }
   }
   Stopwatch clock;
@@ -180,27 +205,34 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const Mod
       found = ultrasound::sweep_boundary_points(sweep, bo);  // already in CT coordinates
     } else {
       // A volume is searched in its own frame: the organ and its prior mapped into it.
-      const Eigen::Matrix4d to_volume = source == "volume" ? Eigen::Matrix4d(registration.inverse()) : Eigen::Matrix4d::Identity();
+      const Eigen::Matrix4d to_volume = source == "volume" ? Eigen::Matrix4d(registration.inverse())
+                                                           : Eigen::Matrix4d::Identity();
       bo.centre_mm = (to_volume * model.shape.centre_mm.homogeneous()).head<3>();
       const Eigen::Matrix4d to_ct = to_volume.inverse();
-      bo.prior_inside = [&prior, to_ct](const Eigen::Vector3d& p) { return prior.inside((to_ct * p.homogeneous()).head<3>()); };
-      found = ultrasound::boundary_points(us_geometry, intensity, in_view.empty() ? nullptr : &in_view, bo);
-      for (auto& p : found.points) p.p_mm = (to_ct * p.p_mm.homogeneous()).head<3>();
+      bo.prior_inside = [&prior, to_ct](const Eigen::Vector3d& p) {
+        return prior.inside((to_ct * p.homogeneous()).head<3>());
+      };
+      found = ultrasound::boundary_points(us_geometry, intensity,
+                                          in_view.empty() ? nullptr : &in_view, bo);
+      for (auto& p : found.points)
+        p.p_mm = (to_ct * p.p_mm.homogeneous()).head<3>();
     }
   } catch (const std::invalid_argument& e) {
     throw InputError(std::string("ultrasound: ") + e.what());
   }
   if (found.points.empty())
-    throw TargetNotMetError("ultrasound: no boundary points found (the organ may be outside the field of view)");
-  for (const auto& p : found.points) pts.points.push_back({p.p_mm, p.confidence});
+    throw TargetNotMetError(
+        "ultrasound: no boundary points found (the organ may be outside the field of view)");
+  for (const auto& p : found.points)
+    pts.points.push_back({p.p_mm, p.confidence});
   summary["rays"] = found.rays;
   summary["rays_with_a_boundary"] = found.rays_in_view;
   summary["rejected_by_neighbours"] = found.rejected;
   summary["count"] = pts.points.size();
   summary["segment_wall_s"] = clock.elapsed_s();
   pts.summary = summary;
-  spdlog::info("ultrasound: {} points from {} rays with a boundary ({} rejected as inconsistent)", pts.points.size(),
-               found.rays_in_view, found.rejected);
+  spdlog::info("ultrasound: {} points from {} rays with a boundary ({} rejected as inconsistent)",
+               pts.points.size(), found.rays_in_view, found.rejected);
   return r;
 }
 

@@ -32,10 +32,12 @@ float grey_at(const Eigen::Vector3d& p, std::uint64_t index) {
 
 std::pair<double, double> errors(const std::vector<ultrasound::BoundaryPoint>& points) {
   std::vector<double> e;
-  for (const auto& p : points) e.push_back(std::abs(p.p_mm.norm() - kRadius));
+  for (const auto& p : points)
+    e.push_back(std::abs(p.p_mm.norm() - kRadius));
   std::sort(e.begin(), e.end());
   if (e.empty()) return {-1, -1};
-  return {e[e.size() / 2], static_cast<double>(std::upper_bound(e.begin(), e.end(), 1.5) - e.begin()) / e.size()};
+  return {e[e.size() / 2],
+          static_cast<double>(std::upper_bound(e.begin(), e.end(), 1.5) - e.begin()) / e.size()};
 }
 
 }  // namespace
@@ -53,7 +55,8 @@ nlohmann::json run_us_benchmark(const UsBenchOptions& o) {
     for (int j = 0; j < g.size[1]; ++j)
       for (int i = 0; i < g.size[0]; ++i) {
         const long long v = g.linear_index(i, j, k);
-        volume[static_cast<size_t>(v)] = grey_at(g.index_to_physical(Eigen::Vector3d(i, j, k)), static_cast<std::uint64_t>(v));
+        volume[static_cast<size_t>(v)] =
+            grey_at(g.index_to_physical(Eigen::Vector3d(i, j, k)), static_cast<std::uint64_t>(v));
       }
   ultrasound::BoundaryOptions bo;
   bo.centre_mm = Eigen::Vector3d(2, -1, 1);
@@ -76,13 +79,14 @@ nlohmann::json run_us_benchmark(const UsBenchOptions& o) {
     frame.pixel_to_ct_mm.block<3, 1>(0, 0) = 0.2 * Eigen::Vector3d::UnitX();
     frame.pixel_to_ct_mm.block<3, 1>(0, 1) = 0.2 * beam;
     frame.pixel_to_ct_mm.block<3, 1>(0, 2) = Eigen::Vector3d::UnitX().cross(beam);
-    frame.pixel_to_ct_mm.block<3, 1>(0, 3) = Eigen::Vector3d(-64, 45, 0);  // probe 45 mm behind the centre
+    frame.pixel_to_ct_mm.block<3, 1>(0, 3) =
+        Eigen::Vector3d(-64, 45, 0);  // probe 45 mm behind the centre
     frame.pixels.resize(640 * 480);
     for (int r = 0; r < 480; ++r)
       for (int c = 0; c < 640; ++c)
-        frame.pixels[static_cast<size_t>(r) * 640 + c] =
-            grey_at((frame.pixel_to_ct_mm * Eigen::Vector4d(c, r, 0, 1)).head<3>(),
-                    static_cast<std::uint64_t>(f) * 640 * 480 + static_cast<std::uint64_t>(r) * 640 + c);
+        frame.pixels[static_cast<size_t>(r) * 640 + c] = grey_at(
+            (frame.pixel_to_ct_mm * Eigen::Vector4d(c, r, 0, 1)).head<3>(),
+            static_cast<std::uint64_t>(f) * 640 * 480 + static_cast<std::uint64_t>(r) * 640 + c);
     sweep.frames.push_back(std::move(frame));
   }
   Stopwatch sweep_clock;
@@ -92,11 +96,23 @@ nlohmann::json run_us_benchmark(const UsBenchOptions& o) {
   const auto [smed, swithin] = errors(sr.points);
   return {{"benchmark", "us"},
           {"threads", omp_get_max_threads()},
-          {"volume", {{"size", o.volume_size}, {"wall_s", volume_s}, {"target_s", 2.0}, {"meets_target", volume_s <= 2.0},
-                      {"points", vr.points.size()}, {"median_error_mm", vmed}, {"within_1_5_mm", vwithin}}},
-          {"sweep", {{"frames", o.frames}, {"frame_size", {640, 480}}, {"wall_s", sweep_s}, {"target_s", 2.0},
-                     {"meets_target", sweep_s <= 2.0}, {"points", sr.points.size()}, {"median_error_mm", smed},
-                     {"within_1_5_mm", swithin}}},
+          {"volume",
+           {{"size", o.volume_size},
+            {"wall_s", volume_s},
+            {"target_s", 2.0},
+            {"meets_target", volume_s <= 2.0},
+            {"points", vr.points.size()},
+            {"median_error_mm", vmed},
+            {"within_1_5_mm", vwithin}}},
+          {"sweep",
+           {{"frames", o.frames},
+            {"frame_size", {640, 480}},
+            {"wall_s", sweep_s},
+            {"target_s", 2.0},
+            {"meets_target", sweep_s <= 2.0},
+            {"points", sr.points.size()},
+            {"median_error_mm", smed},
+            {"within_1_5_mm", swithin}}},
           {"peak_memory_mib", peak_memory_mib()}};
 }
 

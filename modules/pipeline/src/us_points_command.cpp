@@ -22,11 +22,15 @@ namespace {
 
 Eigen::Matrix4d matrix_of(const std::vector<double>& v, const char* option) {
   if (v.empty()) return Eigen::Matrix4d::Identity();
-  if (v.size() != 16) throw InputError(fmt::format("us-points: {} takes 16 numbers (a 4x4 matrix, row by row)", option));
+  if (v.size() != 16)
+    throw InputError(
+        fmt::format("us-points: {} takes 16 numbers (a 4x4 matrix, row by row)", option));
   Eigen::Matrix4d m;
   for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) m(r, c) = v[static_cast<size_t>(4 * r + c)];
-  if (!m.allFinite()) throw InputError(fmt::format("us-points: {} has a non-finite number", option));
+    for (int c = 0; c < 4; ++c)
+      m(r, c) = v[static_cast<size_t>(4 * r + c)];
+  if (!m.allFinite())
+    throw InputError(fmt::format("us-points: {} has a non-finite number", option));
   return m;
 }
 
@@ -42,7 +46,8 @@ bool has_sequence_fields(const fs::path& file) {
 
 std::string lower_extension(const fs::path& p) {
   std::string name = p.filename().string();
-  for (auto& c : name) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  for (auto& c : name)
+    c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return name;
 }
 
@@ -66,7 +71,9 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
   nlohmann::json summary = {{"input", c.input.filename().string()}};
   ultrasound::BoundaryResult found;
   auto set_roi = [&](const Eigen::Vector3d& default_centre, double default_radius) {
-    o.centre_mm = c.centre_mm.size() == 3 ? Eigen::Vector3d(c.centre_mm[0], c.centre_mm[1], c.centre_mm[2]) : default_centre;
+    o.centre_mm = c.centre_mm.size() == 3
+                      ? Eigen::Vector3d(c.centre_mm[0], c.centre_mm[1], c.centre_mm[2])
+                      : default_centre;
     o.r_max_mm = c.radius_mm > 0 ? c.radius_mm : default_radius;
     o.r_min_mm = std::min(2.0, 0.2 * o.r_max_mm);
     summary["centre_mm"] = {o.centre_mm.x(), o.centre_mm.y(), o.centre_mm.z()};
@@ -74,8 +81,10 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
   };
   auto sweep_roi = [&](const ultrasound::TrackedSweep& sweep) {
     const auto& f = sweep.frames[sweep.frames.size() / 2];
-    const Eigen::Vector4d mid = f.pixel_to_ct_mm * Eigen::Vector4d(0.5 * f.width, 0.5 * f.height, 0, 1);
-    const double w = f.pixel_to_ct_mm.block<3, 1>(0, 0).norm() * f.width, h = f.pixel_to_ct_mm.block<3, 1>(0, 1).norm() * f.height;
+    const Eigen::Vector4d mid =
+        f.pixel_to_ct_mm * Eigen::Vector4d(0.5 * f.width, 0.5 * f.height, 0, 1);
+    const double w = f.pixel_to_ct_mm.block<3, 1>(0, 0).norm() * f.width,
+                 h = f.pixel_to_ct_mm.block<3, 1>(0, 1).norm() * f.height;
     set_roi(mid.head<3>(), std::min(w, h) / 3);
   };
   if (ends_with(name, ".dcm")) {
@@ -88,19 +97,23 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
       frame.index = f;
       frame.width = us.width, frame.height = us.height;
       const size_t n = static_cast<size_t>(us.width) * us.height;
-      frame.pixels.assign(us.grey.begin() + static_cast<long>(f * n), us.grey.begin() + static_cast<long>((f + 1) * n));
+      frame.pixels.assign(us.grey.begin() + static_cast<long>(f * n),
+                          us.grey.begin() + static_cast<long>((f + 1) * n));
       frame.pixel_to_ct_mm = registration * calibration * scale;
       sweep.frames.push_back(std::move(frame));
     }
     // Default region: the middle of the calibrated region.
-    const Eigen::Vector4d mid =
-        sweep.frames.front().pixel_to_ct_mm *
-        Eigen::Vector4d(0.5 * (us.region[0] + us.region[2]), 0.5 * (us.region[1] + us.region[3]), 0, 1);
-    set_roi(mid.head<3>(), std::min((us.region[2] - us.region[0]) * us.pixel_mm_x, (us.region[3] - us.region[1]) * us.pixel_mm_y) / 3);
+    const Eigen::Vector4d mid = sweep.frames.front().pixel_to_ct_mm *
+                                Eigen::Vector4d(0.5 * (us.region[0] + us.region[2]),
+                                                0.5 * (us.region[1] + us.region[3]), 0, 1);
+    set_roi(mid.head<3>(), std::min((us.region[2] - us.region[0]) * us.pixel_mm_x,
+                                    (us.region[3] - us.region[1]) * us.pixel_mm_y) /
+                               3);
     summary["kind"] = "dicom";
     summary["photometric"] = us.photometric;
     summary["pixel_mm"] = {us.pixel_mm_x, us.pixel_mm_y};
-    summary["pixel_size_from"] = us.calibrated && c.pixel_mm <= 0 ? "ultrasound region" : "--pixel-mm";
+    summary["pixel_size_from"] =
+        us.calibrated && c.pixel_mm <= 0 ? "ultrasound region" : "--pixel-mm";
     summary["frames"] = us.frames;
     found = ultrasound::sweep_boundary_points(sweep, o);
   } else if ((ends_with(name, ".mha") || ends_with(name, ".mhd")) && has_sequence_fields(c.input)) {
@@ -111,7 +124,8 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
     so.transform = c.transform;
     so.image_to_probe = calibration;
     so.tracker_to_ct = registration;
-    const ultrasound::TrackedSweep sweep = ultrasound::assemble_sweep(video, tracker ? &*tracker : nullptr, so);
+    const ultrasound::TrackedSweep sweep =
+        ultrasound::assemble_sweep(video, tracker ? &*tracker : nullptr, so);
     sweep_roi(sweep);
     summary["kind"] = "tracked sweep";
     summary["frames"] = video.frames.size();
@@ -121,11 +135,14 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
                                  {"no_pose", sweep.skipped_no_pose}};
     found = ultrasound::sweep_boundary_points(sweep, o);
   } else {
-    if (!c.tracker.empty()) throw InputError(c.input.string() + ": --tracker applies to a tracked sweep, not a volume");
+    if (!c.tracker.empty())
+      throw InputError(c.input.string() + ": --tracker applies to a tracked sweep, not a volume");
     const itkbridge::ScalarImage volume = itkbridge::read_scalar_image(c.input);
     const auto& g = volume.geometry;
-    const Eigen::Vector3d mid = g.index_to_physical(0.5 * Eigen::Vector3d(g.size[0] - 1, g.size[1] - 1, g.size[2] - 1));
-    const Eigen::Vector3d extent = g.spacing_mm.cwiseProduct(Eigen::Vector3d(g.size[0], g.size[1], g.size[2]));
+    const Eigen::Vector3d mid =
+        g.index_to_physical(0.5 * Eigen::Vector3d(g.size[0] - 1, g.size[1] - 1, g.size[2] - 1));
+    const Eigen::Vector3d extent =
+        g.spacing_mm.cwiseProduct(Eigen::Vector3d(g.size[0], g.size[1], g.size[2]));
     // The ROI is given in output (CT) coordinates; the search runs in the volume's own.
     set_roi((registration * mid.homogeneous()).head<3>(), extent.minCoeff() / 3);
     o.centre_mm = (registration.inverse() * o.centre_mm.homogeneous()).head<3>();
@@ -136,7 +153,8 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
     } catch (const std::invalid_argument& e) {
       throw InputError(c.input.string() + ": " + e.what());
     }
-    for (auto& p : found.points) p.p_mm = (registration * p.p_mm.homogeneous()).head<3>();
+    for (auto& p : found.points)
+      p.p_mm = (registration * p.p_mm.homogeneous()).head<3>();
   }
   summary["rays"] = found.rays;
   summary["rays_with_a_boundary"] = found.rays_in_view;
@@ -145,10 +163,13 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
   summary["points"] = found.points.size();
   summary["wall_s"] = clock.elapsed_s();
   if (found.points.empty())
-    throw TargetNotMetError(c.input.string() + ": no boundary points found in the region of interest (centre " +
-                            summary["centre_mm"].dump() + " mm, radius " + fmt::format("{:.1f}", o.r_max_mm) + " mm)");
+    throw TargetNotMetError(
+        c.input.string() + ": no boundary points found in the region of interest (centre " +
+        summary["centre_mm"].dump() + " mm, radius " + fmt::format("{:.1f}", o.r_max_mm) + " mm)");
   std::string csv = "x_mm,y_mm,z_mm,confidence\n";
-  for (const auto& p : found.points) csv += fmt::format("{:.3f},{:.3f},{:.3f},{:.3f}\n", p.p_mm.x(), p.p_mm.y(), p.p_mm.z(), p.confidence);
+  for (const auto& p : found.points)
+    csv += fmt::format("{:.3f},{:.3f},{:.3f},{:.3f}\n", p.p_mm.x(), p.p_mm.y(), p.p_mm.z(),
+                       p.confidence);
   if (!c.out.parent_path().empty()) fs::create_directories(c.out.parent_path(), ec);
   write_file_atomically(c.out, csv);
   summary["out"] = c.out.string();

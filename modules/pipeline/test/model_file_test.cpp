@@ -24,9 +24,9 @@ class ModelFile : public ::testing::Test {
   }
   void TearDown() override { fs::remove_all(dir_); }
   ModelStageResult build(const std::string& body) {
-    const config::Scene scene =
-        config::parse_scene("scene:\n  seed: 4\n" + body + "model:\n  radius_mm: 2.0\n  skeleton_stiffness: 0.3\n",
-                            dir_ / "s.yaml", scene_schema());
+    const config::Scene scene = config::parse_scene(
+        "scene:\n  seed: 4\n" + body + "model:\n  radius_mm: 2.0\n  skeleton_stiffness: 0.3\n",
+        dir_ / "s.yaml", scene_schema());
     check_scene_rules(scene);
     return run_model_stage(scene);
   }
@@ -77,16 +77,21 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   m.global_map.affine.t = Eigen::Vector3d(0.5, -1, 2);
   m.global_map.shears.c(3) = 0.003;
   m.placed = m.state.x;
-  for (Eigen::Index i = 0; i < m.placed.cols(); ++i) m.placed.col(i) = m.global_map.apply(m.state.x.col(i));
+  for (Eigen::Index i = 0; i < m.placed.cols(); ++i)
+    m.placed.col(i) = m.global_map.apply(m.state.x.col(i));
   m.state.x = m.placed;
   m.state.x.row(1).array() += 0.4;
   save_model(dir_ / "fitted.json", m, "Prostate", std::nullopt, {});
   SavedModel back = load_model(dir_ / "fitted.json");
   const fitting::EmbeddedBody a = organ_body(m), b = organ_body(back.model);
-  for (const Eigen::Vector3d q : {Eigen::Vector3d(0, 0.4, 2), Eigen::Vector3d(16, -1, 1), Eigen::Vector3d(-3, 11, 2)})
+  for (const Eigen::Vector3d q :
+       {Eigen::Vector3d(0, 0.4, 2), Eigen::Vector3d(16, -1, 1), Eigen::Vector3d(-3, 11, 2)})
     EXPECT_LT((a.pull_back(q) - b.pull_back(q)).norm(), 1e-12);
   // Not the planning organ any more: it moved 0.4 mm in y.
-  EXPECT_NEAR((a.pull_back(Eigen::Vector3d(0, 0.4, 2)) - m.global_map.inverse(Eigen::Vector3d(0, 0, 2))).norm(), 0, 1e-6);
+  EXPECT_NEAR(
+      (a.pull_back(Eigen::Vector3d(0, 0.4, 2)) - m.global_map.inverse(Eigen::Vector3d(0, 0, 2)))
+          .norm(),
+      0, 1e-6);
   // A model saved at rest has no embedding.
   ModelStageResult rest = build("body:\n  shape: ellipsoid\n  size_mm: [30, 24, 20]\n");
   save_model(dir_ / "rest.json", rest, "Prostate", std::nullopt, {});
@@ -101,11 +106,13 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
   auto mask = std::make_shared<geometry::LabelVolume>(g);
   for (int k = 2; k < 10; ++k)
     for (int j = 4; j < 22; ++j)
-      for (int i = 5; i < 25; ++i) mask->at(i, j, k) = (i - 15) * (i - 15) + (j - 13) * (j - 13) < 64 ? 1 : 0;
+      for (int i = 5; i < 25; ++i)
+        mask->at(i, j, k) = (i - 15) * (i - 15) + (j - 13) * (j - 13) < 64 ? 1 : 0;
   const evaluation::Shape organ = evaluation::make_mask_shape(mask);
   std::ofstream(dir_ / "rt.dcm") << "";  // the organ's input file must exist; it is not read here
-  const config::Scene scene = config::parse_scene("organ:\n  roi: X\n  rtstruct: rt.dcm\nmodel:\n  radius_mm: 2.0\n",
-                                                  dir_ / "s.yaml", scene_schema());
+  const config::Scene scene =
+      config::parse_scene("organ:\n  roi: X\n  rtstruct: rt.dcm\nmodel:\n  radius_mm: 2.0\n",
+                          dir_ / "s.yaml", scene_schema());
   const ModelStageResult m = run_model_stage(scene, &organ);
   save_model(dir_ / "m.json", m, "X", std::nullopt, nlohmann::json::object());
   const SavedModel back = load_model(dir_ / "m.json");
@@ -118,7 +125,8 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
 TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
   const std::string f = (dir_ / "bad.json").string();
   EXPECT_EQ(error_of("not json"), f + ": not an organfit model (not JSON)");
-  EXPECT_EQ(error_of("{\"format\": \"x\"}"), f + ": not an organfit model (no 'format: organfit-model')");
+  EXPECT_EQ(error_of("{\"format\": \"x\"}"),
+            f + ": not an organfit model (no 'format: organfit-model')");
   EXPECT_EQ(error_of("{\"format\": \"organfit-model\", \"format_version\": 9}"),
             f + ": model format version 9 is not 1 (made by another organfit version)");
   const ModelStageResult m = build("body:\n");

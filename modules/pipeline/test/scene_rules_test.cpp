@@ -36,7 +36,8 @@ TEST(SceneRules, CutoffMustExceedRMin) {
 }
 
 TEST(SceneSchema, EveryKeyHasADocAndDefaultsPassTheirOwnRules) {
-  for (const auto& p : scene_schema().params()) EXPECT_FALSE(p.doc.empty()) << p.key();
+  for (const auto& p : scene_schema().params())
+    EXPECT_FALSE(p.doc.empty()) << p.key();
   EXPECT_NO_THROW(parse("scene:\nbody:\nmodel:\n"));
 }
 
@@ -65,7 +66,8 @@ TEST(ModelStage, ABodyTooSmallForOneParticleIsABadInputNamingTheKey) {
     run_model_stage(scene);
     FAIL();
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("/s.yaml:2: body.size_mm:"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("/s.yaml:2: body.size_mm:"), std::string::npos)
+        << e.what();
   }
 }
 

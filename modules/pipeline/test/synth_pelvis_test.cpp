@@ -1,7 +1,5 @@
 // The pelvis phantom as written to disk: read back by the CT stage, its Prostate
 // imported from its RT Structure Set and grown from a seed, against the true labels.
-#include "organfit/pipeline/synth_command.h"
-
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -11,6 +9,7 @@
 #include "organfit/dicom/structure_set.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/itkbridge/itk_images.h"
+#include "organfit/pipeline/synth_command.h"
 #include "organfit/segmentation/segment.h"
 #include "organfit/support/error.h"
 
@@ -25,7 +24,8 @@ fs::path scratch(const std::string& name) {
 
 geometry::LabelVolume only(const geometry::LabelVolume& labels, std::uint8_t label) {
   geometry::LabelVolume m(labels.geometry);
-  for (size_t v = 0; v < m.labels.size(); ++v) m.labels[v] = labels.labels[v] == label ? 1 : 0;
+  for (size_t v = 0; v < m.labels.size(); ++v)
+    m.labels[v] = labels.labels[v] == label ? 1 : 0;
   return m;
 }
 
@@ -66,7 +66,8 @@ TEST_F(PelvisOnDisk, CtReadsBackOnTheLabelsGridWithTheProstateAt35Cm3) {
         bool interior = truth_.at(i, j, k) == phantom::kProstate;
         for (int d = -1; d <= 1; d += 2)
           interior = interior && truth_.at(i + d, j, k) == phantom::kProstate &&
-                     truth_.at(i, j + d, k) == phantom::kProstate && truth_.at(i, j, k + d) == phantom::kProstate;
+                     truth_.at(i, j + d, k) == phantom::kProstate &&
+                     truth_.at(i, j, k + d) == phantom::kProstate;
         if (interior) sum += ct_.hu[static_cast<size_t>(g.linear_index(i, j, k))], ++n;
       }
   ASSERT_GT(n, 3000);
@@ -75,7 +76,8 @@ TEST_F(PelvisOnDisk, CtReadsBackOnTheLabelsGridWithTheProstateAt35Cm3) {
 
 TEST_F(PelvisOnDisk, RtstructImportOfTheProstateMatchesTheTrueLabel) {
   const auto rtss = dicom::read_rtstruct(dir_ / "rtstruct.dcm");
-  for (const auto& s : phantom::pelvis_structures()) EXPECT_NE(rtss.find(s.name), nullptr) << s.name;
+  for (const auto& s : phantom::pelvis_structures())
+    EXPECT_NE(rtss.find(s.name), nullptr) << s.name;
   const auto roi = dicom::rasterise_roi(rtss, "Prostate", ct_, "rtstruct.dcm");
   EXPECT_EQ(roi.matched_by_position, 0);
   const auto cmp = geometry::compare_masks(roi.mask, only(truth_, phantom::kProstate));
@@ -104,7 +106,8 @@ TEST(SynthPelvis, SameSeedSameBytesOtherSeedOtherNoise) {
   phantom::PelvisOptions o;
   o.columns = o.rows = 80, o.pixel_mm = 5, o.slices = 12, o.slice_mm = 10;
   const fs::path a = scratch("a"), b = scratch("b"), c = scratch("c");
-  for (const auto& d : {a, b, c}) fs::remove_all(d);
+  for (const auto& d : {a, b, c})
+    fs::remove_all(d);
   run_synth_pelvis(a, o);
   run_synth_pelvis(b, o);
   o.seed = 2;
@@ -113,7 +116,8 @@ TEST(SynthPelvis, SameSeedSameBytesOtherSeedOtherNoise) {
     EXPECT_EQ(bytes(a / f), bytes(b / f)) << f;
   EXPECT_NE(bytes(a / "ct/CT0006.dcm"), bytes(c / "ct/CT0006.dcm"));
   EXPECT_THROW(run_synth_pelvis(a, o), InputError);  // not an empty folder
-  for (const auto& d : {a, b, c}) fs::remove_all(d);
+  for (const auto& d : {a, b, c})
+    fs::remove_all(d);
 }
 
 }  // namespace

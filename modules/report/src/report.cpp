@@ -1,10 +1,10 @@
+#include "organfit/report/report.h"
+
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
 #include <sstream>
-
-#include "organfit/report/report.h"
 
 namespace organfit::report {
 namespace {
@@ -13,11 +13,20 @@ std::string esc(const std::string& s) {
   std::string out;
   for (char c : s) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -29,13 +38,16 @@ std::string text_of(const nlohmann::json& v) {
   return v.dump();
 }
 
-const char* residual_colour(double r) { return r < 1.0 ? "#2ca02c" : r < 2.0 ? "#ff9f1c" : "#d62728"; }
+const char* residual_colour(double r) {
+  return r < 1.0 ? "#2ca02c" : r < 2.0 ? "#ff9f1c" : "#d62728";
+}
 
 /// A table of the scalar entries of a JSON object.
 std::string table_of(const nlohmann::json& object, const std::vector<std::string>& keys) {
   std::string rows;
   for (const auto& k : keys)
-    if (object.contains(k) && !object[k].is_object()) rows += fmt::format("<tr><th>{}</th><td>{}</td></tr>", esc(k), esc(text_of(object[k])));
+    if (object.contains(k) && !object[k].is_object())
+      rows += fmt::format("<tr><th>{}</th><td>{}</td></tr>", esc(k), esc(text_of(object[k])));
   return rows.empty() ? "" : "<table>" + rows + "</table>";
 }
 
@@ -47,13 +59,16 @@ std::vector<HistoryRow> parse_history(const std::string& csv) {
   std::vector<HistoryRow> rows;
   std::istringstream in(csv);
   std::string line;
-  std::getline(in, line);  // header: step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,...
+  std::getline(in,
+               line);  // header: step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,...
   while (std::getline(in, line)) {
     std::vector<double> v;
     std::stringstream ss(line);
     std::string cell;
-    while (std::getline(ss, cell, ',')) v.push_back(std::atof(cell.c_str()));
-    if (v.size() >= 5 && std::isfinite(v[1]) && std::isfinite(v[2]) && std::isfinite(v[3]) && std::isfinite(v[4]))
+    while (std::getline(ss, cell, ','))
+      v.push_back(std::atof(cell.c_str()));
+    if (v.size() >= 5 && std::isfinite(v[1]) && std::isfinite(v[2]) && std::isfinite(v[3]) &&
+        std::isfinite(v[4]))
       rows.push_back({v[1], v[2], v[3], v[4]});
   }
   return rows;
@@ -65,54 +80,85 @@ std::string history_svg(const std::vector<HistoryRow>& rows) {
   if (rows.size() < 2) return "<p>No fit history.</p>";
   const double w = 640, h = 300, l = 60, r = 60, t = 20, b = 45;
   double t_max = 0, res_max = 0, vol_abs = 0.1;
-  for (const auto& row : rows) t_max = std::max(t_max, row.wall_s), res_max = std::max(res_max, row.max),
-                                vol_abs = std::max(vol_abs, std::abs(row.volume));
+  for (const auto& row : rows)
+    t_max = std::max(t_max, row.wall_s), res_max = std::max(res_max, row.max),
+    vol_abs = std::max(vol_abs, std::abs(row.volume));
   t_max = std::max(t_max, 1e-6), res_max = std::max(res_max * 1.1, 0.1), vol_abs *= 1.2;
   auto X = [&](double s) { return l + (w - l - r) * s / t_max; };
   auto Y = [&](double mm) { return t + (h - t - b) * (1 - mm / res_max); };
   auto YV = [&](double pct) { return t + (h - t - b) * (0.5 - 0.5 * pct / vol_abs); };
   auto line = [&](auto value, auto y, const char* colour, const char* dash) {
     std::string pts;
-    for (const auto& row : rows) pts += fmt::format("{:.1f},{:.1f} ", X(row.wall_s), y(value(row)));
-    return fmt::format(R"x(<polyline fill="none" stroke="{}" stroke-width="2" {} points="{}"/>)x", colour, dash, pts);
+    for (const auto& row : rows)
+      pts += fmt::format("{:.1f},{:.1f} ", X(row.wall_s), y(value(row)));
+    return fmt::format(R"x(<polyline fill="none" stroke="{}" stroke-width="2" {} points="{}"/>)x",
+                       colour, dash, pts);
   };
-  std::string svg = fmt::format(R"x(<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {} {}" width="{}" height="{}" role="img" aria-label="error against run time">)x", w, h, w, h);
-  svg += fmt::format(R"x(<rect x="{}" y="{}" width="{}" height="{}" fill="#fafafa" stroke="#888"/>)x", l, t, w - l - r, h - t - b);
+  std::string svg = fmt::format(
+      R"x(<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {} {}" width="{}" height="{}" role="img" aria-label="error against run time">)x",
+      w, h, w, h);
+  svg +=
+      fmt::format(R"x(<rect x="{}" y="{}" width="{}" height="{}" fill="#fafafa" stroke="#888"/>)x",
+                  l, t, w - l - r, h - t - b);
   for (int i = 0; i <= 4; ++i) {
     const double mm = res_max * i / 4, s = t_max * i / 4, pct = vol_abs * (i - 2) / 2;
-    svg += fmt::format(R"x(<text x="{:.1f}" y="{:.1f}" font-size="11" text-anchor="end">{:.2g}</text>)x", l - 4, Y(mm) + 4, mm);
-    svg += fmt::format(R"x(<text x="{:.1f}" y="{:.1f}" font-size="11" text-anchor="middle">{:.3g}</text>)x", X(s), h - b + 15, s);
-    svg += fmt::format(R"x(<text x="{:.1f}" y="{:.1f}" font-size="11" fill="#1f77b4">{:+.2g}</text>)x", w - r + 4, YV(pct) + 4, pct);
+    svg += fmt::format(
+        R"x(<text x="{:.1f}" y="{:.1f}" font-size="11" text-anchor="end">{:.2g}</text>)x", l - 4,
+        Y(mm) + 4, mm);
+    svg += fmt::format(
+        R"x(<text x="{:.1f}" y="{:.1f}" font-size="11" text-anchor="middle">{:.3g}</text>)x", X(s),
+        h - b + 15, s);
+    svg +=
+        fmt::format(R"x(<text x="{:.1f}" y="{:.1f}" font-size="11" fill="#1f77b4">{:+.2g}</text>)x",
+                    w - r + 4, YV(pct) + 4, pct);
   }
   svg += line([](const HistoryRow& x) { return x.mean; }, Y, "#d62728", "");
   svg += line([](const HistoryRow& x) { return x.max; }, Y, "#d62728", "stroke-dasharray=\"5,4\"");
   svg += line([](const HistoryRow& x) { return x.volume; }, YV, "#1f77b4", "");
-  svg += fmt::format(R"x(<text x="{}" y="{}" font-size="12" text-anchor="middle">wall time (s)</text>)x", l + (w - l - r) / 2, h - 8);
-  svg += fmt::format(R"x(<text x="14" y="{}" font-size="12" transform="rotate(-90 14 {})" text-anchor="middle" fill="#d62728">data residual (mm): mean, max (dashed)</text>)x", t + (h - t - b) / 2, t + (h - t - b) / 2);
-  svg += fmt::format(R"x(<text x="{}" y="{}" font-size="12" transform="rotate(90 {} {})" text-anchor="middle" fill="#1f77b4">volume change (%)</text>)x", w - 12, t + (h - t - b) / 2, w - 12, t + (h - t - b) / 2);
+  svg += fmt::format(
+      R"x(<text x="{}" y="{}" font-size="12" text-anchor="middle">wall time (s)</text>)x",
+      l + (w - l - r) / 2, h - 8);
+  svg += fmt::format(
+      R"x(<text x="14" y="{}" font-size="12" transform="rotate(-90 14 {})" text-anchor="middle" fill="#d62728">data residual (mm): mean, max (dashed)</text>)x",
+      t + (h - t - b) / 2, t + (h - t - b) / 2);
+  svg += fmt::format(
+      R"x(<text x="{}" y="{}" font-size="12" transform="rotate(90 {} {})" text-anchor="middle" fill="#1f77b4">volume change (%)</text>)x",
+      w - 12, t + (h - t - b) / 2, w - 12, t + (h - t - b) / 2);
   return svg + "</svg>";
 }
 
 std::string view_svg(const SliceView& v) {
   const double w = v.width * v.pixel_w_mm, h = v.height * v.pixel_h_mm;
   const double scale = 420.0 / std::max(w, h);  // screen pixels per mm
-  std::string svg = fmt::format(R"x(<figure><svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {:.2f} {:.2f}" width="{:.0f}" height="{:.0f}" role="img" aria-label="{}">)x",
-                                w, h, w * scale, h * scale, esc(v.title));
-  svg += fmt::format(R"x(<image x="0" y="0" width="{:.2f}" height="{:.2f}" preserveAspectRatio="none" href="data:image/png;base64,{}"/>)x",
-                     w, h, base64(png_gray(v.width, v.height, v.gray.data())));
-  auto outline = [&](const std::vector<Eigen::Vector2d>& line, const char* colour, const char* dash) {
+  std::string svg = fmt::format(
+      R"x(<figure><svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {:.2f} {:.2f}" width="{:.0f}" height="{:.0f}" role="img" aria-label="{}">)x",
+      w, h, w * scale, h * scale, esc(v.title));
+  svg += fmt::format(
+      R"x(<image x="0" y="0" width="{:.2f}" height="{:.2f}" preserveAspectRatio="none" href="data:image/png;base64,{}"/>)x",
+      w, h, base64(png_gray(v.width, v.height, v.gray.data())));
+  auto outline = [&](const std::vector<Eigen::Vector2d>& line, const char* colour,
+                     const char* dash) {
     std::string pts;
-    for (const auto& p : line) pts += fmt::format("{:.2f},{:.2f} ", p.x(), p.y());
-    return fmt::format(R"x(<polygon fill="none" stroke="{}" stroke-width="{:.2f}" {} points="{}"/>)x", colour, 1.6 / scale, dash, pts);
+    for (const auto& p : line)
+      pts += fmt::format("{:.2f},{:.2f} ", p.x(), p.y());
+    return fmt::format(
+        R"x(<polygon fill="none" stroke="{}" stroke-width="{:.2f}" {} points="{}"/>)x", colour,
+        1.6 / scale, dash, pts);
   };
-  for (const auto& line : v.planning) svg += outline(line, "#ffd400", fmt::format("stroke-dasharray=\"{:.2f},{:.2f}\"", 4 / scale, 3 / scale).c_str());
-  for (const auto& line : v.fitted) svg += outline(line, "#00c8ff", "");
+  for (const auto& line : v.planning)
+    svg += outline(line, "#ffd400",
+                   fmt::format("stroke-dasharray=\"{:.2f},{:.2f}\"", 4 / scale, 3 / scale).c_str());
+  for (const auto& line : v.fitted)
+    svg += outline(line, "#00c8ff", "");
   for (const auto& p : v.points)
-    svg += fmt::format(R"x(<circle cx="{:.2f}" cy="{:.2f}" r="{:.2f}" fill="{}" stroke="black" stroke-width="{:.2f}"><title>residual {:.2f} mm</title></circle>)x",
-                       p.x_mm, p.y_mm, 3.5 / scale, residual_colour(p.residual_mm), 0.6 / scale, p.residual_mm);
+    svg += fmt::format(
+        R"x(<circle cx="{:.2f}" cy="{:.2f}" r="{:.2f}" fill="{}" stroke="black" stroke-width="{:.2f}"><title>residual {:.2f} mm</title></circle>)x",
+        p.x_mm, p.y_mm, 3.5 / scale, residual_colour(p.residual_mm), 0.6 / scale, p.residual_mm);
   const double fs = 13 / scale;
-  svg += fmt::format(R"x(<g fill="white" font-size="{:.2f}" font-family="sans-serif"><text x="{:.2f}" y="{:.2f}">{}</text><text x="{:.2f}" y="{:.2f}" text-anchor="end">{}</text><text x="{:.2f}" y="{:.2f}" text-anchor="middle">{}</text><text x="{:.2f}" y="{:.2f}" text-anchor="middle">{}</text></g>)x",
-                     fs, 0.3 * fs, h / 2, v.left, w - 0.3 * fs, h / 2, v.right, w / 2, 1.1 * fs, v.top, w / 2, h - 0.4 * fs, v.bottom);
+  svg += fmt::format(
+      R"x(<g fill="white" font-size="{:.2f}" font-family="sans-serif"><text x="{:.2f}" y="{:.2f}">{}</text><text x="{:.2f}" y="{:.2f}" text-anchor="end">{}</text><text x="{:.2f}" y="{:.2f}" text-anchor="middle">{}</text><text x="{:.2f}" y="{:.2f}" text-anchor="middle">{}</text></g>)x",
+      fs, 0.3 * fs, h / 2, v.left, w - 0.3 * fs, h / 2, v.right, w / 2, 1.1 * fs, v.top, w / 2,
+      h - 0.4 * fs, v.bottom);
   return svg + "</svg><figcaption>" + esc(v.title) + "</figcaption></figure>";
 }
 
@@ -187,79 +233,133 @@ std::string report_html(const ReportInput& in) {
   const std::string status = run.value("status", "");
   std::string html;
   html += "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">";
-  html += "<title>organfit report: " + esc(name) + "</title><style>"
+  html += "<title>organfit report: " + esc(name) +
+          "</title><style>"
           "body{font-family:sans-serif;margin:24px;max-width:1400px;color:#222}"
-          "table{border-collapse:collapse;margin:6px 0 14px}th,td{border:1px solid #ccc;padding:3px 8px;text-align:left}"
-          "th{background:#f2f2f2;font-weight:normal}.warn{background:#fff4e5;border-left:5px solid #ff9f1c;padding:8px 14px}"
-          ".ok{color:#2ca02c}.bad{color:#d62728}figure{display:inline-block;margin:6px}figcaption{text-align:center}"
-          ".grid{display:flex;flex-wrap:wrap;gap:18px}pre{background:#f7f7f7;padding:10px;overflow:auto}"
-          "canvas{border:1px solid #888;touch-action:none}.legend span{margin-right:16px}</style></head><body>\n";
-  html += fmt::format("<h1>organfit report: {}</h1><p>organfit {} &middot; status <b class=\"{}\">{}</b> &middot; wall time {:.2f} s &middot; peak memory {:.0f} MiB</p>\n",
-                      esc(name), esc(run.value("organfit_version", "")), status == "ok" ? "ok" : "bad", esc(status),
-                      run.value("wall_s", 0.0), run.value("peak_memory_mib", 0.0));
+          "table{border-collapse:collapse;margin:6px 0 14px}th,td{border:1px solid "
+          "#ccc;padding:3px 8px;text-align:left}"
+          "th{background:#f2f2f2;font-weight:normal}.warn{background:#fff4e5;border-left:5px solid "
+          "#ff9f1c;padding:8px 14px}"
+          ".ok{color:#2ca02c}.bad{color:#d62728}figure{display:inline-block;margin:6px}figcaption{"
+          "text-align:center}"
+          ".grid{display:flex;flex-wrap:wrap;gap:18px}pre{background:#f7f7f7;padding:10px;overflow:"
+          "auto}"
+          "canvas{border:1px solid #888;touch-action:none}.legend "
+          "span{margin-right:16px}</style></head><body>\n";
+  html += fmt::format(
+      "<h1>organfit report: {}</h1><p>organfit {} &middot; status <b class=\"{}\">{}</b> &middot; "
+      "wall time {:.2f} s &middot; peak memory {:.0f} MiB</p>\n",
+      esc(name), esc(run.value("organfit_version", "")), status == "ok" ? "ok" : "bad", esc(status),
+      run.value("wall_s", 0.0), run.value("peak_memory_mib", 0.0));
   if (!in.patient.empty()) html += "<p>Patient: " + esc(in.patient) + "</p>\n";
 
   // Warnings first: what a physicist must see before trusting the contour.
   std::vector<std::string> warnings;
   if (run.contains("warnings"))
-    for (const auto& w : run["warnings"]) warnings.push_back(w.get<std::string>());
+    for (const auto& w : run["warnings"])
+      warnings.push_back(w.get<std::string>());
   if (run.contains("fit")) {
     const auto& f = run["fit"];
     if (std::abs(f.value("volume_change_pct", 0.0)) > 1.0)
-      warnings.push_back(fmt::format("volume changed by {:+.2f}% during the fit", f.value("volume_change_pct", 0.0)));
+      warnings.push_back(fmt::format("volume changed by {:+.2f}% during the fit",
+                                     f.value("volume_change_pct", 0.0)));
     int far = 0;
     const double rho = run.contains("model") ? run["model"].value("radius_mm", 0.0) : 0.0;
-    for (double r : in.residuals_mm) far += rho > 0 && r > rho;
-    if (far > 0) warnings.push_back(fmt::format("{} of {} points were never reached (residual above the particle radius {:.2f} mm)", far, in.residuals_mm.size(), rho));
+    for (double r : in.residuals_mm)
+      far += rho > 0 && r > rho;
+    if (far > 0)
+      warnings.push_back(fmt::format(
+          "{} of {} points were never reached (residual above the particle radius {:.2f} mm)", far,
+          in.residuals_mm.size(), rho));
   }
   if (!warnings.empty()) {
     html += "<div class=\"warn\"><b>Warnings</b><ul>";
-    for (const auto& w : warnings) html += "<li>" + esc(w) + "</li>";
+    for (const auto& w : warnings)
+      html += "<li>" + esc(w) + "</li>";
     html += "</ul></div>\n";
   }
 
   html += "<h2>Summary</h2><div class=\"grid\">";
-  if (run.contains("organ")) html += "<div><h3>Organ</h3>" + table_of(run["organ"], {"roi", "source", "volume_cm3", "contours", "matched_by_position"}) + "</div>";
-  if (run.contains("ct")) html += "<div><h3>CT</h3>" + table_of(run["ct"], {"slices"}) + "<p>" + esc(run["ct"].value("size", nlohmann::json()).dump()) + " voxels of " + esc(run["ct"].value("spacing_mm", nlohmann::json()).dump()) + " mm</p></div>";
-  if (run.contains("model")) html += "<div><h3>Model</h3>" + table_of(run["model"], {"particles", "radius_mm", "skeleton_nodes", "skeleton_from", "body_volume_mm3", "volume_vs_reference_pct", "from_planning_model", "planning_scene"}) + "</div>";
-  if (run.contains("fit")) html += "<div><h3>Fit</h3>" + table_of(run["fit"], {"method", "converged", "stop_reason", "iterations", "wall_s", "attractive_points", "rejected_points", "residual_mean_mm", "residual_max_mm", "volume_change_pct"}) + "</div>";
-  if (run.contains("truth")) html += "<div><h3>Against the known truth</h3>" + table_of(run["truth"], {"msd_mm", "hd95_mm", "msd_undeformed_mm", "msd_floor_mm", "recovery"}) + "</div>";
-  if (run.contains("timing")) html += "<div><h3>Modelling and update</h3>" + table_of(run["timing"], {"modelling_s", "planning_modelling_s", "update_s"}) + "</div>";
-  html += "</div>\n<h2>Stages</h2><table><tr><th>stage</th><th>wall time (s)</th><th>peak memory (MiB)</th></tr>";
+  if (run.contains("organ"))
+    html +=
+        "<div><h3>Organ</h3>" +
+        table_of(run["organ"], {"roi", "source", "volume_cm3", "contours", "matched_by_position"}) +
+        "</div>";
+  if (run.contains("ct"))
+    html += "<div><h3>CT</h3>" + table_of(run["ct"], {"slices"}) + "<p>" +
+            esc(run["ct"].value("size", nlohmann::json()).dump()) + " voxels of " +
+            esc(run["ct"].value("spacing_mm", nlohmann::json()).dump()) + " mm</p></div>";
+  if (run.contains("model"))
+    html += "<div><h3>Model</h3>" +
+            table_of(run["model"], {"particles", "radius_mm", "skeleton_nodes", "skeleton_from",
+                                    "body_volume_mm3", "volume_vs_reference_pct",
+                                    "from_planning_model", "planning_scene"}) +
+            "</div>";
+  if (run.contains("fit"))
+    html += "<div><h3>Fit</h3>" +
+            table_of(run["fit"], {"method", "converged", "stop_reason", "iterations", "wall_s",
+                                  "attractive_points", "rejected_points", "residual_mean_mm",
+                                  "residual_max_mm", "volume_change_pct"}) +
+            "</div>";
+  if (run.contains("truth"))
+    html += "<div><h3>Against the known truth</h3>" +
+            table_of(run["truth"],
+                     {"msd_mm", "hd95_mm", "msd_undeformed_mm", "msd_floor_mm", "recovery"}) +
+            "</div>";
+  if (run.contains("timing"))
+    html += "<div><h3>Modelling and update</h3>" +
+            table_of(run["timing"], {"modelling_s", "planning_modelling_s", "update_s"}) + "</div>";
+  html +=
+      "</div>\n<h2>Stages</h2><table><tr><th>stage</th><th>wall time (s)</th><th>peak memory "
+      "(MiB)</th></tr>";
   if (run.contains("stages"))
     for (const auto& st : run["stages"])
-      html += fmt::format("<tr><td>{}</td><td>{:.3f}</td><td>{:.0f}</td></tr>", esc(st.value("name", "")), st.value("wall_s", 0.0), st.value("peak_memory_mib", 0.0));
+      html += fmt::format("<tr><td>{}</td><td>{:.3f}</td><td>{:.0f}</td></tr>",
+                          esc(st.value("name", "")), st.value("wall_s", 0.0),
+                          st.value("peak_memory_mib", 0.0));
   html += "</table>\n";
 
   html += "<h2>Error against run time</h2>" + history_svg(parse_history(in.history_csv)) + "\n";
   if (!in.views.empty()) {
-    html += "<h2>CT through the organ</h2><p class=\"legend\"><span style=\"color:#b59600\">- - planning contour</span><span style=\"color:#0096c8\">&mdash; fitted contour</span>"
-            "<span>points by residual: <b style=\"color:#2ca02c\">&lt; 1 mm</b>, <b style=\"color:#ff9f1c\">&lt; 2 mm</b>, <b style=\"color:#d62728\">&ge; 2 mm</b></span></p><div class=\"grid\">";
-    for (const auto& v : in.views) html += view_svg(v);
+    html +=
+        "<h2>CT through the organ</h2><p class=\"legend\"><span style=\"color:#b59600\">- - "
+        "planning contour</span><span style=\"color:#0096c8\">&mdash; fitted contour</span>"
+        "<span>points by residual: <b style=\"color:#2ca02c\">&lt; 1 mm</b>, <b "
+        "style=\"color:#ff9f1c\">&lt; 2 mm</b>, <b style=\"color:#d62728\">&ge; 2 "
+        "mm</b></span></p><div class=\"grid\">";
+    for (const auto& v : in.views)
+      html += view_svg(v);
     html += "</div>\n";
   }
   if (!in.surface_triangles.empty()) {
     nlohmann::json data;
     std::vector<double> v;
     v.reserve(in.surface_vertex_mm.size());
-    for (float x : in.surface_vertex_mm) v.push_back(std::round(x * 100.0) / 100.0);
+    for (float x : in.surface_vertex_mm)
+      v.push_back(std::round(x * 100.0) / 100.0);
     data["v"] = v;
     data["t"] = in.surface_triangles;
     nlohmann::json pts = nlohmann::json::array();
     for (size_t p = 0; p < in.points_mm.size(); ++p)
-      pts.push_back({in.points_mm[p].x(), in.points_mm[p].y(), in.points_mm[p].z(), p < in.residuals_mm.size() ? in.residuals_mm[p] : 0.0});
+      pts.push_back({in.points_mm[p].x(), in.points_mm[p].y(), in.points_mm[p].z(),
+                     p < in.residuals_mm.size() ? in.residuals_mm[p] : 0.0});
     data["p"] = pts;
     std::string json = data.dump();
     // Inside <script>, "</" must not appear: JSON numbers and arrays never produce it.
-    html += "<h2>Fitted surface</h2><p>Drag to turn. Points coloured by residual.</p><canvas id=\"surface\" width=\"640\" height=\"480\"></canvas>\n";
-    html += "<script type=\"application/json\" id=\"surface-data\">" + json + "</script>\n<script>" + kViewerScript + "</script>\n";
+    html +=
+        "<h2>Fitted surface</h2><p>Drag to turn. Points coloured by residual.</p><canvas "
+        "id=\"surface\" width=\"640\" height=\"480\"></canvas>\n";
+    html += "<script type=\"application/json\" id=\"surface-data\">" + json +
+            "</script>\n<script>" + kViewerScript + "</script>\n";
   } else {
     html += "<script>document.body.dataset.rendered = 'yes';</script>\n";
   }
   html += "<h2>Outputs</h2><ul>";
   if (run.contains("outputs"))
-    for (const auto& o : run["outputs"]) html += "<li>" + esc(o.get<std::string>()) + "</li>";
-  html += "</ul><details><summary>Scene (resolved)</summary><pre>" + esc(in.scene_yaml) + "</pre></details>\n";
+    for (const auto& o : run["outputs"])
+      html += "<li>" + esc(o.get<std::string>()) + "</li>";
+  html += "</ul><details><summary>Scene (resolved)</summary><pre>" + esc(in.scene_yaml) +
+          "</pre></details>\n";
   html += "</body></html>\n";
   return html;
 }

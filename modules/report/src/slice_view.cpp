@@ -21,18 +21,19 @@ std::string side(const Eigen::Vector3d& axis) {
 
 }  // namespace
 
-SliceView slice_view(const geometry::ImageGeometry& g, const std::vector<float>& hu, Plane plane, int index,
-                     const std::array<int, 3>& lo, const std::array<int, 3>& hi,
+SliceView slice_view(const geometry::ImageGeometry& g, const std::vector<float>& hu, Plane plane,
+                     int index, const std::array<int, 3>& lo, const std::array<int, 3>& hi,
                      const geometry::LabelVolume* planning, const geometry::LabelVolume* fitted,
-                     const std::vector<Eigen::Vector3d>& points_mm, const std::vector<double>& residuals_mm,
-                     double slab_mm) {
+                     const std::vector<Eigen::Vector3d>& points_mm,
+                     const std::vector<double>& residuals_mm, double slab_mm) {
   // The view's columns run along axis `ca` (increasing), its rows down along axis `ra`
   // (increasing for axial, decreasing k for the others: superior at the top).
   const int normal = plane == Plane::kAxial ? 2 : plane == Plane::kCoronal ? 1 : 0;
   const int ca = plane == Plane::kSagittal ? 1 : 0;
   const int ra = plane == Plane::kAxial ? 1 : 2;
   const bool rows_down = plane == Plane::kAxial;
-  if (index < 0 || index >= g.size[normal]) throw std::invalid_argument("slice_view: plane outside the CT");
+  if (index < 0 || index >= g.size[normal])
+    throw std::invalid_argument("slice_view: plane outside the CT");
   SliceView v;
   v.width = hi[ca] - lo[ca] + 1;
   v.height = hi[ra] - lo[ra] + 1;
@@ -40,13 +41,16 @@ SliceView slice_view(const geometry::ImageGeometry& g, const std::vector<float>&
   v.pixel_w_mm = g.spacing_mm[ca];
   v.pixel_h_mm = g.spacing_mm[ra];
   const Eigen::Vector3d col_axis = g.direction.col(ca);
-  const Eigen::Vector3d down_axis = rows_down ? Eigen::Vector3d(g.direction.col(ra)) : Eigen::Vector3d(-g.direction.col(ra));
-  v.left = side(-col_axis), v.right = side(col_axis), v.top = side(-down_axis), v.bottom = side(down_axis);
+  const Eigen::Vector3d down_axis =
+      rows_down ? Eigen::Vector3d(g.direction.col(ra)) : Eigen::Vector3d(-g.direction.col(ra));
+  v.left = side(-col_axis), v.right = side(col_axis), v.top = side(-down_axis),
+  v.bottom = side(down_axis);
   static const char* names[3] = {"sagittal", "coronal", "axial"};
   static const char* coords[3] = {"x", "y", "z"};
   Eigen::Vector3d at = Eigen::Vector3d::Zero();
   at[normal] = index;
-  v.title = fmt::format("{}, {} = {:.1f} mm", names[normal], coords[normal], g.index_to_physical(at)[normal]);
+  v.title = fmt::format("{}, {} = {:.1f} mm", names[normal], coords[normal],
+                        g.index_to_physical(at)[normal]);
 
   auto voxel = [&](int c, int r) {
     std::array<int, 3> ijk{};
@@ -66,8 +70,8 @@ SliceView slice_view(const geometry::ImageGeometry& g, const std::vector<float>&
       const auto ijk = voxel(c, r);
       const double value = hu[static_cast<size_t>(g.linear_index(ijk[0], ijk[1], ijk[2]))];
       const double level = 40, width = 400;  // soft tissue
-      v.gray[static_cast<size_t>(r) * v.width + c] =
-          static_cast<std::uint8_t>(std::clamp((value - (level - width / 2)) / width * 255.0, 0.0, 255.0));
+      v.gray[static_cast<size_t>(r) * v.width + c] = static_cast<std::uint8_t>(
+          std::clamp((value - (level - width / 2)) / width * 255.0, 0.0, 255.0));
       if (planning) plan2d.at(c, r, 0) = planning->at(ijk[0], ijk[1], ijk[2]) == 1;
       if (fitted) fit2d.at(c, r, 0) = fitted->at(ijk[0], ijk[1], ijk[2]) == 1;
     }
@@ -75,7 +79,8 @@ SliceView slice_view(const geometry::ImageGeometry& g, const std::vector<float>&
     std::vector<std::vector<Eigen::Vector2d>> out;
     for (const auto& c : geometry::slice_contours(m, 1)) {
       std::vector<Eigen::Vector2d> line;
-      for (const auto& p : c.points_mm) line.emplace_back(p.x(), p.y());
+      for (const auto& p : c.points_mm)
+        line.emplace_back(p.x(), p.y());
       out.push_back(std::move(line));
     }
     return out;

@@ -18,12 +18,14 @@ TEST(Base64, MatchesRfc4648Vectors) {
 TEST(PngGray, DecodesBackToThePixels) {
   const int w = 5, h = 3;
   std::vector<std::uint8_t> pixels(w * h);
-  for (int i = 0; i < w * h; ++i) pixels[i] = static_cast<std::uint8_t>(17 * i);
+  for (int i = 0; i < w * h; ++i)
+    pixels[i] = static_cast<std::uint8_t>(17 * i);
   const std::string png = png_gray(w, h, pixels.data());
   ASSERT_EQ(png.substr(0, 8), std::string("\x89PNG\r\n\x1a\n", 8));
   // IHDR: width, height, 8-bit grey.
   auto u32 = [&](size_t at) {
-    return (std::uint32_t(std::uint8_t(png[at])) << 24) | (std::uint32_t(std::uint8_t(png[at + 1])) << 16) |
+    return (std::uint32_t(std::uint8_t(png[at])) << 24) |
+           (std::uint32_t(std::uint8_t(png[at + 1])) << 16) |
            (std::uint32_t(std::uint8_t(png[at + 2])) << 8) | std::uint8_t(png[at + 3]);
   };
   EXPECT_EQ(png.substr(12, 4), "IHDR");
@@ -35,11 +37,14 @@ TEST(PngGray, DecodesBackToThePixels) {
   const std::uint32_t length = u32(idat - 4);
   std::vector<std::uint8_t> raw(h * (w + 1));
   uLongf raw_size = raw.size();
-  ASSERT_EQ(uncompress(raw.data(), &raw_size, reinterpret_cast<const Bytef*>(png.data() + idat + 4), length), Z_OK);
+  ASSERT_EQ(uncompress(raw.data(), &raw_size, reinterpret_cast<const Bytef*>(png.data() + idat + 4),
+                       length),
+            Z_OK);
   ASSERT_EQ(raw_size, raw.size());
   for (int r = 0; r < h; ++r) {
     EXPECT_EQ(raw[r * (w + 1)], 0);
-    for (int c = 0; c < w; ++c) EXPECT_EQ(raw[r * (w + 1) + 1 + c], pixels[r * w + c]);
+    for (int c = 0; c < w; ++c)
+      EXPECT_EQ(raw[r * (w + 1) + 1 + c], pixels[r * w + c]);
   }
 }
 
@@ -64,8 +69,9 @@ class Views : public ::testing::Test {
 };
 
 TEST_F(Views, AxialViewIsTheSliceWithAnteriorUpAndPatientRightOnTheLeft) {
-  const SliceView v = slice_view(g, hu, Plane::kAxial, 4, {0, 0, 0}, {19, 15, 9}, &mask, nullptr,
-                                 {Eigen::Vector3d(6, 6, 8.4), Eigen::Vector3d(6, 6, 14)}, {0.5, 3.0}, 1.0);
+  const SliceView v =
+      slice_view(g, hu, Plane::kAxial, 4, {0, 0, 0}, {19, 15, 9}, &mask, nullptr,
+                 {Eigen::Vector3d(6, 6, 8.4), Eigen::Vector3d(6, 6, 14)}, {0.5, 3.0}, 1.0);
   EXPECT_EQ(v.width, 20);
   EXPECT_EQ(v.height, 16);
   EXPECT_EQ(v.left + v.right + v.top + v.bottom, "RLAP");
@@ -78,22 +84,32 @@ TEST_F(Views, AxialViewIsTheSliceWithAnteriorUpAndPatientRightOnTheLeft) {
 }
 
 TEST_F(Views, CoronalViewPutsSuperiorAtTheTop) {
-  const SliceView v = slice_view(g, hu, Plane::kCoronal, 6, {0, 0, 0}, {19, 15, 9}, &mask, nullptr, {}, {}, 1.0);
+  const SliceView v =
+      slice_view(g, hu, Plane::kCoronal, 6, {0, 0, 0}, {19, 15, 9}, &mask, nullptr, {}, {}, 1.0);
   EXPECT_EQ(v.height, 10);
   EXPECT_EQ(v.top + v.bottom, "SI");
   // Row 0 is k = 9 (dark), row 9 - 6 = 3 is k = 6 (bright).
   EXPECT_EQ(v.gray[0 * 20 + 5], 0);
   EXPECT_EQ(v.gray[3 * 20 + 5], 255);
   EXPECT_DOUBLE_EQ(v.pixel_h_mm, 2.0);
-  EXPECT_EQ(slice_view(g, hu, Plane::kSagittal, 5, {0, 0, 0}, {19, 15, 9}, nullptr, nullptr, {}, {}, 1.0).left, "A");
+  EXPECT_EQ(
+      slice_view(g, hu, Plane::kSagittal, 5, {0, 0, 0}, {19, 15, 9}, nullptr, nullptr, {}, {}, 1.0)
+          .left,
+      "A");
 }
 
 TEST(ReportHtml, HasTheSectionsEscapesTextAndShowsNoPatientUnlessGiven) {
   ReportInput in;
-  in.run = {{"scene", {{"name", "a<b"}}}, {"status", "ok"}, {"warnings", {"fit: 2 points rejected"}},
-            {"fit", {{"volume_change_pct", 1.7}, {"method", "spread"}}}, {"model", {{"radius_mm", 1.0}}},
-            {"stages", {{{"name", "fit"}, {"wall_s", 0.1}, {"peak_memory_mib", 50.0}}}}, {"outputs", {"run.json"}}};
-  in.history_csv = "step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,ke\n0,0,2,3,0,1\n20,0.1,1,1.5,0.2,0.1\n";
+  in.run = {{"scene", {{"name", "a<b"}}},
+            {"status", "ok"},
+            {"warnings", {"fit: 2 points rejected"}},
+            {"fit", {{"volume_change_pct", 1.7}, {"method", "spread"}}},
+            {"model", {{"radius_mm", 1.0}}},
+            {"stages", {{{"name", "fit"}, {"wall_s", 0.1}, {"peak_memory_mib", 50.0}}}},
+            {"outputs", {"run.json"}}};
+  in.history_csv =
+      "step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,ke\n0,0,2,3,0,1\n20,0.1,1,1."
+      "5,0.2,0.1\n";
   in.residuals_mm = {0.2, 1.5};
   const std::string html = report_html(in);
   EXPECT_NE(html.find("organfit report: a&lt;b"), std::string::npos);

@@ -17,7 +17,8 @@
 
 namespace organfit::segmentation {
 
-itkbridge::PlainMask seeded_region(const itkbridge::PlainFloatImage& hu, const PlainSeedOptions& o) {
+itkbridge::PlainMask seeded_region(const itkbridge::PlainFloatImage& hu,
+                                   const PlainSeedOptions& o) {
   using itkbridge::FloatImage;
   using itkbridge::MaskImage;
   auto fmt3 = [](const std::array<double, 3>& p) {
@@ -25,10 +26,12 @@ itkbridge::PlainMask seeded_region(const itkbridge::PlainFloatImage& hu, const P
     std::snprintf(b, sizeof b, "(%.1f, %.1f, %.1f) mm", p[0], p[1], p[2]);
     return std::string(b);
   };
-  if (!(o.hu_low < o.hu_high)) throw InputError("segment: the HU window is empty (low must be below high)");
+  if (!(o.hu_low < o.hu_high))
+    throw InputError("segment: the HU window is empty (low must be below high)");
   const FloatImage::Pointer image = itkbridge::to_itk(hu);
   FloatImage::PointType point;
-  for (int d = 0; d < 3; ++d) point[d] = o.seed_mm[d];
+  for (int d = 0; d < 3; ++d)
+    point[d] = o.seed_mm[d];
   FloatImage::IndexType seed;
   if (!image->TransformPhysicalPointToIndex(point, seed))
     throw InputError("segment: the seed " + fmt3(o.seed_mm) + " is outside the CT");
@@ -41,8 +44,10 @@ itkbridge::PlainMask seeded_region(const itkbridge::PlainFloatImage& hu, const P
   const float at_seed = smooth->GetOutput()->GetPixel(seed);
   if (at_seed < o.hu_low || at_seed > o.hu_high) {
     char b[160];
-    std::snprintf(b, sizeof b, "segment: the (smoothed) CT reads %.0f HU at the seed %s, outside the window [%.0f, %.0f]",
-                  at_seed, fmt3(o.seed_mm).c_str(), o.hu_low, o.hu_high);
+    std::snprintf(
+        b, sizeof b,
+        "segment: the (smoothed) CT reads %.0f HU at the seed %s, outside the window [%.0f, %.0f]",
+        at_seed, fmt3(o.seed_mm).c_str(), o.hu_low, o.hu_high);
     throw InputError(b);
   }
   auto grow = itk::ConnectedThresholdImageFilter<FloatImage, MaskImage>::New();

@@ -10,7 +10,9 @@ namespace fs = std::filesystem;
 namespace organfit::segmentation {
 namespace {
 
-fs::path data(const std::string& sub) { return fs::path(ORGANFIT_SHARED_DATA_DIR) / sub; }
+fs::path data(const std::string& sub) {
+  return fs::path(ORGANFIT_SHARED_DATA_DIR) / sub;
+}
 
 TEST(SegmentFromSeed, SphereInNoiseIsRecoveredWhole) {
   geometry::ImageGeometry g;
@@ -18,7 +20,10 @@ TEST(SegmentFromSeed, SphereInNoiseIsRecoveredWhole) {
   g.spacing_mm = {1, 1, 2};
   std::vector<float> hu(g.voxel_count());
   unsigned state = 7;
-  auto noise = [&] { state = state * 1103515245u + 12345u; return static_cast<float>((state >> 16) % 41) - 20.f; };
+  auto noise = [&] {
+    state = state * 1103515245u + 12345u;
+    return static_cast<float>((state >> 16) % 41) - 20.f;
+  };
   long inside = 0;
   for (int k = 0; k < 20; ++k)
     for (int j = 0; j < 40; ++j)
@@ -53,7 +58,8 @@ TEST(SegmentFromSeed, BadSeedsAreRefusedNamingTheProblem) {
     segment_from_seed(g, hu, o);
     FAIL();
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("reads 0 HU at the seed (5.0, 5.0, 5.0) mm, outside the window [100, 200]"),
+    EXPECT_NE(std::string(e.what()).find(
+                  "reads 0 HU at the seed (5.0, 5.0, 5.0) mm, outside the window [100, 200]"),
               std::string::npos)
         << e.what();
   }
@@ -66,8 +72,8 @@ TEST(SegmentFromSeed, LiverOfTheRealAbdominalCtHasAPlausibleVolume) {
   o.seed_mm = {-78.7, -4.8, -250.0};  // in the liver on slice 25 (portal venous phase)
   o.hu_low = 95;                      // the liver reads 120 +- 11 HU around the seed
   o.hu_high = 150;
-  o.opening_radius_voxels = 2;        // radius 1 still leaks into stomach contents
-  o.search_box_mm = 0;                // the whole CT: a liver is wider than the default box
+  o.opening_radius_voxels = 2;  // radius 1 still leaks into stomach contents
+  o.search_box_mm = 0;          // the whole CT: a liver is wider than the default box
   const geometry::LabelVolume liver = segment_from_seed(ct.geometry, ct.hu, o).mask;
   const double cm3 = liver.volume_mm3(1) / 1000.0;
   std::cout << "liver (ct-crlm-1004, from a seed): " << cm3 << " cm3\n";

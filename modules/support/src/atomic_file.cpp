@@ -1,8 +1,7 @@
 #include "organfit/support/atomic_file.h"
 
-#include <unistd.h>
-
 #include <fmt/format.h>
+#include <unistd.h>
 
 #include "organfit/support/error.h"
 
@@ -10,8 +9,8 @@ namespace organfit {
 
 AtomicFile::AtomicFile(std::filesystem::path final_path, bool binary)
     : final_path_(std::move(final_path)) {
-  const auto dir = final_path_.has_parent_path() ? final_path_.parent_path()
-                                                 : std::filesystem::path(".");
+  const auto dir =
+      final_path_.has_parent_path() ? final_path_.parent_path() : std::filesystem::path(".");
   temp_path_ =
       dir / fmt::format(".{}.tmp-{}", final_path_.filename().string(), static_cast<long>(getpid()));
   out_.open(temp_path_, binary ? std::ios::out | std::ios::binary | std::ios::trunc
@@ -38,16 +37,16 @@ void AtomicFile::commit() {
   std::error_code ec;
   std::filesystem::rename(temp_path_, final_path_, ec);
   if (ec) {
-    throw Error(ExitCode::kInternal,
-                fmt::format("{}: cannot rename into place: {}", final_path_.string(), ec.message()));
+    throw Error(ExitCode::kInternal, fmt::format("{}: cannot rename into place: {}",
+                                                 final_path_.string(), ec.message()));
   }
   committed_ = true;
 }
 
 TempPath::TempPath(std::filesystem::path final_path)
     : final_path_(std::move(final_path)),
-      temp_path_(final_path_.parent_path() /
-                 fmt::format(".tmp-{}-{}", static_cast<long>(getpid()), final_path_.filename().string())) {}
+      temp_path_(final_path_.parent_path() / fmt::format(".tmp-{}-{}", static_cast<long>(getpid()),
+                                                         final_path_.filename().string())) {}
 
 TempPath::~TempPath() {
   if (!committed_) {

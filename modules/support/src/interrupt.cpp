@@ -3,16 +3,17 @@
 #include <fcntl.h>
 #include <unistd.h>
 
-#include <cstdio>
-
 #include <csignal>
+#include <cstdio>
 
 #include "organfit/support/error.h"
 
 namespace organfit {
 namespace {
 volatile std::sig_atomic_t g_interrupted = 0;
-extern "C" void on_signal(int) { g_interrupted = 1; }  // async-signal-safe: a flag only
+extern "C" void on_signal(int) {
+  g_interrupted = 1;
+}  // async-signal-safe: a flag only
 }  // namespace
 
 void install_abort_guard();
@@ -26,10 +27,13 @@ void install_interrupt_handlers() {
   sigaction(SIGTERM, &action, nullptr);
 }
 
-bool interrupted() { return g_interrupted != 0; }
+bool interrupted() {
+  return g_interrupted != 0;
+}
 
 void throw_if_interrupted() {
-  if (g_interrupted) throw Error(ExitCode::kInterrupted, "interrupted (SIGINT or SIGTERM): nothing was written");
+  if (g_interrupted)
+    throw Error(ExitCode::kInterrupted, "interrupted (SIGINT or SIGTERM): nothing was written");
 }
 
 }  // namespace organfit
@@ -46,10 +50,12 @@ int g_saved_stderr = -1;  // stderr while a library reads: /dev/null (its assert
 void on_abort(int) {
   if (g_is_reading) {
     if (g_saved_stderr >= 0) ::dup2(g_saved_stderr, 2);
-    const char* parts[] = {"organfit: error: ", g_reading, ": malformed input: the ", g_library, " library gave up on it\n"};
+    const char* parts[] = {"organfit: error: ", g_reading, ": malformed input: the ", g_library,
+                           " library gave up on it\n"};
     for (const char* p : parts) {
       size_t n = 0;
-      while (p[n]) ++n;
+      while (p[n])
+        ++n;
       (void)!::write(2, p, n);
     }
     ::_exit(2);
@@ -61,7 +67,8 @@ void on_abort(int) {
 
 ReadingInput::ReadingInput(const char* file, const char* library) {
   size_t n = 0;
-  for (; file[n] && n + 1 < sizeof g_reading; ++n) g_reading[n] = file[n];
+  for (; file[n] && n + 1 < sizeof g_reading; ++n)
+    g_reading[n] = file[n];
   g_reading[n] = 0;
   g_library = library;
   // The library's own assertion text would be a second, cryptic line: silence it while
@@ -78,6 +85,8 @@ ReadingInput::~ReadingInput() {
   if (g_saved_stderr >= 0) ::dup2(g_saved_stderr, 2), ::close(g_saved_stderr), g_saved_stderr = -1;
 }
 
-void install_abort_guard() { std::signal(SIGABRT, on_abort); }
+void install_abort_guard() {
+  std::signal(SIGABRT, on_abort);
+}
 
 }  // namespace organfit

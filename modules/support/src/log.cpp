@@ -16,12 +16,20 @@ void setup_logging(Verbosity verbosity) {
   }
   logger->set_pattern(verbosity == Verbosity::kVerbose ? "[%H:%M:%S.%e] %^%l%$: %v" : "%^%l%$: %v");
   switch (verbosity) {
-    case Verbosity::kQuiet: logger->set_level(spdlog::level::warn); break;
-    case Verbosity::kNormal: logger->set_level(spdlog::level::info); break;
-    case Verbosity::kVerbose: logger->set_level(spdlog::level::debug); break;
+    case Verbosity::kQuiet:
+      logger->set_level(spdlog::level::warn);
+      break;
+    case Verbosity::kNormal:
+      logger->set_level(spdlog::level::info);
+      break;
+    case Verbosity::kVerbose:
+      logger->set_level(spdlog::level::debug);
+      break;
   }
 }
 
-Verbosity current_verbosity() { return g_verbosity; }
+Verbosity current_verbosity() {
+  return g_verbosity;
+}
 
 }  // namespace organfit

@@ -1,8 +1,7 @@
 #include "organfit/support/progress.h"
 
-#include <unistd.h>
-
 #include <fmt/format.h>
+#include <unistd.h>
 
 namespace organfit {
 namespace {
@@ -13,9 +12,15 @@ constexpr double kTtyIntervalS = 0.1;
 double g_plain_interval_s = 5.0;
 }  // namespace
 
-void Progress::set_enabled(bool enabled) { g_enabled = enabled; }
-void Progress::set_force_plain(bool plain) { g_force_plain = plain; }
-void Progress::set_plain_interval_s(double seconds) { g_plain_interval_s = seconds; }
+void Progress::set_enabled(bool enabled) {
+  g_enabled = enabled;
+}
+void Progress::set_force_plain(bool plain) {
+  g_force_plain = plain;
+}
+void Progress::set_plain_interval_s(double seconds) {
+  g_plain_interval_s = seconds;
+}
 
 Progress::Progress(std::string stage, long long total)
     : stage_(std::move(stage)),
@@ -24,7 +29,9 @@ Progress::Progress(std::string stage, long long total)
       last_draw_(start_),
       tty_(!g_force_plain && isatty(fileno(stderr))) {}
 
-Progress::~Progress() { finish(); }
+Progress::~Progress() {
+  finish();
+}
 
 void Progress::update(long long done, const std::string& status) {
   last_done_ = done;
@@ -56,8 +63,8 @@ void Progress::draw(long long done, const std::string& status, bool final_line) 
       line = fmt::format("{} [{}{}] {:3.0f}% {:.1f} s", stage_, std::string(filled, '#'),
                          std::string(kWidth - filled, '.'), 100 * frac, elapsed);
     } else {
-      line = fmt::format("{}: {:.0f}% ({}/{}), {:.1f} s", stage_, 100 * frac, done, total_,
-                         elapsed);
+      line =
+          fmt::format("{}: {:.0f}% ({}/{}), {:.1f} s", stage_, 100 * frac, done, total_, elapsed);
     }
   } else {
     line = fmt::format("{}: {} done, {:.1f} s", stage_, done, elapsed);

@@ -1,12 +1,11 @@
 #include "organfit/ultrasound/boundary_points.h"
 
+#include <Eigen/Geometry>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
-
-#include <Eigen/Geometry>
-#include <Eigen/LU>
 
 #include "organfit/ultrasound/sequence_metafile.h"
 
@@ -14,15 +13,18 @@ namespace organfit::ultrasound {
 namespace {
 
 /// Separable Gaussian of `v` on a box of `size` voxels with per-axis sigma (voxels).
-void gaussian_smooth(std::vector<float>& v, const std::array<int, 3>& size, const Eigen::Vector3d& sigma) {
+void gaussian_smooth(std::vector<float>& v, const std::array<int, 3>& size,
+                     const Eigen::Vector3d& sigma) {
   std::vector<float> line;
   for (int d = 0; d < 3; ++d) {
     if (!(sigma[d] > 0.3)) continue;
     const int radius = static_cast<int>(std::ceil(3 * sigma[d]));
     std::vector<double> kernel(2 * radius + 1);
     double sum = 0;
-    for (int t = -radius; t <= radius; ++t) sum += kernel[t + radius] = std::exp(-0.5 * t * t / (sigma[d] * sigma[d]));
-    for (auto& k : kernel) k /= sum;
+    for (int t = -radius; t <= radius; ++t)
+      sum += kernel[t + radius] = std::exp(-0.5 * t * t / (sigma[d] * sigma[d]));
+    for (auto& k : kernel)
+      k /= sum;
     const long long stride = d == 0 ? 1 : d == 1 ? size[0] : 1LL * size[0] * size[1];
     const int n = size[d];
     const long long lines = 1LL * size[0] * size[1] * size[2] / n;
@@ -30,14 +32,19 @@ void gaussian_smooth(std::vector<float>& v, const std::array<int, 3>& size, cons
     for (long long l = 0; l < lines; ++l) {
       // The first voxel of line l: index over the other two axes.
       long long base;
-      if (d == 0) base = l * size[0];
-      else if (d == 1) base = (l / size[0]) * size[0] * size[1] + (l % size[0]);
-      else base = l;
+      if (d == 0)
+        base = l * size[0];
+      else if (d == 1)
+        base = (l / size[0]) * size[0] * size[1] + (l % size[0]);
+      else
+        base = l;
       line.resize(static_cast<size_t>(n));
-      for (int t = 0; t < n; ++t) line[t] = v[static_cast<size_t>(base + t * stride)];
+      for (int t = 0; t < n; ++t)
+        line[t] = v[static_cast<size_t>(base + t * stride)];
       for (int t = 0; t < n; ++t) {
         double acc = 0;
-        for (int q = -radius; q <= radius; ++q) acc += kernel[q + radius] * line[std::clamp(t + q, 0, n - 1)];
+        for (int q = -radius; q <= radius; ++q)
+          acc += kernel[q + radius] * line[std::clamp(t + q, 0, n - 1)];
         v[static_cast<size_t>(base + t * stride)] = static_cast<float>(acc);
       }
     }
@@ -46,20 +53,25 @@ void gaussian_smooth(std::vector<float>& v, const std::array<int, 3>& size, cons
 
 }  // namespace
 
-BoundaryResult boundary_points(const geometry::ImageGeometry& g, const std::vector<float>& intensity,
+BoundaryResult boundary_points(const geometry::ImageGeometry& g,
+                               const std::vector<float>& intensity,
                                const std::vector<std::uint8_t>* in_view, const BoundaryOptions& o) {
-  if (intensity.size() != static_cast<size_t>(g.voxel_count()) || (in_view && in_view->size() != intensity.size()))
+  if (intensity.size() != static_cast<size_t>(g.voxel_count()) ||
+      (in_view && in_view->size() != intensity.size()))
     throw std::invalid_argument("boundary_points: image sizes do not match the geometry");
-  if (!(o.r_max_mm > o.r_min_mm) || o.rays < 16) throw std::invalid_argument("boundary_points: bad search range");
+  if (!(o.r_max_mm > o.r_min_mm) || o.rays < 16)
+    throw std::invalid_argument("boundary_points: bad search range");
   const Eigen::Vector3d c_idx = g.physical_to_index(o.centre_mm);
   for (int d = 0; d < 3; ++d)
     if (!(c_idx[d] > -0.5 && c_idx[d] < g.size[d] - 0.5))
-      throw std::invalid_argument("boundary_points: the organ's centre is outside the ultrasound volume");
+      throw std::invalid_argument(
+          "boundary_points: the organ's centre is outside the ultrasound volume");
 
   // 1. The region of interest, smoothed.
   std::array<int, 3> lo{}, size{};
   for (int d = 0; d < 3; ++d) {
-    const int half = static_cast<int>(std::ceil((o.r_max_mm + 3 * o.smoothing_mm) / g.spacing_mm[d])) + 1;
+    const int half =
+        static_cast<int>(std::ceil((o.r_max_mm + 3 * o.smoothing_mm) / g.spacing_mm[d])) + 1;
     const int c = static_cast<int>(std::lround(c_idx[d]));
     lo[d] = std::max(0, c - half);
     size[d] = std::min(g.size[d] - 1, c + half) - lo[d] + 1;
@@ -78,16 +90,19 @@ BoundaryResult boundary_points(const geometry::ImageGeometry& g, const std::vect
   auto sample = [&](const Eigen::Vector3d& p, bool& ok) -> double {  // trilinear, ROI voxels
     const Eigen::Vector3d idx = g.physical_to_index(p) - Eigen::Vector3d(lo[0], lo[1], lo[2]);
     const Eigen::Vector3d base = idx.array().floor();
-    ok = (base.array() >= 0).all() && (base.array() < Eigen::Array3d(size[0] - 1, size[1] - 1, size[2] - 1)).all();
+    ok = (base.array() >= 0).all() &&
+         (base.array() < Eigen::Array3d(size[0] - 1, size[1] - 1, size[2] - 1)).all();
     if (!ok) return 0;
     const Eigen::Vector3d t = idx - base;
     double value = 0;
     for (int c = 0; c < 8; ++c) {
-      const int i = static_cast<int>(base.x()) + (c & 1), j = static_cast<int>(base.y()) + ((c >> 1) & 1),
+      const int i = static_cast<int>(base.x()) + (c & 1),
+                j = static_cast<int>(base.y()) + ((c >> 1) & 1),
                 k = static_cast<int>(base.z()) + ((c >> 2) & 1);
       const size_t at = i + static_cast<size_t>(size[0]) * (j + static_cast<size_t>(size[1]) * k);
       if (!roi_view[at]) ok = false;
-      value += ((c & 1) ? t.x() : 1 - t.x()) * (((c >> 1) & 1) ? t.y() : 1 - t.y()) * (((c >> 2) & 1) ? t.z() : 1 - t.z()) * roi[at];
+      value += ((c & 1) ? t.x() : 1 - t.x()) * (((c >> 1) & 1) ? t.y() : 1 - t.y()) *
+               (((c >> 2) & 1) ? t.z() : 1 - t.z()) * roi[at];
     }
     return value;
   };
@@ -98,7 +113,8 @@ BoundaryResult boundary_points(const geometry::ImageGeometry& g, const std::vect
   const double golden = 3.14159265358979323846 * (3 - std::sqrt(5.0));
   for (int r = 0; r < n; ++r) {
     const double z = 1 - 2 * (r + 0.5) / n, rho = std::sqrt(1 - z * z);
-    rays[r] = {o.centre_mm, Eigen::Vector3d(rho * std::cos(golden * r), rho * std::sin(golden * r), z)};
+    rays[r] = {o.centre_mm,
+               Eigen::Vector3d(rho * std::cos(golden * r), rho * std::sin(golden * r), z)};
   }
   std::vector<std::vector<int>> neighbours(n);
 #pragma omp parallel for schedule(dynamic, 64)
@@ -107,14 +123,18 @@ BoundaryResult boundary_points(const geometry::ImageGeometry& g, const std::vect
     for (int q = 0; q < n; ++q)
       if (q != r) near.push_back({-rays[r].direction.dot(rays[q].direction), q});
     std::partial_sort(near.begin(), near.begin() + 8, near.end());
-    for (int q = 0; q < 8; ++q) neighbours[r].push_back(near[q].second);
+    for (int q = 0; q < 8; ++q)
+      neighbours[r].push_back(near[q].second);
   }
-  return search_rays(rays, neighbours, [&](int, const Eigen::Vector3d& p, bool& ok) { return sample(p, ok); },
-                     0.25 * g.spacing_mm.minCoeff(), o);
+  return search_rays(
+      rays, neighbours, [&](int, const Eigen::Vector3d& p, bool& ok) { return sample(p, ok); },
+      0.25 * g.spacing_mm.minCoeff(), o);
 }
 
-BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOptions& o, int rays_per_frame) {
-  if (rays_per_frame < 16) throw std::invalid_argument("sweep_boundary_points: at least 16 rays per frame");
+BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOptions& o,
+                                     int rays_per_frame) {
+  if (rays_per_frame < 16)
+    throw std::invalid_argument("sweep_boundary_points: at least 16 rays per frame");
   struct Plane {
     const TrackedFrame* frame;
     std::vector<float> smooth;
@@ -126,7 +146,8 @@ BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOp
   std::vector<int> plane_of;
   std::vector<std::vector<int>> neighbours;
   for (const auto& f : sweep.frames) {
-    if (f.pixels.size() != static_cast<size_t>(f.width) * f.height || f.width < 4 || f.height < 4) continue;
+    if (f.pixels.size() != static_cast<size_t>(f.width) * f.height || f.width < 4 || f.height < 4)
+      continue;
     Plane pl;
     pl.frame = &f;
     pl.origin = f.pixel_to_ct_mm.block<3, 1>(0, 3);
@@ -139,8 +160,9 @@ BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOp
     gram << pl.eu.dot(pl.eu), pl.eu.dot(pl.ev), pl.ev.dot(pl.eu), pl.ev.dot(pl.ev);
     pl.gram_inverse = gram.inverse();
     pl.smooth = f.pixels;
-    gaussian_smooth(pl.smooth, {f.width, f.height, 1},
-                    Eigen::Vector3d(o.smoothing_mm / pl.eu.norm(), o.smoothing_mm / pl.ev.norm(), 0));
+    gaussian_smooth(
+        pl.smooth, {f.width, f.height, 1},
+        Eigen::Vector3d(o.smoothing_mm / pl.eu.norm(), o.smoothing_mm / pl.ev.norm(), 0));
     const Eigen::Vector3d centre = o.centre_mm - distance * normal;
     const int first = static_cast<int>(rays.size());
     const Eigen::Vector3d u = pl.eu.normalized(), v = normal.cross(u);
@@ -159,13 +181,15 @@ BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOp
   }
   if (rays.empty()) return {};
   double step = 1e9;
-  for (const auto& pl : planes) step = std::min(step, 0.5 * std::min(pl.eu.norm(), pl.ev.norm()));
+  for (const auto& pl : planes)
+    step = std::min(step, 0.5 * std::min(pl.eu.norm(), pl.ev.norm()));
   return search_rays(
       rays, neighbours,
       [&](int ray, const Eigen::Vector3d& p, bool& ok) -> double {
         const Plane& pl = planes[static_cast<size_t>(plane_of[static_cast<size_t>(ray)])];
         const Eigen::Vector3d rel = p - pl.origin;
-        const Eigen::Vector2d ab = pl.gram_inverse * Eigen::Vector2d(rel.dot(pl.eu), rel.dot(pl.ev));
+        const Eigen::Vector2d ab =
+            pl.gram_inverse * Eigen::Vector2d(rel.dot(pl.eu), rel.dot(pl.ev));
         const int w = pl.frame->width, h = pl.frame->height;
         const double fa = std::floor(ab.x()), fb = std::floor(ab.y());
         ok = fa >= 0 && fb >= 0 && fa < w - 1 && fb < h - 1;
@@ -178,7 +202,8 @@ BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOp
       step, o);
 }
 
-BoundaryResult search_rays(const std::vector<Ray>& rays, const std::vector<std::vector<int>>& neighbours,
+BoundaryResult search_rays(const std::vector<Ray>& rays,
+                           const std::vector<std::vector<int>>& neighbours,
                            const RaySampler& sample, double step, const BoundaryOptions& o) {
   const int n = static_cast<int>(rays.size());
   std::vector<double> radius(n, -1), rise(n, 0);
@@ -206,7 +231,8 @@ BoundaryResult search_rays(const std::vector<Ray>& rays, const std::vector<std::
     // The first strong rise outward: a dark gland into its capsule's bright line or fat.
     std::vector<double> d(m, 0);
     double best = 0;
-    for (int s = h; s + h < m; ++s) best = std::max(best, d[s] = profile[s + h] - profile[s - h]);
+    for (int s = h; s + h < m; ++s)
+      best = std::max(best, d[s] = profile[s + h] - profile[s - h]);
     if (!(best > 0)) continue;
     for (int s = h + 1; s + h + 1 < m; ++s)
       if (d[s] >= 0.5 * best && d[s] >= d[s - 1] && d[s] >= d[s + 1]) {
@@ -220,11 +246,13 @@ BoundaryResult search_rays(const std::vector<Ray>& rays, const std::vector<std::
   double max_rise = 0;
   std::vector<double> rises;
   for (int r = 0; r < n; ++r)
-    if (radius[r] > 0) ++out.rays_in_view, max_rise = std::max(max_rise, rise[r]), rises.push_back(rise[r]);
+    if (radius[r] > 0)
+      ++out.rays_in_view, max_rise = std::max(max_rise, rise[r]), rises.push_back(rise[r]);
   // A ray whose best edge is weak against the boundary's typical one has found speckle
   // or a fading interface, not the capsule: no boundary on it.
   if (!rises.empty()) {
-    std::nth_element(rises.begin(), rises.begin() + static_cast<long>(rises.size() / 2), rises.end());
+    std::nth_element(rises.begin(), rises.begin() + static_cast<long>(rises.size() / 2),
+                     rises.end());
     const double weak = o.weak_edge_fraction * rises[rises.size() / 2];
     for (int r = 0; r < n; ++r)
       if (radius[r] > 0 && rise[r] < weak) radius[r] = -1, ++out.weak;
@@ -246,7 +274,8 @@ BoundaryResult search_rays(const std::vector<Ray>& rays, const std::vector<std::
     if (std::isfinite(v)) abs_res.push_back(std::abs(v));
   double cutoff = std::numeric_limits<double>::infinity();
   if (!abs_res.empty()) {
-    std::nth_element(abs_res.begin(), abs_res.begin() + static_cast<long>(abs_res.size() / 2), abs_res.end());
+    std::nth_element(abs_res.begin(), abs_res.begin() + static_cast<long>(abs_res.size() / 2),
+                     abs_res.end());
     cutoff = std::max(0.5, o.mad_threshold * 1.4826 * abs_res[abs_res.size() / 2]);
   }
   std::vector<BoundaryPoint> accepted;

@@ -44,7 +44,8 @@ TEST_F(SequenceFiles, AWrittenSweepReadsBackWithItsPoses) {
     frame.index = f, frame.width = 4, frame.height = 3, frame.timestamp_s = 0.5 * f;
     frame.pixels.assign(12, static_cast<float>(10 * f));
     frame.pixel_to_ct_mm.setIdentity();
-    frame.pixel_to_ct_mm.topLeftCorner<3, 2>() *= 0.5;  // 0.5 mm pixels; the third column is the unit normal
+    frame.pixel_to_ct_mm.topLeftCorner<3, 2>() *=
+        0.5;  // 0.5 mm pixels; the third column is the unit normal
     frame.pixel_to_ct_mm(2, 3) = 2.0 * f;
     sweep.frames.push_back(frame);
   }
@@ -58,20 +59,32 @@ TEST_F(SequenceFiles, AWrittenSweepReadsBackWithItsPoses) {
 }
 
 TEST_F(SequenceFiles, MalformedFilesAreRefusedNamingTheProblem) {
-  const std::string head = "ObjectType = Image\nNDims = 3\nDimSize = 2 2 1\nElementType = MET_UCHAR\n"
-                           "Seq_Frame0000_ProbeToTrackerTransform = 1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n";
+  const std::string head =
+      "ObjectType = Image\nNDims = 3\nDimSize = 2 2 1\nElementType = MET_UCHAR\n"
+      "Seq_Frame0000_ProbeToTrackerTransform = 1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n";
   EXPECT_NE(error_of(write("nodata.mha", head)).find("no ElementDataFile line"), std::string::npos);
   // Found by fuzzing: a data file that is a folder threw std::ios_failure.
-  EXPECT_NE(error_of(write("folder.mha", head + "ElementDataFile = .\n")).find("is missing"), std::string::npos);
+  EXPECT_NE(error_of(write("folder.mha", head + "ElementDataFile = .\n")).find("is missing"),
+            std::string::npos);
   // Found by fuzzing: a DimSize of 7.8e42 overflowed the int it was cast to (UBSan).
-  EXPECT_NE(error_of(write("huge.mha", "DimSize = 7.8e42 2 1\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n")).find("DimSize must hold whole numbers"),
+  EXPECT_NE(
+      error_of(write("huge.mha",
+                     "DimSize = 7.8e42 2 1\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n"))
+          .find("DimSize must hold whole numbers"),
+      std::string::npos);
+  EXPECT_NE(
+      error_of(write("short.mha", head + "ElementDataFile = LOCAL\nab")).find("DimSize needs 4"),
+      std::string::npos);
+  EXPECT_NE(error_of(write("type.mha",
+                           "DimSize = 2 2 1\nElementType = MET_DOUBLE\nElementDataFile = LOCAL\n"))
+                .find("not supported"),
             std::string::npos);
-  EXPECT_NE(error_of(write("short.mha", head + "ElementDataFile = LOCAL\nab")).find("DimSize needs 4"), std::string::npos);
-  EXPECT_NE(error_of(write("type.mha", "DimSize = 2 2 1\nElementType = MET_DOUBLE\nElementDataFile = LOCAL\n")).find("not supported"),
+  const std::string scaled =
+      "ObjectType = Image\nDimSize = 2 2 1\nElementType = MET_UCHAR\n"
+      "Seq_Frame0000_ProbeToTrackerTransform = 2 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\nElementDataFile = "
+      "LOCAL\nabcd";
+  EXPECT_NE(error_of(write("scaled.mha", scaled)).find("is not a rigid transform"),
             std::string::npos);
-  const std::string scaled = "ObjectType = Image\nDimSize = 2 2 1\nElementType = MET_UCHAR\n"
-                             "Seq_Frame0000_ProbeToTrackerTransform = 2 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\nElementDataFile = LOCAL\nabcd";
-  EXPECT_NE(error_of(write("scaled.mha", scaled)).find("is not a rigid transform"), std::string::npos);
 }
 
 }  // namespace

@@ -67,7 +67,8 @@ TEST(Simulator, IsDeterministicForASeedAndShadowsBehindBone) {
 TEST(Simulator, TrueBoundaryIsTheVisibleSphereSurface) {
   const SimulatedUltrasound s = simulate_bmode(sphere_in_fat(), probe(), options(1));
   ASSERT_GT(s.true_boundary_mm.size(), 1000u);
-  for (const auto& p : s.true_boundary_mm) ASSERT_NEAR(p.norm(), kRadius, 0.3) << p.transpose();
+  for (const auto& p : s.true_boundary_mm)
+    ASSERT_NEAR(p.norm(), kRadius, 0.3) << p.transpose();
 }
 
 TEST(Simulator, RefusesAPoseWhoseAxesAreNotPerpendicular) {
@@ -86,11 +87,13 @@ TEST(BoundaryPoints, FindTheSphereInSpeckle) {
   const BoundaryResult r = boundary_points(s.geometry, intensity, &s.in_view, o);
   ASSERT_EQ(r.points.size(), 87u);
   std::vector<double> err;
-  for (const auto& p : r.points) err.push_back(std::abs(p.p_mm.norm() - kRadius));
+  for (const auto& p : r.points)
+    err.push_back(std::abs(p.p_mm.norm() - kRadius));
   std::sort(err.begin(), err.end());
-  EXPECT_LT(err[err.size() / 2], 0.7);          // median
-  EXPECT_LT(err[err.size() * 9 / 10], 1.5);     // 90th percentile
-  for (const auto& p : r.points) EXPECT_TRUE(p.confidence >= 0.1 && p.confidence <= 1.0);
+  EXPECT_LT(err[err.size() / 2], 0.7);       // median
+  EXPECT_LT(err[err.size() * 9 / 10], 1.5);  // 90th percentile
+  for (const auto& p : r.points)
+    EXPECT_TRUE(p.confidence >= 0.1 && p.confidence <= 1.0);
 }
 
 TEST(BoundaryPoints, APriorBandKeepsTheSearchNearTheModel) {
@@ -103,7 +106,8 @@ TEST(BoundaryPoints, APriorBandKeepsTheSearchNearTheModel) {
   const std::vector<float> intensity(s.bmode.begin(), s.bmode.end());
   const BoundaryResult r = boundary_points(s.geometry, intensity, &s.in_view, o);
   ASSERT_GT(r.points.size(), 500u);
-  for (const auto& p : r.points) ASSERT_LE(p.p_mm.norm(), 13.0 + 4.0 + 0.5);
+  for (const auto& p : r.points)
+    ASSERT_LE(p.p_mm.norm(), 13.0 + 4.0 + 0.5);
 }
 
 TEST(BoundaryPoints, RefuseACentreOutsideTheVolume) {
@@ -113,7 +117,8 @@ TEST(BoundaryPoints, RefuseACentreOutsideTheVolume) {
   BoundaryOptions o;
   o.centre_mm = Eigen::Vector3d(50, 0, 0);
   EXPECT_THROW(boundary_points(g, v, nullptr, o), std::invalid_argument);
-  EXPECT_THROW(boundary_points(g, std::vector<float>(5), nullptr, BoundaryOptions{}), std::invalid_argument);
+  EXPECT_THROW(boundary_points(g, std::vector<float>(5), nullptr, BoundaryOptions{}),
+               std::invalid_argument);
 }
 
 }  // namespace

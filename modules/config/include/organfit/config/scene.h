@@ -66,8 +66,7 @@ class Scene {
 /// problem: YAML syntax, an unknown section or key (with the nearest declared name),
 /// a duplicate key, a wrong type, a value out of range, a missing required key or
 /// a missing input file. The schema must outlive the scene.
-Scene parse_scene(const std::string& text, const std::filesystem::path& file,
-                  const Schema& schema);
+Scene parse_scene(const std::string& text, const std::filesystem::path& file, const Schema& schema);
 
 /// Reads and parses a scene file (InputError when it cannot be read).
 Scene load_scene(const std::filesystem::path& file, const Schema& schema);

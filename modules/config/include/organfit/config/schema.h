@@ -27,17 +27,18 @@ enum class ParamType {
 const char* to_string(ParamType type);
 
 /// A parameter value. std::monostate means "no value" (a required key's default).
-using Value = std::variant<std::monostate, double, long long, bool, std::string, Eigen::Vector3d, Eigen::Matrix4d>;
+using Value = std::variant<std::monostate, double, long long, bool, std::string, Eigen::Vector3d,
+                           Eigen::Matrix4d>;
 
 /// One declared scene key.
 struct ParamSpec {
   std::string section;  ///< e.g. "model"
   std::string name;     ///< e.g. "radius_mm"
   ParamType type = ParamType::kNumber;
-  Value default_value;  ///< monostate: the key is required when its section is present
-  std::string unit;     ///< "mm", "s", "HU", "" when dimensionless
-  std::optional<double> min, max;  ///< allowed range (numbers, integers, each vec3 component)
-  bool min_exclusive = false;      ///< true: value must be > min (e.g. a radius)
+  Value default_value;               ///< monostate: the key is required when its section is present
+  std::string unit;                  ///< "mm", "s", "HU", "" when dimensionless
+  std::optional<double> min, max;    ///< allowed range (numbers, integers, each vec3 component)
+  bool min_exclusive = false;        ///< true: value must be > min (e.g. a radius)
   std::vector<std::string> choices;  ///< allowed values of an enum
   std::string doc;                   ///< one line
 
@@ -71,8 +72,8 @@ class Schema {
                   std::optional<double> max, const std::string& doc);
   Schema& flag(const std::string& name, bool def, const std::string& doc);
   Schema& text(const std::string& name, std::optional<std::string> def, const std::string& doc);
-  Schema& choice(const std::string& name, const std::string& def,
-                 std::vector<std::string> choices, const std::string& doc);
+  Schema& choice(const std::string& name, const std::string& def, std::vector<std::string> choices,
+                 const std::string& doc);
   /// An input file or folder; optional ones default to "" (not given).
   Schema& input_path(const std::string& name, const std::string& doc, bool required = true);
   /// A 4x4 transform (identity by default), e.g. a calibration or registration in mm.

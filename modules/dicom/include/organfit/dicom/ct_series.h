@@ -47,7 +47,7 @@ struct CtSeries {
 struct CtReadOptions {
   std::string series_instance_uid;  ///< choose this series (empty: the only CT one)
   std::string series_description;   ///< or the one with this description
-  double spacing_tolerance = 0.02;   ///< relative deviation of slice gaps still regular
+  double spacing_tolerance = 0.02;  ///< relative deviation of slice gaps still regular
 };
 
 /// Reads the CT series in `folder`. Throws InputError "FOLDER: reason" on bad input.

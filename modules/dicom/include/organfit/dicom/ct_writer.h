@@ -23,6 +23,7 @@ struct CtWriteOptions {
 /// counted in the return value), Explicit VR Little Endian. The folder appears whole or
 /// not at all. Empty UIDs in `ct` (study, series, frame of reference) are filled in, and
 /// `ct.slices` is set to the files written. Throws InputError naming the folder.
-long long write_ct_series(const std::filesystem::path& folder, CtSeries& ct, const CtWriteOptions& options = {});
+long long write_ct_series(const std::filesystem::path& folder, CtSeries& ct,
+                          const CtWriteOptions& options = {});
 
 }  // namespace organfit::dicom

@@ -11,15 +11,16 @@
 namespace organfit::dicom {
 
 struct RtstructRoi {
-  std::string name;                             ///< e.g. Prostate_fit
+  std::string name;  ///< e.g. Prostate_fit
   std::array<int, 3> colour{255, 128, 0};
   std::vector<geometry::SliceContour> contours;  ///< on the CT's slices (k indexes ct.slices)
-  std::string interpreted_type = "ORGAN";          ///< RT ROI Interpreted Type: ORGAN, EXTERNAL, GTV, ...
-  std::string generation_algorithm = "AUTOMATIC";  ///< ROI Generation Algorithm (empty: unknown, e.g. copied)
+  std::string interpreted_type = "ORGAN";  ///< RT ROI Interpreted Type: ORGAN, EXTERNAL, GTV, ...
+  std::string generation_algorithm =
+      "AUTOMATIC";  ///< ROI Generation Algorithm (empty: unknown, e.g. copied)
 };
 
 struct RtstructWriteOptions {
-  std::string label = "organfit";          ///< Structure Set Label
+  std::string label = "organfit";  ///< Structure Set Label
   /// Deterministic UIDs and dates (for tests): UIDs derived from the CT's and the ROI
   /// names, dates fixed. Otherwise new UIDs under one root per run and today's date.
   bool fixed_uids_and_dates = false;
@@ -32,7 +33,7 @@ struct RtstructWriteOptions {
 /// RT ROI Observations. Explicit VR Little Endian. Written under a temporary name and
 /// renamed. Throws InputError naming the file when it cannot be written, or when a
 /// contour is not on a slice of the CT.
-void write_rtstruct(const std::filesystem::path& file, const CtSeries& ct, const std::vector<RtstructRoi>& rois,
-                    const RtstructWriteOptions& options = {});
+void write_rtstruct(const std::filesystem::path& file, const CtSeries& ct,
+                    const std::vector<RtstructRoi>& rois, const RtstructWriteOptions& options = {});
 
 }  // namespace organfit::dicom

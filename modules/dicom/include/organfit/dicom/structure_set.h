@@ -14,9 +14,9 @@
 namespace organfit::dicom {
 
 struct Contour {
-  std::string geometric_type;                ///< CLOSED_PLANAR, OPEN_PLANAR, POINT, ...
-  std::string referenced_sop_instance_uid;   ///< the CT slice it lies on (may be absent)
-  std::vector<Eigen::Vector3d> points_mm;    ///< patient coordinates
+  std::string geometric_type;               ///< CLOSED_PLANAR, OPEN_PLANAR, POINT, ...
+  std::string referenced_sop_instance_uid;  ///< the CT slice it lies on (may be absent)
+  std::vector<Eigen::Vector3d> points_mm;   ///< patient coordinates
 };
 
 struct Roi {
@@ -38,9 +38,9 @@ struct StructureSet {
 StructureSet read_rtstruct(const std::filesystem::path& file);
 
 struct RasterisedRoi {
-  geometry::LabelVolume mask;          ///< on the CT's grid, label 1 inside
+  geometry::LabelVolume mask;  ///< on the CT's grid, label 1 inside
   int contours = 0;
-  int matched_by_position = 0;         ///< contours whose referenced slice is not in the CT
+  int matched_by_position = 0;  ///< contours whose referenced slice is not in the CT
   std::vector<std::string> warnings;
 };
 

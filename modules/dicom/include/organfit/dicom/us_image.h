@@ -16,10 +16,10 @@ namespace organfit::dicom {
 struct UsImage {
   int width = 0, height = 0, frames = 0;
   double pixel_mm_x = 0, pixel_mm_y = 0;
-  bool calibrated = false;                 ///< the size came from an ultrasound region
-  std::array<int, 4> region{0, 0, 0, 0};   ///< x0, y0, x1, y1 of that region (pixels)
-  std::string photometric;                 ///< as stored (RGB, PALETTE COLOR, MONOCHROME2, ...)
-  std::vector<float> grey;                 ///< width x height x frames, row-major per frame
+  bool calibrated = false;                ///< the size came from an ultrasound region
+  std::array<int, 4> region{0, 0, 0, 0};  ///< x0, y0, x1, y1 of that region (pixels)
+  std::string photometric;                ///< as stored (RGB, PALETTE COLOR, MONOCHROME2, ...)
+  std::vector<float> grey;                ///< width x height x frames, row-major per frame
 };
 
 /// Reads `file`. `pixel_mm` > 0 overrides (or supplies) the pixel size. Throws

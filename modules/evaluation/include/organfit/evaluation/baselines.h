@@ -13,7 +13,8 @@ using PointMap = std::function<Eigen::Vector3d(const Eigen::Vector3d&)>;
 /// Rigid plus isotropic scale ICP: closest surface sample to each point, then Umeyama's
 /// similarity (rotation R, scale s, translation t) from the pairs; `iterations` rounds.
 /// Map: x -> s R x + t.
-PointMap similarity_icp(const Eigen::Matrix3Xd& surface, const Eigen::Matrix3Xd& points, int iterations = 30);
+PointMap similarity_icp(const Eigen::Matrix3Xd& surface, const Eigen::Matrix3Xd& points,
+                        int iterations = 30);
 
 /// Non-rigid coherent point drift, Myronenko and Song (2010), Fig. 4: the surface
 /// samples Y are the GMM centroids moved by T(Y) = Y + G W, G_ij = exp(-|y_i - y_j|^2 /
@@ -28,6 +29,7 @@ struct CpdOptions {
   double lambda = 3.0;  ///< smoothness
   int iterations = 150;
 };
-PointMap coherent_point_drift(const Eigen::Matrix3Xd& surface, const Eigen::Matrix3Xd& points, const CpdOptions& options);
+PointMap coherent_point_drift(const Eigen::Matrix3Xd& surface, const Eigen::Matrix3Xd& points,
+                              const CpdOptions& options);
 
 }  // namespace organfit::evaluation

@@ -21,7 +21,7 @@ struct CohesionBenchOptions {
   long long particles = 32000;  ///< rounded to 4 c^3 (whole fcc cells)
   long long steps = 100;
   int threads = 1;
-  bool run_lammps = true;       ///< when `lmp` is on PATH
+  bool run_lammps = true;  ///< when `lmp` is on PATH
   std::string lammps_binary = "lmp";
 };
 

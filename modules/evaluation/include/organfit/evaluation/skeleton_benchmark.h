@@ -14,12 +14,13 @@ namespace organfit::evaluation {
 struct SkeletonBenchOptions {
   double size_x_mm = 60, size_yz_mm = 25;
   double r0_mm = 2.0;
-  double temperature = 0.7;         ///< kT in units of E0 (this truncated LJ melts near 0.62-0.69)
-  double friction = 0.5;            ///< thermostat friction K_a / M (1/s)
+  double temperature = 0.7;  ///< kT in units of E0 (this truncated LJ melts near 0.62-0.69)
+  double friction = 0.5;     ///< thermostat friction K_a / M (1/s)
   long long steps = 20000;
-  double stiffness_fraction = 0.2;  ///< skeleton k_s as a fraction of the LJ stiffness m n E0 / r0^2
-  double node_spacing_r0 = 3.0;     ///< distance between skeleton nodes, in r0
-  double overlap_r0 = 0.5;          ///< cluster overlap, in r0
+  double stiffness_fraction =
+      0.2;                       ///< skeleton k_s as a fraction of the LJ stiffness m n E0 / r0^2
+  double node_spacing_r0 = 3.0;  ///< distance between skeleton nodes, in r0
+  double overlap_r0 = 0.5;       ///< cluster overlap, in r0
   int threads = 1;
 };
 

@@ -18,12 +18,12 @@ namespace organfit::evaluation {
 /// An organ shape given by an inside test, in mm: analytic, or a label mask (an organ
 /// segmented or imported from CT).
 struct Shape {
-  std::string kind;                                    ///< "ellipsoid", "box", "egg", "lung", "mask"
-  Eigen::Vector3d size_mm = Eigen::Vector3d::Ones();   ///< full extents (before the notch)
-  Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero(); ///< centre (a mask: its centroid)
-  std::shared_ptr<const geometry::LabelVolume> mask;   ///< kind "mask": label 1 is inside (surface:
-                                                       ///< 0.5 level of its trilinear interpolation)
-  geometry::Aabb box;                                  ///< kind "mask": bounds of its voxels
+  std::string kind;                                   ///< "ellipsoid", "box", "egg", "lung", "mask"
+  Eigen::Vector3d size_mm = Eigen::Vector3d::Ones();  ///< full extents (before the notch)
+  Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();  ///< centre (a mask: its centroid)
+  std::shared_ptr<const geometry::LabelVolume> mask;  ///< kind "mask": label 1 is inside (surface:
+                                                      ///< 0.5 level of its trilinear interpolation)
+  geometry::Aabb box;                                 ///< kind "mask": bounds of its voxels
   bool inside(const Eigen::Vector3d& p) const;
   geometry::Aabb bounds() const {
     return mask ? box : geometry::Aabb{centre_mm - 0.5 * size_mm, centre_mm + 0.5 * size_mm};
@@ -56,16 +56,17 @@ double shape_volume_mm3(const Shape& shape, double voxel_mm);
 struct Deformation {
   double stretch = 1.0;
   double bend_mm = 0.0;
-  double twist_rad = 0.0;   ///< w: the turn at x = c_x +- L
-  double indent_mm = 0.0;   ///< a
-  double push_mm = 0.0;     ///< p
+  double twist_rad = 0.0;  ///< w: the turn at x = c_x +- L
+  double indent_mm = 0.0;  ///< a
+  double push_mm = 0.0;    ///< p
   double bump_sigma_mm = 8.0;
   Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();
   double half_length_mm = 1.0;
   Eigen::Vector3d apply(const Eigen::Vector3d& p) const;
   Eigen::Vector3d inverse(const Eigen::Vector3d& p) const;
   bool is_identity() const {
-    return stretch == 1.0 && bend_mm == 0.0 && twist_rad == 0.0 && indent_mm == 0.0 && push_mm == 0.0;
+    return stretch == 1.0 && bend_mm == 0.0 && twist_rad == 0.0 && indent_mm == 0.0 &&
+           push_mm == 0.0;
   }
 };
 
@@ -91,19 +92,20 @@ std::function<bool(const Eigen::Vector3d&)> deformed_inside(const Shape& shape,
 /// Compares the closed body of a particle set (balls of `radius_mm`, closed by the same)
 /// with a body given by its inside test, on a grid of `voxel_mm` covering both
 /// (mask_ops.h has the definitions).
-geometry::SurfaceComparison compare_with_body(const Eigen::Matrix3Xd& particles, double radius_mm,
-                                              const std::function<bool(const Eigen::Vector3d&)>& inside,
-                                              const geometry::Aabb& body_bounds, double voxel_mm);
+geometry::SurfaceComparison compare_with_body(
+    const Eigen::Matrix3Xd& particles, double radius_mm,
+    const std::function<bool(const Eigen::Vector3d&)>& inside, const geometry::Aabb& body_bounds,
+    double voxel_mm);
 
 /// Compares the organ a model carries (fitting/embedded_body.h) with a body given by its
 /// inside test, on a grid of `voxel_mm` covering both.
-geometry::SurfaceComparison compare_with_body(const fitting::EmbeddedBody& organ,
-                                              const std::function<bool(const Eigen::Vector3d&)>& inside,
-                                              const geometry::Aabb& body_bounds, double voxel_mm);
+geometry::SurfaceComparison compare_with_body(
+    const fitting::EmbeddedBody& organ, const std::function<bool(const Eigen::Vector3d&)>& inside,
+    const geometry::Aabb& body_bounds, double voxel_mm);
 
 /// Compares a body already on a grid (label 1) with a body given by its inside test,
 /// sampled at the same grid's voxel centres.
-geometry::SurfaceComparison compare_mask_with_body(const geometry::LabelVolume& body,
-                                                   const std::function<bool(const Eigen::Vector3d&)>& inside);
+geometry::SurfaceComparison compare_mask_with_body(
+    const geometry::LabelVolume& body, const std::function<bool(const Eigen::Vector3d&)>& inside);
 
 }  // namespace organfit::evaluation

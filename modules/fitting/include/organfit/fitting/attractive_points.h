@@ -11,8 +11,8 @@
 namespace organfit::fitting {
 
 struct AttractivePoint {
-  Eigen::Vector3d p_mm;      ///< position, patient coordinates
-  double confidence = 1.0;   ///< in (0, 1]: scales the point's force
+  Eigen::Vector3d p_mm;     ///< position, patient coordinates
+  double confidence = 1.0;  ///< in (0, 1]: scales the point's force
 };
 
 /// W(i) for every particle: neighbours within `shell_mm` (the first shell), O(N).
@@ -26,7 +26,8 @@ void cap_by_cohesion(particles::Forces& data_force, const std::vector<int>& touc
 
 /// The particle among `candidates` nearest to `p_mm`, and its squared distance (mm^2);
 /// ties go to the first. {-1, infinity} when there are no candidates.
-std::pair<int, double> nearest_particle(const particles::Positions& x, const std::vector<int>& candidates,
+std::pair<int, double> nearest_particle(const particles::Positions& x,
+                                        const std::vector<int>& candidates,
                                         const Eigen::Vector3d& p_mm);
 
 /// Points farther than this from the skin are outliers unless a distance is given:
@@ -39,23 +40,24 @@ void validate_points(const std::vector<AttractivePoint>& points);
 
 /// What became of each point at the last evaluation.
 struct PointStatus {
-  int epicentre = -1;          ///< nearest skin particle
-  double d_min_mm = 0;         ///< distance from the point to the nearest influenced centre
-  bool inside_model = false;   ///< case 3: the point lies inside the body
-  bool reached = false;        ///< case 2: d_min <= rho, no force
-  bool rejected = false;       ///< an outlier: too far from the model to be fitted
+  int epicentre = -1;         ///< nearest skin particle
+  double d_min_mm = 0;        ///< distance from the point to the nearest influenced centre
+  bool inside_model = false;  ///< case 3: the point lies inside the body
+  bool reached = false;       ///< case 2: d_min <= rho, no force
+  bool rejected = false;      ///< an outlier: too far from the model to be fitted
   int influence_count = 0;
-  double f_max_k = 0;          ///< force on the epicentre when the point was assigned
+  double f_max_k = 0;  ///< force on the epicentre when the point was assigned
 };
 
 struct PaperForceParams {
-  double alpha = 2.0;                  ///< fall-off exponent alpha_k (> 1: falls off)
+  double alpha = 2.0;                    ///< fall-off exponent alpha_k (> 1: falls off)
   double influence_radius_min_r0 = 1.2;  ///< influence radius at d_min = rho, in r0
-  double influence_growth = 0.5;       ///< extra influence radius per mm of (d_min - rho)
+  double influence_growth = 0.5;         ///< extra influence radius per mm of (d_min - rho)
   double influence_radius_max_r0 = 4.0;  ///< bound on the influence radius, in r0
-  double total_force_factor = 3.0;     ///< a point's total force <= this x its F_max_k
-  double outlier_distance_mm = 0.0;    ///< reject points farther than this from the skin (0: 0.5 x model diameter)
-  double first_shell_r0 = 1.3;         ///< W(i) counts neighbours within this distance
+  double total_force_factor = 3.0;       ///< a point's total force <= this x its F_max_k
+  double outlier_distance_mm =
+      0.0;  ///< reject points farther than this from the skin (0: 0.5 x model diameter)
+  double first_shell_r0 = 1.3;  ///< W(i) counts neighbours within this distance
 };
 
 /// The paper's attractive force, with the fixes METHOD.md s.8 calls for:

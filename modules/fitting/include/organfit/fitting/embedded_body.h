@@ -73,12 +73,14 @@ class EmbeddedBody {
 /// are deep inside and never skin). With the samples of the reference surface moved by
 /// the global map, these are the depths the spread force fits with, so that the
 /// surface it moves onto the points is the embedded body's. O(N + samples).
-std::vector<double> surface_depths(const particles::Positions& x, const Eigen::Matrix3Xd& surface_mm,
-                                   double reach_mm);
+std::vector<double> surface_depths(const particles::Positions& x,
+                                   const Eigen::Matrix3Xd& surface_mm, double reach_mm);
 
 /// Moving-least-squares support for a model of lattice spacing `a_nn_mm`: 2 spacings,
 /// so that a point on the surface, with particles on one side only, has ~20 of them
 /// (and more where they spread too little: EmbeddedBody::pull_back).
-inline double embedding_support_mm(double a_nn_mm) { return 2.0 * a_nn_mm; }
+inline double embedding_support_mm(double a_nn_mm) {
+  return 2.0 * a_nn_mm;
+}
 
 }  // namespace organfit::fitting

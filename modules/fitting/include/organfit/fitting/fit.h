@@ -17,7 +17,8 @@ namespace organfit::fitting {
 /// get NaN and are left out of the statistics.
 std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
                                    const particles::Positions& x, const std::vector<int>& skin,
-                                   double radius_mm, const std::vector<PointStatus>* status = nullptr,
+                                   double radius_mm,
+                                   const std::vector<PointStatus>* status = nullptr,
                                    const std::vector<double>* depths_mm = nullptr);
 
 struct FitOptions {
@@ -27,9 +28,9 @@ struct FitOptions {
   double kinetic_tolerance = 1e-4;          ///< ... and kinetic energy per particle below this
   long long max_steps = 20000;
   double max_wall_s = 60.0;
-  int record_every = 20;                    ///< steps between history rows
-  int stall_rows = 25;                      ///< stop when the mean residual has not improved by
-  double stall_improvement = 0.01;          ///< this fraction over that many rows
+  int record_every = 20;            ///< steps between history rows
+  int stall_rows = 25;              ///< stop when the mean residual has not improved by
+  double stall_improvement = 0.01;  ///< this fraction over that many rows
   /// Volume of the model (mm^3) for the history; empty: not recorded.
   std::function<double(const particles::Positions&)> volume;
   int volume_every_rows = 5;
@@ -61,12 +62,13 @@ struct FitResult {
 /// skin particles (for residuals). `on_row` (optional) sees each history row;
 /// `after_row` (optional) may adjust the state or force terms between rows (e.g. let
 /// the skeleton's rest shape follow the fit); forces are recomputed after it.
-FitResult run_fit(particles::Model& model, particles::State& state,
-                  const particles::IntegratorOptions& integrator_options,
-                  const std::vector<AttractivePoint>& points,
-                  const std::function<const std::vector<int>&(const particles::Positions&)>& skin_of,
-                  const std::vector<PointStatus>* status, const FitOptions& options,
-                  const std::function<void(const HistoryRow&)>& on_row = nullptr,
-                  const std::function<void(particles::State&)>& after_row = nullptr);
+FitResult run_fit(
+    particles::Model& model, particles::State& state,
+    const particles::IntegratorOptions& integrator_options,
+    const std::vector<AttractivePoint>& points,
+    const std::function<const std::vector<int>&(const particles::Positions&)>& skin_of,
+    const std::vector<PointStatus>* status, const FitOptions& options,
+    const std::function<void(const HistoryRow&)>& on_row = nullptr,
+    const std::function<void(particles::State&)>& after_row = nullptr);
 
 }  // namespace organfit::fitting

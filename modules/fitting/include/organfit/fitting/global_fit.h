@@ -18,12 +18,13 @@ namespace organfit::fitting {
 
 struct AffineFitOptions {
   int iterations = 60;
-  double outlier_mads = 3.0;     ///< points beyond median + this x 1.4826 MAD get no weight
-  double point_to_point = 0.1;   ///< weight of the point-to-point term beside point-to-plane
-  double regularisation = 1e-3;  ///< pull of A towards I, relative to the points' spread
+  double outlier_mads = 3.0;           ///< points beyond median + this x 1.4826 MAD get no weight
+  double point_to_point = 0.1;         ///< weight of the point-to-point term beside point-to-plane
+  double regularisation = 1e-3;        ///< pull of A towards I, relative to the points' spread
   double shear_regularisation = 1e-3;  ///< pull of the shears towards none, likewise
   double max_stretch = 1.5;  ///< a map stretching by more (or by less than 1/this) is refused
-  double max_shear_mm = 0.25;  ///< ... and one whose shears move any sample by more than this x the body's size
+  double max_shear_mm =
+      0.25;  ///< ... and one whose shears move any sample by more than this x the body's size
 };
 
 struct AffineFit {
@@ -74,7 +75,9 @@ struct GlobalMap {
   QuadraticShears shears;
   double rms_after_mm = 0;  ///< point-to-surface over the kept points
   bool refused = false;     ///< the fitted map was implausible: identity used instead
-  Eigen::Vector3d apply(const Eigen::Vector3d& p) const { return shears.apply(affine.a * p + affine.t); }
+  Eigen::Vector3d apply(const Eigen::Vector3d& p) const {
+    return shears.apply(affine.a * p + affine.t);
+  }
   Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
 };
 

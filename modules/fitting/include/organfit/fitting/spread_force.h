@@ -62,8 +62,8 @@ class SpreadAttractiveForce : public particles::ForceTerm {
   SkinDetector skin_;
   std::vector<PointStatus> status_;
   std::vector<std::vector<std::pair<int, double>>> patch_;  // (particle, weight) per point
-  std::vector<int> w_;  // W(i) at the last assignment
-  std::vector<double> depth_;  // per particle; empty: rho for all
+  std::vector<int> w_;                                      // W(i) at the last assignment
+  std::vector<double> depth_;                               // per particle; empty: rho for all
   std::vector<Eigen::Vector3d> num_;
   std::vector<double> den_;
 };

@@ -20,10 +20,10 @@ struct Aabb {
 };
 
 struct ImageGeometry {
-  std::array<int, 3> size{0, 0, 0};                          ///< voxels along i, j, k
-  Eigen::Vector3d spacing_mm = Eigen::Vector3d::Ones();      ///< voxel size along i, j, k
-  Eigen::Vector3d origin_mm = Eigen::Vector3d::Zero();       ///< centre of voxel (0,0,0)
-  Eigen::Matrix3d direction = Eigen::Matrix3d::Identity();   ///< columns: axis directions
+  std::array<int, 3> size{0, 0, 0};                         ///< voxels along i, j, k
+  Eigen::Vector3d spacing_mm = Eigen::Vector3d::Ones();     ///< voxel size along i, j, k
+  Eigen::Vector3d origin_mm = Eigen::Vector3d::Zero();      ///< centre of voxel (0,0,0)
+  Eigen::Matrix3d direction = Eigen::Matrix3d::Identity();  ///< columns: axis directions
 
   long long voxel_count() const { return 1LL * size[0] * size[1] * size[2]; }
   double voxel_volume_mm3() const { return spacing_mm.prod(); }

@@ -41,8 +41,8 @@ void close_mask(LabelVolume& mask, double radius_mm);
 /// `closing_mm` (the definition above). Computed on the part of the grid the balls and
 /// the closing can reach, then placed on the whole grid: a large CT costs no more than
 /// the organ's box. Label 1 inside.
-LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm, double closing_mm,
-                                const ImageGeometry& grid);
+LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm,
+                                double closing_mm, const ImageGeometry& grid);
 
 /// Whether `p_mm` lies inside the surface of a mask taken as the 0.5 level of the
 /// trilinear interpolation of its indicator (label 1 = 1, else 0; 0 off the grid). On a
@@ -54,8 +54,8 @@ bool inside_interpolated(const LabelVolume& mask, const Eigen::Vector3d& p_mm);
 std::vector<std::uint8_t> surface_of(const LabelVolume& mask);
 
 struct SurfaceComparison {
-  double msd_mm = 0;    ///< symmetric mean surface distance
-  double hd95_mm = 0;   ///< symmetric 95th-percentile Hausdorff distance
+  double msd_mm = 0;   ///< symmetric mean surface distance
+  double hd95_mm = 0;  ///< symmetric 95th-percentile Hausdorff distance
   double dice = 0;
   double volume_a_mm3 = 0, volume_b_mm3 = 0;
 };
@@ -64,8 +64,8 @@ struct SurfaceComparison {
 SurfaceComparison compare_masks(const LabelVolume& a, const LabelVolume& b);
 
 /// Volume (mm^3) of the closed body of a particle set (definition above).
-double particle_body_volume_mm3(const Eigen::Matrix3Xd& centres, double radius_mm,
-                                double voxel_mm, double closing_mm);
+double particle_body_volume_mm3(const Eigen::Matrix3Xd& centres, double radius_mm, double voxel_mm,
+                                double closing_mm);
 
 /// Compares the closed bodies of two particle sets on a common grid.
 SurfaceComparison compare_particle_bodies(const Eigen::Matrix3Xd& a, const Eigen::Matrix3Xd& b,

@@ -15,13 +15,14 @@
 namespace organfit::geometry {
 
 struct SliceContour {
-  int k = 0;                                ///< slice index
-  std::vector<Eigen::Vector3d> points_mm;   ///< closed (last joins first), patient mm
-  double thinning_tolerance_mm = 0;         ///< 0 when only collinear points were dropped
+  int k = 0;                               ///< slice index
+  std::vector<Eigen::Vector3d> points_mm;  ///< closed (last joins first), patient mm
+  double thinning_tolerance_mm = 0;        ///< 0 when only collinear points were dropped
 };
 
 /// Contours of `label` in `mask`, slice by slice. `max_points` bounds one contour (a
 /// DICOM Contour Data element holds at most 65,534 bytes: about 2,000 points).
-std::vector<SliceContour> slice_contours(const LabelVolume& mask, std::uint8_t label, int max_points = 2000);
+std::vector<SliceContour> slice_contours(const LabelVolume& mask, std::uint8_t label,
+                                         int max_points = 2000);
 
 }  // namespace organfit::geometry

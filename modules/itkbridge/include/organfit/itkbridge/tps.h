@@ -11,7 +11,8 @@ namespace organfit::itkbridge {
 /// in a plane); apply() moves any point. Throws InputError on bad landmarks.
 class ThinPlateSpline {
  public:
-  ThinPlateSpline(const std::vector<std::array<double, 3>>& source, const std::vector<std::array<double, 3>>& target);
+  ThinPlateSpline(const std::vector<std::array<double, 3>>& source,
+                  const std::vector<std::array<double, 3>>& target);
   ~ThinPlateSpline();
   ThinPlateSpline(const ThinPlateSpline&) = delete;
   ThinPlateSpline& operator=(const ThinPlateSpline&) = delete;

@@ -17,13 +17,14 @@ struct PlainMask {
 struct PlainSurfaceReport {
   long long points = 0, triangles = 0, boundary_edges = 0, non_manifold_edges = 0;
   double enclosed_volume_mm3 = 0, area_mm2 = 0, signed_volume_mm3 = 0;
-  std::vector<float> vertex_mm;    ///< x, y, z per point (filled when asked for)
-  std::vector<int> triangle_ids;   ///< three point indices per triangle (idem)
+  std::vector<float> vertex_mm;   ///< x, y, z per point (filled when asked for)
+  std::vector<int> triangle_ids;  ///< three point indices per triangle (idem)
 };
 
 /// Surface of the mask written to `file` (none when empty); with `keep_mesh` the
 /// report carries the triangles. Throws InputError (VTK side).
-PlainSurfaceReport vtk_write_surface(const PlainMask& mask, const std::string& file, bool keep_mesh = false);
+PlainSurfaceReport vtk_write_surface(const PlainMask& mask, const std::string& file,
+                                     bool keep_mesh = false);
 
 struct PlainPointSet {
   std::vector<double> xyz_mm;      ///< x, y, z per point

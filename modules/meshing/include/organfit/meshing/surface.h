@@ -7,9 +7,9 @@
 //          volume-preserving smoothing (no shrinkage, unlike Laplacian)
 //        --vtkPolyDataNormals (consistent, auto-oriented outward)-->
 // The mask is padded by one empty voxel so the surface closes at the grid's border.
+#include <array>
 #include <filesystem>
 #include <string>
-#include <array>
 #include <vector>
 
 #include "organfit/geometry/image_geometry.h"
@@ -32,8 +32,9 @@ SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesy
 
 /// The same surface as triangles, not written (for the report's 3D view).
 struct SurfaceMesh {
-  std::vector<float> vertex_mm;   ///< x, y, z per vertex, patient mm
-  std::vector<int> triangle_ids;  ///< three vertex indices per triangle, outward (counter-clockwise)
+  std::vector<float> vertex_mm;  ///< x, y, z per vertex, patient mm
+  std::vector<int>
+      triangle_ids;  ///< three vertex indices per triangle, outward (counter-clockwise)
   SurfaceReport report;
 };
 SurfaceMesh surface_mesh(const geometry::LabelVolume& mask);

@@ -60,8 +60,8 @@ class LennardJones {
  private:
   CohesionParams p_;
   double rc_, rf_;
-  double c_force_;        // m n E0 / ((n-m) r0)
-  double e_shift_;        // bare_energy(rc)
+  double c_force_;                          // m n E0 / ((n-m) r0)
+  double e_shift_;                          // bare_energy(rc)
   double f_floor_, slope_floor_, e_floor_;  // at r_f: force, -LJ'(r_f) > 0, shifted energy
 };
 

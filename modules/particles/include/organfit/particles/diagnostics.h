@@ -28,6 +28,8 @@ inline double aspect_ratio(const Positions& x) {
 Positions rigid_align(const Positions& moving, const Positions& fixed);
 
 /// True when every coordinate is finite.
-inline bool all_finite(const Eigen::Matrix3Xd& m) { return m.allFinite(); }
+inline bool all_finite(const Eigen::Matrix3Xd& m) {
+  return m.allFinite();
+}
 
 }  // namespace organfit::particles

@@ -34,25 +34,25 @@ class StabilityError : public std::runtime_error {
 };
 
 struct IntegratorOptions {
-  double time_step_s = 0.0;          ///< 0: derived from the stiffness
-  double time_step_fraction = 0.1;   ///< derived dt as a fraction of 2 sqrt(M/k)
-  double damping = 0.0;              ///< K_a (mass unit / s): force -K_a v on every particle
-  double temperature = 0.0;          ///< kT (energy unit); > 0 needs damping > 0
-  std::uint64_t seed = 1;            ///< for the thermostat's noise
-  double max_step_r0 = 0.2;          ///< cap on one step's displacement, in r0 (0: none)
+  double time_step_s = 0.0;         ///< 0: derived from the stiffness
+  double time_step_fraction = 0.1;  ///< derived dt as a fraction of 2 sqrt(M/k)
+  double damping = 0.0;             ///< K_a (mass unit / s): force -K_a v on every particle
+  double temperature = 0.0;         ///< kT (energy unit); > 0 needs damping > 0
+  std::uint64_t seed = 1;           ///< for the thermostat's noise
+  double max_step_r0 = 0.2;         ///< cap on one step's displacement, in r0 (0: none)
   /// Speed limit (mm/s, 0: none). A displacement cap alone lets a particle keep far
   /// more kinetic energy than the well depth (an overlap stores thousands of E0) and
   /// tear the body; sqrt(2 * 5 E0 / M) keeps it whole (tested with (20,40) overlaps).
   double max_speed_mm_s = 0.0;
-  double length_scale_mm = 1.0;      ///< r0 of the model, for the cap
-  bool adapt_time_step = true;       ///< halve dt when the cap keeps acting; else throw
+  double length_scale_mm = 1.0;  ///< r0 of the model, for the cap
+  bool adapt_time_step = true;   ///< halve dt when the cap keeps acting; else throw
 };
 
 struct IntegratorStats {
   long long steps = 0;
-  long long capped_moves = 0;   ///< particle half-drifts shortened by the cap
+  long long capped_moves = 0;  ///< particle half-drifts shortened by the cap
   int time_step_halvings = 0;
-  double time_step_s = 0.0;     ///< current
+  double time_step_s = 0.0;  ///< current
 };
 
 class Integrator {
@@ -93,7 +93,7 @@ struct RelaxResult {
 
 /// Damped relaxation: runs until the kinetic energy per particle falls below
 /// `ke_tolerance` (checked every 10 steps, after at least 20) or `max_steps` pass.
-RelaxResult relax(Model& model, State& state, const IntegratorOptions& options,
-                  long long max_steps, double ke_tolerance);
+RelaxResult relax(Model& model, State& state, const IntegratorOptions& options, long long max_steps,
+                  double ke_tolerance);
 
 }  // namespace organfit::particles

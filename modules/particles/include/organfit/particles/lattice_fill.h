@@ -22,7 +22,9 @@ inline constexpr double kFccBasis[4][3] = {{0, 0, 0}, {0.5, 0.5, 0}, {0.5, 0, 0.
 double fcc_equilibrium_spacing(const LennardJones& law);
 
 /// Volume per particle of an fcc lattice with nearest-neighbour distance a (mm^3): a^3/sqrt(2).
-inline double fcc_volume_per_particle(double a_nn_mm) { return a_nn_mm * a_nn_mm * a_nn_mm / std::sqrt(2.0); }
+inline double fcc_volume_per_particle(double a_nn_mm) {
+  return a_nn_mm * a_nn_mm * a_nn_mm / std::sqrt(2.0);
+}
 
 /// fcc lattice points with nearest-neighbour distance `a_nn_mm`, one of them at
 /// `centre_mm`, that lie in `box` and satisfy `inside`. Order: z, then y, then x.

@@ -43,11 +43,11 @@ struct Skeleton {
 
 /// Medial nodes of a particle body at rest: surface particles are those with fewer
 /// than 12 neighbours within 1.2 a_nn (fcc bulk has 12); depth is the Euclidean
-/// distance to the nearest surface particle (its feature); a particle is medial when a neighbour's nearest surface particle lies farther than
-/// max(3 a_nn, 1.5 depth) from its own (the two surface points subtend > ~97 degrees). Nodes are medial particles chosen farthest-first
-/// from the deepest, at least `node_spacing_mm` apart (one node, at the deepest
-/// particle, for bodies too thin to have a medial axis). Edges are left empty
-/// (SkeletonForce fills them).
+/// distance to the nearest surface particle (its feature); a particle is medial when a neighbour's
+/// nearest surface particle lies farther than max(3 a_nn, 1.5 depth) from its own (the two surface
+/// points subtend > ~97 degrees). Nodes are medial particles chosen farthest-first from the
+/// deepest, at least `node_spacing_mm` apart (one node, at the deepest particle, for bodies too
+/// thin to have a medial axis). Edges are left empty (SkeletonForce fills them).
 Skeleton medial_skeleton(const Positions& rest, double a_nn_mm, double node_spacing_mm);
 
 /// The same from a segmentation (label != 0 inside; the CT stage's organ mask): voxel

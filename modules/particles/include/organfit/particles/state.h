@@ -16,8 +16,7 @@ struct State {
   double time_s = 0.0;
 
   State() = default;
-  explicit State(Positions positions)
-      : x(std::move(positions)), v(Velocities::Zero(3, x.cols())) {}
+  explicit State(Positions positions) : x(std::move(positions)), v(Velocities::Zero(3, x.cols())) {}
   int size() const { return static_cast<int>(x.cols()); }
 };
 

@@ -51,19 +51,19 @@ struct PelvisStructure {
 const std::vector<PelvisStructure>& pelvis_structures();
 
 struct PelvisOptions {
-  std::uint64_t seed = 1;     ///< noise; the anatomy is the same for every seed
-  int columns = 320;          ///< voxels along x (i)
-  int rows = 320;             ///< voxels along y (j)
-  int slices = 56;            ///< slices along z (k), centred on the prostate
-  double pixel_mm = 1.25;     ///< in-plane spacing
-  double slice_mm = 2.5;      ///< slice spacing and thickness
-  double noise_hu = 12.0;     ///< standard deviation of the Gaussian noise
+  std::uint64_t seed = 1;  ///< noise; the anatomy is the same for every seed
+  int columns = 320;       ///< voxels along x (i)
+  int rows = 320;          ///< voxels along y (j)
+  int slices = 56;         ///< slices along z (k), centred on the prostate
+  double pixel_mm = 1.25;  ///< in-plane spacing
+  double slice_mm = 2.5;   ///< slice spacing and thickness
+  double noise_hu = 12.0;  ///< standard deviation of the Gaussian noise
 };
 
 struct PelvisPhantom {
-  geometry::ImageGeometry geometry;        ///< axial, identity direction
-  std::vector<float> hu;                   ///< Hounsfield units, i fastest
-  geometry::LabelVolume labels;            ///< true labels at voxel centres (PelvisLabel)
+  geometry::ImageGeometry geometry;  ///< axial, identity direction
+  std::vector<float> hu;             ///< Hounsfield units, i fastest
+  geometry::LabelVolume labels;      ///< true labels at voxel centres (PelvisLabel)
   Eigen::Vector3d prostate_centre_mm = Eigen::Vector3d::Zero();
 };
 
@@ -79,6 +79,7 @@ std::uint8_t pelvis_label_at(const Eigen::Vector3d& p_mm);
 /// times the in-plane resolution (vertex error below pixel / (2 supersample)). Contours'
 /// k index the slices.
 std::vector<geometry::SliceContour> pelvis_true_contours(const geometry::LabelVolume& labels,
-                                                         const PelvisStructure& structure, int supersample = 4);
+                                                         const PelvisStructure& structure,
+                                                         int supersample = 4);
 
 }  // namespace organfit::phantom

@@ -13,11 +13,11 @@ struct CtBenchOptions {
   /// separate `organfit synth pelvis` process (so its memory is not counted).
   std::filesystem::path ct;
   int columns = 512, rows = 512, slices = 100;
-  std::vector<double> seed_mm{0, 0, 0};    ///< organ seed (default: the phantom's prostate)
-  std::vector<double> hu_window{20, 80};   ///< organ HU window
-  double radius_mm = 1.5;                  ///< particle radius
-  int threads = 0;                         ///< 0: all cores
-  double target_s = 10.0;                  ///< the issue's budget for read + segment + skeleton + seed
+  std::vector<double> seed_mm{0, 0, 0};   ///< organ seed (default: the phantom's prostate)
+  std::vector<double> hu_window{20, 80};  ///< organ HU window
+  double radius_mm = 1.5;                 ///< particle radius
+  int threads = 0;                        ///< 0: all cores
+  double target_s = 10.0;  ///< the issue's budget for read + segment + skeleton + seed
 };
 
 /// Runs the benchmark; returns machine-readable results (timings in s, memory in MiB).

@@ -16,10 +16,9 @@
 #include <string>
 #include <vector>
 
-#include "organfit/fitting/embedded_body.h"
-
 #include "organfit/dicom/ct_series.h"
 #include "organfit/dicom/structure_set.h"
+#include "organfit/fitting/embedded_body.h"
 #include "organfit/particles/state.h"
 
 namespace organfit::pipeline {
@@ -29,14 +28,14 @@ struct ExportRequest {
   std::string roi_name;                          ///< the fitted organ's ROI
   /// ROIs to copy into the RT Structure Set beside the fitted one (from the input one).
   const dicom::StructureSet* copy_rois_from = nullptr;
-  std::string skip_roi;  ///< not copied (the organ the fit replaces is kept under its own name)
+  std::string skip_roi;     ///< not copied (the organ the fit replaces is kept under its own name)
   bool fixed_uids = false;  ///< deterministic UIDs and dates (tests)
 };
 
 class PendingExport {
  public:
-  nlohmann::json summary;               ///< run.json "export"; the mesh adds its report on commit
-  std::vector<std::string> files;       ///< what commit() will write
+  nlohmann::json summary;          ///< run.json "export"; the mesh adds its report on commit
+  std::vector<std::string> files;  ///< what commit() will write
   std::vector<std::string> warnings;
   /// Writes the files. Throws InputError naming a file that cannot be written.
   void commit();
@@ -50,7 +49,7 @@ class PendingExport {
 /// Computes the exports of the organ a model carries (pipeline::organ_body), whose
 /// particles have radius `rho_mm` (the mesh's voxel). `ct` is needed for the RT
 /// Structure Set and the label map (InputError otherwise).
-PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho_mm, const dicom::CtSeries* ct,
-                             const ExportRequest& request);
+PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho_mm,
+                             const dicom::CtSeries* ct, const ExportRequest& request);
 
 }  // namespace organfit::pipeline

@@ -31,10 +31,12 @@ PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageR
 
 /// The true deformation the points section describes (evaluation::Deformation), about the
 /// shape's centre.
-evaluation::Deformation deformation_from(const config::Scene& scene, const evaluation::Shape& shape);
+evaluation::Deformation deformation_from(const config::Scene& scene,
+                                         const evaluation::Shape& shape);
 
 /// A box holding the deformed shape: its corners mapped, widened by the non-affine parts.
-geometry::Aabb deformed_bounds(const evaluation::Shape& shape, const evaluation::Deformation& deformation);
+geometry::Aabb deformed_bounds(const evaluation::Shape& shape,
+                               const evaluation::Deformation& deformation);
 
 struct FitStageResult {
   fitting::FitResult fit;

@@ -27,15 +27,16 @@ struct CtReference {
 };
 
 struct SavedModel {
-  ModelStageResult model;        ///< state, force terms (cohesion, skeleton), shape, reference
-  std::string organ_name;        ///< e.g. Prostate
+  ModelStageResult model;  ///< state, force terms (cohesion, skeleton), shape, reference
+  std::string organ_name;  ///< e.g. Prostate
   std::optional<CtReference> ct;
   nlohmann::json provenance;
 };
 
 /// Writes the model (atomically). `organ_name` names the organ for exports.
-void save_model(const std::filesystem::path& file, const ModelStageResult& model, const std::string& organ_name,
-                const std::optional<CtReference>& ct, const nlohmann::json& provenance);
+void save_model(const std::filesystem::path& file, const ModelStageResult& model,
+                const std::string& organ_name, const std::optional<CtReference>& ct,
+                const nlohmann::json& provenance);
 
 /// Reads a model file and rebuilds its force terms. Throws InputError "FILE: reason" on
 /// a file that is not an organfit model, of another format version, or inconsistent

@@ -1,15 +1,15 @@
 #pragma once
 // The model stage: fill the organ with particles and relax them (physics core).
-#include <nlohmann/json.hpp>
 #include <cstdint>
 #include <memory>
+#include <nlohmann/json.hpp>
 
 #include "organfit/config/scene.h"
 #include "organfit/evaluation/synthetic.h"
 #include "organfit/fitting/embedded_body.h"
-#include "organfit/particles/skeleton.h"
 #include "organfit/particles/integrator.h"
 #include "organfit/particles/model.h"
+#include "organfit/particles/skeleton.h"
 
 namespace organfit::pipeline {
 
@@ -34,15 +34,16 @@ ModelSettings model_settings_from_json(const nlohmann::json& j, const std::strin
 
 /// Cohesion law and integrator settings of a model.
 particles::CohesionParams cohesion_params_from(const ModelSettings& s);
-particles::IntegratorOptions integrator_options_from(const ModelSettings& s, const particles::Model& model);
+particles::IntegratorOptions integrator_options_from(const ModelSettings& s,
+                                                     const particles::Model& model);
 
 struct ModelStageResult {
   ModelSettings settings;
   particles::State state;
   std::unique_ptr<particles::Model> model;
-  evaluation::Shape shape;               ///< the body that was filled
-  geometry::LabelVolume reference;       ///< the same body as a mask (voxels of rho/2)
-  double lattice_spacing_mm = 0;         ///< relaxed fcc nearest-neighbour distance
+  evaluation::Shape shape;          ///< the body that was filled
+  geometry::LabelVolume reference;  ///< the same body as a mask (voxels of rho/2)
+  double lattice_spacing_mm = 0;    ///< relaxed fcc nearest-neighbour distance
   particles::CohesionParams cohesion;
   particles::SkeletonForce* skeleton = nullptr;  ///< owned by `model`; null without skeleton
   particles::SkeletonParams skeleton_params;
@@ -60,7 +61,8 @@ fitting::EmbeddedBody organ_body(const ModelStageResult& model);
 
 /// Fills the organ (when given, e.g. imported from CT) or the scene's analytic body with
 /// particles at the relaxed fcc spacing and relaxes them.
-ModelStageResult run_model_stage(const config::Scene& scene, const evaluation::Shape* organ = nullptr);
+ModelStageResult run_model_stage(const config::Scene& scene,
+                                 const evaluation::Shape* organ = nullptr);
 
 /// The model's force terms (cohesion, and the skeleton when `skeleton` has nodes) around
 /// given positions: what run_model_stage builds, and what loading a saved model rebuilds.

@@ -13,15 +13,16 @@
 namespace organfit::pipeline {
 
 struct ReportContext {
-  nlohmann::json run;                        ///< run.json as it will be written
+  nlohmann::json run;  ///< run.json as it will be written
   std::string scene_yaml, history_csv;
-  const dicom::CtSeries* ct = nullptr;       ///< null: no CT views
+  const dicom::CtSeries* ct = nullptr;          ///< null: no CT views
   const evaluation::Shape* planning = nullptr;  ///< the organ before the fit (its contour)
-  const fitting::EmbeddedBody* fitted = nullptr; ///< the organ after the fit (pipeline::organ_body)
-  double rho_mm = 0;                         ///< the particles' radius: the 3D view's voxel
+  const fitting::EmbeddedBody* fitted =
+      nullptr;        ///< the organ after the fit (pipeline::organ_body)
+  double rho_mm = 0;  ///< the particles' radius: the 3D view's voxel
   std::vector<Eigen::Vector3d> points_mm;
   std::vector<double> residuals_mm;
-  bool show_patient = false;                 ///< the scene asked for name and ID
+  bool show_patient = false;  ///< the scene asked for name and ID
 };
 
 /// The report page. Views: the CT planes through the fitted organ's centroid, cropped to

@@ -13,10 +13,10 @@ struct SegmentRequest {
   std::string series_uid;
   std::filesystem::path rtstruct;  ///< with roi: import
   std::string roi;
-  std::vector<double> seed_mm;     ///< x,y,z with hu: grow from a seed
-  std::vector<double> hu_window;   ///< low,high
-  double search_box_mm = 200;      ///< cube around the seed grown in (0: the whole CT)
-  std::filesystem::path out;       ///< .nrrd, .mha, .nii(.gz)
+  std::vector<double> seed_mm;    ///< x,y,z with hu: grow from a seed
+  std::vector<double> hu_window;  ///< low,high
+  double search_box_mm = 200;     ///< cube around the seed grown in (0: the whole CT)
+  std::filesystem::path out;      ///< .nrrd, .mha, .nii(.gz)
 };
 
 struct SegmentResult {

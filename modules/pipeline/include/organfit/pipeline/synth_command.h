@@ -23,6 +23,7 @@ struct SynthResult {
 ///   phantom.json   what was made: options, labels, volumes, the prostate's centre
 /// The same seed and options give byte-identical files (UIDs derived from them).
 /// Throws InputError naming `out` when it cannot be written.
-SynthResult run_synth_pelvis(const std::filesystem::path& out, const phantom::PelvisOptions& options);
+SynthResult run_synth_pelvis(const std::filesystem::path& out,
+                             const phantom::PelvisOptions& options);
 
 }  // namespace organfit::pipeline

@@ -10,15 +10,15 @@
 namespace organfit::pipeline {
 
 struct SynthUltrasoundCommand {
-  std::filesystem::path labels;        ///< phantom labels (phantom::PelvisLabel)
-  std::filesystem::path ct;            ///< optional CT folder: HU for gas and bone shadows
-  std::vector<double> probe;           ///< X,Y,Z[,AX,AY,AZ[,LX,LY,LZ]]; empty: transrectal at the prostate
-  std::filesystem::path out;           ///< folder (created; must be empty)
+  std::filesystem::path labels;  ///< phantom labels (phantom::PelvisLabel)
+  std::filesystem::path ct;      ///< optional CT folder: HU for gas and bone shadows
+  std::vector<double> probe;  ///< X,Y,Z[,AX,AY,AZ[,LX,LY,LZ]]; empty: transrectal at the prostate
+  std::filesystem::path out;  ///< folder (created; must be empty)
   std::uint64_t seed = 1;
   double stretch = 1.0, bend_mm = 0.0;  ///< the organ's known deformation
-  int organ_label = 8;                 ///< the prostate
+  int organ_label = 8;                  ///< the prostate
   double speckle = 1.0;
-  int sweep_frames = 41;               ///< frames of the tracked sweep (a fan of +-40 degrees)
+  int sweep_frames = 41;  ///< frames of the tracked sweep (a fan of +-40 degrees)
 };
 
 /// Writes OUT/volume.mha (8-bit B-mode, CT axes), OUT/sweep.igs.mha (sequence metafile,

@@ -11,15 +11,16 @@
 namespace organfit::pipeline {
 
 struct UltrasoundStageResult {
-  PointsStageResult points;                  ///< truth set when simulated
-  std::optional<geometry::LabelVolume> bmode;  ///< the B-mode volume (8 bit), to save if asked
+  PointsStageResult points;                       ///< truth set when simulated
+  std::optional<geometry::LabelVolume> bmode;     ///< the B-mode volume (8 bit), to save if asked
   std::vector<Eigen::Vector3d> true_boundary_mm;  ///< simulated: the surface the probe sees
 };
 
 /// Tissue classes of a CT by HU, with the organ on top: what the simulator images.
 /// Labels: 1 gas (< -400), 2 fat (< -30), 3 fluid (< 25), 4 soft tissue (< 150),
 /// 5 dense (< 400), 6 bone, 7 the organ (mask label 1).
-geometry::LabelVolume tissue_classes(const geometry::ImageGeometry& ct, const std::vector<float>& hu,
+geometry::LabelVolume tissue_classes(const geometry::ImageGeometry& ct,
+                                     const std::vector<float>& hu,
                                      const geometry::LabelVolume* organ_mask);
 
 /// The same classes from the pelvis phantom's true labels (no partial-volume voxels:
@@ -31,14 +32,16 @@ ultrasound::SimulatorOptions tissue_class_simulator_options();
 
 /// Today's anatomy for the simulator: `organ` deformed by `deformation`, the rest as the
 /// planning CT has it (tissue classes and HU on its grid), fat where the organ was.
-ultrasound::TissueAt deformed_anatomy(const geometry::LabelVolume& tissue, const std::vector<float>& hu,
-                                      const evaluation::Shape& organ, const evaluation::Deformation& deformation);
+ultrasound::TissueAt deformed_anatomy(const geometry::LabelVolume& tissue,
+                                      const std::vector<float>& hu, const evaluation::Shape& organ,
+                                      const evaluation::Deformation& deformation);
 
 /// Runs the stage. `ct` and `organ_mask` (on the CT grid) are needed to simulate;
 /// `anatomy` (tissue classes on the CT grid, e.g. the phantom's) replaces the classes
 /// from HU when given.
-UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene, const ModelStageResult& model,
-                                           const dicom::CtSeries* ct, const geometry::LabelVolume* organ_mask,
+UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene,
+                                           const ModelStageResult& model, const dicom::CtSeries* ct,
+                                           const geometry::LabelVolume* organ_mask,
                                            const geometry::LabelVolume* anatomy = nullptr);
 
 }  // namespace organfit::pipeline

@@ -7,9 +7,9 @@
 namespace organfit::pipeline {
 
 struct UsBenchOptions {
-  int volume_size = 256;   ///< voxels per side (0.4 mm)
+  int volume_size = 256;  ///< voxels per side (0.4 mm)
   int frames = 100;
-  int threads = 0;         ///< 0: all cores
+  int threads = 0;  ///< 0: all cores
 };
 
 nlohmann::json run_us_benchmark(const UsBenchOptions& options);

@@ -27,10 +27,10 @@ struct ViewPoint {
 
 /// One CT plane through the organ, cropped around it, with outlines on it.
 struct SliceView {
-  std::string title;                 ///< e.g. "axial, z = 1.2 mm"
-  int width = 0, height = 0;         ///< pixels
+  std::string title;          ///< e.g. "axial, z = 1.2 mm"
+  int width = 0, height = 0;  ///< pixels
   double pixel_w_mm = 1, pixel_h_mm = 1;
-  std::vector<std::uint8_t> gray;    ///< width x height, row-major, top row first
+  std::vector<std::uint8_t> gray;  ///< width x height, row-major, top row first
   std::vector<std::vector<Eigen::Vector2d>> planning, fitted;  ///< closed polylines, mm
   std::vector<ViewPoint> points;
   std::string left, right, top, bottom;  ///< patient directions at the edges (L, R, A, P, S, I)
@@ -42,22 +42,23 @@ enum class Plane { kAxial, kCoronal, kSagittal };
 /// cropped to `crop_lo`..`crop_hi` (voxel indices, inclusive), soft-tissue window
 /// (level 40, width 400 HU); the masks' outlines traced on it (either may be null); the
 /// points within `slab_mm` of the plane with their residuals.
-SliceView slice_view(const geometry::ImageGeometry& ct, const std::vector<float>& hu, Plane plane, int index,
-                     const std::array<int, 3>& crop_lo, const std::array<int, 3>& crop_hi,
-                     const geometry::LabelVolume* planning, const geometry::LabelVolume* fitted,
-                     const std::vector<Eigen::Vector3d>& points_mm, const std::vector<double>& residuals_mm,
-                     double slab_mm);
+SliceView slice_view(const geometry::ImageGeometry& ct, const std::vector<float>& hu, Plane plane,
+                     int index, const std::array<int, 3>& crop_lo,
+                     const std::array<int, 3>& crop_hi, const geometry::LabelVolume* planning,
+                     const geometry::LabelVolume* fitted,
+                     const std::vector<Eigen::Vector3d>& points_mm,
+                     const std::vector<double>& residuals_mm, double slab_mm);
 
 struct ReportInput {
-  nlohmann::json run;               ///< run.json as written
-  std::string scene_yaml;           ///< resolved.yaml
-  std::string history_csv;          ///< history.csv (empty without a fit)
+  nlohmann::json run;       ///< run.json as written
+  std::string scene_yaml;   ///< resolved.yaml
+  std::string history_csv;  ///< history.csv (empty without a fit)
   std::vector<SliceView> views;
   std::vector<float> surface_vertex_mm;  ///< fitted surface, x y z per vertex
   std::vector<int> surface_triangles;    ///< three indices per triangle
   std::vector<Eigen::Vector3d> points_mm;
   std::vector<double> residuals_mm;
-  std::string patient;              ///< empty: no patient name or ID in the page
+  std::string patient;  ///< empty: no patient name or ID in the page
 };
 
 /// The page.

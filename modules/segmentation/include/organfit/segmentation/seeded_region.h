@@ -13,6 +13,7 @@ struct PlainSeedOptions {
   int opening_radius_voxels = 1;
 };
 
-itkbridge::PlainMask seeded_region(const itkbridge::PlainFloatImage& hu, const PlainSeedOptions& options);
+itkbridge::PlainMask seeded_region(const itkbridge::PlainFloatImage& hu,
+                                   const PlainSeedOptions& options);
 
 }  // namespace organfit::segmentation

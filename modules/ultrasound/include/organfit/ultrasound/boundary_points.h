@@ -31,13 +31,14 @@ namespace organfit::ultrasound {
 struct BoundaryOptions {
   Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();  ///< inside the organ (volume frame)
   double r_min_mm = 2, r_max_mm = 40;
-  std::function<bool(const Eigen::Vector3d&)> prior_inside;  ///< optional organ prior (volume frame)
-  double band_mm = 12;             ///< search band around the prior's surface
+  std::function<bool(const Eigen::Vector3d&)>
+      prior_inside;     ///< optional organ prior (volume frame)
+  double band_mm = 12;  ///< search band around the prior's surface
   int rays = 2000;
   double smoothing_mm = 1.0;
   double mad_threshold = 3.0;
   double weak_edge_fraction = 0.7;  ///< edges weaker than this x the median edge are dropped
-  int target_count = 87;           ///< 0: keep every accepted ray
+  int target_count = 87;            ///< 0: keep every accepted ray
 };
 
 struct BoundaryPoint {
@@ -53,15 +54,18 @@ struct BoundaryResult {
 /// Finds boundary points in `intensity` on `geometry`; `in_view` (optional, same size)
 /// marks the field of view. Throws std::invalid_argument on sizes that do not match or a
 /// centre outside the volume.
-BoundaryResult boundary_points(const geometry::ImageGeometry& geometry, const std::vector<float>& intensity,
-                               const std::vector<std::uint8_t>* in_view, const BoundaryOptions& options);
+BoundaryResult boundary_points(const geometry::ImageGeometry& geometry,
+                               const std::vector<float>& intensity,
+                               const std::vector<std::uint8_t>* in_view,
+                               const BoundaryOptions& options);
 
 struct TrackedSweep;
 
 /// The same on a tracked 2D sweep (see sequence_metafile.h): in each frame whose plane
 /// passes within r_max of the centre, `rays_per_frame` rays in the plane from the centre's
 /// projection; neighbours are the adjacent rays of the same frame. Points in CT mm.
-BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOptions& options, int rays_per_frame = 180);
+BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOptions& options,
+                                     int rays_per_frame = 180);
 
 /// The engine under both: rays (origin, unit direction, in mm), each ray's neighbours
 /// (for step 4), and a sampler of the smoothed image along ray r at point p (setting `ok`
@@ -71,7 +75,9 @@ struct Ray {
   Eigen::Vector3d origin, direction;
 };
 using RaySampler = std::function<double(int ray, const Eigen::Vector3d& p_mm, bool& ok)>;
-BoundaryResult search_rays(const std::vector<Ray>& rays, const std::vector<std::vector<int>>& neighbours,
-                           const RaySampler& sample, double step_mm, const BoundaryOptions& options);
+BoundaryResult search_rays(const std::vector<Ray>& rays,
+                           const std::vector<std::vector<int>>& neighbours,
+                           const RaySampler& sample, double step_mm,
+                           const BoundaryOptions& options);
 
 }  // namespace organfit::ultrasound

@@ -26,32 +26,32 @@ namespace organfit::ultrasound {
 
 struct ProbePose {
   Eigen::Vector3d position_mm = Eigen::Vector3d::Zero();  ///< centre of the probe's face (CT mm)
-  Eigen::Vector3d axis = Eigen::Vector3d(0, -1, 0);       ///< beam direction at the centre of the field
-  Eigen::Vector3d lateral = Eigen::Vector3d(1, 0, 0);     ///< in-plane direction across the image
+  Eigen::Vector3d axis = Eigen::Vector3d(0, -1, 0);  ///< beam direction at the centre of the field
+  Eigen::Vector3d lateral = Eigen::Vector3d(1, 0, 0);  ///< in-plane direction across the image
 };
 
 struct SimulatorOptions {
-  double probe_radius_mm = 10;       ///< imaging starts this far from the probe's centre
-  double max_depth_mm = 70;          ///< from the probe's centre
+  double probe_radius_mm = 10;  ///< imaging starts this far from the probe's centre
+  double max_depth_mm = 70;     ///< from the probe's centre
   double lateral_half_angle_deg = 50, elevation_half_angle_deg = 50;
   int lateral_rays = 161, elevation_rays = 161;
   double ray_step_mm = 0.25;
-  double voxel_mm = 0.5;             ///< output grid spacing
-  double speckle = 1.0;              ///< 0: no speckle; 1: fully developed (Rayleigh)
-  double specular = 0.8;             ///< brightness added at a tissue boundary
-  double specular_mm = 1.0;          ///< thickness of that bright line (axial resolution)
+  double voxel_mm = 0.5;                ///< output grid spacing
+  double speckle = 1.0;                 ///< 0: no speckle; 1: fully developed (Rayleigh)
+  double specular = 0.8;                ///< brightness added at a tissue boundary
+  double specular_mm = 1.0;             ///< thickness of that bright line (axial resolution)
   double attenuation_db_per_mm = 0.05;  ///< after time-gain compensation
   double dynamic_range_db = 50;
   std::array<float, 256> echogenicity;  ///< mean echo per label (0 = anechoic)
-  std::uint8_t organ_label = 0;      ///< whose visible boundary is returned as truth
+  std::uint8_t organ_label = 0;         ///< whose visible boundary is returned as truth
   std::uint64_t seed = 1;
   SimulatorOptions() { echogenicity.fill(0.5f); }
 };
 
 struct SimulatedUltrasound {
-  geometry::ImageGeometry geometry;       ///< Cartesian, CT axes, voxel_mm
-  std::vector<std::uint8_t> bmode;        ///< 0..255, 0 outside the field of view
-  std::vector<std::uint8_t> in_view;      ///< 1 inside the field of view
+  geometry::ImageGeometry geometry;               ///< Cartesian, CT axes, voxel_mm
+  std::vector<std::uint8_t> bmode;                ///< 0..255, 0 outside the field of view
+  std::vector<std::uint8_t> in_view;              ///< 1 inside the field of view
   std::vector<Eigen::Vector3d> true_boundary_mm;  ///< visible organ boundary (CT mm)
 };
 
@@ -66,10 +66,12 @@ using TissueAt = std::function<TissueSample(const Eigen::Vector3d& p_mm)>;
 /// a continuous description keeps organ boundaries smooth, unlike a CT's 2.5 mm slices).
 /// Throws std::invalid_argument on a pose whose axes are not perpendicular, or bad
 /// sampling.
-SimulatedUltrasound simulate_bmode(const TissueAt& tissue_at, const ProbePose& probe, const SimulatorOptions& options);
+SimulatedUltrasound simulate_bmode(const TissueAt& tissue_at, const ProbePose& probe,
+                                   const SimulatorOptions& options);
 
 /// The same on labelled voxels (nearest voxel) with their HU (same grid).
-SimulatedUltrasound simulate_bmode(const geometry::LabelVolume& labels, const std::vector<float>& hu,
-                                   const ProbePose& probe, const SimulatorOptions& options);
+SimulatedUltrasound simulate_bmode(const geometry::LabelVolume& labels,
+                                   const std::vector<float>& hu, const ProbePose& probe,
+                                   const SimulatorOptions& options);
 
 }  // namespace organfit::ultrasound
