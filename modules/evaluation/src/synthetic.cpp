@@ -154,6 +154,21 @@ std::vector<fitting::AttractivePoint> sample_deformed_surface(const Shape& shape
   return points;
 }
 
+namespace {
+/// Compares a body on a grid (label 1) with a body given by its inside test, sampled at
+/// the same grid's voxel centres.
+geometry::SurfaceComparison compare_mask_with_body(
+    const geometry::LabelVolume& body, const std::function<bool(const Eigen::Vector3d&)>& inside) {
+  const geometry::ImageGeometry& g = body.geometry;
+  geometry::LabelVolume truth(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        truth.at(i, j, k) = inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  return geometry::compare_masks(body, truth);
+}
+}  // namespace
+
 geometry::SurfaceComparison compare_with_body(
     const Eigen::Matrix3Xd& particles, double radius_mm,
     const std::function<bool(const Eigen::Vector3d&)>& inside, const geometry::Aabb& body_bounds,
@@ -165,14 +180,8 @@ geometry::SurfaceComparison compare_with_body(
   }
   const geometry::ImageGeometry g =
       geometry::grid_covering(box, voxel_mm, 2 * radius_mm + 2 * voxel_mm);
-  const geometry::LabelVolume model =
-      geometry::closed_body_on_grid(particles, radius_mm, radius_mm, g);
-  geometry::LabelVolume truth(g);
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        truth.at(i, j, k) = inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
-  return geometry::compare_masks(model, truth);
+  return compare_mask_with_body(geometry::closed_body_on_grid(particles, radius_mm, radius_mm, g),
+                                inside);
 }
 
 geometry::SurfaceComparison compare_with_body(
@@ -183,17 +192,6 @@ geometry::SurfaceComparison compare_with_body(
   box.max_mm = box.max_mm.cwiseMax(body_bounds.max_mm);
   return compare_mask_with_body(organ.on_grid(geometry::grid_covering(box, voxel_mm, 2 * voxel_mm)),
                                 inside);
-}
-
-geometry::SurfaceComparison compare_mask_with_body(
-    const geometry::LabelVolume& body, const std::function<bool(const Eigen::Vector3d&)>& inside) {
-  const geometry::ImageGeometry& g = body.geometry;
-  geometry::LabelVolume truth(g);
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        truth.at(i, j, k) = inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
-  return geometry::compare_masks(body, truth);
 }
 
 }  // namespace organfit::evaluation

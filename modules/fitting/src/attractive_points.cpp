@@ -46,6 +46,20 @@ std::pair<int, double> nearest_particle(const particles::Positions& x,
   return best;
 }
 
+std::pair<int, double> nearest_surface_particle(const particles::Positions& x,
+                                                const std::vector<int>& candidates,
+                                                const Eigen::Vector3d& p_mm,
+                                                const std::vector<double>& depths_mm,
+                                                double radius_mm) {
+  std::pair<int, double> best{-1, std::numeric_limits<double>::infinity()};
+  for (int i : candidates) {
+    const double depth = depths_mm.empty() ? radius_mm : depths_mm[static_cast<size_t>(i)];
+    const double gap = (x.col(i) - p_mm).norm() - depth;
+    if (gap < best.second) best = {i, gap};
+  }
+  return best;
+}
+
 double default_outlier_distance(const particles::Positions& x) {
   return x.cols() > 0 ? 0.5 * (x.rowwise().maxCoeff() - x.rowwise().minCoeff()).norm() : 0.0;
 }

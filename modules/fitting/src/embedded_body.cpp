@@ -12,6 +12,14 @@
 namespace organfit::fitting {
 namespace {
 constexpr double kMaxExtentMm = 2000;  // larger than any organ: grids over it are not made
+
+/// Hash key of a cell of a uniform grid: 21 bits per axis, cells within +-2^20 of the
+/// grid's origin (the callers bound them).
+long long cell_key(const Eigen::Vector3i& c) {
+  return (static_cast<long long>(c.x() + (1 << 20)) << 42) |
+         (static_cast<long long>(c.y() + (1 << 20)) << 21) |
+         static_cast<long long>(c.z() + (1 << 20));
+}
 }  // namespace
 
 EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> reference, GlobalMap map,
@@ -38,15 +46,8 @@ EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> referenc
                             : Eigen::Vector3d::Zero();
   for (Eigen::Index i = 0; i < current_.cols(); ++i) {
     const Eigen::Vector3d c = ((current_.col(i) - lo_) / h_).array().floor();
-    cells_[key(static_cast<int>(c.x()), static_cast<int>(c.y()), static_cast<int>(c.z()))]
-        .push_back(static_cast<int>(i));
+    cells_[cell_key(c.cast<int>())].push_back(static_cast<int>(i));
   }
-}
-
-long long EmbeddedBody::key(int i, int j, int k) const {
-  // Cells are within a few hundred of the origin for any organ; 21 bits per axis.
-  return (static_cast<long long>(i + (1 << 20)) << 42) |
-         (static_cast<long long>(j + (1 << 20)) << 21) | static_cast<long long>(k + (1 << 20));
 }
 
 Eigen::Vector3d EmbeddedBody::unmove_locally(const Eigen::Vector3d& q, bool widen_if_needed) const {
@@ -54,8 +55,7 @@ Eigen::Vector3d EmbeddedBody::unmove_locally(const Eigen::Vector3d& q, bool wide
   if (!q.allFinite()) return nan;
   const Eigen::Vector3d c = ((q - lo_) / h_).array().floor();
   if ((c.array().abs() > 1e5).any()) return nan;  // far from every particle
-  const int ci = static_cast<int>(c.x()), cj = static_cast<int>(c.y()),
-            ck = static_cast<int>(c.z());
+  const Eigen::Vector3i cq = c.cast<int>();
   // Weighted least squares for u(x) = c0 + B (x - q) / h over the neighbours within h.
   // Where they spread too little in some direction to fix the gradient (a tip of the
   // body, where they may all lie in one lattice plane), h grows: the field is
@@ -70,7 +70,7 @@ Eigen::Vector3d EmbeddedBody::unmove_locally(const Eigen::Vector3d& q, bool wide
     for (int dk = -reach; dk <= reach; ++dk)
       for (int dj = -reach; dj <= reach; ++dj)
         for (int di = -reach; di <= reach; ++di) {
-          const auto it = cells_.find(key(ci + di, cj + dj, ck + dk));
+          const auto it = cells_.find(cell_key(cq + Eigen::Vector3i(di, dj, dk)));
           if (it == cells_.end()) continue;
           for (int p : it->second) {
             const Eigen::Vector3d d = current_.col(p) - q;
@@ -131,19 +131,8 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   geometry::LabelVolume out(grid);
   if (current_.cols() == 0) return out;
   const geometry::Aabb b = bounds();
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = Eigen::Vector3d::Constant(-1e300);
-  for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d corner((c & 1) ? b.max_mm.x() : b.min_mm.x(),
-                                 (c & 2) ? b.max_mm.y() : b.min_mm.y(),
-                                 (c & 4) ? b.max_mm.z() : b.min_mm.z());
-    const Eigen::Vector3d idx = grid.physical_to_index(corner);
-    lo = lo.cwiseMin(idx), hi = hi.cwiseMax(idx);
-  }
-  int i0[3], i1[3];
-  for (int d = 0; d < 3; ++d) {
-    i0[d] = static_cast<int>(std::max(0.0, std::floor(lo[d])));
-    i1[d] = static_cast<int>(std::min(static_cast<double>(grid.size[d] - 1), std::ceil(hi[d])));
-  }
+  const geometry::IndexRange r = geometry::index_range(grid, b);
+  if (r.empty()) return out;
   // The local displacement is smooth at the scale of the support: it is evaluated on a
   // lattice of a quarter of the support and interpolated trilinearly in between (an
   // error of ~ spacing^2 / 8 times its curvature: hundredths of a mm), directly where a
@@ -152,8 +141,8 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   // The lattice covers the evaluated voxels (the grid's part within bounds()) only.
   Eigen::Vector3d v_lo = Eigen::Vector3d::Constant(1e300), v_hi = Eigen::Vector3d::Constant(-1e300);
   for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d corner = grid.index_to_physical(
-        Eigen::Vector3d((c & 1) ? i1[0] : i0[0], (c & 2) ? i1[1] : i0[1], (c & 4) ? i1[2] : i0[2]));
+    const Eigen::Vector3d corner = grid.index_to_physical(Eigen::Vector3d(
+        (c & 1) ? r.hi[0] : r.lo[0], (c & 2) ? r.hi[1] : r.lo[1], (c & 4) ? r.hi[2] : r.lo[2]));
     v_lo = v_lo.cwiseMin(corner), v_hi = v_hi.cwiseMax(corner);
   }
   const Eigen::Vector3d l0 = v_lo.cwiseMax(b.min_mm).array() - lattice;
@@ -162,20 +151,21 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   for (int d = 0; d < 3; ++d)
     nl[d] = std::max(2, static_cast<int>(std::ceil((l1[d] - l0[d]) / lattice)) + 2);
   const long long nodes = 1LL * nl[0] * nl[1] * nl[2];
-  std::vector<Eigen::Vector3d> q0(static_cast<size_t>(nodes));
+  std::vector<Eigen::Vector3d> u(static_cast<size_t>(nodes));  // q0 - q at each node
 #pragma omp parallel for schedule(dynamic, 16)
   for (long long v = 0; v < nodes; ++v) {
     const int i = static_cast<int>(v % nl[0]), j = static_cast<int>((v / nl[0]) % nl[1]),
               k = static_cast<int>(v / (1LL * nl[0] * nl[1]));
-    q0[static_cast<size_t>(v)] = unmove_locally(l0 + lattice * Eigen::Vector3d(i, j, k));
+    const Eigen::Vector3d q = l0 + lattice * Eigen::Vector3d(i, j, k);
+    u[static_cast<size_t>(v)] = unmove_locally(q) - q;
   }
   auto node = [&](int i, int j, int k) -> const Eigen::Vector3d& {
-    return q0[static_cast<size_t>(i + 1LL * nl[0] * (j + 1LL * nl[1] * k))];
+    return u[static_cast<size_t>(i + 1LL * nl[0] * (j + 1LL * nl[1] * k))];
   };
 #pragma omp parallel for schedule(dynamic, 1) collapse(2)
-  for (int k = i0[2]; k <= i1[2]; ++k)
-    for (int j = i0[1]; j <= i1[1]; ++j)
-      for (int i = i0[0]; i <= i1[0]; ++i) {
+  for (int k = r.lo[2]; k <= r.hi[2]; ++k)
+    for (int j = r.lo[1]; j <= r.hi[1]; ++j)
+      for (int i = r.lo[0]; i <= r.hi[0]; ++i) {
         const Eigen::Vector3d q = grid.index_to_physical(Eigen::Vector3d(i, j, k));
         const Eigen::Vector3d t = (q - l0) / lattice;
         const Eigen::Vector3d base = t.array().floor();
@@ -188,11 +178,9 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
           Eigen::Vector3d sum = Eigen::Vector3d::Zero();
           for (int corner = 0; corner < 8; ++corner) {
             const int di = corner & 1, dj = (corner >> 1) & 1, dk = (corner >> 2) & 1;
-            const Eigen::Vector3d& n = node(a + di, bb + dj, c + dk);
             const double w =
                 (di ? f.x() : 1 - f.x()) * (dj ? f.y() : 1 - f.y()) * (dk ? f.z() : 1 - f.z());
-            // The displacement (node value minus node position) is what is interpolated.
-            sum += w * (n - (l0 + lattice * Eigen::Vector3d(a + di, bb + dj, c + dk)));
+            sum += w * node(a + di, bb + dj, c + dk);
           }
           local = q + sum;  // NaN when a corner had no particle near
         }
@@ -221,14 +209,9 @@ std::vector<double> surface_depths(const particles::Positions& x, const Eigen::M
     const Eigen::Vector3d c = ((p - lo) / reach).array().floor();
     return c.cwiseMax(-1e6).cwiseMin(1e6).cast<int>();
   };
-  auto key = [](const Eigen::Vector3i& c) {
-    return (static_cast<long long>(c.x() + (1 << 20)) << 42) |
-           (static_cast<long long>(c.y() + (1 << 20)) << 21) |
-           static_cast<long long>(c.z() + (1 << 20));
-  };
   std::unordered_map<long long, std::vector<int>> cells;
   for (Eigen::Index j = 0; j < surface.cols(); ++j)
-    cells[key(cell_of(surface.col(j)))].push_back(static_cast<int>(j));
+    cells[cell_key(cell_of(surface.col(j)))].push_back(static_cast<int>(j));
 #pragma omp parallel for schedule(static)
   for (Eigen::Index i = 0; i < x.cols(); ++i) {
     const Eigen::Vector3i c = cell_of(x.col(i));
@@ -236,7 +219,7 @@ std::vector<double> surface_depths(const particles::Positions& x, const Eigen::M
     for (int dz = -1; dz <= 1; ++dz)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {
-          const auto it = cells.find(key(c + Eigen::Vector3i(dx, dy, dz)));
+          const auto it = cells.find(cell_key(c + Eigen::Vector3i(dx, dy, dz)));
           if (it == cells.end()) continue;
           for (int j : it->second)
             best2 = std::min(best2, (surface.col(j) - x.col(i)).squaredNorm());

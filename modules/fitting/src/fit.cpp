@@ -23,11 +23,9 @@ std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
       if (std::isfinite(d2)) out[k] = std::abs(std::sqrt(d2) - radius_mm);
       continue;
     }
-    double best = std::numeric_limits<double>::infinity();
-    for (int i : skin)
-      best =
-          std::min(best, (x.col(i) - points[k].p_mm).norm() - (*depths_mm)[static_cast<size_t>(i)]);
-    if (std::isfinite(best)) out[k] = std::abs(best);
+    const double gap =
+        nearest_surface_particle(x, skin, points[k].p_mm, *depths_mm, radius_mm).second;
+    if (std::isfinite(gap)) out[k] = std::abs(gap);
   }
   return out;
 }

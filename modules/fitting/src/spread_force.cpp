@@ -46,11 +46,7 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
     st = PointStatus{};
     patch_[k].clear();
     // Epicentre: the skin particle whose surface (its depth away) is nearest the point.
-    double best = std::numeric_limits<double>::infinity();
-    for (int i : skin) {
-      const double gap = (x.col(i) - points_[k].p_mm).norm() - depth(i);
-      if (gap < best) best = gap, st.epicentre = i;
-    }
+    st.epicentre = nearest_surface_particle(x, skin, points_[k].p_mm, depth_, rho_).first;
     if (st.epicentre < 0) continue;
     st.d_min_mm = (x.col(st.epicentre) - points_[k].p_mm).norm();
     st.inside_model = skin_.inside(points_[k].p_mm);

@@ -21,6 +21,26 @@ TEST(ImageGeometry, IndexPhysicalRoundTripWithRotatedDirection) {
   EXPECT_LT((step.normalized() - g.direction.col(2)).norm(), 1e-12);
 }
 
+TEST(ImageGeometry, IndexRangeOfABoxIsClampedPaddedAndEmptyOffTheGrid) {
+  ImageGeometry g;
+  g.size = {20, 10, 8};
+  g.spacing_mm = Eigen::Vector3d(1.0, 2.0, 2.5);
+  g.origin_mm = Eigen::Vector3d(-10, 0, 5);
+  // x 2.5..5.2 mm -> index 12.5..15.2; y 3..7 -> 1.5..3.5; z 5..10 -> 0..2.
+  const IndexRange r = index_range(g, {{2.5, 3, 5}, {5.2, 7, 10}});
+  EXPECT_EQ(r.lo, (std::array<int, 3>{12, 1, 0}));
+  EXPECT_EQ(r.hi, (std::array<int, 3>{16, 4, 2}));
+  const IndexRange padded = index_range(g, {{2.5, 3, 5}, {5.2, 7, 10}}, 1);
+  EXPECT_EQ(padded.lo, (std::array<int, 3>{11, 0, 0}));
+  EXPECT_EQ(padded.hi, (std::array<int, 3>{17, 5, 3}));
+  EXPECT_FALSE(r.empty());
+  EXPECT_TRUE(index_range(g, {{1e9, 3, 5}, {2e9, 7, 10}}).empty());
+  EXPECT_TRUE(index_range(g, {{-1e300, 3, 5}, {-1e299, 7, 10}}).empty());
+  const IndexRange all = index_range(g, {{-1e300, -1e300, -1e300}, {1e300, 1e300, 1e300}});
+  EXPECT_EQ(all.lo, (std::array<int, 3>{0, 0, 0}));
+  EXPECT_EQ(all.hi, (std::array<int, 3>{19, 9, 7}));
+}
+
 TEST(LabelVolume, CountsVolumeAndPhysicalLookup) {
   ImageGeometry g;
   g.size = {4, 4, 4};

@@ -16,22 +16,10 @@ namespace {
 geometry::LabelVolume shape_on_grid(const evaluation::Shape& shape,
                                     const geometry::ImageGeometry& g) {
   geometry::LabelVolume mask(g);
-  const geometry::Aabb box = shape.bounds();
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
-  for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d corner((c & 1) ? box.max_mm.x() : box.min_mm.x(),
-                                 (c & 2) ? box.max_mm.y() : box.min_mm.y(),
-                                 (c & 4) ? box.max_mm.z() : box.min_mm.z());
-    const Eigen::Vector3d idx = g.physical_to_index(corner);
-    lo = lo.cwiseMin(idx), hi = hi.cwiseMax(idx);
-  }
-  int a[3], b[3];
-  for (int d = 0; d < 3; ++d)
-    a[d] = std::max(0, static_cast<int>(std::floor(lo[d])) - 1),
-    b[d] = std::min(g.size[d] - 1, static_cast<int>(std::ceil(hi[d])) + 1);
-  for (int k = a[2]; k <= b[2]; ++k)
-    for (int j = a[1]; j <= b[1]; ++j)
-      for (int i = a[0]; i <= b[0]; ++i)
+  const geometry::IndexRange r = geometry::index_range(g, shape.bounds(), 1);
+  for (int k = r.lo[2]; k <= r.hi[2]; ++k)
+    for (int j = r.lo[1]; j <= r.hi[1]; ++j)
+      for (int i = r.lo[0]; i <= r.hi[0]; ++i)
         mask.at(i, j, k) = shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
   return mask;
 }

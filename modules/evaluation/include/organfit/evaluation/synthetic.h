@@ -98,14 +98,10 @@ geometry::SurfaceComparison compare_with_body(
     double voxel_mm);
 
 /// Compares the organ a model carries (fitting/embedded_body.h) with a body given by its
-/// inside test, on a grid of `voxel_mm` covering both.
+/// inside test, on a grid of `voxel_mm` covering both with a margin of 2 voxels
+/// (volume_a_mm3: the organ's volume on that grid).
 geometry::SurfaceComparison compare_with_body(
     const fitting::EmbeddedBody& organ, const std::function<bool(const Eigen::Vector3d&)>& inside,
     const geometry::Aabb& body_bounds, double voxel_mm);
-
-/// Compares a body already on a grid (label 1) with a body given by its inside test,
-/// sampled at the same grid's voxel centres.
-geometry::SurfaceComparison compare_mask_with_body(
-    const geometry::LabelVolume& body, const std::function<bool(const Eigen::Vector3d&)>& inside);
 
 }  // namespace organfit::evaluation

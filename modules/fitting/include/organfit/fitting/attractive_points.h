@@ -30,6 +30,16 @@ std::pair<int, double> nearest_particle(const particles::Positions& x,
                                         const std::vector<int>& candidates,
                                         const Eigen::Vector3d& p_mm);
 
+/// The particle among `candidates` whose surface lies nearest `p_mm`: the least
+/// |p - x_i| - depth_i (mm, signed), with depth_i = depths_mm[i], or `radius_mm` for every
+/// particle when depths_mm is empty (the balls' surface). Ties go to the first.
+/// {-1, infinity} when there are no candidates.
+std::pair<int, double> nearest_surface_particle(const particles::Positions& x,
+                                                const std::vector<int>& candidates,
+                                                const Eigen::Vector3d& p_mm,
+                                                const std::vector<double>& depths_mm,
+                                                double radius_mm);
+
 /// Points farther than this from the skin are outliers unless a distance is given:
 /// half the model's diameter (mm).
 double default_outlier_distance(const particles::Positions& x);

@@ -60,7 +60,6 @@ class EmbeddedBody {
   double h_;
   Eigen::Vector3d lo_;  // hash grid origin (mm), cells of size h_
   std::unordered_map<long long, std::vector<int>> cells_;
-  long long key(int i, int j, int k) const;
   /// Step 1: q + u(q) (NaN when no particle is within the support of q); the support
   /// widens where the neighbours spread too little, unless told not to.
   Eigen::Vector3d unmove_locally(const Eigen::Vector3d& q_mm, bool widen_if_needed = true) const;

@@ -41,6 +41,17 @@ struct ImageGeometry {
   Aabb bounds_mm() const;
 };
 
+/// A box of voxel indices, inclusive per axis; empty when lo > hi on some axis.
+struct IndexRange {
+  std::array<int, 3> lo{0, 0, 0}, hi{-1, -1, -1};
+  bool empty() const { return lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]; }
+};
+
+/// The voxels of `grid` whose centres may lie in the physical `box` (any direction
+/// matrix): the index bounding box of its 8 corners (floor, ceil), widened by `pad`
+/// voxels and clamped to the grid.
+IndexRange index_range(const ImageGeometry& grid, const Aabb& box, int pad = 0);
+
 /// A binary or multi-label mask on an image grid (0 = background).
 struct LabelVolume {
   ImageGeometry geometry;
