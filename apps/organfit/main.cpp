@@ -241,6 +241,11 @@ int run_main(int argc, char** argv) {
       ->add_option("--sample", fb.sample,
                    "Run N cases, a seeded uniform sample of the grid (0: all)")
       ->check(CLI::Range(0LL, 1000000LL));
+  bench_fit
+      ->add_option(
+          "--methods", fb.methods,
+          "Only these methods, comma-separated: spread, paper, tps, cpd, icp (default: all)")
+      ->delimiter(',');
 
   organfit::pipeline::StabilityBenchOptions stb;
   auto* bench_stability = bench->add_subcommand(

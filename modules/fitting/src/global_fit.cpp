@@ -111,7 +111,7 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
     p.col(k) = points[k].p_mm;
   const Eigen::Vector3d sc = surface.points.rowwise().mean();
   const double spread2 = (surface.points.colwise() - sc).squaredNorm() / surface.points.cols();
-  const double lambda = o.regularisation * spread2 * m;
+  const double lambda_final = o.regularisation * spread2 * m;
 
   std::vector<int> match(m);
   std::vector<double> r(m), w(m);
@@ -126,7 +126,14 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
   };
   fit.rms_before_mm = correspond(fit.a, fit.t);
   double previous = fit.rms_before_mm;
-  for (int it = 0; it < o.iterations; ++it) {
+  // Stiffness annealing (as in non-rigid ICP, Amberg et al. 2007): the pull towards the
+  // identity starts 1000x the stated one, where the fit is nearly a translation, and is
+  // relaxed tenfold each time the fit settles. Closest-point matches made from the
+  // identity are poor for a large change of shape; a stiff first fit gets them close.
+  int level = 0, in_level = 0;
+  const int levels = 4;
+  for (int it = 0; it < levels * o.iterations; ++it, ++in_level) {
+    const double lambda = lambda_final * std::pow(10.0, 3 - level);
     // Unknowns theta = [a row 0, a row 1, a row 2, t] (12). Point-to-plane rows
     // n^T (a s + t) = n^T p with n the matched normal mapped by a^-T; point-to-point rows
     // (a s + t)_r = p_r with weight mu; a pull lambda |a - I|^2.
@@ -177,8 +184,12 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
     fit.t = t;
     fit.iterations = it + 1;
     fit.rms_after_mm = rms;
-    if (it >= 10 && std::abs(previous - rms) < 1e-5 * (1 + previous)) break;
+    const bool settled = std::abs(previous - rms) < 1e-5 * (1 + previous);
     previous = rms;
+    if (settled || in_level + 1 >= o.iterations) {
+      if (level == levels - 1) break;
+      ++level, in_level = -1;
+    }
   }
   if (fit.iterations == 0) fit.rms_after_mm = fit.rms_before_mm;
   return fit;
@@ -204,20 +215,40 @@ Eigen::Vector3d GlobalMap::inverse(const Eigen::Vector3d& q) const {
   return affine.a.inverse() * (shears.inverse(q) - affine.t);
 }
 
-GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
-                         const AffineFitOptions& o) {
-  GlobalMap map;
-  map.affine = fit_volume_preserving_affine(surface, points, o);  // the starting point
-  map.rms_after_mm = map.affine.rms_after_mm;
+namespace {
+
+/// Principal stretches within [1 / max_stretch, max_stretch].
+bool within_stretch(const Eigen::Matrix3d& a, const AffineFitOptions& o) {
+  const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(a).singularValues();
+  return sv[0] <= o.max_stretch && sv[2] >= 1.0 / o.max_stretch;
+}
+
+/// Stretches within bounds, and shears moving no surface sample by more than
+/// max_shear_mm x the body's size.
+bool plausible(const GlobalMap& map, const SurfaceSamples& surface, const AffineFitOptions& o) {
+  const double size =
+      (surface.points.rowwise().maxCoeff() - surface.points.rowwise().minCoeff()).norm();
+  double shear_move = 0;
+  for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
+    const Eigen::Vector3d q = map.affine.a * surface.points.col(j) + map.affine.t;
+    shear_move = std::max(shear_move, (map.shears.apply(q) - q).norm());
+  }
+  return within_stretch(map.affine.a, o) && shear_move <= o.max_shear_mm * size;
+}
+
+/// Gauss-Newton on the whole map (affine with det 1, then shears) from `map`, with the
+/// stiffness annealed from 1000x the stated one when `anneal`.
+GlobalMap refine_global_map(GlobalMap map, const SurfaceSamples& surface,
+                            const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
+                            bool anneal) {
   const int m = static_cast<int>(points.size());
-  if (m < 21 || surface.points.cols() == 0) return map;  // 21 unknowns below
-  map.shears.centre = ((map.affine.a * surface.points).colwise() + map.affine.t).rowwise().mean();
   Eigen::Matrix3Xd p(3, m);
   for (int k = 0; k < m; ++k)
     p.col(k) = points[k].p_mm;
   const double extent2 = (p.colwise() - map.shears.centre).colwise().squaredNorm().mean();
-  const double lambda_a = o.regularisation * m * extent2;
-  const double lambda_c = o.shear_regularisation * m * extent2 * extent2;  // coefficients are 1/mm
+  const double lambda_a_final = o.regularisation * m * extent2;
+  const double lambda_c_final =
+      o.shear_regularisation * m * extent2 * extent2;  // coefficients are 1/mm
   const Eigen::Vector3d centroid = surface.points.rowwise().mean();
 
   std::vector<int> match(m);
@@ -230,7 +261,11 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     b(2, 6) = u.x() * u.x(), b(2, 7) = u.y() * u.y(), b(2, 8) = u.x() * u.y();
     return b;
   };
-  for (int it = 0; it < o.iterations; ++it) {
+  int level = 0, in_level = 0;
+  const int levels = anneal ? 4 : 1;
+  for (int it = 0; it < levels * o.iterations; ++it, ++in_level) {
+    const double stiff = std::pow(10.0, levels - 1 - level);
+    const double lambda_a = lambda_a_final * stiff, lambda_c = lambda_c_final * stiff;
     const Eigen::Matrix3Xd affine_img = (map.affine.a * surface.points).colwise() + map.affine.t;
     Eigen::Matrix3Xd moved(3, affine_img.cols());
     for (Eigen::Index j = 0; j < affine_img.cols(); ++j)
@@ -241,11 +276,12 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
       match[k] = static_cast<int>(j);
     }
     const double rms = robust_weights(r, points, o.outlier_mads, w);
-    if (it > 0 && std::abs(map.rms_after_mm - rms) < 1e-5 * (1 + rms)) {
-      map.rms_after_mm = rms;
-      break;
-    }
+    const bool settled = it > 0 && std::abs(map.rms_after_mm - rms) < 1e-5 * (1 + rms);
     map.rms_after_mm = rms;
+    if (settled || in_level >= o.iterations) {
+      if (level == levels - 1) break;
+      ++level, in_level = 0;
+    }
     // Linearised image of sample s: a s + t + B(u) c, u = the current affine image - centre.
     const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
     Eigen::Matrix<double, 21, 21> nrm = Eigen::Matrix<double, 21, 21>::Zero();
@@ -290,24 +326,51 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     map.shears.c = theta.segment<9>(12);
   }
   map.affine.rms_after_mm = map.rms_after_mm;
-  // Plausibility: bounded stretches and shear displacements, else the identity.
-  const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(map.affine.a).singularValues();
-  const double size =
-      (surface.points.rowwise().maxCoeff() - surface.points.rowwise().minCoeff()).norm();
-  double shear_move = 0;
-  for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
-    const Eigen::Vector3d q = map.affine.a * surface.points.col(j) + map.affine.t;
-    shear_move = std::max(shear_move, (map.shears.apply(q) - q).norm());
-  }
-  if (!(sv[0] <= o.max_stretch) || !(sv[2] >= 1.0 / o.max_stretch) ||
-      !(shear_move <= o.max_shear_mm * size)) {
+  return map;
+}
+
+}  // namespace
+
+GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
+                         const AffineFitOptions& o) {
+  GlobalMap affine_only;
+  affine_only.affine = fit_volume_preserving_affine(surface, points, o);
+  affine_only.rms_after_mm = affine_only.affine.rms_after_mm;
+  // No plausible map: the identity, marked refused.
+  auto refused = [rms = affine_only.affine.rms_before_mm] {
     GlobalMap identity;
     identity.refused = true;
-    identity.rms_after_mm = identity.affine.rms_after_mm = map.affine.rms_before_mm;
-    identity.affine.rms_before_mm = map.affine.rms_before_mm;
+    identity.rms_after_mm = identity.affine.rms_after_mm = identity.affine.rms_before_mm = rms;
     return identity;
+  };
+  if (points.size() < 21 || surface.points.cols() == 0)  // 21 unknowns in the whole map
+    return plausible(affine_only, surface, o) ? affine_only : refused();
+  // Two starts, the better fit of the points kept: from the affine fit, and from its
+  // translation alone with the stiffness annealed. From the affine fit alone, a bend
+  // seen from one side can be taken for a stretch and the shears stay in that minimum;
+  // from the translation, a large stretch can be missed.
+  GlobalMap from_affine = affine_only;
+  from_affine.shears.centre =
+      ((affine_only.affine.a * surface.points).colwise() + affine_only.affine.t).rowwise().mean();
+  GlobalMap from_translation = from_affine;
+  const Eigen::Vector3d centroid = surface.points.rowwise().mean();
+  from_translation.affine.t += affine_only.affine.a * centroid - centroid;
+  from_translation.affine.a.setIdentity();
+  const GlobalMap fits[2] = {refine_global_map(from_affine, surface, points, o, false),
+                             refine_global_map(from_translation, surface, points, o, true)};
+  const int best = fits[1].rms_after_mm < fits[0].rms_after_mm ? 1 : 0;
+  // The better fit asks for a stretch beyond the limit: refused, whatever a worse fit
+  // within it would say.
+  if (!within_stretch(fits[best].affine.a, o)) return refused();
+  if (plausible(fits[best], surface, o)) return fits[best];
+  // Its shears swing out of range (a bulge seen from one side can do that): the other
+  // start if it fits plausibly, else the affine part alone, the next simplest explanation.
+  if (plausible(fits[1 - best], surface, o)) return fits[1 - best];
+  if (plausible(affine_only, surface, o)) {
+    affine_only.shears_dropped = true;
+    return affine_only;
   }
-  return map;
+  return refused();
 }
 
 particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, int count,

@@ -23,8 +23,17 @@ SpreadAttractiveForce::SpreadAttractiveForce(std::vector<AttractivePoint> points
     throw std::invalid_argument("spread force: stiffness must be > 0");
   if (!(params.patch_sigma_r0 > 0) || !(params.patch_radius_r0 > 0))
     throw std::invalid_argument("spread force: patch sizes must be > 0");
+  if (!(params.consistency_threshold >= 0) || params.consistency_neighbours < 0 ||
+      !(params.consistency_noise_mm >= 0))
+    throw std::invalid_argument("spread force: consistency test settings must be >= 0");
   status_.resize(points_.size());
   patch_.resize(points_.size());
+  if (params.consistency_threshold > 0) {
+    std::vector<Eigen::Vector3d> p;
+    for (const auto& a : points_)
+      p.push_back(a.p_mm);
+    neighbours_ = k_nearest(p, params.consistency_neighbours);
+  }
 }
 
 void SpreadAttractiveForce::set_surface_depths(std::vector<double> depth_mm) {
@@ -77,6 +86,24 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
         patch_[k].clear();
       }
     }
+  }
+  // A lone jump among neighbours: signed residuals (inside the model: negative).
+  if (!neighbours_.empty()) {
+    std::vector<double> residual(points_.size(), 0.0);
+    std::vector<char> use(points_.size(), 0);
+    for (size_t k = 0; k < status_.size(); ++k) {
+      const PointStatus& st = status_[k];
+      if (st.rejected || st.epicentre < 0) continue;
+      const double r = st.d_min_mm - depth(st.epicentre);
+      residual[k] = st.inside_model ? -std::abs(r) : r;
+      use[k] = 1;
+    }
+    const double epsilon =
+        params_.consistency_noise_mm > 0 ? params_.consistency_noise_mm : 0.5 * rho_;
+    const std::vector<char> lone =
+        normalised_median_test(residual, neighbours_, use, params_.consistency_threshold, epsilon);
+    for (size_t k = 0; k < status_.size(); ++k)
+      if (lone[k]) status_[k].rejected = true, patch_[k].clear();
   }
 }
 

@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+
+#include "organfit/fitting/spread_force.h"
 #include "organfit/particles/lattice_fill.h"
 
 namespace organfit::fitting {
@@ -18,6 +22,11 @@ class PaperForceTest : public ::testing::Test {
     a_ = particles::fcc_equilibrium_spacing(*law_);
     state_ = State(particles::fill_ellipsoid({30, 20, 20}, {0, 0, 0}, a_));
     force_params_.total_force_factor = 1000;  // no cap unless a test asks for it
+  }
+  Forces forces_of_spread(SpreadAttractiveForce& term) {
+    Forces f = Forces::Zero(3, state_.size());
+    term.add_forces(state_, f, false);
+    return f;
   }
   Forces forces_of(PaperAttractiveForce& term) {
     Forces f = Forces::Zero(3, state_.size());
@@ -134,6 +143,58 @@ TEST_F(PaperForceTest, FarOutlierIsRejectedAndExertsNoForce) {
   EXPECT_FALSE(term.status()[1].rejected);
   EXPECT_GT(f.norm(), 0.0);
   EXPECT_LT(f.colwise().norm().maxCoeff(), 1.0001 * term.status()[1].f_max_k);
+}
+
+// Points on the +y half of the body's ellipsoid, the `moved` of them nearest `spot`
+// pushed `off_mm` outwards along the normal (their indices in `which`).
+std::vector<AttractivePoint> half_ellipsoid_points(const Eigen::Vector3d& spot, int moved,
+                                                   double off_mm, std::vector<char>& which) {
+  std::vector<AttractivePoint> pts;
+  std::vector<Eigen::Vector3d> normals;
+  const Eigen::Vector3d semi(15, 10, 10);
+  for (int i = 0; i < 12; ++i)
+    for (int j = 1; j <= 6; ++j) {
+      const double phi = M_PI * i / 11.0, theta = M_PI * j / 7.0;  // y >= 0 half
+      const Eigen::Vector3d u(std::cos(phi) * std::sin(theta), std::sin(phi) * std::sin(theta),
+                              std::cos(theta));
+      const Eigen::Vector3d p = semi.cwiseProduct(u);
+      pts.push_back({p, 1.0});
+      normals.push_back(p.cwiseQuotient(semi.cwiseProduct(semi)).normalized());
+    }
+  std::vector<int> order(pts.size());
+  for (size_t k = 0; k < order.size(); ++k)
+    order[k] = static_cast<int>(k);
+  std::sort(order.begin(), order.end(), [&](int l, int r) {
+    return (pts[l].p_mm - spot).norm() < (pts[r].p_mm - spot).norm();
+  });
+  which.assign(pts.size(), 0);
+  for (int q = 0; q < moved; ++q)
+    pts[order[q]].p_mm += off_mm * normals[order[q]], which[order[q]] = 1;
+  return pts;
+}
+
+// The spread force's neighbour test: a lone point 3.5 mm off the surface (within the
+// 2 r0 that the global rule lets pass) is rejected; a dent of the same depth shown by
+// a group of neighbouring points is data.
+TEST_F(PaperForceTest, SpreadForceRejectsALoneJumpButNotACoherentDent) {
+  const Eigen::Vector3d spot(0, 10, 0);
+  std::vector<char> lone_moved, dent_moved;
+  const auto lone = half_ellipsoid_points(spot, 1, 3.5, lone_moved);
+  const auto dent = half_ellipsoid_points(spot, 7, 3.5, dent_moved);
+  for (const auto* pts : {&lone, &dent}) {
+    SpreadAttractiveForce term(*pts, *law_, rho(), SpreadForceParams{}, rho());
+    forces_of_spread(term);
+    for (size_t k = 0; k < pts->size(); ++k)
+      EXPECT_EQ(term.status()[k].rejected, pts == &lone && lone_moved[k])
+          << (pts == &lone ? "lone" : "dent") << " point " << k;
+    // Without the test nothing is rejected.
+    SpreadForceParams off;
+    off.consistency_threshold = 0;
+    SpreadAttractiveForce plain(*pts, *law_, rho(), off, rho());
+    forces_of_spread(plain);
+    for (const auto& st : plain.status())
+      EXPECT_FALSE(st.rejected);
+  }
 }
 
 TEST(PaperForce, BadPointsAndParametersAreRefused) {

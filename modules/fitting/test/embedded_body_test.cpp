@@ -84,7 +84,7 @@ TEST(EmbeddedBody, FollowsAnAffineMotionOfTheParticlesExactly) {
   const EmbeddedBody body(mask, GlobalMap{}, x0, x1, embedding_support_mm(kSpacing));
   // Pulled back through the moving-least-squares field: exact for affine motion, also
   // beyond the outermost particles (on and just outside the surface).
-  for (const Eigen::Vector3d r :
+  for (const Eigen::Vector3d& r :
        {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(19.5, 0, 0), Eigen::Vector3d(0, -14.2, 0),
         Eigen::Vector3d(8, 7, -8), Eigen::Vector3d(-12, 3, 8.5)}) {
     const Eigen::Vector3d q = a * r + t;
@@ -104,7 +104,7 @@ TEST(EmbeddedBody, AppliesTheGlobalMapsInverse) {
   for (Eigen::Index i = 0; i < x0.cols(); ++i)
     placed.col(i) = map.apply(x0.col(i));
   const EmbeddedBody body(mask, map, placed, placed, embedding_support_mm(kSpacing));
-  for (const Eigen::Vector3d r :
+  for (const Eigen::Vector3d& r :
        {Eigen::Vector3d(15, 2, 1), Eigen::Vector3d(-19.5, 0, 0), Eigen::Vector3d(0, 13.8, 0)})
     EXPECT_LT((body.pull_back(map.apply(r)) - r).norm(), 1e-9);
   // Volume-preserving map: the same volume.

@@ -7,6 +7,7 @@
 #include <random>
 
 #include "organfit/fitting/skin.h"
+#include "organfit/geometry/mask_ops.h"
 #include "organfit/particles/lattice_fill.h"
 
 namespace organfit::fitting {
@@ -49,6 +50,102 @@ TEST(GlobalFit, RecoversAVolumePreservingStretchFromSurfacePoints) {
   EXPECT_NEAR(sv[0], 1.2, 0.03) << sv.transpose();
   EXPECT_NEAR(sv[1], 1 / std::sqrt(1.2), 0.03) << sv.transpose();
   EXPECT_NEAR(sv[2], 1 / std::sqrt(1.2), 0.03) << sv.transpose();
+}
+
+/// Points on the ellipsoid's +y half (what a probe sees; all of it unless `half`) moved
+/// by `truth`.
+template <class Map>
+std::vector<AttractivePoint> half_surface_points(const Map& truth, int count, unsigned seed,
+                                                 bool half = true) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> g;
+  std::vector<AttractivePoint> pts;
+  const Eigen::Vector3d semi(25, 20, 17);
+  while (static_cast<int>(pts.size()) < count) {
+    const Eigen::Vector3d d = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
+    if (half && d.y() < 0) continue;
+    pts.push_back({truth(semi.cwiseProduct(d)), 1.0});
+  }
+  return pts;
+}
+
+/// Mean distance from the body's surface samples moved by `map` to the ellipsoid's
+/// surface moved by `truth` (a dense sample of it), mm.
+template <class Map>
+double mean_surface_error(const GlobalMap& map, const Map& truth, const SurfaceSamples& s) {
+  const std::vector<AttractivePoint> dense = half_surface_points(truth, 20000, 9, false);
+  Eigen::Matrix3Xd d(3, static_cast<Eigen::Index>(dense.size()));
+  for (size_t k = 0; k < dense.size(); ++k)
+    d.col(static_cast<Eigen::Index>(k)) = dense[k].p_mm;
+  double sum = 0;
+  for (Eigen::Index j = 0; j < s.points.cols(); ++j)
+    sum += std::sqrt((d.colwise() - map.apply(s.points.col(j))).colwise().squaredNorm().minCoeff());
+  return sum / static_cast<double>(s.points.cols());
+}
+
+// A bend seen from one side (exact points on the +y half): the whole map follows it
+// with its shears, and the surface comes more than halfway to the truth.
+TEST(GlobalFit, RecoversABendFromPointsOnOneSide) {
+  // The ellipsoid as a mask of 0.75 mm voxels, its surface as the fit stage samples it.
+  const Eigen::Vector3d semi(25, 20, 17);
+  const geometry::ImageGeometry g = geometry::grid_covering({-semi, semi}, 0.75, 3.0);
+  geometry::LabelVolume mask(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        mask.at(i, j, k) =
+            g.index_to_physical(Eigen::Vector3d(i, j, k)).cwiseQuotient(semi).squaredNorm() <= 1;
+  const SurfaceSamples samples = reference_surface(mask, 2);
+  const auto bend = [](const Eigen::Vector3d& p) {  // ends moved 12 mm along +y
+    return Eigen::Vector3d(p.x(), p.y() + 12.0 * (p.x() / 25.0) * (p.x() / 25.0), p.z());
+  };
+  const GlobalMap map = fit_global_map(samples, half_surface_points(bend, 87, 5), {});
+  EXPECT_FALSE(map.refused);
+  EXPECT_FALSE(map.shears_dropped);
+  GlobalMap none;
+  const double before = mean_surface_error(none, bend, samples);
+  const double after = mean_surface_error(map, bend, samples);
+  EXPECT_GT(before, 1.4);          // what there is to recover
+  EXPECT_LT(after, 0.5 * before);  // 0.56 of 1.42 mm: the unseen side is under-determined
+}
+
+// Shears beyond max_shear_mm fall back to the affine part alone, not to nothing.
+TEST(GlobalFit, ImplausibleShearsFallBackToTheAffinePart) {
+  const Body b = ellipsoid_body();
+  SkinDetector skin(b.rho, b.rho);
+  skin.update(b.x);
+  const SurfaceSamples samples = surface_samples(b.x, skin.skin(), b.rho);
+  const auto moved = [](const Eigen::Vector3d& p) {  // a stretch and a bend
+    return Eigen::Vector3d(1.2 * p.x(),
+                           p.y() / std::sqrt(1.2) + 10.0 * (p.x() / 25.0) * (p.x() / 25.0),
+                           p.z() / std::sqrt(1.2));
+  };
+  AffineFitOptions o;
+  o.max_shear_mm = 1e-3;
+  const GlobalMap map = fit_global_map(samples, half_surface_points(moved, 120, 4, false), o);
+  EXPECT_FALSE(map.refused);
+  EXPECT_TRUE(map.shears_dropped);
+  EXPECT_TRUE(map.shears.c.isZero(0));
+  EXPECT_NEAR(Eigen::JacobiSVD<Eigen::Matrix3d>(map.affine.a).singularValues()[0], 1.2, 0.08);
+}
+
+// A stretch far beyond max_stretch is refused: the identity, marked so.
+TEST(GlobalFit, RefusesAStretchBeyondTheLimit) {
+  const Body b = ellipsoid_body();
+  SkinDetector skin(b.rho, b.rho);
+  skin.update(b.x);
+  const SurfaceSamples samples = surface_samples(b.x, skin.skin(), b.rho);
+  AffineFitOptions o;
+  o.max_stretch = 1.3;
+  const GlobalMap map = fit_global_map(samples, stretched_points(1.8, 200, 2), o);
+  EXPECT_TRUE(map.refused);
+  EXPECT_TRUE(map.affine.a.isIdentity(0));
+  EXPECT_TRUE(map.shears.c.isZero(0));
+  // The same points within a looser limit are followed.
+  o.max_stretch = 2.0;
+  const GlobalMap followed = fit_global_map(samples, stretched_points(1.8, 200, 2), o);
+  EXPECT_FALSE(followed.refused);
+  EXPECT_NEAR(Eigen::JacobiSVD<Eigen::Matrix3d>(followed.affine.a).singularValues()[0], 1.8, 0.1);
 }
 
 }  // namespace

@@ -303,6 +303,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
               {"translation_mm", {affine.t.x(), affine.t.y(), affine.t.z()}},
               {"shear_coefficients_per_mm",
                std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
+              {"shears_dropped", map.shears_dropped},
               {"refill_passes", passes},
               {"particles_after_refill", state.size()},
               {"volume_change_after_settling_pct", settled_change_pct},

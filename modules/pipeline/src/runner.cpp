@@ -338,6 +338,21 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
           fit.truth_summary["msd_floor_mm"].get<double>(),
           fit.truth_summary["hd95_mm"].get<double>(), fit.truth_summary["recovery"].get<double>());
     }
+    const double organ_change = fit.fit_summary["volume_change_pct"].get<double>();
+    const double balls_change = fit.fit_summary["particle_body_volume_change_pct"].get<double>();
+    if (std::abs(organ_change) > 1.0)
+      warn(
+          std::abs(balls_change) <= 1.0 && std::abs(organ_change) > 3.0
+              ? fmt::format(
+                    "fit: the organ's volume changed by {:+.1f}% while the particles' own body "
+                    "changed by {:+.1f}%: the particles rearranged under a deformation larger than "
+                    "the global map explains, and the organ they carry is not to be trusted there",
+                    organ_change, balls_change)
+              : fmt::format("fit: the organ's volume changed by {:+.1f}%", organ_change));
+    if (fit.global_map.shears_dropped)
+      warn(
+          "fit: the points asked for an implausible bend (fit.max_global_stretch and a quarter of "
+          "the organ's size bound it); the global stage used a stretch and shift only");
     if (fit.fit_summary["rejected_points"].get<int>() > 0) {
       const std::string w = fmt::format("fit: {} points rejected as outliers",
                                         fit.fit_summary["rejected_points"].get<int>());
@@ -459,9 +474,9 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
       if (f.first == "history.csv") context.history_csv = f.second;
     context.ct = ct ? &*ct : nullptr;
     context.planning = model ? &model->shape : nullptr;
-    std::optional<fitting::EmbeddedBody> organ;
-    if (model) organ.emplace(organ_body(*model));
-    context.fitted = organ ? &*organ : nullptr;
+    std::optional<fitting::EmbeddedBody> fitted_organ;
+    if (model) fitted_organ.emplace(organ_body(*model));
+    context.fitted = fitted_organ ? &*fitted_organ : nullptr;
     context.rho_mm = model ? model->model->radius_mm() : 0;
     if (points)
       for (const auto& p : points->points)

@@ -84,7 +84,7 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   save_model(dir_ / "fitted.json", m, "Prostate", std::nullopt, {});
   SavedModel back = load_model(dir_ / "fitted.json");
   const fitting::EmbeddedBody a = organ_body(m), b = organ_body(back.model);
-  for (const Eigen::Vector3d q :
+  for (const Eigen::Vector3d& q :
        {Eigen::Vector3d(0, 0.4, 2), Eigen::Vector3d(16, -1, 1), Eigen::Vector3d(-3, 11, 2)})
     EXPECT_LT((a.pull_back(q) - b.pull_back(q)).norm(), 1e-12);
   // Not the planning organ any more: it moved 0.4 mm in y.

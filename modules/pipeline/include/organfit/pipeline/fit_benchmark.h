@@ -19,10 +19,15 @@
 //   msd_balls_mm, volume_change_balls_pct  the same for the particles' own body (balls
 //              of rho closed by rho), the paper's surface;
 //   residual_mm  mean over the points of |distance to the nearest particle centre - rho|.
+// The particle fits run with the scene defaults except fit.max_global_stretch: 2 (the
+// grid stretches a 30 mm cube by up to 2x; the default 1.5 would refuse it) and
+// fit.max_wall_s: 20.
 // Writes DIR/results.csv, DIR/curves.csv (the particle fits' histories), DIR/work_precision.svg
 // and DIR/RESULTS.md.
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
 
 namespace organfit::pipeline {
 
@@ -34,6 +39,9 @@ struct FitBenchOptions {
   /// noise; 0 and 5% outliers.
   bool quick = false;
   long long sample = 0;  ///< run this many cases, a seeded uniform sample of the grid (0: all)
+  /// run only these of spread, paper, tps, cpd, icp (empty: all); an unknown name is an
+  /// InputError
+  std::vector<std::string> methods;
   int threads = 0;
 };
 
