@@ -333,43 +333,59 @@ GlobalMap refine_global_map(GlobalMap map, const SurfaceSamples& surface,
 
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
                          const AffineFitOptions& o) {
-  GlobalMap affine_only;
-  affine_only.affine = fit_volume_preserving_affine(surface, points, o);
-  affine_only.rms_after_mm = affine_only.affine.rms_after_mm;
+  // Each pull towards the identity (the stated one, and the alternative if any) gives an
+  // affine fit and, with enough points, two fits of the whole map.
+  std::vector<AffineFitOptions> pulls = {o};
+  if (o.regularisation_alternative > 0 && o.regularisation_alternative != o.regularisation) {
+    pulls.push_back(o);
+    pulls.back().regularisation = o.regularisation_alternative;
+  }
+  std::vector<GlobalMap> affine_fits, fits;
+  for (const AffineFitOptions& pull : pulls) {
+    GlobalMap affine_only;
+    affine_only.affine = fit_volume_preserving_affine(surface, points, pull);
+    affine_only.rms_after_mm = affine_only.affine.rms_after_mm;
+    affine_fits.push_back(affine_only);
+    if (points.size() < 21 || surface.points.cols() == 0) continue;  // 21 unknowns
+    // Two starts: from the affine fit, and from its translation alone with the stiffness
+    // annealed. From the affine fit alone, a bend seen from one side can be taken for a
+    // stretch and the shears stay in that minimum; from the translation, a large stretch
+    // can be missed.
+    GlobalMap from_affine = affine_only;
+    from_affine.shears.centre =
+        ((affine_only.affine.a * surface.points).colwise() + affine_only.affine.t).rowwise().mean();
+    GlobalMap from_translation = from_affine;
+    const Eigen::Vector3d centroid = surface.points.rowwise().mean();
+    from_translation.affine.t += affine_only.affine.a * centroid - centroid;
+    from_translation.affine.a.setIdentity();
+    fits.push_back(refine_global_map(from_affine, surface, points, pull, false));
+    fits.push_back(refine_global_map(from_translation, surface, points, pull, true));
+  }
   // No plausible map: the identity, marked refused.
-  auto refused = [rms = affine_only.affine.rms_before_mm] {
+  auto refused = [rms = affine_fits[0].affine.rms_before_mm] {
     GlobalMap identity;
     identity.refused = true;
     identity.rms_after_mm = identity.affine.rms_after_mm = identity.affine.rms_before_mm = rms;
     return identity;
   };
-  if (points.size() < 21 || surface.points.cols() == 0)  // 21 unknowns in the whole map
-    return plausible(affine_only, surface, o) ? affine_only : refused();
-  // Two starts, the better fit of the points kept: from the affine fit, and from its
-  // translation alone with the stiffness annealed. From the affine fit alone, a bend
-  // seen from one side can be taken for a stretch and the shears stay in that minimum;
-  // from the translation, a large stretch can be missed.
-  GlobalMap from_affine = affine_only;
-  from_affine.shears.centre =
-      ((affine_only.affine.a * surface.points).colwise() + affine_only.affine.t).rowwise().mean();
-  GlobalMap from_translation = from_affine;
-  const Eigen::Vector3d centroid = surface.points.rowwise().mean();
-  from_translation.affine.t += affine_only.affine.a * centroid - centroid;
-  from_translation.affine.a.setIdentity();
-  const GlobalMap fits[2] = {refine_global_map(from_affine, surface, points, o, false),
-                             refine_global_map(from_translation, surface, points, o, true)};
-  const int best = fits[1].rms_after_mm < fits[0].rms_after_mm ? 1 : 0;
-  // The better fit asks for a stretch beyond the limit: refused, whatever a worse fit
-  // within it would say.
-  if (!within_stretch(fits[best].affine.a, o)) return refused();
-  if (plausible(fits[best], surface, o)) return fits[best];
-  // Its shears swing out of range (a bulge seen from one side can do that): the other
-  // start if it fits plausibly, else the affine part alone, the next simplest explanation.
-  if (plausible(fits[1 - best], surface, o)) return fits[1 - best];
-  if (plausible(affine_only, surface, o)) {
-    affine_only.shears_dropped = true;
-    return affine_only;
-  }
+  auto by_fit = [](const GlobalMap& l, const GlobalMap& r) {
+    return l.rms_after_mm < r.rms_after_mm;
+  };
+  std::stable_sort(affine_fits.begin(), affine_fits.end(), by_fit);
+  std::stable_sort(fits.begin(), fits.end(), by_fit);
+  if (fits.empty()) fits = affine_fits;  // too few points for the whole map
+  // The best fit of the points asks for a stretch beyond the limit: refused, whatever a
+  // worse fit within it would say.
+  if (!within_stretch(fits[0].affine.a, o)) return refused();
+  // Shears can swing out of range (a bulge seen from one side can do that): then the
+  // next best plausible fit, else the affine part alone, the next simplest explanation.
+  for (const GlobalMap& fit : fits)
+    if (plausible(fit, surface, o)) return fit;
+  for (GlobalMap& affine_only : affine_fits)
+    if (plausible(affine_only, surface, o)) {
+      affine_only.shears_dropped = true;
+      return affine_only;
+    }
   return refused();
 }
 

@@ -20,11 +20,14 @@ struct AffineFitOptions {
   int iterations = 60;
   double outlier_mads = 3.0;    ///< points beyond median + this x 1.4826 MAD get no weight
   double point_to_point = 0.1;  ///< weight of the point-to-point term beside point-to-plane
-  /// pull of A towards I, relative to the points' spread. 3e-3: on a seeded sample of 240
-  /// cases of `organfit bench fit`, points on half the surface, it kept bends from being
-  /// taken for stretches (median surface distance 0.97 -> 0.91 mm against 1e-3; stretches
-  /// themselves came out a little short: 0.90 -> 1.10 mm on that family)
+  /// pull of A towards I, relative to the points' spread
   double regularisation = 3e-3;
+  /// a second pull also tried (0: none); fit_global_map keeps the better fit of the
+  /// points. On a seeded sample of 240 cases of `organfit bench fit`, points on half the
+  /// surface, 3e-3 alone kept bends from being taken for stretches (median surface
+  /// distance 0.97 -> 0.91 mm against 1e-3 alone) but fell short on stretches (prostate
+  /// stretched 1.4x: 0.51 -> 0.86 mm); each fits the points better where it is right.
+  double regularisation_alternative = 1e-3;
   double shear_regularisation = 1e-3;  ///< pull of the shears towards none, likewise
   double max_stretch = 1.5;  ///< a map stretching by more (or by less than 1/this) is refused
   double max_shear_mm =
@@ -92,8 +95,9 @@ struct GlobalMap {
 /// term, the same outlier rule), from two starts: the affine fit, and its translation
 /// alone with the stiffness of both parts annealed from 1000x down (from the affine fit
 /// alone a bend seen from one side is taken for a stretch and the shears stay in that
-/// minimum). The better fit of the points is kept. The shears are regularised towards
-/// none. When that fit stretches beyond max_stretch it is refused (the identity, marked
+/// minimum); both with each pull towards the identity (regularisation and its
+/// alternative). The best fit of the points (robust RMS) is kept. The shears are regularised
+/// towards none. When that fit stretches beyond max_stretch it is refused (the identity, marked
 /// so): points that can only be explained by crushing the organ are not data to follow
 /// globally. When only its shears are out of range (moving the surface by more than
 /// max_shear_mm x its size) the other start is used if plausible, else the affine part
