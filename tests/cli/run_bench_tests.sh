@@ -52,6 +52,20 @@ for r in part:
 j = json.load(open('$tmp/sample.json'))
 assert j['cases'] == 3 and j['grid_cases'] == 20
 assert 'a seeded uniform sample' in open('$tmp/sample/RESULTS.md').read()"
+# --methods: only those methods, the same rows as in the whole grid; an unknown one is a
+# one-line usage error (exit 2) that names the option and makes no folder.
+"$bin" --quiet bench fit --quick --sample 2 --methods icp,spread --out "$tmp/some" > /dev/null 2>&1
+check bench.fit_methods_runs_only_those /usr/bin/python3 -c "
+import csv
+key = lambda r: (r['method'], r['shape'], r['family'], r['magnitude_mm'])
+whole = {key(r): r for r in csv.DictReader(open('$tmp/fit/results.csv'))}
+part = list(csv.DictReader(open('$tmp/some/results.csv')))
+assert [r['method'] for r in part] == ['spread', 'icp'] * 2, [r['method'] for r in part]
+for r in part:
+    assert r['msd_mm'] == whole[key(r)]['msd_mm'], key(r)"
+"$bin" bench fit --quick --methods spread,tsp --out "$tmp/none" > /dev/null 2> "$tmp/none.err"
+check bench.fit_unknown_method_refused test $? -eq 2 -a "$(grep -c . "$tmp/none.err")" -eq 1 -a ! -e "$tmp/none"
+check bench.fit_unknown_method_named grep -q -- "--methods: unknown method 'tsp'" "$tmp/none.err"
 "$bin" --quiet bench stability --out "$tmp/stab" > "$tmp/stab.json" 2> /dev/null
 check bench.stability_every_row_passes test $? -eq 0
 check bench.stability_table /usr/bin/python3 -c "

@@ -177,6 +177,15 @@ std::string svg_work_precision(const std::vector<Row>& all_rows) {
 
 nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   if (o.out.empty()) throw InputError("bench fit: --out DIR is required");
+  const std::vector<std::string> all_methods = {"spread", "paper", "tps", "cpd", "icp"};
+  for (const auto& m : o.methods)
+    if (std::find(all_methods.begin(), all_methods.end(), m) == all_methods.end())
+      throw InputError("bench fit: --methods: unknown method '" + m +
+                       "' (spread, paper, tps, cpd, icp)");
+  std::vector<std::string> methods;  // in the table's order
+  for (const auto& m : all_methods)
+    if (o.methods.empty() || std::find(o.methods.begin(), o.methods.end(), m) != o.methods.end())
+      methods.push_back(m);
   std::error_code ec;
   fs::create_directories(o.out, ec);
   if (ec) throw InputError(o.out.string() + ": cannot create the folder: " + ec.message());
@@ -205,15 +214,6 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
     noises = {0, 0.5, 1.0};
     outliers = {0, 0.05};
   }
-  const std::vector<std::string> all_methods = {"spread", "paper", "tps", "cpd", "icp"};
-  for (const auto& m : o.methods)
-    if (std::find(all_methods.begin(), all_methods.end(), m) == all_methods.end())
-      throw InputError("bench fit: --methods: unknown method '" + m +
-                       "' (spread, paper, tps, cpd, icp)");
-  std::vector<std::string> methods;  // in the table's order
-  for (const auto& m : all_methods)
-    if (o.methods.empty() || std::find(o.methods.begin(), o.methods.end(), m) != o.methods.end())
-      methods.push_back(m);
   // --sample N: a seeded, uniform subset of the grid's cases (each keeps its number and
   // seed from the whole grid, so a sampled case is the same case as in a full run).
   const long long grid_cases =
