@@ -96,6 +96,25 @@ double robust_weights(const std::vector<double>& r, const std::vector<Attractive
   return std::sqrt(sum / std::max(1, kept));
 }
 
+/// Stiffness annealing (as in non-rigid ICP, Amberg et al. 2007): the pull towards no
+/// change starts 10^(levels - 1) times the stated one and is relaxed tenfold each time
+/// the fit settles, or after `iterations` steps at a level. Closest-point matches made
+/// from the identity are poor for a large change of shape; a stiff first fit gets them
+/// close.
+struct StiffnessSchedule {
+  int levels, iterations;
+  int level = 0, steps = 0;  ///< the current level, and the steps taken at it
+  double factor() const { return std::pow(10.0, levels - 1 - level); }
+  /// Moves to the next level when the fit `settled` or the level's steps are used up;
+  /// false when that was the last level (stop).
+  bool go_on(bool settled) {
+    if (!settled && steps < iterations) return true;
+    if (level == levels - 1) return false;
+    ++level, steps = 0;
+    return true;
+  }
+};
+
 }  // namespace
 
 AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
@@ -126,14 +145,10 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
   };
   fit.rms_before_mm = correspond(fit.a, fit.t);
   double previous = fit.rms_before_mm;
-  // Stiffness annealing (as in non-rigid ICP, Amberg et al. 2007): the pull towards the
-  // identity starts 1000x the stated one, where the fit is nearly a translation, and is
-  // relaxed tenfold each time the fit settles. Closest-point matches made from the
-  // identity are poor for a large change of shape; a stiff first fit gets them close.
-  int level = 0, in_level = 0;
-  const int levels = 4;
-  for (int it = 0; it < levels * o.iterations; ++it, ++in_level) {
-    const double lambda = lambda_final * std::pow(10.0, 3 - level);
+  // The pull starts 1000x the stated one, where the fit is nearly a translation.
+  StiffnessSchedule schedule{4, o.iterations};
+  for (int it = 0; it < schedule.levels * o.iterations; ++it) {
+    const double lambda = lambda_final * schedule.factor();
     // Unknowns theta = [a row 0, a row 1, a row 2, t] (12). Point-to-plane rows
     // n^T (a s + t) = n^T p with n the matched normal mapped by a^-T; point-to-point rows
     // (a s + t)_r = p_r with weight mu; a pull lambda |a - I|^2.
@@ -186,10 +201,8 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
     fit.rms_after_mm = rms;
     const bool settled = std::abs(previous - rms) < 1e-5 * (1 + previous);
     previous = rms;
-    if (settled || in_level + 1 >= o.iterations) {
-      if (level == levels - 1) break;
-      ++level, in_level = -1;
-    }
+    ++schedule.steps;
+    if (!schedule.go_on(settled)) break;
   }
   if (fit.iterations == 0) fit.rms_after_mm = fit.rms_before_mm;
   return fit;
@@ -261,11 +274,10 @@ GlobalMap refine_global_map(GlobalMap map, const SurfaceSamples& surface,
     b(2, 6) = u.x() * u.x(), b(2, 7) = u.y() * u.y(), b(2, 8) = u.x() * u.y();
     return b;
   };
-  int level = 0, in_level = 0;
-  const int levels = anneal ? 4 : 1;
-  for (int it = 0; it < levels * o.iterations; ++it, ++in_level) {
-    const double stiff = std::pow(10.0, levels - 1 - level);
-    const double lambda_a = lambda_a_final * stiff, lambda_c = lambda_c_final * stiff;
+  StiffnessSchedule schedule{anneal ? 4 : 1, o.iterations};
+  for (int it = 0; it < schedule.levels * o.iterations; ++it, ++schedule.steps) {
+    const double lambda_a = lambda_a_final * schedule.factor(),
+                 lambda_c = lambda_c_final * schedule.factor();
     const Eigen::Matrix3Xd affine_img = (map.affine.a * surface.points).colwise() + map.affine.t;
     Eigen::Matrix3Xd moved(3, affine_img.cols());
     for (Eigen::Index j = 0; j < affine_img.cols(); ++j)
@@ -278,10 +290,7 @@ GlobalMap refine_global_map(GlobalMap map, const SurfaceSamples& surface,
     const double rms = robust_weights(r, points, o.outlier_mads, w);
     const bool settled = it > 0 && std::abs(map.rms_after_mm - rms) < 1e-5 * (1 + rms);
     map.rms_after_mm = rms;
-    if (settled || in_level >= o.iterations) {
-      if (level == levels - 1) break;
-      ++level, in_level = 0;
-    }
+    if (!schedule.go_on(settled)) break;
     // Linearised image of sample s: a s + t + B(u) c, u = the current affine image - centre.
     const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
     Eigen::Matrix<double, 21, 21> nrm = Eigen::Matrix<double, 21, 21>::Zero();
