@@ -7,19 +7,12 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "cell_key.h"
 #include "organfit/geometry/mask_ops.h"
 
 namespace organfit::fitting {
 namespace {
 constexpr double kMaxExtentMm = 2000;  // larger than any organ: grids over it are not made
-
-/// Hash key of a cell of a uniform grid: 21 bits per axis, cells within +-2^20 of the
-/// grid's origin (the callers bound them).
-long long cell_key(const Eigen::Vector3i& c) {
-  return (static_cast<long long>(c.x() + (1 << 20)) << 42) |
-         (static_cast<long long>(c.y() + (1 << 20)) << 21) |
-         static_cast<long long>(c.z() + (1 << 20));
-}
 }  // namespace
 
 EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> reference, GlobalMap map,

@@ -5,6 +5,8 @@
 #include <limits>
 #include <unordered_map>
 
+#include "cell_key.h"
+
 namespace organfit::fitting {
 
 namespace {
@@ -34,21 +36,20 @@ std::vector<std::vector<int>> k_nearest(const std::vector<Eigen::Vector3d>& poin
   for (const auto& p : points)
     lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
   // Cells of about two points each over the points' box, its flat sides counted as one
-  // cell thick (a sheet of points gets square cells, not slivers); at most 2^20 cells
-  // along an axis.
+  // cell thick (a sheet of points gets square cells, not slivers); at most 2^19 cells
+  // along an axis (cell_key's range). The neighbours found do not depend on the cells.
   const Eigen::Vector3d extent = hi - lo;
   double cell = std::max(extent.maxCoeff(), 1e-9);
   for (int it = 0; it < 12; ++it)
     cell = std::cbrt(2.0 * extent.cwiseMax(cell).prod() / n);
-  cell = std::max({cell, extent.maxCoeff() / (1 << 20), 1e-9});
-  auto key = [](long long i, long long j, long long l) { return (i << 42) ^ (j << 21) ^ l; };
+  cell = std::max({cell, extent.maxCoeff() / (1 << 19), 1e-9});
   auto index = [&](const Eigen::Vector3d& p) {
     return Eigen::Array3i(((p - lo) / cell).array().floor().cast<int>());
   };
   std::unordered_map<long long, std::vector<int>> cells;
   for (int i = 0; i < n; ++i) {
     const Eigen::Array3i c = index(points[static_cast<size_t>(i)]);
-    cells[key(c.x(), c.y(), c.z())].push_back(i);
+    cells[cell_key(c.matrix())].push_back(i);
   }
   const Eigen::Array3i last = index(hi);
   const int max_ring = last.maxCoeff() + 1;
@@ -66,7 +67,7 @@ std::vector<std::vector<int>> k_nearest(const std::vector<Eigen::Vector3d>& poin
             if (std::max({std::abs(a - c.x()), std::abs(b - c.y()), std::abs(d - c.z())}) != r ||
                 a < 0 || b < 0 || d < 0 || a > last.x() || b > last.y() || d > last.z())
               continue;
-            const auto it = cells.find(key(a, b, d));
+            const auto it = cells.find(cell_key(Eigen::Vector3i(a, b, d)));
             if (it == cells.end()) continue;
             for (int j : it->second)
               if (j != i) found.push_back({(points[static_cast<size_t>(j)] - p).squaredNorm(), j});
