@@ -222,9 +222,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
                  model->summary["relax_wall_s"].get<double>(),
                  model->summary["skeleton_wall_s"].get<double>());
     if (!model->summary["relax_settled"].get<bool>()) {
-      const std::string w = "model: relaxation did not settle within model.relax_steps";
-      spdlog::warn(w);
-      run["warnings"].push_back(w);
+      warn("model: relaxation did not settle within model.relax_steps");
     }
   } else if (!model) {
     spdlog::info("the scene names no model");
@@ -354,10 +352,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
           "fit: the points asked for an implausible bend (fit.max_global_stretch and a quarter of "
           "the organ's size bound it); the global stage used a stretch and shift only");
     if (fit.fit_summary["rejected_points"].get<int>() > 0) {
-      const std::string w = fmt::format("fit: {} points rejected as outliers",
-                                        fit.fit_summary["rejected_points"].get<int>());
-      spdlog::warn(w);
-      run["warnings"].push_back(w);
+      warn(fmt::format("fit: {} points rejected as outliers",
+                       fit.fit_summary["rejected_points"].get<int>()));
     }
     not_converged = fit.not_converged_message;
     if (!not_converged.empty()) run["warnings"].push_back(not_converged);
