@@ -250,10 +250,13 @@ bool plausible(const GlobalMap& map, const SurfaceSamples& surface, const Affine
 }
 
 /// Gauss-Newton on the whole map (affine with det 1, then shears) from `map`, with the
-/// stiffness annealed from 1000x the stated one when `anneal`.
-GlobalMap refine_global_map(GlobalMap map, const SurfaceSamples& surface,
-                            const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
-                            bool anneal) {
+/// stiffness annealed from 1000x the stated one when `anneal`. Returns the map as it was
+/// at the end of each stiffness level, the final one last: each is a fit of the points
+/// by a stiffer map, a candidate in its own right.
+std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& surface,
+                                         const std::vector<AttractivePoint>& points,
+                                         const AffineFitOptions& o, bool anneal) {
+  std::vector<GlobalMap> ends;
   const int m = static_cast<int>(points.size());
   Eigen::Matrix3Xd p(3, m);
   for (int k = 0; k < m; ++k)
@@ -275,7 +278,9 @@ GlobalMap refine_global_map(GlobalMap map, const SurfaceSamples& surface,
     return b;
   };
   StiffnessSchedule schedule{anneal ? 4 : 1, o.iterations};
-  for (int it = 0; it < schedule.levels * o.iterations; ++it, ++schedule.steps) {
+  // The schedule ends the loop (at most levels x iterations steps), always just after the
+  // current map's residuals are measured, so that each map kept carries its own RMS.
+  for (;; ++schedule.steps) {
     const double lambda_a = lambda_a_final * schedule.factor(),
                  lambda_c = lambda_c_final * schedule.factor();
     const Eigen::Matrix3Xd affine_img = (map.affine.a * surface.points).colwise() + map.affine.t;
@@ -288,9 +293,13 @@ GlobalMap refine_global_map(GlobalMap map, const SurfaceSamples& surface,
       match[k] = static_cast<int>(j);
     }
     const double rms = robust_weights(r, points, o.outlier_mads, w);
-    const bool settled = it > 0 && std::abs(map.rms_after_mm - rms) < 1e-5 * (1 + rms);
+    const bool settled = schedule.steps > 0 && std::abs(map.rms_after_mm - rms) < 1e-5 * (1 + rms);
     map.rms_after_mm = rms;
-    if (!schedule.go_on(settled)) break;
+    map.affine.rms_after_mm = rms;
+    const int level = schedule.level;
+    const bool go_on = schedule.go_on(settled);
+    if (!go_on || schedule.level != level) ends.push_back(map);
+    if (!go_on) break;
     // Linearised image of sample s: a s + t + B(u) c, u = the current affine image - centre.
     const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
     Eigen::Matrix<double, 21, 21> nrm = Eigen::Matrix<double, 21, 21>::Zero();
@@ -326,7 +335,10 @@ GlobalMap refine_global_map(GlobalMap map, const SurfaceSamples& surface,
         theta.segment<3>(6).transpose();
     Eigen::Vector3d t = theta.segment<3>(9);
     const double det = a.determinant();
-    if (!(det > 0) || !theta.allFinite()) break;     // degenerate: keep the last good map
+    if (!(det > 0) || !theta.allFinite()) {  // degenerate: keep the last good map
+      ends.push_back(map);
+      break;
+    }
     const Eigen::Vector3d image = a * centroid + t;  // det(a) = 1 about the body's centre
     a /= std::cbrt(det);
     t = image - a * centroid;
@@ -334,16 +346,44 @@ GlobalMap refine_global_map(GlobalMap map, const SurfaceSamples& surface,
     map.affine.t = t;
     map.shears.c = theta.segment<9>(12);
   }
-  map.affine.rms_after_mm = map.rms_after_mm;
-  return map;
+  return ends;
+}
+
+/// Robust RMS (mm) of the points' distances to the tangent planes of their nearest mapped
+/// surface samples (normals turned by the affine part), the same outlier rule as the
+/// fits. Unlike the nearest-sample distance the fits report, it has no floor from the
+/// samples' spacing (0.4 to 0.6 mm on a CT mask, as much as the noise): fits that differ
+/// by less than the noise can be told apart.
+double point_to_plane_rms(const GlobalMap& map, const SurfaceSamples& surface,
+                          const std::vector<AttractivePoint>& points, double mads) {
+  Eigen::Matrix3Xd moved(3, surface.points.cols());
+  for (Eigen::Index j = 0; j < moved.cols(); ++j)
+    moved.col(j) = map.apply(surface.points.col(j));
+  const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
+  std::vector<double> r(points.size()), w;
+  for (size_t k = 0; k < points.size(); ++k) {
+    Eigen::Index j;
+    (moved.colwise() - points[k].p_mm).colwise().squaredNorm().minCoeff(&j);
+    r[k] = std::abs(
+        (normal_map * surface.normals.col(j)).normalized().dot(points[k].p_mm - moved.col(j)));
+  }
+  return robust_weights(r, points, mads, w);
 }
 
 }  // namespace
 
+double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface) {
+  Eigen::Matrix3Xd d(3, surface.points.cols());
+  for (Eigen::Index j = 0; j < d.cols(); ++j)
+    d.col(j) = map.apply(surface.points.col(j)) - surface.points.col(j);
+  const Eigen::Vector3d mean = d.rowwise().mean();
+  return std::sqrt((d.colwise() - mean).colwise().squaredNorm().mean());
+}
+
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
                          const AffineFitOptions& o) {
   // Each pull towards the identity (the stated one, and the alternative if any) gives an
-  // affine fit and, with enough points, two fits of the whole map.
+  // affine fit and, with enough points, fits of the whole map from two starts.
   std::vector<AffineFitOptions> pulls = {o};
   if (o.regularisation_alternative > 0 && o.regularisation_alternative != o.regularisation) {
     pulls.push_back(o);
@@ -357,9 +397,9 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     affine_fits.push_back(affine_only);
     if (points.size() < 21 || surface.points.cols() == 0) continue;  // 21 unknowns
     // Two starts: from the affine fit, and from its translation alone with the stiffness
-    // annealed. From the affine fit alone, a bend seen from one side can be taken for a
-    // stretch and the shears stay in that minimum; from the translation, a large stretch
-    // can be missed.
+    // annealed (each level's settled map kept). From the affine fit alone, a bend seen
+    // from one side can be taken for a stretch and the shears stay in that minimum; from
+    // the translation, a large stretch can be missed.
     GlobalMap from_affine = affine_only;
     from_affine.shears.centre =
         ((affine_only.affine.a * surface.points).colwise() + affine_only.affine.t).rowwise().mean();
@@ -367,8 +407,10 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     const Eigen::Vector3d centroid = surface.points.rowwise().mean();
     from_translation.affine.t += affine_only.affine.a * centroid - centroid;
     from_translation.affine.a.setIdentity();
-    fits.push_back(refine_global_map(from_affine, surface, points, pull, false));
-    fits.push_back(refine_global_map(from_translation, surface, points, pull, true));
+    for (bool anneal : {false, true})
+      for (GlobalMap& fit : refine_global_map(anneal ? from_translation : from_affine, surface,
+                                              points, pull, anneal))
+        fits.push_back(fit);
   }
   // No plausible map: the identity, marked refused.
   auto refused = [rms = affine_fits[0].affine.rms_before_mm] {
@@ -380,22 +422,39 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   auto by_fit = [](const GlobalMap& l, const GlobalMap& r) {
     return l.rms_after_mm < r.rms_after_mm;
   };
-  std::stable_sort(affine_fits.begin(), affine_fits.end(), by_fit);
-  std::stable_sort(fits.begin(), fits.end(), by_fit);
-  if (fits.empty()) fits = affine_fits;  // too few points for the whole map
   // The best fit of the points asks for a stretch beyond the limit: refused, whatever a
   // worse fit within it would say.
-  if (!within_stretch(fits[0].affine.a, o)) return refused();
-  // Shears can swing out of range (a bulge seen from one side can do that): then the
-  // next best plausible fit, else the affine part alone, the next simplest explanation.
+  const std::vector<GlobalMap>& judged = fits.empty() ? affine_fits : fits;
+  if (!within_stretch(std::min_element(judged.begin(), judged.end(), by_fit)->affine.a, o))
+    return refused();
+  // The plausible fits. Shears can swing out of range (a bulge seen from one side can do
+  // that); when every fit of the whole map does, the affine part alone is what is left.
+  std::vector<GlobalMap> candidates;
   for (const GlobalMap& fit : fits)
-    if (plausible(fit, surface, o)) return fit;
-  for (GlobalMap& affine_only : affine_fits)
-    if (plausible(affine_only, surface, o)) {
-      affine_only.shears_dropped = true;
-      return affine_only;
-    }
-  return refused();
+    if (plausible(fit, surface, o)) candidates.push_back(fit);
+  const bool shears_dropped = !fits.empty() && candidates.empty();
+  for (const GlobalMap& fit : affine_fits)
+    if (plausible(fit, surface, o)) candidates.push_back(fit);
+  if (candidates.empty()) return refused();
+  // Points on part of the surface leave the rest free: fits from different starts and
+  // stiffnesses often explain them equally well and differ by a millimetre elsewhere.
+  // Of those within `equally_good` of the best mean square, the one changing the shape
+  // least is kept (the closest to rest, as the pull towards the identity would choose).
+  std::vector<double> rms;
+  for (const GlobalMap& fit : candidates)
+    rms.push_back(point_to_plane_rms(fit, surface, points, o.outlier_mads));
+  const double best = *std::min_element(rms.begin(), rms.end());
+  const GlobalMap* chosen = nullptr;
+  double least = std::numeric_limits<double>::infinity();
+  for (size_t c = 0; c < candidates.size(); ++c) {
+    const GlobalMap& fit = candidates[c];
+    if (rms[c] * rms[c] > (1 + o.equally_good) * best * best) continue;
+    const double change = shape_change_mm(fit, surface);
+    if (change < least) least = change, chosen = &fit;
+  }
+  GlobalMap out = *chosen;
+  out.shears_dropped = shears_dropped;
+  return out;
 }
 
 particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, int count,

@@ -304,6 +304,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
               {"shear_coefficients_per_mm",
                std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
               {"shears_dropped", map.shears_dropped},
+              {"shape_change_mm", fitting::shape_change_mm(map, samples)},
               {"refill_passes", passes},
               {"particles_after_refill", state.size()},
               {"volume_change_after_settling_pct", settled_change_pct},
