@@ -60,8 +60,9 @@ TEST(MaskOps, BallsOnARotatedGridLandWhereThePhysicalBallIs) {
   for (int k = 0; k < 30; ++k)
     for (int j = 0; j < 30; ++j)
       for (int i = 0; i < 30; ++i)
-        if (m.at(i, j, k))
+        if (m.at(i, j, k)) {
           EXPECT_LE((g.index_to_physical(Eigen::Vector3d(i, j, k)) - centre).norm(), 5.0 + 1e-9);
+        }
 }
 
 TEST(MaskOps, ClosedBodyOnALargeGridEqualsClosingTheWholeGrid) {

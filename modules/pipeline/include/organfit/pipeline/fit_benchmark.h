@@ -11,11 +11,13 @@
 // (fitting/embedded_body.h; the particle fits with their global map, the baselines with
 // their map sampled at the particles), measured the same way (geometry/mask_ops.h):
 //   msd_mm     symmetric mean surface distance between that organ and the true deformed
-//              body, both on a grid of rho/2 covering both: the mean, over the surface
-//              voxels of each mask, of the distance to the other mask's surface voxels;
+//              body, both on a grid of 0.5 mm covering both (evaluation::kTruthVoxelMm,
+//              whatever the model's resolution): the mean, over the surface voxels of
+//              each mask, of the distance to the other mask's surface voxels;
 //   hd95_mm    the 95th percentile of the same two sets of distances pooled;
 //   dice       on that grid;
-//   volume_change_pct  that organ's volume against the model's reference at rest;
+//   volume_change_pct  that organ's volume on that grid against the model's reference
+//              body (its own voxel count);
 //   msd_balls_mm, volume_change_balls_pct  the same for the particles' own body (balls
 //              of rho closed by rho), the paper's surface;
 //   residual_mm  mean over the points of |distance to the nearest particle centre - rho|.
