@@ -241,6 +241,14 @@ int run_main(int argc, char** argv) {
       ->add_option("--sample", fb.sample,
                    "Run N cases, a seeded uniform sample of the grid (0: all)")
       ->check(CLI::Range(0LL, 1000000LL));
+  bench_fit->add_flag("--targets", fb.targets,
+                      "Only the cases the targets name (<= 87 points, 0.5 mm noise, no outliers, "
+                      "<= 10 mm): 225 of the grid's 2,400");
+  bench_fit
+      ->add_option("--cases", fb.cases,
+                   "Only these cases, comma-separated, by their number in the grid (results.csv's "
+                   "case column)")
+      ->delimiter(',');
   bench_fit
       ->add_option(
           "--methods", fb.methods,

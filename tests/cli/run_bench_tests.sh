@@ -66,6 +66,21 @@ for r in part:
 "$bin" bench fit --quick --methods spread,tsp --out "$tmp/none" > /dev/null 2> "$tmp/none.err"
 check bench.fit_unknown_method_refused test $? -eq 2 -a "$(grep -c . "$tmp/none.err")" -eq 1 -a ! -e "$tmp/none"
 check bench.fit_unknown_method_named grep -q -- "--methods: unknown method 'tsp'" "$tmp/none.err"
+# --cases: those cases of the grid, by number, the same rows as in the whole grid; a
+# number beyond the grid is a one-line error (exit 2) and makes no folder.
+"$bin" --quiet bench fit --quick --cases 4,17 --methods spread,tps --out "$tmp/cases" > /dev/null 2>&1
+check bench.fit_cases_reruns_those_cases /usr/bin/python3 -c "
+import csv
+key = lambda r: (r['method'], r['case'])
+whole = {key(r): r for r in csv.DictReader(open('$tmp/fit/results.csv'))}
+part = list(csv.DictReader(open('$tmp/cases/results.csv')))
+assert [(r['method'], r['case']) for r in part] == [('spread', '4'), ('tps', '4'), ('spread', '17'), ('tps', '17')], part
+for r in part:
+    assert r['msd_mm'] == whole[key(r)]['msd_mm'] and r['family'] == whole[key(r)]['family'], key(r)
+    assert (r['msd_global_mm'] == 'nan') == (r['method'] != 'spread'), r"
+"$bin" bench fit --quick --cases 3,21 --out "$tmp/beyond" > /dev/null 2> "$tmp/beyond.err"
+check bench.fit_case_beyond_the_grid_refused test $? -eq 2 -a "$(grep -c . "$tmp/beyond.err")" -eq 1 -a ! -e "$tmp/beyond"
+check bench.fit_case_beyond_the_grid_named grep -q -- "--cases: no case 21" "$tmp/beyond.err"
 "$bin" --quiet bench stability --out "$tmp/stab" > "$tmp/stab.json" 2> /dev/null
 check bench.stability_every_row_passes test $? -eq 0
 check bench.stability_table /usr/bin/python3 -c "

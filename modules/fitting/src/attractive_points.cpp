@@ -49,13 +49,26 @@ std::pair<int, double> nearest_particle(const particles::Positions& x,
 std::pair<int, double> nearest_surface_particle(const particles::Positions& x,
                                                 const std::vector<int>& candidates,
                                                 const Eigen::Vector3d& p_mm,
-                                                const std::vector<double>& depths_mm,
-                                                double radius_mm) {
+                                                const SurfaceFeet& feet, double radius_mm) {
   std::pair<int, double> best{-1, std::numeric_limits<double>::infinity()};
+  if (feet.empty()) {
+    for (int i : candidates) {
+      const double gap = (x.col(i) - p_mm).norm() - radius_mm;
+      if (gap < best.second) best = {i, gap};
+    }
+    return best;
+  }
+  // The path from p to the particle through its foot: of particles stacked under one
+  // foot, the outermost.
+  double shortest = std::numeric_limits<double>::infinity();
   for (int i : candidates) {
-    const double depth = depths_mm.empty() ? radius_mm : depths_mm[static_cast<size_t>(i)];
-    const double gap = (x.col(i) - p_mm).norm() - depth;
-    if (gap < best.second) best = {i, gap};
+    const double path =
+        (x.col(i) + feet.offset_mm.col(i) - p_mm).norm() + feet.offset_mm.col(i).norm();
+    if (path < shortest) shortest = path, best.first = i;
+  }
+  if (best.first >= 0) {
+    const int i = best.first;
+    best.second = feet.normal.col(i).dot(p_mm - x.col(i) - feet.offset_mm.col(i));
   }
   return best;
 }

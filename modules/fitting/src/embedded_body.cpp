@@ -193,10 +193,20 @@ double EmbeddedBody::volume_mm3(double voxel_mm) const {
   return on_grid(geometry::grid_covering(bounds(), voxel_mm, voxel_mm)).volume_mm3(1);
 }
 
-std::vector<double> surface_depths(const particles::Positions& x, const Eigen::Matrix3Xd& surface,
-                                   double reach) {
-  std::vector<double> depth(static_cast<size_t>(x.cols()), reach);
-  if (surface.cols() == 0 || !(reach > 0)) return depth;
+SurfaceFeet surface_feet(const particles::Positions& x, const SurfaceSamples& samples,
+                         double reach) {
+  SurfaceFeet feet;
+  feet.offset_mm.resize(3, x.cols());
+  feet.normal.resize(3, x.cols());
+  const Eigen::Vector3d centroid =
+      x.cols() > 0 ? Eigen::Vector3d(x.rowwise().mean()) : Eigen::Vector3d::Zero();
+  for (Eigen::Index i = 0; i < x.cols(); ++i) {  // no sample within reach: deep inside
+    Eigen::Vector3d away = x.col(i) - centroid;
+    away = away.norm() > 1e-12 ? Eigen::Vector3d(away.normalized()) : Eigen::Vector3d::UnitX();
+    feet.normal.col(i) = away, feet.offset_mm.col(i) = reach * away;
+  }
+  const Eigen::Matrix3Xd& surface = samples.points;
+  if (surface.cols() == 0 || !(reach > 0)) return feet;
   const Eigen::Vector3d lo = surface.rowwise().minCoeff();
   auto cell_of = [&](const Eigen::Vector3d& p) -> Eigen::Vector3i {
     const Eigen::Vector3d c = ((p - lo) / reach).array().floor();
@@ -209,17 +219,22 @@ std::vector<double> surface_depths(const particles::Positions& x, const Eigen::M
   for (Eigen::Index i = 0; i < x.cols(); ++i) {
     const Eigen::Vector3i c = cell_of(x.col(i));
     double best2 = reach * reach;
+    int nearest = -1;
     for (int dz = -1; dz <= 1; ++dz)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {
           const auto it = cells.find(cell_key(c + Eigen::Vector3i(dx, dy, dz)));
           if (it == cells.end()) continue;
-          for (int j : it->second)
-            best2 = std::min(best2, (surface.col(j) - x.col(i)).squaredNorm());
+          for (int j : it->second) {
+            const double d2 = (surface.col(j) - x.col(i)).squaredNorm();
+            if (d2 < best2) best2 = d2, nearest = j;
+          }
         }
-    depth[static_cast<size_t>(i)] = std::sqrt(best2);
+    if (nearest < 0) continue;
+    feet.offset_mm.col(i) = surface.col(nearest) - x.col(i);
+    feet.normal.col(i) = samples.normals.col(nearest);
   }
-  return depth;
+  return feet;
 }
 
 }  // namespace organfit::fitting

@@ -11,20 +11,19 @@ namespace organfit::fitting {
 std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
                                    const particles::Positions& x, const std::vector<int>& skin,
                                    double radius_mm, const std::vector<PointStatus>* status,
-                                   const std::vector<double>* depths_mm) {
+                                   const SurfaceFeet* feet) {
   std::vector<double> out(points.size(), std::numeric_limits<double>::infinity());
   for (size_t k = 0; k < points.size(); ++k) {
     if (status && k < status->size() && (*status)[k].rejected) {
       out[k] = std::numeric_limits<double>::quiet_NaN();
       continue;
     }
-    if (!depths_mm) {
+    if (!feet || feet->empty()) {
       const double d2 = nearest_particle(x, skin, points[k].p_mm).second;
       if (std::isfinite(d2)) out[k] = std::abs(std::sqrt(d2) - radius_mm);
       continue;
     }
-    const double gap =
-        nearest_surface_particle(x, skin, points[k].p_mm, *depths_mm, radius_mm).second;
+    const double gap = nearest_surface_particle(x, skin, points[k].p_mm, *feet, radius_mm).second;
     if (std::isfinite(gap)) out[k] = std::abs(gap);
   }
   return out;
@@ -63,8 +62,7 @@ FitResult run_fit(
     HistoryRow h;
     h.step = integ.stats().steps;
     const std::vector<double> r =
-        data_residuals(points, state.x, skin_of(state.x), rho, status,
-                       o.surface_depths_mm.empty() ? nullptr : &o.surface_depths_mm);
+        data_residuals(points, state.x, skin_of(state.x), rho, status, &o.surface_feet);
     double sum = 0, mx = 0;
     std::vector<double> kept;
     for (double v : r)

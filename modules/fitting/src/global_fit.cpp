@@ -372,6 +372,24 @@ double point_to_plane_rms(const GlobalMap& map, const SurfaceSamples& surface,
 
 }  // namespace
 
+SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface) {
+  SurfaceSamples out;
+  out.points.resize(3, surface.points.cols());
+  out.normals.resize(3, surface.points.cols());
+  const double h = 1e-3;  // mm: the shears' second derivatives are ~1/100 mm^-1
+  for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
+    const Eigen::Vector3d s = surface.points.col(j);
+    Eigen::Matrix3d jacobian;
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::Vector3d e = h * Eigen::Vector3d::Unit(c);
+      jacobian.col(c) = (map.apply(s + e) - map.apply(s - e)) / (2 * h);
+    }
+    out.points.col(j) = map.apply(s);
+    out.normals.col(j) = (jacobian.inverse().transpose() * surface.normals.col(j)).normalized();
+  }
+  return out;
+}
+
 double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface) {
   Eigen::Matrix3Xd d(3, surface.points.cols());
   for (Eigen::Index j = 0; j < d.cols(); ++j)

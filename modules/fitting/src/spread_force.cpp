@@ -36,12 +36,15 @@ SpreadAttractiveForce::SpreadAttractiveForce(std::vector<AttractivePoint> points
   }
 }
 
-void SpreadAttractiveForce::set_surface_depths(std::vector<double> depth_mm) {
-  for (double d : depth_mm)
-    if (!(d >= 0) || !std::isfinite(d))
-      throw std::invalid_argument("spread force: surface depths must be finite and >= 0");
-  depth_ = std::move(depth_mm);
-  skin_.invalidate();  // re-assign the epicentres with the new depths
+void SpreadAttractiveForce::set_surface_feet(SurfaceFeet feet) {
+  if (feet.normal.cols() != feet.offset_mm.cols() || !feet.offset_mm.allFinite() ||
+      !feet.normal.allFinite() ||
+      (feet.normal.cols() > 0 &&
+       (feet.normal.colwise().norm().array() - 1.0).abs().maxCoeff() > 1e-6))
+    throw std::invalid_argument(
+        "spread force: surface feet must be finite, with one unit normal per offset");
+  feet_ = std::move(feet);
+  skin_.invalidate();  // re-assign the epicentres on the new surface
 }
 
 void SpreadAttractiveForce::assign(const particles::Positions& x) {
@@ -50,16 +53,19 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
   const double outlier =
       params_.outlier_distance_mm > 0 ? params_.outlier_distance_mm : default_outlier_distance(x);
   const double sigma = params_.patch_sigma_r0 * r0_, radius = params_.patch_radius_r0 * r0_;
+  gap_.assign(points_.size(), 0.0);
   for (size_t k = 0; k < points_.size(); ++k) {
     PointStatus& st = status_[k];
     st = PointStatus{};
     patch_[k].clear();
-    // Epicentre: the skin particle whose surface (its depth away) is nearest the point.
-    st.epicentre = nearest_surface_particle(x, skin, points_[k].p_mm, depth_, rho_).first;
+    // Epicentre: the skin particle whose surface is nearest the point.
+    const auto [epicentre, gap] = nearest_surface_particle(x, skin, points_[k].p_mm, feet_, rho_);
+    st.epicentre = epicentre;
     if (st.epicentre < 0) continue;
+    gap_[k] = gap;
     st.d_min_mm = (x.col(st.epicentre) - points_[k].p_mm).norm();
     st.inside_model = skin_.inside(points_[k].p_mm);
-    if (!st.inside_model && st.d_min_mm - depth(st.epicentre) > outlier) {
+    if (!st.inside_model && gap > outlier) {
       st.rejected = true;
       continue;
     }
@@ -74,14 +80,13 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
   // Points far off the surface compared with the others (median + 5 x 1.4826 MAD, and
   // more than 2 r0) are not boundary data: e.g. a point deep inside the organ.
   std::vector<double> off;
-  for (const auto& st : status_)
-    if (!st.rejected && st.epicentre >= 0)
-      off.push_back(std::abs(st.d_min_mm - depth(st.epicentre)));
+  for (size_t k = 0; k < status_.size(); ++k)
+    if (!status_[k].rejected && status_[k].epicentre >= 0) off.push_back(std::abs(gap_[k]));
   if (off.size() >= 5) {
     const double cut = std::max(2.0 * r0_, outlier_cutoff(off, 5.0));
     for (size_t k = 0; k < status_.size(); ++k) {
       PointStatus& st = status_[k];
-      if (!st.rejected && st.epicentre >= 0 && std::abs(st.d_min_mm - depth(st.epicentre)) > cut) {
+      if (!st.rejected && st.epicentre >= 0 && std::abs(gap_[k]) > cut) {
         st.rejected = true;
         patch_[k].clear();
       }
@@ -94,8 +99,8 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
     for (size_t k = 0; k < status_.size(); ++k) {
       const PointStatus& st = status_[k];
       if (st.rejected || st.epicentre < 0) continue;
-      const double r = st.d_min_mm - depth(st.epicentre);
-      residual[k] = st.inside_model ? -std::abs(r) : r;
+      // The tangent plane's gap is signed; the balls' is not below a dent (inside: negative).
+      residual[k] = !feet_.empty() ? gap_[k] : st.inside_model ? -std::abs(gap_[k]) : gap_[k];
       use[k] = 1;
     }
     const double epsilon =
@@ -116,13 +121,21 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
   for (size_t k = 0; k < points_.size(); ++k) {
     PointStatus& st = status_[k];
     if (st.rejected || patch_[k].empty()) continue;
-    const Eigen::Vector3d to_p = points_[k].p_mm - state.x.col(st.epicentre);
+    const int e = st.epicentre;
+    const Eigen::Vector3d to_p = points_[k].p_mm - state.x.col(e);
     const double d = to_p.norm();
     st.d_min_mm = d;
-    const double reach = depth(st.epicentre);
-    st.reached = std::abs(d - reach) < 1e-3 * rho_;
-    if (d < 1e-12) continue;
-    const Eigen::Vector3d r = (d - reach) * (to_p / d);
+    Eigen::Vector3d r;
+    if (!feet_.empty()) {
+      const Eigen::Vector3d normal = feet_.normal.col(e);
+      const double gap = normal.dot(to_p - feet_.offset_mm.col(e));
+      st.reached = std::abs(gap) < 1e-3 * rho_;
+      r = gap * normal;
+    } else {
+      st.reached = std::abs(d - rho_) < 1e-3 * rho_;
+      if (d < 1e-12) continue;
+      r = (d - rho_) * (to_p / d);
+    }
     for (const auto& [i, w] : patch_[k]) {
       num_[i] += w * r;
       den_[i] += w;

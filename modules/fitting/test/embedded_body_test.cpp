@@ -130,25 +130,65 @@ TEST(EmbeddedBody, IsEmptyFarFromTheParticlesAndRefusesBadInput) {
   EXPECT_THROW(EmbeddedBody(mask, GlobalMap{}, x, flung, 5.0), std::invalid_argument);
 }
 
-TEST(SurfaceDepths, AreDistancesToTheNearestSampleCappedAtTheReach) {
-  // Samples on the plane z = 0 (0.5 mm apart); particles below it.
-  Eigen::Matrix3Xd plane(3, 41 * 41);
+TEST(SurfaceFeet, AreTheNearestSamplesWithTheirNormalsWithinTheReach) {
+  // Samples on the plane z = 0 (0.5 mm apart), normal +z; particles below it.
+  SurfaceSamples plane;
+  plane.points.resize(3, 41 * 41);
+  plane.normals.resize(3, 41 * 41);
   for (int j = 0, k = 0; j < 41; ++j)
     for (int i = 0; i < 41; ++i, ++k)
-      plane.col(k) = Eigen::Vector3d(-10 + 0.5 * i, -10 + 0.5 * j, 0);
+      plane.points.col(k) = Eigen::Vector3d(-10 + 0.5 * i, -10 + 0.5 * j, 0),
+      plane.normals.col(k) = Eigen::Vector3d::UnitZ();
   particles::Positions x(3, 3);
-  x.col(0) = Eigen::Vector3d(0.25, 0, -1.5);
+  x.col(0) = Eigen::Vector3d(0.25, 0, -1.5);  // between two samples: the first is taken
   x.col(1) = Eigen::Vector3d(3, -2, -0.2);
   x.col(2) = Eigen::Vector3d(0, 0, -40);
-  const std::vector<double> d = surface_depths(x, plane, 6.0);
-  EXPECT_NEAR(d[0], std::hypot(0.25, 1.5), 1e-12);
-  EXPECT_NEAR(d[1], 0.2, 1e-12);
-  EXPECT_DOUBLE_EQ(d[2], 6.0);
+  const SurfaceFeet feet = surface_feet(x, plane, 6.0);
+  EXPECT_TRUE(feet.offset_mm.col(0).isApprox(Eigen::Vector3d(-0.25, 0, 1.5), 1e-12));
+  EXPECT_TRUE(feet.offset_mm.col(1).isApprox(Eigen::Vector3d(0, 0, 0.2), 1e-12));
+  EXPECT_TRUE(feet.normal.col(1).isApprox(Eigen::Vector3d::UnitZ(), 1e-12));
+  // Deep inside: the reach, away from the particles' centroid.
+  EXPECT_NEAR(feet.offset_mm.col(2).norm(), 6.0, 1e-12);
+  EXPECT_LT(feet.normal(2, 2), -0.99);
 }
 
-TEST(SpreadAttractiveForce, PullsTheEpicentreToItsDepthBelowThePoint) {
-  // Two particles; the point is 5 mm above particle 0, whose surface lies 1.2 mm above
-  // it: the residual is 3.8 mm, and the force on particle 0 points at the point.
+TEST(NearestSurfaceParticle, ReadsAPointOnTheSurfaceBesideTheFootAsOnIt) {
+  // A flat organ surface z = 0 above two particles 4 mm apart, 1.5 mm deep. A point on
+  // that surface 2 mm beside a foot is on the surface: the tangent plane says 0, a
+  // sphere of the depth about the particle would say hypot(2, 1.5) - 1.5 = 1 mm out.
+  particles::Positions x(3, 2);
+  x.col(0) = Eigen::Vector3d(0, 0, -1.5);
+  x.col(1) = Eigen::Vector3d(4, 0, -1.5);
+  SurfaceFeet feet;
+  feet.offset_mm = Eigen::Matrix3Xd::Zero(3, 2);
+  feet.offset_mm.row(2).setConstant(1.5);
+  feet.normal = Eigen::Matrix3Xd::Zero(3, 2);
+  feet.normal.row(2).setConstant(1.0);
+  const auto on = nearest_surface_particle(x, {0, 1}, Eigen::Vector3d(1.9, 0, 0), feet, 1.5);
+  EXPECT_EQ(on.first, 0);
+  EXPECT_NEAR(on.second, 0.0, 1e-12);
+  const auto below = nearest_surface_particle(x, {0, 1}, Eigen::Vector3d(2.5, 1, -0.7), feet, 1.5);
+  EXPECT_EQ(below.first, 1);
+  EXPECT_NEAR(below.second, -0.7, 1e-12);  // inside: negative
+  const auto balls = nearest_surface_particle(x, {0, 1}, Eigen::Vector3d(2, 0, 0), {}, 1.5);
+  EXPECT_NEAR(balls.second, 1.0, 1e-12);
+  // A particle 3 mm below particle 0 with its foot 0.1 mm nearer the point: the outer
+  // one, whose path through its foot is shorter, takes it.
+  particles::Positions stacked(3, 2);
+  stacked.col(0) = Eigen::Vector3d(0, 0, -1.5);
+  stacked.col(1) = Eigen::Vector3d(0.1, 0, -4.5);
+  SurfaceFeet under;
+  under.offset_mm = Eigen::Matrix3Xd::Zero(3, 2);
+  under.offset_mm(2, 0) = 1.5, under.offset_mm(2, 1) = 4.5;
+  under.normal = feet.normal;
+  EXPECT_EQ(nearest_surface_particle(stacked, {1, 0}, Eigen::Vector3d(1, 0, 0.2), under, 1.5).first,
+            0);
+}
+
+TEST(SpreadAttractiveForce, PullsTheEpicentreAlongItsNormalByItsGapToThePoint) {
+  // Two particles; the point is 5 mm above particle 0 and 1 mm to the side, whose surface
+  // lies 1.2 mm above it (normal +z): the residual is 3.8 mm along +z, and the force on
+  // particle 0 has no sideways part.
   particles::CohesionParams cp;
   cp.r0_mm = 3.0;
   const particles::LennardJones law(cp);
@@ -159,21 +199,29 @@ TEST(SpreadAttractiveForce, PullsTheEpicentreToItsDepthBelowThePoint) {
   params.hold_volume = false;
   params.outlier_distance_mm = 20;
   params.stiffness_fraction = 1e-3;  // below the cohesion cap
-  SpreadAttractiveForce term({{Eigen::Vector3d(0, 0, 5), 1.0}}, law, 1.5, params, 0.5);
-  term.set_surface_depths({1.2, 1.2});
+  SurfaceFeet feet;
+  feet.offset_mm.resize(3, 2);
+  feet.offset_mm << 0, 0, 0, 0, 1.2, 1.2;
+  feet.normal.resize(3, 2);
+  feet.normal << 0, 0, 0, 0, 1, 1;
+  SpreadAttractiveForce term({{Eigen::Vector3d(1, 0, 5), 1.0}}, law, 1.5, params, 0.5);
+  term.set_surface_feet(feet);
   particles::State s(x);
   particles::Forces f = particles::Forces::Zero(3, 2);
   term.add_forces(s, f, false);
   EXPECT_EQ(term.status()[0].epicentre, 0);
   EXPECT_GT(f(2, 0), 0);
   EXPECT_NEAR(f.col(0).head<2>().norm(), 0, 1e-12);
-  // With the balls' radius (1.5 mm) instead the residual is 3.5 mm: the pull is smaller
-  // in the ratio 3.5 / 3.8 (below the cohesion cap).
-  SpreadAttractiveForce balls({{Eigen::Vector3d(0, 0, 5), 1.0}}, law, 1.5, params, 0.5);
+  // With the balls' radius (1.5 mm) instead the residual is |(1, 0, 5)| - 1.5 along the
+  // line to the point (below the cohesion cap).
+  SpreadAttractiveForce balls({{Eigen::Vector3d(1, 0, 5), 1.0}}, law, 1.5, params, 0.5);
   particles::Forces g = particles::Forces::Zero(3, 2);
   balls.add_forces(s, g, false);
-  EXPECT_NEAR(g(2, 0) / f(2, 0), 3.5 / 3.8, 1e-9);
-  EXPECT_THROW(term.set_surface_depths({-1.0, 1.0}), std::invalid_argument);
+  const double r_balls = std::sqrt(26.0) - 1.5;
+  EXPECT_NEAR(g(2, 0) / f(2, 0), r_balls * (5 / std::sqrt(26.0)) / 3.8, 1e-9);
+  EXPECT_NEAR(g(0, 0) / g(2, 0), 0.2, 1e-9);
+  feet.normal(2, 0) = 2;
+  EXPECT_THROW(term.set_surface_feet(feet), std::invalid_argument);
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <Eigen/SVD>
 #include <random>
@@ -143,6 +144,39 @@ TEST(GlobalFit, OfEquallyGoodFitsKeepsTheLeastChange) {
       moved += (map->apply(samples.points.col(j)) - samples.points.col(j)).norm();
     EXPECT_LT(moved / static_cast<double>(samples.points.cols()), 0.5);
   }
+}
+
+TEST(MapSurface, TurnsNormalsToStayNormalToTheMappedSurface) {
+  // A stretch and all nine shears: a mapped tangent stays orthogonal to the mapped normal,
+  // and for the affine part alone the normal is a^-T n.
+  const SurfaceSamples samples = ellipsoid_mask_surface();
+  GlobalMap map;
+  map.affine.a = Eigen::DiagonalMatrix<double, 3>(1.3, 1 / std::sqrt(1.3), 1 / std::sqrt(1.3));
+  map.affine.t = Eigen::Vector3d(2, -1, 3);
+  map.shears.centre = Eigen::Vector3d(1, 0, -1);
+  for (int c = 0; c < 9; ++c)
+    map.shears.c(c) = 0.004 * (c % 2 ? 1 : -1) * (1 + c / 3);
+  const SurfaceSamples mapped = map_surface(map, samples);
+  ASSERT_EQ(mapped.points.cols(), samples.points.cols());
+  double worst = 0;
+  for (Eigen::Index j = 0; j < samples.points.cols(); j += 7) {
+    const Eigen::Vector3d n = samples.normals.col(j);
+    const Eigen::Vector3d t1 = n.unitOrthogonal(), t2 = n.cross(t1);
+    EXPECT_NEAR(mapped.normals.col(j).norm(), 1.0, 1e-12);
+    EXPECT_TRUE(mapped.points.col(j).isApprox(map.apply(samples.points.col(j)), 1e-12));
+    for (const Eigen::Vector3d& t : {t1, t2}) {
+      const Eigen::Vector3d s = samples.points.col(j);
+      const Eigen::Vector3d mapped_t = map.apply(s + 1e-3 * t) - map.apply(s - 1e-3 * t);
+      worst = std::max(worst, std::abs(mapped.normals.col(j).dot(mapped_t.normalized())));
+    }
+  }
+  EXPECT_LT(worst, 1e-6);
+  GlobalMap affine_only = map;
+  affine_only.shears.c.setZero();
+  const SurfaceSamples affine_mapped = map_surface(affine_only, samples);
+  const Eigen::Vector3d expected =
+      (map.affine.a.inverse().transpose() * samples.normals.col(0)).normalized();
+  EXPECT_TRUE(affine_mapped.normals.col(0).isApprox(expected, 1e-8));
 }
 
 // Shears beyond max_shear_mm fall back to the affine part alone, not to nothing.

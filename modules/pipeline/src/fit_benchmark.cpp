@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <optional>
 #include <random>
@@ -62,7 +63,15 @@ struct Row {
   double msd_balls_mm = 0,
          volume_change_balls_pct = 0;  ///< the particles' own body (balls closed by rho)
   bool converged = true;
+  int case_id = 0;
+  double msd_global_mm = std::numeric_limits<double>::quiet_NaN();  ///< after the global stage
 };
+
+/// The cases the targets name: sparse partial data (at most 87 points on half the
+/// surface, 0.5 mm noise, no outliers), deformations up to 10 mm.
+bool target_case(int points, double noise_mm, double outliers, double magnitude_mm) {
+  return points <= 87 && noise_mm == 0.5 && outliers == 0 && magnitude_mm <= 10;
+}
 
 ModelStageResult clone(const ModelStageResult& m) {
   ModelStageResult c;
@@ -186,9 +195,6 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   for (const auto& m : all_methods)
     if (o.methods.empty() || std::find(o.methods.begin(), o.methods.end(), m) != o.methods.end())
       methods.push_back(m);
-  std::error_code ec;
-  fs::create_directories(o.out, ec);
-  if (ec) throw InputError(o.out.string() + ": cannot create the folder: " + ec.message());
   if (o.threads > 0) omp_set_num_threads(o.threads);
   Stopwatch total;
 
@@ -220,7 +226,19 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
       static_cast<long long>(shapes.size() * families.size() * magnitudes.size() * counts.size() *
                              noises.size() * outliers.size());
   std::vector<char> selected(static_cast<size_t>(grid_cases) + 1, 1);
-  if (o.sample > 0 && o.sample < grid_cases) {
+  if (!o.cases.empty()) {
+    if (o.sample > 0 || o.targets)
+      throw InputError("bench fit: --cases excludes --sample and --targets");
+    std::fill(selected.begin(), selected.end(), 0);
+    for (long long c : o.cases) {
+      if (c < 1 || c > grid_cases)
+        throw InputError(fmt::format("bench fit: --cases: no case {} (the {}grid has 1 to {})", c,
+                                     o.quick ? "quick " : "", grid_cases));
+      selected[static_cast<size_t>(c)] = 1;
+    }
+  } else if (o.targets && o.sample > 0) {
+    throw InputError("bench fit: --targets excludes --sample");
+  } else if (o.sample > 0 && o.sample < grid_cases) {
     std::vector<long long> ids(static_cast<size_t>(grid_cases));
     for (long long i = 0; i < grid_cases; ++i)
       ids[static_cast<size_t>(i)] = i + 1;
@@ -230,6 +248,10 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
     for (long long i = 0; i < o.sample; ++i)
       selected[static_cast<size_t>(ids[static_cast<size_t>(i)])] = 1;
   }
+  // The folder only once the options are known to be good: a refused run leaves nothing.
+  std::error_code ec;
+  fs::create_directories(o.out, ec);
+  if (ec) throw InputError(o.out.string() + ": cannot create the folder: " + ec.message());
   std::vector<Row> rows;
   std::string curves = "case,method,step,wall_s,residual_mean_mm,volume_change_pct\n";
   int case_id = 0, cases_run = 0;
@@ -260,7 +282,9 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
             for (double outlier : outliers) {
               throw_if_interrupted();
               ++case_id;
-              if (!selected[static_cast<size_t>(case_id)]) continue;
+              if (!selected[static_cast<size_t>(case_id)] ||
+                  (o.targets && !target_case(count, noise, outlier, magnitude)))
+                continue;
               ++cases_run;
               const evaluation::Deformation d = family_deformation(family, magnitude, model.shape);
               evaluation::SamplingOptions so;
@@ -278,6 +302,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                 xs.col(static_cast<Eigen::Index>(i)) = pts.points[i].p_mm;
               for (const auto& method : methods) {
                 Row row{method, shape.name, family, magnitude, count, noise, outlier};
+                row.case_id = case_id;
                 particles::Positions moved;
                 fitting::GlobalMap global_map;
                 particles::Positions placed = model.state.x;
@@ -356,6 +381,12 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                   placed = moved, global_map = fitting::GlobalMap{};
                 const fitting::EmbeddedBody organ(reference, global_map, placed, moved, support);
                 const auto cmp = evaluation::compare_with_body(organ, inside, bounds, voxel);
+                if (method == "spread" && placed.cols() == moved.cols()) {
+                  const fitting::EmbeddedBody global_only(reference, global_map, placed, placed,
+                                                          support);
+                  row.msd_global_mm =
+                      evaluation::compare_with_body(global_only, inside, bounds, voxel).msd_mm;
+                }
                 row.msd_mm = cmp.msd_mm, row.hd95_mm = cmp.hd95_mm, row.dice = cmp.dice;
                 row.volume_change_pct = 100 * (cmp.volume_a_mm3 / v0_embedded - 1);
                 const auto balls = evaluation::compare_with_body(moved, rho, inside, bounds, voxel);
@@ -377,13 +408,14 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   std::string csv =
       "method,shape,family,magnitude_mm,points,noise_mm,outliers,wall_s,msd_mm,hd95_mm,dice,volume_"
       "change_pct,residual_mm,"
-      "converged,msd_balls_mm,volume_change_balls_pct\n";
+      "converged,msd_balls_mm,volume_change_balls_pct,msd_global_mm,case\n";
   for (const auto& r : rows)
     csv += fmt::format(
-        "{},{},{},{},{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{:.4f},{:.4f}\n",
+        "{},{},{},{},{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{:.4f},{:.4f},{:.4f},{}"
+        "\n",
         r.method, r.shape, r.family, r.magnitude_mm, r.points, r.noise_mm, r.outliers, r.wall_s,
         r.msd_mm, r.hd95_mm, r.dice, r.volume_change_pct, r.residual_mm, r.converged ? 1 : 0,
-        r.msd_balls_mm, r.volume_change_balls_pct);
+        r.msd_balls_mm, r.volume_change_balls_pct, r.msd_global_mm, r.case_id);
   write_file_atomically(o.out / "results.csv", csv);
   write_file_atomically(o.out / "curves.csv", curves);
   write_file_atomically(o.out / "work_precision.svg", svg_work_precision(rows));
@@ -443,8 +475,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   // Targets: sparse partial data (<= 87 points, half the surface, 0.5 mm noise), <= 10 mm.
   int n = 0, meet_msd = 0, meet_hd = 0, meet_vol = 0;
   for (const auto& r : rows)
-    if (r.method == "spread" && r.points <= 87 && r.noise_mm == 0.5 && r.magnitude_mm <= 10 &&
-        r.outliers == 0)
+    if (r.method == "spread" && target_case(r.points, r.noise_mm, r.outliers, r.magnitude_mm))
       ++n, meet_msd += r.msd_mm <= 1.0, meet_hd += r.hd95_mm <= 2.5,
           meet_vol += std::abs(r.volume_change_pct) <= 1.0;
   md += fmt::format(
@@ -458,8 +489,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   std::map<std::string, int> half, smaller_volume, cases;
   for (size_t i = 0; i < rows.size(); ++i) {
     const Row& r = rows[i];
-    if (r.method != "spread" ||
-        !(r.points <= 87 && r.noise_mm == 0.5 && r.magnitude_mm <= 10 && r.outliers == 0))
+    if (r.method != "spread" || !target_case(r.points, r.noise_mm, r.outliers, r.magnitude_mm))
       continue;
     for (size_t j = i + 1; j < rows.size() && j < i + methods.size(); ++j) {
       const Row& b = rows[j];

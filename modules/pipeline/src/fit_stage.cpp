@@ -310,18 +310,12 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     auto& term = m.add(std::make_unique<fitting::SpreadAttractiveForce>(
         points, law, rho, fitting::SpreadForceParams{}, skin_voxel));
     // The surface the local stage fits is the organ's embedded surface (the reference
-    // moved with the particles, fitting/embedded_body.h): each particle's depth below
-    // the mapped reference surface replaces the balls' radius.
-    {
-      const fitting::SurfaceSamples reference_surface =
-          fitting::reference_surface(model.reference, 1);
-      Eigen::Matrix3Xd mapped(3, reference_surface.points.cols());
-      for (Eigen::Index j = 0; j < mapped.cols(); ++j)
-        mapped.col(j) = map.apply(reference_surface.points.col(j));
-      fo.surface_depths_mm =
-          fitting::surface_depths(state.x, mapped, 3.0 * model.lattice_spacing_mm);
-      term.set_surface_depths(fo.surface_depths_mm);
-    }
+    // moved with the particles, fitting/embedded_body.h): each particle's foot on the
+    // mapped reference surface and the tangent plane there replace the balls.
+    fo.surface_feet = fitting::surface_feet(
+        state.x, fitting::map_surface(map, fitting::reference_surface(model.reference, 1)),
+        3.0 * model.lattice_spacing_mm);
+    term.set_surface_feet(fo.surface_feet);
     skin_of = [&term](const particles::Positions&) -> const std::vector<int>& {
       return term.skin().skin();
     };

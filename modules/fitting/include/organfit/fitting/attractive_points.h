@@ -30,15 +30,32 @@ std::pair<int, double> nearest_particle(const particles::Positions& x,
                                         const std::vector<int>& candidates,
                                         const Eigen::Vector3d& p_mm);
 
-/// The particle among `candidates` whose surface lies nearest `p_mm`: the least
-/// |p - x_i| - depth_i (mm, signed), with depth_i = depths_mm[i], or `radius_mm` for every
-/// particle when depths_mm is empty (the balls' surface). Ties go to the first.
-/// {-1, infinity} when there are no candidates.
+/// The organ's surface as each particle sees it (fitting/embedded_body.h): its foot, the
+/// nearest point of the surface, as an offset from the particle (mm), and the surface's
+/// outward unit normal there. Near particle i the surface is the tangent plane through
+/// x_i + offset_i; it moves with the particle. One column per particle.
+struct SurfaceFeet {
+  Eigen::Matrix3Xd offset_mm;
+  Eigen::Matrix3Xd normal;
+  bool empty() const { return offset_mm.cols() == 0; }
+};
+
+/// The particle among `candidates` whose surface lies nearest `p_mm`, and the signed
+/// distance (mm, positive outside) from that surface to p:
+///  * with `feet`: the particle with the shortest path from p through its foot,
+///    |p - x_i - offset_i| + |offset_i| (of particles stacked under one foot, the outermost:
+///    with the nearest foot alone a deeper one could take the pull, and on a model of
+///    0.3 mm particles under 0.5 mm noise one was pulled out of the body), and p's distance
+///    to that foot's tangent plane, n_i . (p - x_i - offset_i). A plane, not a sphere of
+///    the foot's depth about the particle: the sphere falls away from the surface beside
+///    the foot, so points on the surface would read as outside (by d^2 / 2 depth at a
+///    distance d from the foot, 0.3 mm on average at the model's spacing) and be chased;
+///  * without (feet empty): the least |p - x_i| - radius_mm, the balls' surface.
+/// Ties go to the first. {-1, infinity} when there are no candidates.
 std::pair<int, double> nearest_surface_particle(const particles::Positions& x,
                                                 const std::vector<int>& candidates,
                                                 const Eigen::Vector3d& p_mm,
-                                                const std::vector<double>& depths_mm,
-                                                double radius_mm);
+                                                const SurfaceFeet& feet, double radius_mm);
 
 /// Points farther than this from the skin are outliers unless a distance is given:
 /// half the model's diameter (mm).

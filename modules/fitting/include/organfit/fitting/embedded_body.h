@@ -67,13 +67,14 @@ class EmbeddedBody {
   Eigen::Vector3d unmap_globally(const Eigen::Vector3d& q0_mm) const;
 };
 
-/// Depth of each particle below a surface given by dense samples (mm): its distance to
-/// the nearest sample, found within `reach_mm` (farther particles get reach_mm: they
-/// are deep inside and never skin). With the samples of the reference surface moved by
-/// the global map, these are the depths the spread force fits with, so that the
-/// surface it moves onto the points is the embedded body's. O(N + samples).
-std::vector<double> surface_depths(const particles::Positions& x,
-                                   const Eigen::Matrix3Xd& surface_mm, double reach_mm);
+/// Each particle's foot on a surface given by dense samples with outward normals: the
+/// offset to its nearest sample (mm) and that sample's normal, found within `reach_mm`.
+/// A particle with no sample within reach (deep inside, never skin) gets the offset
+/// reach_mm along the direction from the particles' centroid. With the reference surface
+/// moved by the global map (map_surface), these are what the spread force fits with, so
+/// that the surface it moves onto the points is the embedded body's. O(N + samples).
+SurfaceFeet surface_feet(const particles::Positions& x, const SurfaceSamples& surface,
+                         double reach_mm);
 
 /// Moving-least-squares support for a model of lattice spacing `a_nn_mm`: 2 spacings,
 /// so that a point on the surface, with particles on one side only, has ~20 of them

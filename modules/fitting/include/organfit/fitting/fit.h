@@ -10,16 +10,15 @@
 
 namespace organfit::fitting {
 
-/// Data residual of each point (mm): distance from the point to the model surface,
-/// taken as | min over skin particles of (|p - x_i| - depth_i) | with depth_i = rho (the
-/// balls' surface) or, given `depths_mm` (one per particle), each particle's depth below
-/// the organ's embedded surface (fitting/embedded_body.h). Rejected points (outliers)
-/// get NaN and are left out of the statistics.
+/// Data residual of each point (mm): distance from the point to the model surface, the
+/// balls' (| min over skin particles of |p - x_i| - rho |) or, given `feet`, the organ's
+/// embedded surface (the tangent plane at the nearest foot: nearest_surface_particle).
+/// Rejected points (outliers) get NaN and are left out of the statistics.
 std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
                                    const particles::Positions& x, const std::vector<int>& skin,
                                    double radius_mm,
                                    const std::vector<PointStatus>* status = nullptr,
-                                   const std::vector<double>* depths_mm = nullptr);
+                                   const SurfaceFeet* feet = nullptr);
 
 struct FitOptions {
   double residual_mean_tolerance_mm = 0.5;  ///< converged: mean residual at most this
@@ -34,9 +33,9 @@ struct FitOptions {
   /// Volume of the model (mm^3) for the history; empty: not recorded.
   std::function<double(const particles::Positions&)> volume;
   int volume_every_rows = 5;
-  /// Depth of each particle below the organ's surface (mm) for the residuals; empty:
-  /// rho for all (see data_residuals).
-  std::vector<double> surface_depths_mm;
+  /// The organ's surface as each particle sees it, for the residuals; empty: the balls'
+  /// (see data_residuals).
+  SurfaceFeet surface_feet;
 };
 
 struct HistoryRow {

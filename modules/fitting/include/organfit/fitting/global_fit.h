@@ -98,6 +98,10 @@ struct GlobalMap {
   Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
 };
 
+/// The surface samples moved by `map`: points mapped, normals turned by the inverse
+/// transpose of its Jacobian (by central differences) and made unit again.
+SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface);
+
 /// How much `map` changes the shape and orientation of the body whose surface is sampled
 /// (mm): the RMS displacement of the samples about their mean displacement (the
 /// translation).

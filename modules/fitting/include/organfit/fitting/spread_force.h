@@ -2,11 +2,11 @@
 // Local stage of the "spread" fit: a smooth attractive force that moves a patch of
 // skin around each point coherently, instead of pulling single particles into "tents".
 //
-// For point k with epicentre e_k (nearest skin particle, re-assigned when the skin is
-// recomputed), the residual is the vector from the epicentre's surface point to p_k:
-//     r_k = (|p_k - x_e| - rho) u_ek,   u_ek = (p_k - x_e) / |p_k - x_e|.
-// (With surface depths set, rho is replaced by the epicentre's depth below the organ's
-// embedded surface: set_surface_depths.)
+// For point k with epicentre e_k (the skin particle whose surface is nearest, re-assigned
+// when the skin is recomputed), the residual is the vector from that surface to p_k:
+//     r_k = (|p_k - x_e| - rho) u_ek,   u_ek = (p_k - x_e) / |p_k - x_e|   (the balls'),
+//     r_k = (n_e . (p_k - x_e - o_e)) n_e   (the organ's embedded surface: set_surface_feet,
+// the tangent plane at the epicentre's foot x_e + o_e, normal n_e).
 // Skin particles i of the patch (within patch_radius of e_k) share that displacement with
 // Gaussian weights w_ik = exp(-|x_i - x_e|^2 / (2 sigma^2)) (positions at assignment),
 // normalised where patches overlap (a partition of unity, so nearby points average
@@ -53,14 +53,12 @@ class SpreadAttractiveForce : public particles::ForceTerm {
   const SkinDetector& skin() const { return skin_; }
   const std::vector<PointStatus>& status() const { return status_; }
 
-  /// Each particle's depth below the organ's surface (mm, one per particle; see
-  /// fitting/embedded_body.h): the residual of a point becomes |p - x_e| - depth_e and
-  /// its epicentre the skin particle minimising that, so the surface fitted is the
-  /// embedded body's, not the balls'. Without it every depth is rho (the balls').
-  /// Throws std::invalid_argument on a negative or non-finite depth.
-  void set_surface_depths(std::vector<double> depth_mm);
-  /// Depth of particle i (mm).
-  double depth(int i) const { return depth_.empty() ? rho_ : depth_[static_cast<size_t>(i)]; }
+  /// The organ's surface as each particle sees it (one column per particle; see
+  /// fitting/embedded_body.h, surface_feet): a point's epicentre becomes the skin
+  /// particle whose foot is nearest, and its residual its distance to that foot's
+  /// tangent plane, so the surface fitted is the embedded body's, not the balls'.
+  /// Throws std::invalid_argument on a non-finite offset or a normal not of unit length.
+  void set_surface_feet(SurfaceFeet feet);
 
  private:
   void assign(const particles::Positions& x);
@@ -72,7 +70,8 @@ class SpreadAttractiveForce : public particles::ForceTerm {
   std::vector<std::vector<std::pair<int, double>>> patch_;  // (particle, weight) per point
   std::vector<std::vector<int>> neighbours_;  // each point's nearest points (fixed: points stay)
   std::vector<int> w_;                        // W(i) at the last assignment
-  std::vector<double> depth_;                 // per particle; empty: rho for all
+  SurfaceFeet feet_;                          // empty: the balls' surface
+  std::vector<double> gap_;                   // each point's signed residual at assignment
   std::vector<Eigen::Vector3d> num_;
   std::vector<double> den_;
 };
