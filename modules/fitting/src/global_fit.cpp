@@ -11,6 +11,7 @@
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/particles/diagnostics.h"
 #include "organfit/particles/lattice_fill.h"
+#include "sample_grid.h"
 
 namespace organfit::fitting {
 
@@ -136,10 +137,11 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
   std::vector<double> r(m), w(m);
   auto correspond = [&](const Eigen::Matrix3d& a, const Eigen::Vector3d& t) {
     const Eigen::Matrix3Xd moved = (a * surface.points).colwise() + t;
+    const SampleGrid grid(moved);
     for (int k = 0; k < m; ++k) {
-      Eigen::Index j;
-      r[k] = std::sqrt((moved.colwise() - p.col(k)).colwise().squaredNorm().minCoeff(&j));
-      match[k] = static_cast<int>(j);
+      const auto [j, d2] = grid.nearest(p.col(k));
+      r[k] = std::sqrt(d2);
+      match[k] = j;
     }
     return robust_weights(r, points, o.outlier_mads, w);
   };
@@ -287,10 +289,11 @@ std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& su
     Eigen::Matrix3Xd moved(3, affine_img.cols());
     for (Eigen::Index j = 0; j < affine_img.cols(); ++j)
       moved.col(j) = map.shears.apply(affine_img.col(j));
+    const SampleGrid grid(moved);
     for (int k = 0; k < m; ++k) {
-      Eigen::Index j;
-      r[k] = std::sqrt((moved.colwise() - p.col(k)).colwise().squaredNorm().minCoeff(&j));
-      match[k] = static_cast<int>(j);
+      const auto [j, d2] = grid.nearest(p.col(k));
+      r[k] = std::sqrt(d2);
+      match[k] = j;
     }
     const double rms = robust_weights(r, points, o.outlier_mads, w);
     const bool settled = schedule.steps > 0 && std::abs(map.rms_after_mm - rms) < 1e-5 * (1 + rms);
@@ -361,9 +364,9 @@ double point_to_plane_rms(const GlobalMap& map, const SurfaceSamples& surface,
     moved.col(j) = map.apply(surface.points.col(j));
   const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
   std::vector<double> r(points.size()), w;
+  const SampleGrid grid(moved);
   for (size_t k = 0; k < points.size(); ++k) {
-    Eigen::Index j;
-    (moved.colwise() - points[k].p_mm).colwise().squaredNorm().minCoeff(&j);
+    const int j = grid.nearest(points[k].p_mm).first;
     r[k] = std::abs(
         (normal_map * surface.normals.col(j)).normalized().dot(points[k].p_mm - moved.col(j)));
   }

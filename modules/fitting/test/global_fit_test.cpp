@@ -7,6 +7,7 @@
 #include <Eigen/SVD>
 #include <random>
 
+#include "../src/sample_grid.h"
 #include "organfit/fitting/skin.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/particles/lattice_fill.h"
@@ -144,6 +145,31 @@ TEST(GlobalFit, OfEquallyGoodFitsKeepsTheLeastChange) {
       moved += (map->apply(samples.points.col(j)) - samples.points.col(j)).norm();
     EXPECT_LT(moved / static_cast<double>(samples.points.cols()), 0.5);
   }
+}
+
+TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
+  // The ellipsoid's surface samples, one duplicated (ties go to the lower index); queries
+  // on the surface, inside, 40 mm outside and 1 m away.
+  SurfaceSamples s = ellipsoid_mask_surface();
+  s.points.conservativeResize(Eigen::NoChange, s.points.cols() + 1);
+  s.points.col(s.points.cols() - 1) = s.points.col(7);
+  const SampleGrid grid(s.points);
+  std::mt19937 rng(5);
+  std::normal_distribution<double> g(0.0, 1.0);
+  for (double scale : {0.0, 0.5, 2.6, 40.0}) {
+    for (int q = 0; q < 200; ++q) {
+      const Eigen::Vector3d d = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
+      const Eigen::Vector3d p = scale == 0.0 ? Eigen::Vector3d(s.points.col(q)) : scale * 25.0 * d;
+      Eigen::Index j;
+      const double d2 = (s.points.colwise() - p).colwise().squaredNorm().minCoeff(&j);
+      const auto [k, e2] = grid.nearest(p);
+      EXPECT_EQ(k, j) << p.transpose();
+      EXPECT_DOUBLE_EQ(e2, d2);
+    }
+  }
+  EXPECT_EQ(grid.nearest(s.points.col(7)).first, 7);
+  const Eigen::Matrix3Xd none(3, 0);
+  EXPECT_EQ(SampleGrid(none).nearest(Eigen::Vector3d::Zero()).first, -1);
 }
 
 TEST(MapSurface, TurnsNormalsToStayNormalToTheMappedSurface) {

@@ -1,0 +1,93 @@
+#pragma once
+// Nearest-sample queries for the global fits (internal to the fitting module).
+#include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <utility>
+#include <vector>
+
+namespace organfit::fitting {
+
+/// Nearest-sample queries among surface samples, bucketed on a grid of about cbrt(S)
+/// cells a side: exact (ties go to the lower index, as a scan would), and O(points x a
+/// few cells) instead of O(points x samples): the fits ask it every iteration.
+class SampleGrid {
+ public:
+  explicit SampleGrid(const Eigen::Matrix3Xd& samples) : s_(samples) {
+    const Eigen::Index n = s_.cols();
+    if (n == 0) return;
+    lo_ = s_.rowwise().minCoeff();
+    const Eigen::Vector3d extent = s_.rowwise().maxCoeff() - lo_;
+    h_ = std::max(extent.maxCoeff() / std::max(1.0, std::cbrt(static_cast<double>(n))), 1e-6);
+    for (int c = 0; c < 3; ++c)
+      dim_[c] = std::min(1024, static_cast<int>(extent[c] / h_) + 1);
+    start_.assign(static_cast<size_t>(dim_[0]) * dim_[1] * dim_[2] + 1, 0);
+    std::vector<int> cell(static_cast<size_t>(n));
+    for (Eigen::Index j = 0; j < n; ++j) {
+      const Eigen::Vector3i c = cell_of(s_.col(j));
+      cell[static_cast<size_t>(j)] = linear(c);
+      ++start_[static_cast<size_t>(cell[static_cast<size_t>(j)]) + 1];
+    }
+    for (size_t c = 1; c < start_.size(); ++c)
+      start_[c] += start_[c - 1];
+    order_.resize(static_cast<size_t>(n));
+    std::vector<int> fill(start_.begin(), start_.end() - 1);
+    for (Eigen::Index j = 0; j < n; ++j)  // by cell, ascending index within a cell
+      order_[static_cast<size_t>(fill[static_cast<size_t>(cell[static_cast<size_t>(j)])]++)] =
+          static_cast<int>(j);
+  }
+
+  /// The nearest sample to q and the squared distance (mm^2); {-1, inf} when empty.
+  std::pair<int, double> nearest(const Eigen::Vector3d& q) const {
+    std::pair<int, double> best{-1, std::numeric_limits<double>::infinity()};
+    if (s_.cols() == 0) return best;
+    const Eigen::Vector3i c = cell_of(q);
+    for (int r = 0;; ++r) {
+      // Shell r: the cells at Chebyshev distance r from q's (clamped) cell.
+      Eigen::Vector3i lo = (c.array() - r).max(0), hi = (c.array() + r).min(dim_.array() - 1);
+      for (int z = lo.z(); z <= hi.z(); ++z)
+        for (int y = lo.y(); y <= hi.y(); ++y)
+          for (int x = lo.x(); x <= hi.x(); ++x) {
+            if (std::max({std::abs(x - c.x()), std::abs(y - c.y()), std::abs(z - c.z())}) != r)
+              continue;
+            const int cell = linear(Eigen::Vector3i(x, y, z));
+            for (int k = start_[static_cast<size_t>(cell)];
+                 k < start_[static_cast<size_t>(cell) + 1]; ++k) {
+              const int j = order_[static_cast<size_t>(k)];
+              const double d2 = (s_.col(j) - q).squaredNorm();
+              if (d2 < best.second || (d2 == best.second && j < best.first)) best = {j, d2};
+            }
+          }
+      const bool all = (lo.array() == 0).all() && (hi.array() == dim_.array() - 1).all();
+      if (all) return best;
+      // Every sample not yet seen lies outside the block of cells searched; q's distance
+      // to that outside is a lower bound on its distance to them.
+      const Eigen::Vector3d block_lo = lo_ + h_ * lo.cast<double>(),
+                            block_hi = lo_ + h_ * (hi.array() + 1).matrix().cast<double>();
+      double margin = std::numeric_limits<double>::infinity();
+      for (int a = 0; a < 3; ++a) {
+        if (lo[a] > 0) margin = std::min(margin, q[a] - block_lo[a]);
+        if (hi[a] < dim_[a] - 1) margin = std::min(margin, block_hi[a] - q[a]);
+      }
+      if (margin > 0 && best.second <= margin * margin) return best;
+    }
+  }
+
+ private:
+  Eigen::Vector3i cell_of(const Eigen::Vector3d& q) const {
+    Eigen::Vector3i c;
+    for (int a = 0; a < 3; ++a)
+      c[a] = static_cast<int>(
+          std::clamp(std::floor((q[a] - lo_[a]) / h_), 0.0, static_cast<double>(dim_[a] - 1)));
+    return c;
+  }
+  int linear(const Eigen::Vector3i& c) const { return (c.z() * dim_[1] + c.y()) * dim_[0] + c.x(); }
+  const Eigen::Matrix3Xd& s_;
+  Eigen::Vector3d lo_ = Eigen::Vector3d::Zero();
+  double h_ = 1;
+  Eigen::Vector3i dim_ = Eigen::Vector3i::Ones();
+  std::vector<int> start_, order_;
+};
+
+}  // namespace organfit::fitting
