@@ -9,6 +9,7 @@
 
 #include "cell_key.h"
 #include "organfit/geometry/mask_ops.h"
+#include "sample_grid.h"
 
 namespace organfit::fitting {
 namespace {
@@ -205,33 +206,13 @@ SurfaceFeet surface_feet(const particles::Positions& x, const SurfaceSamples& sa
     away = away.norm() > 1e-12 ? Eigen::Vector3d(away.normalized()) : Eigen::Vector3d::UnitX();
     feet.normal.col(i) = away, feet.offset_mm.col(i) = reach * away;
   }
-  const Eigen::Matrix3Xd& surface = samples.points;
-  if (surface.cols() == 0 || !(reach > 0)) return feet;
-  const Eigen::Vector3d lo = surface.rowwise().minCoeff();
-  auto cell_of = [&](const Eigen::Vector3d& p) -> Eigen::Vector3i {
-    const Eigen::Vector3d c = ((p - lo) / reach).array().floor();
-    return c.cwiseMax(-1e6).cwiseMin(1e6).cast<int>();
-  };
-  std::unordered_map<long long, std::vector<int>> cells;
-  for (Eigen::Index j = 0; j < surface.cols(); ++j)
-    cells[cell_key(cell_of(surface.col(j)))].push_back(static_cast<int>(j));
+  if (samples.points.cols() == 0 || !(reach > 0)) return feet;
+  const SampleGrid grid(samples.points);
 #pragma omp parallel for schedule(static)
   for (Eigen::Index i = 0; i < x.cols(); ++i) {
-    const Eigen::Vector3i c = cell_of(x.col(i));
-    double best2 = reach * reach;
-    int nearest = -1;
-    for (int dz = -1; dz <= 1; ++dz)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-          const auto it = cells.find(cell_key(c + Eigen::Vector3i(dx, dy, dz)));
-          if (it == cells.end()) continue;
-          for (int j : it->second) {
-            const double d2 = (surface.col(j) - x.col(i)).squaredNorm();
-            if (d2 < best2) best2 = d2, nearest = j;
-          }
-        }
+    const int nearest = grid.nearest(x.col(i), reach).first;
     if (nearest < 0) continue;
-    feet.offset_mm.col(i) = surface.col(nearest) - x.col(i);
+    feet.offset_mm.col(i) = samples.points.col(nearest) - x.col(i);
     feet.normal.col(i) = samples.normals.col(nearest);
   }
   return feet;

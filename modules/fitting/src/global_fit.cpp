@@ -238,16 +238,38 @@ bool within_stretch(const Eigen::Matrix3d& a, const AffineFitOptions& o) {
   return sv[0] <= o.max_stretch && sv[2] >= 1.0 / o.max_stretch;
 }
 
+/// A map's images of the surface samples: after its affine part, and in full. Each
+/// candidate's samples are mapped once for the three questions asked of it (plausible,
+/// point_to_plane_rms, shape change).
+struct MappedSamples {
+  Eigen::Matrix3Xd affine, full;  ///< mm
+};
+
+MappedSamples map_samples(const GlobalMap& map, const SurfaceSamples& surface) {
+  MappedSamples m{Eigen::Matrix3Xd(3, surface.points.cols()),
+                  Eigen::Matrix3Xd(3, surface.points.cols())};
+  for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
+    m.affine.col(j) = map.affine.a * surface.points.col(j) + map.affine.t;
+    m.full.col(j) = map.shears.apply(m.affine.col(j));
+  }
+  return m;
+}
+
+/// RMS displacement (mm) of `moved` from `original` about its mean displacement.
+double shape_change_of(const Eigen::Matrix3Xd& moved, const Eigen::Matrix3Xd& original) {
+  const Eigen::Matrix3Xd d = moved - original;
+  const Eigen::Vector3d mean = d.rowwise().mean();
+  return std::sqrt((d.colwise() - mean).colwise().squaredNorm().mean());
+}
+
 /// Stretches within bounds, and shears moving no surface sample by more than
 /// max_shear_mm x the body's size.
-bool plausible(const GlobalMap& map, const SurfaceSamples& surface, const AffineFitOptions& o) {
+bool plausible(const GlobalMap& map, const MappedSamples& mapped, const SurfaceSamples& surface,
+               const AffineFitOptions& o) {
   const double size =
       (surface.points.rowwise().maxCoeff() - surface.points.rowwise().minCoeff()).norm();
-  double shear_move = 0;
-  for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
-    const Eigen::Vector3d q = map.affine.a * surface.points.col(j) + map.affine.t;
-    shear_move = std::max(shear_move, (map.shears.apply(q) - q).norm());
-  }
+  const double shear_move =
+      mapped.full.cols() > 0 ? (mapped.full - mapped.affine).colwise().norm().maxCoeff() : 0.0;
   return within_stretch(map.affine.a, o) && shear_move <= o.max_shear_mm * size;
 }
 
@@ -357,11 +379,10 @@ std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& su
 /// fits. Unlike the nearest-sample distance the fits report, it has no floor from the
 /// samples' spacing (0.4 to 0.6 mm on a CT mask, as much as the noise): fits that differ
 /// by less than the noise can be told apart.
-double point_to_plane_rms(const GlobalMap& map, const SurfaceSamples& surface,
-                          const std::vector<AttractivePoint>& points, double mads) {
-  Eigen::Matrix3Xd moved(3, surface.points.cols());
-  for (Eigen::Index j = 0; j < moved.cols(); ++j)
-    moved.col(j) = map.apply(surface.points.col(j));
+double point_to_plane_rms(const GlobalMap& map, const MappedSamples& mapped,
+                          const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
+                          double mads) {
+  const Eigen::Matrix3Xd& moved = mapped.full;
   const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
   std::vector<double> r(points.size()), w;
   const SampleGrid grid(moved);
@@ -394,11 +415,7 @@ SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface) 
 }
 
 double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface) {
-  Eigen::Matrix3Xd d(3, surface.points.cols());
-  for (Eigen::Index j = 0; j < d.cols(); ++j)
-    d.col(j) = map.apply(surface.points.col(j)) - surface.points.col(j);
-  const Eigen::Vector3d mean = d.rowwise().mean();
-  return std::sqrt((d.colwise() - mean).colwise().squaredNorm().mean());
+  return shape_change_of(map_samples(map, surface).full, surface.points);
 }
 
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
@@ -450,28 +467,32 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     return refused();
   // The plausible fits. Shears can swing out of range (a bulge seen from one side can do
   // that); when every fit of the whole map does, the affine part alone is what is left.
-  std::vector<GlobalMap> candidates;
+  std::vector<const GlobalMap*> candidates;
+  std::vector<MappedSamples> mapped;
+  auto keep_if_plausible = [&](const GlobalMap& fit) {
+    MappedSamples m = map_samples(fit, surface);
+    if (plausible(fit, m, surface, o)) candidates.push_back(&fit), mapped.push_back(std::move(m));
+  };
   for (const GlobalMap& fit : fits)
-    if (plausible(fit, surface, o)) candidates.push_back(fit);
+    keep_if_plausible(fit);
   const bool shears_dropped = !fits.empty() && candidates.empty();
   for (const GlobalMap& fit : affine_fits)
-    if (plausible(fit, surface, o)) candidates.push_back(fit);
+    keep_if_plausible(fit);
   if (candidates.empty()) return refused();
   // Points on part of the surface leave the rest free: fits from different starts and
   // stiffnesses often explain them equally well and differ by a millimetre elsewhere.
   // Of those within `equally_good` of the best mean square, the one changing the shape
   // least is kept (the closest to rest, as the pull towards the identity would choose).
   std::vector<double> rms;
-  for (const GlobalMap& fit : candidates)
-    rms.push_back(point_to_plane_rms(fit, surface, points, o.outlier_mads));
+  for (size_t c = 0; c < candidates.size(); ++c)
+    rms.push_back(point_to_plane_rms(*candidates[c], mapped[c], surface, points, o.outlier_mads));
   const double best = *std::min_element(rms.begin(), rms.end());
   const GlobalMap* chosen = nullptr;
   double least = std::numeric_limits<double>::infinity();
   for (size_t c = 0; c < candidates.size(); ++c) {
-    const GlobalMap& fit = candidates[c];
     if (rms[c] * rms[c] > (1 + o.equally_good) * best * best) continue;
-    const double change = shape_change_mm(fit, surface);
-    if (change < least) least = change, chosen = &fit;
+    const double change = shape_change_of(mapped[c].full, surface.points);
+    if (change < least) least = change, chosen = candidates[c];
   }
   GlobalMap out = *chosen;
   out.shears_dropped = shears_dropped;

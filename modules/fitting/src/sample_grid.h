@@ -38,10 +38,14 @@ class SampleGrid {
           static_cast<int>(j);
   }
 
-  /// The nearest sample to q and the squared distance (mm^2); {-1, inf} when empty.
-  std::pair<int, double> nearest(const Eigen::Vector3d& q) const {
-    std::pair<int, double> best{-1, std::numeric_limits<double>::infinity()};
+  /// The nearest sample to q and the squared distance (mm^2), searched within `reach_mm`
+  /// of q; {-1, inf} when there is none that near.
+  std::pair<int, double> nearest(const Eigen::Vector3d& q,
+                                 double reach_mm = std::numeric_limits<double>::infinity()) const {
+    const std::pair<int, double> none{-1, std::numeric_limits<double>::infinity()};
+    std::pair<int, double> best = none;
     if (s_.cols() == 0) return best;
+    const double reach2 = reach_mm * reach_mm;
     const Eigen::Vector3i c = cell_of(q);
     for (int r = 0;; ++r) {
       // Shell r: the cells at Chebyshev distance r from q's (clamped) cell.
@@ -60,7 +64,7 @@ class SampleGrid {
             }
           }
       const bool all = (lo.array() == 0).all() && (hi.array() == dim_.array() - 1).all();
-      if (all) return best;
+      if (all) return best.second <= reach2 ? best : none;
       // Every sample not yet seen lies outside the block of cells searched; q's distance
       // to that outside is a lower bound on its distance to them.
       const Eigen::Vector3d block_lo = lo_ + h_ * lo.cast<double>(),
@@ -70,7 +74,8 @@ class SampleGrid {
         if (lo[a] > 0) margin = std::min(margin, q[a] - block_lo[a]);
         if (hi[a] < dim_[a] - 1) margin = std::min(margin, block_hi[a] - q[a]);
       }
-      if (margin > 0 && best.second <= margin * margin) return best;
+      if (margin > 0 && std::min(best.second, reach2) <= margin * margin)
+        return best.second <= reach2 ? best : none;
     }
   }
 

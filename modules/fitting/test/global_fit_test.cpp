@@ -168,6 +168,12 @@ TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
     }
   }
   EXPECT_EQ(grid.nearest(s.points.col(7)).first, 7);
+  // Within a reach: the nearest when it is that near, none when it is not.
+  const Eigen::Vector3d out(0, 0, 17 + 3.0);  // 3 mm above the top of the ellipsoid
+  const auto [top, top2] = grid.nearest(out);
+  EXPECT_EQ(grid.nearest(out, 4.0).first, top);
+  EXPECT_EQ(grid.nearest(out, std::sqrt(top2) - 0.01).first, -1);
+  EXPECT_EQ(grid.nearest(Eigen::Vector3d::Zero(), 10.0).first, -1);  // 17 mm from the centre
   const Eigen::Matrix3Xd none(3, 0);
   EXPECT_EQ(SampleGrid(none).nearest(Eigen::Vector3d::Zero()).first, -1);
 }
