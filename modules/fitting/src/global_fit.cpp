@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <optional>
 
 #include "organfit/fitting/robust.h"
 #include "organfit/geometry/mask_ops.h"
@@ -41,21 +42,13 @@ SurfaceSamples surface_samples(const particles::Positions& x, const std::vector<
 }
 
 SurfaceSamples reference_surface(const geometry::LabelVolume& reference, int stride) {
+  return reference_surface(reference, geometry::SignedDistance(reference), stride);
+}
+
+SurfaceSamples reference_surface(const geometry::LabelVolume& reference,
+                                 const geometry::SignedDistance& distance, int stride) {
   const geometry::ImageGeometry& g = reference.geometry;
-  const size_t total = reference.labels.size();
-  std::vector<std::uint8_t> in(total), out(total);
-  for (size_t i = 0; i < total; ++i)
-    in[i] = reference.labels[i] != 0, out[i] = !in[i];
-  const std::vector<double> to_in = geometry::squared_distance_transform(in, g);
-  const std::vector<double> to_out = geometry::squared_distance_transform(out, g);
-  // Signed distance at voxel centres, positive outside (half a voxel at the boundary).
-  auto sd = [&](int i, int j, int k) {
-    i = std::clamp(i, 0, g.size[0] - 1), j = std::clamp(j, 0, g.size[1] - 1),
-    k = std::clamp(k, 0, g.size[2] - 1);
-    const long long v = g.linear_index(i, j, k);
-    const double h = 0.5 * g.spacing_mm.minCoeff();
-    return in[v] ? -(std::sqrt(to_out[v]) - h) : std::sqrt(to_in[v]) - h;
-  };
+  auto sd = [&](int i, int j, int k) { return distance.at_voxel(i, j, k); };
   const std::vector<std::uint8_t> boundary = geometry::surface_of(reference);
   std::vector<Eigen::Vector3d> pts, nrm;
   long long seen = 0;
@@ -394,6 +387,168 @@ double point_to_plane_rms(const GlobalMap& map, const MappedSamples& mapped,
   return robust_weights(r, points, mads, w);
 }
 
+/// Robust RMS (mm) of the points' distances to their nearest mapped surface samples, by
+/// the fits' outlier rule: what refine_global_map reports of its maps.
+double nearest_sample_rms(const GlobalMap& map, const SurfaceSamples& surface,
+                          const std::vector<AttractivePoint>& points, double mads) {
+  const MappedSamples mapped = map_samples(map, surface);
+  const SampleGrid grid(mapped.full);  // holds a reference to the samples
+  std::vector<double> r(points.size()), w;
+  for (size_t k = 0; k < points.size(); ++k)
+    r[k] = std::sqrt(grid.nearest(points[k].p_mm).second);
+  return robust_weights(r, points, mads, w);
+}
+
+/// Distance (mm) of point p to the surface mapped by `map`, to first order:
+/// D(q) / |grad_p D(q)|, q = M^-1 p, with the shears' Jacobian left out of the
+/// normalisation (they are small). `b` is map.affine.a's inverse.
+struct MappedDistance {
+  double r;            ///< mm, positive outside
+  Eigen::Vector3d q;   ///< M^-1 p, in the reference (mm)
+  Eigen::Vector3d gp;  ///< gradient of D(M^-1 p) in p
+  double nu;           ///< its length, at least 0.1
+};
+MappedDistance mapped_distance(const GlobalMap& map, const Eigen::Matrix3d& b,
+                               const geometry::SignedDistance& distance, const Eigen::Vector3d& p) {
+  MappedDistance out;
+  out.q = b * (map.shears.inverse(p) - map.affine.t);
+  Eigen::Vector3d grad;
+  const double d = distance.at(out.q, &grad);
+  out.gp = b.transpose() * grad;
+  out.nu = std::max(out.gp.norm(), 0.1);
+  out.r = d / out.nu;
+  return out;
+}
+
+/// The fit on the reference's signed distance (see fit_global_map): robust Gauss-Newton
+/// on the points' mapped_distance. Returns the map at the end of each stiffness level, the last
+/// last.
+std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDistance& distance,
+                                       const SurfaceSamples& surface,
+                                       const std::vector<AttractivePoint>& points,
+                                       const AffineFitOptions& o, bool with_shears) {
+  const int m = static_cast<int>(points.size());
+  const int n = with_shears ? 21 : 12;  // a (row-major), t, c
+  using VecX = Eigen::VectorXd;
+  const Eigen::Vector3d centroid = surface.points.rowwise().mean();
+  double extent2 = 0;
+  for (const AttractivePoint& p : points)
+    extent2 += (p.p_mm - map.shears.centre).squaredNorm() / m;
+  const double lambda_a_final = o.regularisation * m * extent2;
+  const double lambda_c_final = o.shear_regularisation * m * extent2 * extent2;
+  auto theta_of = [n](const GlobalMap& g) {
+    VecX th(n);
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        th(3 * i + j) = g.affine.a(i, j);
+    th.segment<3>(9) = g.affine.t;
+    if (n == 21) th.segment<9>(12) = g.shears.c;
+    return th;
+  };
+  auto map_of = [&](const VecX& th) {  // det(a) = 1 by scaling about the body's centre
+    GlobalMap g = map;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        g.affine.a(i, j) = th(3 * i + j);
+    g.affine.t = th.segment<3>(9);
+    if (n == 21) g.shears.c = th.segment<9>(12);
+    const double det = g.affine.a.determinant();
+    if (!(det > 0) || !th.allFinite()) return std::optional<GlobalMap>();
+    const Eigen::Vector3d image = g.affine.a * centroid + g.affine.t;
+    g.affine.a /= std::cbrt(det);
+    g.affine.t = image - g.affine.a * centroid;
+    return std::optional<GlobalMap>(g);
+  };
+  VecX identity = VecX::Zero(n);
+  identity(0) = identity(4) = identity(8) = 1;
+  // Residuals (mm) and, when asked, their Jacobian (m x n).
+  auto residuals = [&](const GlobalMap& g, VecX& r, Eigen::MatrixXd* jac) {
+    const Eigen::Matrix3d b = g.affine.a.inverse();
+    r.resize(m);
+    if (jac) jac->resize(m, n);
+    for (int k = 0; k < m; ++k) {
+      const auto [rk, q, gp, nu] = mapped_distance(g, b, distance, points[k].p_mm);
+      r(k) = rk;
+      if (!jac) continue;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+          (*jac)(k, 3 * i + j) = -gp(i) * q(j) / nu;  // d(a^-1)/da_ij = -b e_i e_j^T b
+      jac->block<1, 3>(k, 9) = -gp.transpose() / nu;
+      for (int l = 12; l < n; ++l) {  // the nested inverse shears, by central differences
+        const double h = 1e-6;
+        QuadraticShears plus = g.shears, minus = g.shears;
+        plus.c(l - 12) += h, minus.c(l - 12) -= h;
+        (*jac)(k, l) =
+            gp.dot(plus.inverse(points[k].p_mm) - minus.inverse(points[k].p_mm)) / (2 * h * nu);
+      }
+    }
+  };
+  std::vector<GlobalMap> ends;
+  for (int level = 0; level < 4; ++level) {
+    const double factor = std::pow(10.0, 3 - level);
+    // Graduated non-convexity: the robust scale starts 8x the stated one, so that a large
+    // change (points 10 mm off) is followed before anything is taken for an outlier.
+    const double scale = o.distance_scale_mm * std::pow(2.0, 3 - level), c2 = scale * scale;
+    VecX lambda = VecX::Constant(n, lambda_a_final * factor);
+    if (n == 21) lambda.segment<9>(12).setConstant(lambda_c_final * factor);
+    auto objective = [&](const GlobalMap& g, const VecX& r) {
+      double e = 0;
+      for (int k = 0; k < m; ++k)
+        e += points[k].confidence * c2 * r(k) * r(k) / (c2 + r(k) * r(k));
+      const VecX d = theta_of(g) - identity;
+      return 0.5 * e + 0.5 * d.dot(lambda.asDiagonal() * d);
+    };
+    VecX r;
+    Eigen::MatrixXd jac;
+    residuals(map, r, &jac);
+    double e = objective(map, r);
+    for (int it = 0; it < o.iterations; ++it) {
+      VecX w(m);
+      for (int k = 0; k < m; ++k) {
+        const double f = c2 / (c2 + r(k) * r(k));
+        w(k) = points[k].confidence * f * f;
+      }
+      const VecX theta = theta_of(map);
+      Eigen::MatrixXd h = jac.transpose() * w.asDiagonal() * jac;
+      h.diagonal() += lambda;
+      const VecX grad = jac.transpose() * w.cwiseProduct(r) + lambda.cwiseProduct(theta - identity);
+      const VecX step = -h.ldlt().solve(grad);
+      bool accepted = false;
+      double e_new = e;
+      for (double alpha = 1; alpha > 1e-3 && !accepted; alpha *= 0.5) {
+        const std::optional<GlobalMap> trial = map_of(theta + alpha * step);
+        if (!trial) continue;
+        VecX r_trial;
+        residuals(*trial, r_trial, nullptr);
+        e_new = objective(*trial, r_trial);
+        if (e_new < e) map = *trial, accepted = true;
+      }
+      if (!accepted) break;
+      const bool settled = e - e_new < 1e-6 * (1 + e);
+      e = e_new;
+      residuals(map, r, &jac);
+      if (settled) break;
+    }
+    map.rms_after_mm = map.affine.rms_after_mm =
+        nearest_sample_rms(map, surface, points, o.outlier_mads);
+    ends.push_back(map);
+  }
+  return ends;
+}
+
+/// RMS (mm) over all points of their mapped_distance, each capped at `cap_mm`: a fixed
+/// robust loss, so that fits which explain more of the points are not judged on fewer.
+double truncated_rms(const GlobalMap& map, const geometry::SignedDistance& distance,
+                     const std::vector<AttractivePoint>& points, double cap_mm) {
+  const Eigen::Matrix3d b = map.affine.a.inverse();
+  double sum = 0, weight = 0;
+  for (const AttractivePoint& p : points) {
+    const double r = std::min(std::abs(mapped_distance(map, b, distance, p.p_mm).r), cap_mm);
+    sum += p.confidence * r * r, weight += p.confidence;
+  }
+  return std::sqrt(sum / std::max(weight, 1e-12));
+}
+
 }  // namespace
 
 SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface) {
@@ -419,7 +574,7 @@ double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface) {
 }
 
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
-                         const AffineFitOptions& o) {
+                         const AffineFitOptions& o, const geometry::SignedDistance* distance) {
   // Each pull towards the identity (the stated one, and the alternative if any) gives an
   // affine fit and, with enough points, fits of the whole map from two starts.
   std::vector<AffineFitOptions> pulls = {o};
@@ -432,6 +587,7 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     GlobalMap affine_only;
     affine_only.affine = fit_volume_preserving_affine(surface, points, pull);
     affine_only.rms_after_mm = affine_only.affine.rms_after_mm;
+    affine_only.found_by = "affine";
     affine_fits.push_back(affine_only);
     if (points.size() < 21 || surface.points.cols() == 0) continue;  // 21 unknowns
     // Two starts: from the affine fit, and from its translation alone with the stiffness
@@ -447,8 +603,19 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     from_translation.affine.a.setIdentity();
     for (bool anneal : {false, true})
       for (GlobalMap& fit : refine_global_map(anneal ? from_translation : from_affine, surface,
-                                              points, pull, anneal))
+                                              points, pull, anneal)) {
+        fit.found_by = anneal ? "whole map annealed" : "whole map";
         fits.push_back(fit);
+      }
+  }
+  if (distance && !points.empty() && surface.points.cols() > 0) {
+    GlobalMap identity;
+    identity.shears.centre = surface.points.rowwise().mean();
+    const bool with_shears = points.size() >= 21;
+    for (GlobalMap& fit : fit_to_distance(identity, *distance, surface, points, o, with_shears)) {
+      fit.found_by = "signed distance";
+      (with_shears ? fits : affine_fits).push_back(fit);
+    }
   }
   // No plausible map: the identity, marked refused.
   auto refused = [rms = affine_fits[0].affine.rms_before_mm] {
@@ -485,7 +652,9 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   // least is kept (the closest to rest, as the pull towards the identity would choose).
   std::vector<double> rms;
   for (size_t c = 0; c < candidates.size(); ++c)
-    rms.push_back(point_to_plane_rms(*candidates[c], mapped[c], surface, points, o.outlier_mads));
+    rms.push_back(
+        distance ? truncated_rms(*candidates[c], *distance, points, o.distance_scale_mm)
+                 : point_to_plane_rms(*candidates[c], mapped[c], surface, points, o.outlier_mads));
   const double best = *std::min_element(rms.begin(), rms.end());
   const GlobalMap* chosen = nullptr;
   double least = std::numeric_limits<double>::infinity();

@@ -65,6 +65,7 @@ struct Row {
   bool converged = true;
   int case_id = 0;
   double msd_global_mm = std::numeric_limits<double>::quiet_NaN();  ///< after the global stage
+  std::string global_fit = "";  ///< which global fit was kept (GlobalMap::found_by)
 };
 
 /// The cases the targets name: sparse partial data (at most 87 points on half the
@@ -386,6 +387,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                                                           support);
                   row.msd_global_mm =
                       evaluation::compare_with_body(global_only, inside, bounds, voxel).msd_mm;
+                  row.global_fit = global_map.found_by;
                 }
                 row.msd_mm = cmp.msd_mm, row.hd95_mm = cmp.hd95_mm, row.dice = cmp.dice;
                 row.volume_change_pct = 100 * (cmp.volume_a_mm3 / v0_embedded - 1);
@@ -408,14 +410,15 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   std::string csv =
       "method,shape,family,magnitude_mm,points,noise_mm,outliers,wall_s,msd_mm,hd95_mm,dice,volume_"
       "change_pct,residual_mm,"
-      "converged,msd_balls_mm,volume_change_balls_pct,msd_global_mm,case\n";
+      "converged,msd_balls_mm,volume_change_balls_pct,msd_global_mm,case,global_fit\n";
   for (const auto& r : rows)
     csv += fmt::format(
-        "{},{},{},{},{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{:.4f},{:.4f},{:.4f},{}"
+        "{},{},{},{},{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{:.4f},{:.4f},{:.4f},{},"
+        "{}"
         "\n",
         r.method, r.shape, r.family, r.magnitude_mm, r.points, r.noise_mm, r.outliers, r.wall_s,
         r.msd_mm, r.hd95_mm, r.dice, r.volume_change_pct, r.residual_mm, r.converged ? 1 : 0,
-        r.msd_balls_mm, r.volume_change_balls_pct, r.msd_global_mm, r.case_id);
+        r.msd_balls_mm, r.volume_change_balls_pct, r.msd_global_mm, r.case_id, r.global_fit);
   write_file_atomically(o.out / "results.csv", csv);
   write_file_atomically(o.out / "curves.csv", curves);
   write_file_atomically(o.out / "work_precision.svg", svg_work_precision(rows));

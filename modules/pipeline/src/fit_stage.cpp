@@ -12,6 +12,7 @@
 #include "organfit/fitting/global_fit.h"
 #include "organfit/fitting/spread_force.h"
 #include "organfit/geometry/mask_ops.h"
+#include "organfit/geometry/signed_distance.h"
 #include "organfit/meshing/surface.h"
 #include "organfit/particles/diagnostics.h"
 #include "organfit/support/error.h"
@@ -203,10 +204,12 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   // dense samples of the reference surface against the model before the fit; the
   // tolerance on the mean residual is the stated one and this floor in quadrature.
   double residual_floor = 0;
+  const geometry::SignedDistance reference_distance(model.reference);
   {
     fitting::SkinDetector skin0(skin_voxel, rho);
     skin0.update(start);
-    const fitting::SurfaceSamples ref = fitting::reference_surface(model.reference, 4);
+    const fitting::SurfaceSamples ref =
+        fitting::reference_surface(model.reference, reference_distance, 4);
     std::vector<fitting::AttractivePoint> probes;
     for (Eigen::Index j = 0; j < ref.points.cols(); ++j)
       probes.push_back({ref.points.col(j), 1.0});
@@ -249,10 +252,12 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   } else {
     // Global stage: a volume-preserving map of the whole organ (affine with det 1, then
     // quadratic shears) fitted to the points; the body re-made in its mapped shape.
-    const fitting::SurfaceSamples samples = fitting::reference_surface(model.reference, 2);
+    const fitting::SurfaceSamples samples =
+        fitting::reference_surface(model.reference, reference_distance, 2);
     fitting::AffineFitOptions global_options;
     global_options.max_stretch = scene.number("fit", "max_global_stretch");
-    const fitting::GlobalMap map = fitting::fit_global_map(samples, points, global_options);
+    const fitting::GlobalMap map =
+        fitting::fit_global_map(samples, points, global_options, &reference_distance);
     if (map.refused) {
       throw TargetNotMetError(fmt::format(
           "fit: the points ask for an implausible change of the whole organ (a stretch beyond {}x, "
@@ -294,6 +299,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
               {"shear_coefficients_per_mm",
                std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
               {"shears_dropped", map.shears_dropped},
+              {"found_by", map.found_by},
               {"shape_change_mm", fitting::shape_change_mm(map, samples)},
               {"refill_passes", passes},
               {"particles_after_refill", state.size()},
@@ -313,7 +319,9 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     // moved with the particles, fitting/embedded_body.h): each particle's foot on the
     // mapped reference surface and the tangent plane there replace the balls.
     fo.surface_feet = fitting::surface_feet(
-        state.x, fitting::map_surface(map, fitting::reference_surface(model.reference, 1)),
+        state.x,
+        fitting::map_surface(map,
+                             fitting::reference_surface(model.reference, reference_distance, 1)),
         3.0 * model.lattice_spacing_mm);
     term.set_surface_feet(fo.surface_feet);
     skin_of = [&term](const particles::Positions&) -> const std::vector<int>& {

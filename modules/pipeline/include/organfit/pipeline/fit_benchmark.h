@@ -23,7 +23,8 @@
 //   residual_mm  mean over the points of |distance to the nearest particle centre - rho|;
 //   msd_global_mm  (ours only) msd_mm of the organ after the global stage alone (the
 //              reference moved by the global map), before the local stage;
-//   case       the case's number in the grid (--cases N reruns it alone).
+//   case       the case's number in the grid (--cases N reruns it alone);
+//   global_fit (ours only) which global fit was kept (fitting::GlobalMap::found_by).
 // The particle fits run with the scene defaults except fit.max_global_stretch: 2 (the
 // grid stretches a 30 mm cube by up to 2x; the default 1.5 would refuse it) and
 // fit.max_wall_s: 20.

@@ -1,0 +1,94 @@
+#include "organfit/geometry/signed_distance.h"
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <cmath>
+
+#include "organfit/geometry/mask_ops.h"
+
+namespace organfit::geometry {
+
+SignedDistance::SignedDistance(const LabelVolume& mask)
+    : geometry_(mask.geometry),
+      to_index_(mask.geometry.spacing_mm.cwiseInverse().asDiagonal() *
+                mask.geometry.direction.inverse()) {
+  const size_t total = mask.labels.size();
+  std::vector<std::uint8_t> in(total), out(total);
+  for (size_t v = 0; v < total; ++v)
+    in[v] = mask.labels[v] != 0, out[v] = !in[v];
+  const std::vector<double> to_in = squared_distance_transform(in, geometry_);
+  const std::vector<double> to_out = squared_distance_transform(out, geometry_);
+  const double h = 0.5 * geometry_.spacing_mm.minCoeff();
+  values_.resize(total);
+  // An empty mask (or a full one) has no boundary: the transform's infinity stays.
+  for (size_t v = 0; v < total; ++v)
+    values_[v] = in[v] ? -(std::sqrt(to_out[v]) - h) : std::sqrt(to_in[v]) - h;
+  smooth();
+}
+
+void SignedDistance::smooth() {
+  // Binomial 1-4-6-4-1 along each axis (a Gaussian of one voxel), ends clamped: it leaves
+  // a linear field unchanged and takes the voxel steps out of a slanted boundary.
+  const ImageGeometry& g = geometry_;
+  if (std::any_of(values_.begin(), values_.end(), [](double v) { return !std::isfinite(v); }))
+    return;  // no boundary: nothing to smooth
+  std::vector<double> out(values_.size());
+  const double weight[5] = {1 / 16.0, 4 / 16.0, 6 / 16.0, 4 / 16.0, 1 / 16.0};
+  for (int axis = 0; axis < 3; ++axis) {
+    for (int k = 0; k < g.size[2]; ++k)
+      for (int j = 0; j < g.size[1]; ++j)
+        for (int i = 0; i < g.size[0]; ++i) {
+          double sum = 0;
+          for (int o = -2; o <= 2; ++o) {
+            int idx[3] = {i, j, k};
+            idx[axis] = std::clamp(idx[axis] + o, 0, g.size[axis] - 1);
+            sum += weight[o + 2] *
+                   values_[static_cast<size_t>(g.linear_index(idx[0], idx[1], idx[2]))];
+          }
+          out[static_cast<size_t>(g.linear_index(i, j, k))] = sum;
+        }
+    values_.swap(out);
+  }
+}
+
+double SignedDistance::at_voxel(int i, int j, int k) const {
+  const ImageGeometry& g = geometry_;
+  i = std::clamp(i, 0, g.size[0] - 1), j = std::clamp(j, 0, g.size[1] - 1),
+  k = std::clamp(k, 0, g.size[2] - 1);
+  return values_[static_cast<size_t>(g.linear_index(i, j, k))];
+}
+
+double SignedDistance::at(const Eigen::Vector3d& p_mm, Eigen::Vector3d* gradient) const {
+  const ImageGeometry& g = geometry_;
+  const Eigen::Vector3d idx = to_index_ * (p_mm - g.origin_mm);
+  const Eigen::Vector3d hi(g.size[0] - 1, g.size[1] - 1, g.size[2] - 1);
+  const Eigen::Vector3d inside = idx.cwiseMax(Eigen::Vector3d::Zero()).cwiseMin(hi);
+  // Beyond the grid: the distance to the grid's nearest point is added (a lower bound
+  // on the true distance, and continuous).
+  const Eigen::Vector3d beyond_mm = g.direction * g.spacing_mm.cwiseProduct(idx - inside);
+  const double beyond = beyond_mm.norm();
+  Eigen::Vector3i base;
+  Eigen::Vector3d f;
+  for (int c = 0; c < 3; ++c) {
+    base[c] = std::min(static_cast<int>(std::floor(inside[c])), std::max(0, g.size[c] - 2));
+    f[c] = inside[c] - base[c];
+  }
+  double value = 0;
+  Eigen::Vector3d d_index = Eigen::Vector3d::Zero();  // d value / d index
+  for (int corner = 0; corner < 8; ++corner) {
+    const int di = corner & 1, dj = (corner >> 1) & 1, dk = (corner >> 2) & 1;
+    const double v = at_voxel(base[0] + di, base[1] + dj, base[2] + dk);
+    const double wx = di ? f[0] : 1 - f[0], wy = dj ? f[1] : 1 - f[1], wz = dk ? f[2] : 1 - f[2];
+    value += wx * wy * wz * v;
+    d_index[0] += (di ? 1 : -1) * wy * wz * v;
+    d_index[1] += (dj ? 1 : -1) * wx * wz * v;
+    d_index[2] += (dk ? 1 : -1) * wx * wy * v;
+  }
+  if (gradient) {
+    *gradient = to_index_.transpose() * d_index;
+    if (beyond > 0) *gradient = beyond_mm / beyond;  // outside the grid: straight away from it
+  }
+  return value + beyond;
+}
+
+}  // namespace organfit::geometry
