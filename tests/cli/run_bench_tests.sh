@@ -30,6 +30,30 @@ lines = open('$tmp/fit/curves.csv').read().splitlines()
 assert lines[0] == 'case,method,step,wall_s,residual_mean_mm,volume_change_pct' and len(lines) > 100
 xml.dom.minidom.parse('$tmp/fit/work_precision.svg')"
 check bench.fit_results_md grep -q "MSD <= 1.0 mm:" "$tmp/fit/RESULTS.md"
+# Work precision: every case has each method at each setting of its effort, the default
+# setting's row is the one in results.csv, and the plot has one curve per method.
+check bench.fit_work_precision_settings /usr/bin/python3 -c "
+import csv, xml.dom.minidom
+rows = list(csv.DictReader(open('$tmp/fit/work_precision.csv')))
+settings = {(r['method'], r['effort']) for r in rows}
+assert settings == {('spread', 'global stage'), ('spread', 'global and local stages'),
+                    ('paper', 'default'), ('tps', '1 round'), ('tps', '2 rounds'),
+                    ('tps', '5 rounds'), ('tps', '10 rounds'), ('cpd', '15 iterations'),
+                    ('cpd', '50 iterations'), ('cpd', '150 iterations'), ('icp', '3 iterations'),
+                    ('icp', '10 iterations'), ('icp', '30 iterations')}, settings
+assert len(rows) == 20 * len(settings), len(rows)
+default = {'spread': 'global and local stages', 'paper': 'default', 'tps': '5 rounds',
+           'cpd': '150 iterations', 'icp': '30 iterations'}
+main = {(r['method'], r['case']): r for r in csv.DictReader(open('$tmp/fit/results.csv'))}
+for r in rows:
+  if r['effort'] == default[r['method']]:
+    m = main[(r['method'], r['case'])]
+    assert abs(float(m['msd_mm']) - float(r['msd_mm'])) < 1e-3 and abs(float(m['wall_s']) - float(r['wall_s'])) < 1e-3, (r, m)
+  # less effort takes less time (TPS's rounds are one run stopped there)
+  if r['method'] == 'tps' and r['effort'] == '1 round':
+    assert float(r['wall_s']) <= float(main[('tps', r['case'])]['wall_s']), r
+svg = xml.dom.minidom.parse('$tmp/fit/work_precision.svg')
+assert len(svg.getElementsByTagName('polyline')) == 5"
 # Ours against the baselines on the same cases (medians; the quick grid's numbers are in
 # the README): closer than TPS and than half of CPD, and the volume kept within 1%.
 check bench.fit_ours_ahead_of_the_baselines /usr/bin/python3 -c "
@@ -38,7 +62,8 @@ j = json.load(open('$tmp/fit.json'))
 assert j['versus_tps']['median_msd_ratio'] < 1.0, j['versus_tps']
 assert j['versus_cpd']['median_msd_ratio'] < 0.5, j['versus_cpd']
 assert j['spread']['median_volume_change_pct'] < 1.0 < j['tps']['median_volume_change_pct'], j['spread']
-assert j['versus_tps']['smaller_volume_change'] == j['versus_tps']['cases']"
+assert j['versus_tps']['smaller_volume_change'] == j['versus_tps']['cases']
+assert j['versus_tps']['at_equal_wall_time']['median_msd_ratio'] < 1.0, j['versus_tps']"
 # --sample: a seeded subset whose cases are the same cases as in the whole grid.
 "$bin" --quiet bench fit --quick --sample 3 --out "$tmp/sample" > "$tmp/sample.json" 2> /dev/null
 check bench.fit_sample_runs_the_same_cases /usr/bin/python3 -c "
