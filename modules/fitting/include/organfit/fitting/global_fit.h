@@ -40,6 +40,12 @@ struct AffineFitOptions {
   /// robust scale of the fit on the signed distance (mm): point k weighs
   /// (c^2 / (c^2 + r_k^2))^2 (Geman-McClure), c from 8x this down to it
   double distance_scale_mm = 2.0;
+  /// with fewer points than the whole map's 21 unknowns, the fit on the signed distance
+  /// also fits the shears, their pull this many times shear_regularisation (0: affine
+  /// only). On the 75 target cases with 20 points of `organfit bench fit --targets`:
+  /// median ratio of MSD to TPS's 0.56 -> 0.50; 11 cases better by over 0.05 mm, 3 worse
+  /// (3x: 11 and 8; 30x: 5 and 2).
+  double few_points_shear_stiffness = 10.0;
   double max_stretch = 1.5;  ///< a map stretching by more (or by less than 1/this) is refused
   double max_shear_mm =
       0.25;  ///< ... and one whose shears move any sample by more than this x the body's size
@@ -100,7 +106,7 @@ struct GlobalMap {
   bool refused = false;         ///< no plausible map: the identity instead
   bool shears_dropped = false;  ///< the shears were implausible: the affine part alone
   /// which fit of fit_global_map's it is: "affine", "whole map", "whole map annealed",
-  /// "signed distance" ("none": not fitted)
+  /// "signed distance", "signed distance (stiffer shears)" ("none": not fitted)
   const char* found_by = "none";
   Eigen::Vector3d apply(const Eigen::Vector3d& p) const {
     return shears.apply(affine.a * p + affine.t);
@@ -133,9 +139,10 @@ double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface);
 /// (a cube stretched 1.67x, its ends 10 mm out), a stiff fit by closest samples matches
 /// the rest and the outlier rule then drops those points for good; the fits above reach
 /// a 1.3x stretch at most and leave 3 to 4.5 mm of surface error. Candidates are then
-/// judged on D too: the RMS over all points of their distances capped at
-/// `distance_scale_mm` (judged over only the points each keeps, a fit that drops a third
-/// of them looked as good as one that explains them).
+/// judged on D too (with fewer than 21 points, the distance fit is affine, and a second
+/// one adds shears held stiffer: few_points_shear_stiffness): the RMS over all points of their
+/// distances capped at `distance_scale_mm` (judged over only the points each keeps, a fit that
+/// drops a third of them looked as good as one that explains them).
 ///  * When the best fit of the points (robust RMS) stretches beyond max_stretch, it is
 ///    refused (the identity, marked so): points that can only be explained by crushing
 ///    the organ are not data to follow globally.
