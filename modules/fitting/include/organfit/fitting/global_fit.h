@@ -67,7 +67,8 @@ struct SurfaceSamples {
 SurfaceSamples surface_samples(const particles::Positions& x, const std::vector<int>& skin,
                                double radius_mm);
 
-/// Surface samples of a reference body (a mask): every `stride`-th boundary voxel,
+/// Surface samples of a reference body (a mask): one in `stride` boundary voxels (chosen
+/// by a hash of the voxel's index: spread evenly over the surface, the same every run),
 /// moved onto the zero level of the signed distance, with the distance's gradient as
 /// normal. Denser and smoother than the particles' own surface.
 SurfaceSamples reference_surface(const geometry::LabelVolume& reference, int stride = 1);
@@ -138,8 +139,13 @@ double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface);
 /// `distance_scale_mm`). Why: when a third of the points lie far off the unmoved organ
 /// (a cube stretched 1.67x, its ends 10 mm out), a stiff fit by closest samples matches
 /// the rest and the outlier rule then drops those points for good; the fits above reach
-/// a 1.3x stretch at most and leave 3 to 4.5 mm of surface error. Candidates are then
-/// judged on D too (with fewer than 21 points, the distance fit is affine, and a second
+/// a 1.3x stretch at most and leave 3 to 4.5 mm of surface error. Its pulls are on the
+/// change of shape (a, the shears) and on the displacement of the body's centre, as hard
+/// per mm^2 as on a's entries: the organ stays where the reference has it unless the
+/// points insist (freed, a stretch seen from one side was taken for a shift: that cube
+/// seen by 20 to 87 points, MSD 0.3-0.5 -> 1.1-3.8 mm); the fits by closest samples leave
+/// the translation free, and a real shift is found by them. Candidates are then judged
+/// on D too (with fewer than 21 points, the distance fit is affine, and a second
 /// one adds shears held stiffer: few_points_shear_stiffness): the RMS over all points of their
 /// distances capped at `distance_scale_mm` (judged over only the points each keeps, a fit that
 /// drops a third of them looked as good as one that explains them).
