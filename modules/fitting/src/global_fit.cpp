@@ -691,7 +691,7 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   if (candidates.empty()) return refused();
   // Points on part of the surface leave the rest free: fits from different starts and
   // stiffnesses often explain them equally well and differ by a millimetre elsewhere.
-  // Of those within `equally_good` of the best mean square, the one changing the shape
+  // Of those within `equally_good_dof` / m of the best mean square, the one changing the shape
   // least is kept (the closest to rest, as the pull towards the identity would choose).
   std::vector<double> rms;
   for (size_t c = 0; c < candidates.size(); ++c)
@@ -699,10 +699,11 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
         distance ? truncated_rms(*candidates[c], *distance, points, o.distance_scale_mm)
                  : point_to_plane_rms(*candidates[c], mapped[c], surface, points, o.outlier_mads));
   const double best = *std::min_element(rms.begin(), rms.end());
+  const double window = o.equally_good_dof / static_cast<double>(points.size());
   const GlobalMap* chosen = nullptr;
   double least = std::numeric_limits<double>::infinity();
   for (size_t c = 0; c < candidates.size(); ++c) {
-    if (rms[c] * rms[c] > (1 + o.equally_good) * best * best) continue;
+    if (rms[c] * rms[c] > (1 + window) * best * best) continue;
     const double change = shape_change_of(mapped[c].full, surface.points);
     if (change < least) least = change, chosen = candidates[c];
   }

@@ -125,8 +125,8 @@ TEST(GlobalFit, RecoversABendFromPointsOnOneSide) {
 }
 
 // Noisy points on one side of an organ that has not changed: several maps explain them
-// to within their noise. With equally_good = 0 the best fit of the points is kept; by
-// default, of those within 10% of its mean square (judged on the signed distance), the
+// to within their noise. With equally_good_dof = 0 the best fit of the points is kept; by
+// default, of those within 20/87 of its mean square (judged on the signed distance), the
 // one changing the shape least.
 TEST(GlobalFit, OfEquallyGoodFitsKeepsTheLeastChange) {
   const SurfaceSamples samples = ellipsoid_mask_surface();
@@ -138,7 +138,7 @@ TEST(GlobalFit, OfEquallyGoodFitsKeepsTheLeastChange) {
   for (auto& p : points)
     p.p_mm += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
   AffineFitOptions best_fit_only;
-  best_fit_only.equally_good = 0;
+  best_fit_only.equally_good_dof = 0;
   const GlobalMap least = fit_global_map(samples, points, {}, &distance);
   const GlobalMap best = fit_global_map(samples, points, best_fit_only, &distance);
   ASSERT_FALSE(least.refused);
