@@ -480,7 +480,9 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
   // The body's centre's image is (centre_shift theta): a c + t. The pull is on its
   // displacement, not on t: t alone is the image of the patient's coordinate origin, and
   // pulling it made the fit of an organ far from that origin stiff against any change
-  // moving it (300 mm away, the same cube and points gave a map 7.8 mm different).
+  // moving it (300 mm away, the same cube and points gave a map 7.8 mm different). Since
+  // centre_shift identity = c, that displacement is centre_shift (theta - identity), and
+  // all the pulls are one quadratic form in theta - identity (`pull` below).
   Eigen::MatrixXd centre_shift = Eigen::MatrixXd::Zero(3, n);
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j)
@@ -519,14 +521,14 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
     lambda.segment<3>(9).setZero();  // t is pulled through the centre's displacement
     if (n == 21) lambda.segment<9>(12).setConstant(lambda_c_final * factor);
     const double lambda_centre = lambda_a_final * factor;  // per mm^2
+    Eigen::MatrixXd pull = lambda_centre * centre_shift.transpose() * centre_shift;
+    pull.diagonal() += lambda;
     auto objective = [&](const GlobalMap& g, const VecX& r) {
       double e = 0;
       for (int k = 0; k < m; ++k)
         e += points[k].confidence * c2 * r(k) * r(k) / (c2 + r(k) * r(k));
       const VecX d = theta_of(g) - identity;
-      const Eigen::Vector3d moved = centre_shift * theta_of(g) - centroid;
-      return 0.5 * e + 0.5 * d.dot(lambda.asDiagonal() * d) +
-             0.5 * lambda_centre * moved.squaredNorm();
+      return 0.5 * e + 0.5 * d.dot(pull * d);
     };
     VecX r;
     Eigen::MatrixXd jac;
@@ -540,11 +542,8 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
       }
       const VecX theta = theta_of(map);
       Eigen::MatrixXd h = jac.transpose() * w.asDiagonal() * jac;
-      h.diagonal() += lambda;
-      h += lambda_centre * centre_shift.transpose() * centre_shift;
-      const VecX grad =
-          jac.transpose() * w.cwiseProduct(r) + lambda.cwiseProduct(theta - identity) +
-          lambda_centre * centre_shift.transpose() * (centre_shift * theta - centroid);
+      h += pull;
+      const VecX grad = jac.transpose() * w.cwiseProduct(r) + pull * (theta - identity);
       const VecX step = -h.ldlt().solve(grad);
       bool accepted = false;
       double e_new = e;
