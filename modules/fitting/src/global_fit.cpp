@@ -235,8 +235,107 @@ Eigen::Vector3d QuadraticShears::inverse(const Eigen::Vector3d& q) const {
   return centre + u;
 }
 
+namespace {
+/// The two axes other than `a`, in order.
+std::pair<int, int> other_axes(int a) {
+  return {a == 0 ? 1 : 0, a == 2 ? 1 : 2};
+}
+}  // namespace
+
+ShearFields ShearFields::over(const Eigen::Vector3d& box_min_mm, const Eigen::Vector3d& box_max_mm,
+                              double sigma_mm) {
+  ShearFields f;
+  f.sigma_mm = sigma_mm;
+  if (!(sigma_mm > 0)) return f;
+  for (int a = 0; a < 3; ++a) {  // centred on the box, reaching one spacing beyond it
+    const double span = box_max_mm(a) - box_min_mm(a) + 2 * sigma_mm;
+    f.count(a) = 1 + static_cast<int>(std::ceil(std::max(0.0, span) / sigma_mm));
+    f.origin_mm(a) = 0.5 * (box_min_mm(a) + box_max_mm(a)) - 0.5 * (f.count(a) - 1) * sigma_mm;
+  }
+  f.weights = Eigen::VectorXd::Zero(3 * f.block());
+  return f;
+}
+
+int ShearFields::block() const {
+  int most = 0;
+  for (int a = 0; a < 3; ++a) {
+    const auto [b, c] = other_axes(a);
+    most = std::max(most, count(b) * count(c));
+  }
+  return most;
+}
+
+void ShearFields::bumps(int a, const Eigen::Vector3d& q,
+                        std::vector<std::pair<int, double>>& out) const {
+  out.clear();
+  if (!(sigma_mm > 0)) return;
+  const auto [b, c] = other_axes(a);
+  const double reach = 5.3;  // sigmas: exp(-5.3^2 / 2) < 1e-6
+  const double ub = (q(b) - origin_mm(b)) / sigma_mm, uc = (q(c) - origin_mm(c)) / sigma_mm;
+  const int i0 = std::max(0, static_cast<int>(std::ceil(ub - reach))),
+            i1 = std::min(count(b) - 1, static_cast<int>(std::floor(ub + reach)));
+  const int j0 = std::max(0, static_cast<int>(std::ceil(uc - reach))),
+            j1 = std::min(count(c) - 1, static_cast<int>(std::floor(uc + reach)));
+  // The Gaussian is separable: one exp per row and per column, not per bump.
+  double along_b[16];
+  if (i1 - i0 >= 16) return;  // cannot happen: 2 x 5.3 sigmas span at most 11 centres
+  for (int i = i0; i <= i1; ++i)
+    along_b[i - i0] = std::exp(-0.5 * (ub - i) * (ub - i));
+  const int first = a * block();
+  for (int j = j0; j <= j1; ++j) {
+    const double along_c = std::exp(-0.5 * (uc - j) * (uc - j));
+    for (int i = i0; i <= i1; ++i) {
+      const double e = along_b[i - i0] * along_c;
+      if (e >= 1e-6) out.emplace_back(first + i + count(b) * j, e);
+    }
+  }
+}
+
+double ShearFields::field(int a, const Eigen::Vector3d& q) const {
+  if (weights.size() == 0 || !(sigma_mm > 0)) return 0.0;
+  // As bumps() (the same centres, the same 1e-6 cut), without the list: it is called for
+  // every lattice site of a re-fill and every voxel an evaluation asks about.
+  const auto [b, c] = other_axes(a);
+  const double reach = 5.3;
+  const double ub = (q(b) - origin_mm(b)) / sigma_mm, uc = (q(c) - origin_mm(c)) / sigma_mm;
+  const int i0 = std::max(0, static_cast<int>(std::ceil(ub - reach))),
+            i1 = std::min(count(b) - 1, static_cast<int>(std::floor(ub + reach)));
+  const int j0 = std::max(0, static_cast<int>(std::ceil(uc - reach))),
+            j1 = std::min(count(c) - 1, static_cast<int>(std::floor(uc + reach)));
+  if (i1 < i0 || j1 < j0 || i1 - i0 >= 16) return 0.0;
+  double along_b[16];
+  for (int i = i0; i <= i1; ++i)
+    along_b[i - i0] = std::exp(-0.5 * (ub - i) * (ub - i));
+  const double* w = weights.data() + a * block();
+  double f = 0;
+  for (int j = j0; j <= j1; ++j) {
+    const double along_c = std::exp(-0.5 * (uc - j) * (uc - j));
+    for (int i = i0; i <= i1; ++i) {
+      const double e = along_b[i - i0] * along_c;
+      if (e >= 1e-6) f += w[i + count(b) * j] * e;
+    }
+  }
+  return f;
+}
+
+Eigen::Vector3d ShearFields::apply(const Eigen::Vector3d& q) const {
+  Eigen::Vector3d u = q;
+  if (weights.size() == 0) return u;
+  for (int a = 0; a < 3; ++a)
+    u(a) += field(a, u);
+  return u;
+}
+
+Eigen::Vector3d ShearFields::inverse(const Eigen::Vector3d& q) const {
+  Eigen::Vector3d u = q;  // undo the fields in reverse order
+  if (weights.size() == 0) return u;
+  for (int a = 2; a >= 0; --a)
+    u(a) -= field(a, u);
+  return u;
+}
+
 Eigen::Vector3d GlobalMap::inverse(const Eigen::Vector3d& q) const {
-  return affine.a.inverse() * (shears.inverse(q) - affine.t);
+  return affine.a.inverse() * (shears.inverse(fields.inverse(q)) - affine.t);
 }
 
 namespace {
@@ -259,7 +358,7 @@ MappedSamples map_samples(const GlobalMap& map, const SurfaceSamples& surface) {
                   Eigen::Matrix3Xd(3, surface.points.cols())};
   for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
     m.affine.col(j) = map.affine.a * surface.points.col(j) + map.affine.t;
-    m.full.col(j) = map.shears.apply(m.affine.col(j));
+    m.full.col(j) = map.fields.apply(map.shears.apply(m.affine.col(j)));
   }
   return m;
 }
@@ -415,6 +514,25 @@ double nearest_sample_rms(const GlobalMap& map, const SurfaceSamples& surface,
   return robust_weights(r, points, mads, w);
 }
 
+/// Geman-McClure loss of scale sqrt(c2) (mm): sum_k conf_k c2 r_k^2 / (c2 + r_k^2), and the
+/// weights of its iteratively reweighted least squares, conf_k (c2 / (c2 + r_k^2))^2.
+double geman_mcclure(const std::vector<AttractivePoint>& points, const Eigen::VectorXd& r,
+                     double c2) {
+  double e = 0;
+  for (Eigen::Index k = 0; k < r.size(); ++k)
+    e += points[k].confidence * c2 * r(k) * r(k) / (c2 + r(k) * r(k));
+  return e;
+}
+Eigen::VectorXd geman_mcclure_weights(const std::vector<AttractivePoint>& points,
+                                      const Eigen::VectorXd& r, double c2) {
+  Eigen::VectorXd w(r.size());
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    const double f = c2 / (c2 + r(k) * r(k));
+    w(k) = points[k].confidence * f * f;
+  }
+  return w;
+}
+
 /// Distance (mm) of point p to the surface mapped by `map`, to first order:
 /// D(q) / |grad_p D(q)|, q = M^-1 p, with the shears' Jacobian left out of the
 /// normalisation (they are small). `b` is map.affine.a's inverse.
@@ -427,7 +545,7 @@ struct MappedDistance {
 MappedDistance mapped_distance(const GlobalMap& map, const Eigen::Matrix3d& b,
                                const geometry::SignedDistance& distance, const Eigen::Vector3d& p) {
   MappedDistance out;
-  out.q = b * (map.shears.inverse(p) - map.affine.t);
+  out.q = b * (map.shears.inverse(map.fields.inverse(p)) - map.affine.t);
   Eigen::Vector3d grad;
   const double d = distance.at(out.q, &grad);
   out.gp = b.transpose() * grad;
@@ -524,22 +642,15 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
     Eigen::MatrixXd pull = lambda_centre * centre_shift.transpose() * centre_shift;
     pull.diagonal() += lambda;
     auto objective = [&](const GlobalMap& g, const VecX& r) {
-      double e = 0;
-      for (int k = 0; k < m; ++k)
-        e += points[k].confidence * c2 * r(k) * r(k) / (c2 + r(k) * r(k));
       const VecX d = theta_of(g) - identity;
-      return 0.5 * e + 0.5 * d.dot(pull * d);
+      return 0.5 * geman_mcclure(points, r, c2) + 0.5 * d.dot(pull * d);
     };
     VecX r;
     Eigen::MatrixXd jac;
     residuals(map, r, &jac);
     double e = objective(map, r);
     for (int it = 0; it < o.iterations; ++it) {
-      VecX w(m);
-      for (int k = 0; k < m; ++k) {
-        const double f = c2 / (c2 + r(k) * r(k));
-        w(k) = points[k].confidence * f * f;
-      }
+      const VecX w = geman_mcclure_weights(points, r, c2);
       const VecX theta = theta_of(map);
       Eigen::MatrixXd h = jac.transpose() * w.asDiagonal() * jac;
       h += pull;
@@ -566,6 +677,84 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
     ends.push_back(map);
   }
   return ends;
+}
+
+/// Smooth shear fields on top of `map` (its affine part and quadratic shears held): robust
+/// Gauss-Newton on the points' mapped_distance, Geman-McClure weights of scale
+/// distance_scale_mm, the bumps' heights pulled towards none by field_stiffness. The
+/// fields' Jacobian is taken to first order (each field's bumps at the point itself).
+/// The fields' grid covers the mapped surface. `effective_dof` gets the fit's effective
+/// number of parameters, tr(J (J^T W J + lambda I)^-1 J^T W) at the end.
+GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distance,
+                           const SurfaceSamples& surface,
+                           const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
+                           double& effective_dof) {
+  effective_dof = 0;
+  const int m = static_cast<int>(points.size());
+  const MappedSamples mapped = map_samples(map, surface);
+  map.fields = ShearFields::over(mapped.full.rowwise().minCoeff(), mapped.full.rowwise().maxCoeff(),
+                                 o.field_sigma_mm);
+  const int n = static_cast<int>(map.fields.weights.size());
+  if (n == 0 || m == 0) return map;
+  using VecX = Eigen::VectorXd;
+  const double c2 = o.distance_scale_mm * o.distance_scale_mm;
+  const double lambda = std::max(o.field_stiffness, 1e-9);  // > 0: more heights than points
+  std::vector<std::pair<int, double>> near;
+  auto residuals = [&](const GlobalMap& g, VecX& r, Eigen::MatrixXd* jac) {
+    const Eigen::Matrix3d b = g.affine.a.inverse();
+    r.resize(m);
+    if (jac) jac->setZero(m, n);
+    for (int k = 0; k < m; ++k) {
+      const MappedDistance d = mapped_distance(g, b, distance, points[k].p_mm);
+      r(k) = d.r;
+      if (!jac) continue;
+      for (int a = 0; a < 3; ++a) {
+        g.fields.bumps(a, points[k].p_mm, near);
+        for (const auto& [index, value] : near)
+          (*jac)(k, index) = -d.gp(a) * value / d.nu;
+      }
+    }
+  };
+  auto objective = [&](const GlobalMap& g, const VecX& r) {
+    return 0.5 * geman_mcclure(points, r, c2) + 0.5 * lambda * g.fields.weights.squaredNorm();
+  };
+  VecX r;
+  Eigen::MatrixXd jac;
+  residuals(map, r, &jac);
+  double e = objective(map, r);
+  for (int it = 0; it < o.iterations; ++it) {
+    const VecX w = geman_mcclure_weights(points, r, c2);
+    Eigen::MatrixXd h = jac.transpose() * w.asDiagonal() * jac;
+    h.diagonal().array() += lambda;
+    const VecX grad = jac.transpose() * w.cwiseProduct(r) + lambda * map.fields.weights;
+    const VecX step = -h.ldlt().solve(grad);
+    if (!step.allFinite()) break;
+    bool accepted = false;
+    double e_new = e;
+    for (double alpha = 1; alpha > 1e-3 && !accepted; alpha *= 0.5) {
+      GlobalMap trial = map;
+      trial.fields.weights += alpha * step;
+      VecX r_trial;
+      residuals(trial, r_trial, nullptr);
+      e_new = objective(trial, r_trial);
+      if (e_new < e) map = std::move(trial), accepted = true;
+    }
+    if (!accepted) break;
+    const bool settled = e - e_new < 1e-6 * (1 + e);
+    e = e_new;
+    residuals(map, r, &jac);
+    if (settled) break;
+  }
+  {  // the effective number of parameters at the end
+    const VecX w = geman_mcclure_weights(points, r, c2);
+    Eigen::MatrixXd jtw = jac.transpose() * w.asDiagonal();
+    Eigen::MatrixXd h = jtw * jac;
+    h.diagonal().array() += lambda;
+    effective_dof = jac.rows() > 0 ? (h.ldlt().solve(jtw * jac)).trace() : 0.0;
+  }
+  map.rms_after_mm = map.affine.rms_after_mm =
+      nearest_sample_rms(map, surface, points, o.outlier_mads);
+  return map;
 }
 
 /// RMS (mm) over all points of their mapped_distance, each capped at `cap_mm`: a fixed
@@ -648,14 +837,20 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
       fit.found_by = "signed distance";
       (with_shears ? fits : affine_fits).push_back(fit);
     }
-    // Fewer points than unknowns: the shears too, held stiffer (with the stated pull they
-    // followed the noise: stretches of 2 mm came out 0.3 to 0.4 mm worse).
-    if (!with_shears && o.few_points_shear_stiffness > 0) {
-      AffineFitOptions stiffer = o;
-      stiffer.shear_regularisation *= o.few_points_shear_stiffness;
-      for (GlobalMap& fit : fit_to_distance(identity, *distance, surface, points, stiffer, true)) {
-        fit.found_by = "signed distance (stiffer shears)";
-        fits.push_back(fit);
+    // Fewer points than unknowns: the shears too, at the stated stiffness and held
+    // stiffer. Either alone falls short: stiffer, a 10 mm bend was half followed (prostate
+    // seen by 20 points: 1.90 mm) and taken for an affine change; at the stated stiffness
+    // alone, stretches of 2 mm came out 0.3 to 0.4 mm worse. Both are candidates.
+    if (!with_shears) {
+      for (const double stiffness : {o.few_points_shear_stiffness, 1.0}) {
+        if (!(stiffness > 0)) continue;
+        AffineFitOptions held = o;
+        held.shear_regularisation *= stiffness;
+        for (GlobalMap& fit : fit_to_distance(identity, *distance, surface, points, held, true)) {
+          fit.found_by =
+              stiffness == 1.0 ? "signed distance (shears)" : "signed distance (stiffer shears)";
+          fits.push_back(fit);
+        }
       }
     }
   }
@@ -697,16 +892,53 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     rms.push_back(
         distance ? truncated_rms(*candidates[c], *distance, points, o.distance_scale_mm)
                  : point_to_plane_rms(*candidates[c], mapped[c], surface, points, o.outlier_mads));
-  const double best = *std::min_element(rms.begin(), rms.end());
+  std::vector<double> change;
+  for (size_t c = 0; c < candidates.size(); ++c)
+    change.push_back(shape_change_of(mapped[c].full, surface.points));
+  // The one changing the shape least within `window` of the best of `fit` (mean squares).
   const double window = o.equally_good_dof / static_cast<double>(points.size());
-  const GlobalMap* chosen = nullptr;
-  double least = std::numeric_limits<double>::infinity();
-  for (size_t c = 0; c < candidates.size(); ++c) {
-    if (rms[c] * rms[c] > (1 + window) * best * best) continue;
-    const double change = shape_change_of(mapped[c].full, surface.points);
-    if (change < least) least = change, chosen = candidates[c];
+  auto least_change_of_equally_good = [window](const std::vector<double>& fit,
+                                               const std::vector<double>& shape_change) {
+    const double best = *std::min_element(fit.begin(), fit.end());
+    size_t chosen = 0;
+    double least = std::numeric_limits<double>::infinity();
+    for (size_t c = 0; c < fit.size(); ++c)
+      if (fit[c] * fit[c] <= (1 + window) * best * best && shape_change[c] < least)
+        least = shape_change[c], chosen = c;
+    return chosen;
+  };
+  const size_t chosen = least_change_of_equally_good(rms, change);
+  if (!distance || !(o.field_sigma_mm > 0)) {
+    GlobalMap out = *candidates[chosen];
+    out.shears_dropped = shears_dropped;
+    return out;
   }
-  GlobalMap out = *chosen;
+  // Shear fields on top of the chosen map and of the one changing the shape least of all
+  // (often near the identity: a dent is a local change, not a global one), each judged
+  // with the rest. A fit with k effective parameters lowers the mean square by about k/m of
+  // the noise's by chance alone, so theirs is raised by m / (m - k) first: without that,
+  // fields that fitted the noise of 20 points (a mean square a quarter of the noise's)
+  // put every fit without them out of the window.
+  const size_t least_of_all =
+      static_cast<size_t>(std::min_element(change.begin(), change.end()) - change.begin());
+  std::vector<GlobalMap> refined;
+  std::vector<const GlobalMap*> all = candidates;
+  std::vector<size_t> starts = {chosen};
+  if (least_of_all != chosen) starts.push_back(least_of_all);
+  for (const size_t c : starts) {
+    double dof = 0;
+    GlobalMap f = fit_shear_fields(*candidates[c], *distance, surface, points, o, dof);
+    const MappedSamples m = map_samples(f, surface);
+    if (f.fields.empty() || !plausible(f, m, surface, o)) continue;
+    const double inflation = static_cast<double>(points.size()) /
+                             std::max(1.0, static_cast<double>(points.size()) - dof);
+    rms.push_back(truncated_rms(f, *distance, points, o.distance_scale_mm) * std::sqrt(inflation));
+    change.push_back(shape_change_of(m.full, surface.points));
+    refined.push_back(std::move(f));
+  }
+  for (const GlobalMap& f : refined)
+    all.push_back(&f);
+  GlobalMap out = *all[least_change_of_equally_good(rms, change)];
   out.shears_dropped = shears_dropped;
   return out;
 }

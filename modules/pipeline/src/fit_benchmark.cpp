@@ -493,7 +493,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                                                           support);
                   row.msd_global_mm =
                       evaluation::compare_with_body(global_only, inside, bounds, voxel).msd_mm;
-                  row.global_fit = global_map.found_by;
+                  row.global_fit = std::string(global_map.found_by) +
+                                   (global_map.fields.empty() ? "" : " + shear fields");
                   if (std::isfinite(global_wall_s))
                     effort.push_back(
                         {method, "global stage", case_id, global_wall_s, row.msd_global_mm});

@@ -256,6 +256,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
         fitting::reference_surface(model.reference, reference_distance, 2);
     fitting::AffineFitOptions global_options;
     global_options.max_stretch = scene.number("fit", "max_global_stretch");
+    global_options.field_sigma_mm = scene.number("fit", "global_shear_field_mm");
     const fitting::GlobalMap map =
         fitting::fit_global_map(samples, points, global_options, &reference_distance);
     if (map.refused) {
@@ -291,6 +292,11 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
       count = static_cast<int>(std::lround(count * v0 / v));
     }
     const Eigen::Vector3d stretches = Eigen::JacobiSVD<Eigen::Matrix3d>(affine.a).singularValues();
+    double fields_move_mm = 0;  // how far the shear fields move the organ's surface at most
+    for (Eigen::Index j = 0; j < samples.points.cols(); ++j) {
+      const Eigen::Vector3d y = map.shears.apply(affine.a * samples.points.col(j) + affine.t);
+      fields_move_mm = std::max(fields_move_mm, (map.fields.apply(y) - y).norm());
+    }
     global = {{"rms_before_mm", affine.rms_before_mm},
               {"rms_after_mm", map.rms_after_mm},
               {"iterations", affine.iterations},
@@ -299,6 +305,8 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
               {"shear_coefficients_per_mm",
                std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
               {"shears_dropped", map.shears_dropped},
+              {"shear_fields_sigma_mm", map.fields.empty() ? 0.0 : map.fields.sigma_mm},
+              {"shear_fields_largest_move_mm", fields_move_mm},
               {"found_by", map.found_by},
               {"shape_change_mm", fitting::shape_change_mm(map, samples)},
               {"refill_passes", passes},

@@ -98,7 +98,17 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
         {"global_affine", std::vector<double>(map.affine.a.data(), map.affine.a.data() + 9)},
         {"global_translation_mm", vec(map.affine.t)},
         {"global_shear_centre_mm", vec(map.shears.centre)},
-        {"global_shears", std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)}};
+        {"global_shears", std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
+        {"global_shear_fields",
+         map.fields.empty()
+             ? nlohmann::json(nullptr)
+             : nlohmann::json{
+                   {"sigma_mm", map.fields.sigma_mm},
+                   {"origin_mm", vec(map.fields.origin_mm)},
+                   {"count", {map.fields.count.x(), map.fields.count.y(), map.fields.count.z()}},
+                   {"weights_mm",
+                    std::vector<double>(map.fields.weights.data(),
+                                        map.fields.weights.data() + map.fields.weights.size())}}}};
   } else {
     j["embedding"] = nullptr;
   }
@@ -197,6 +207,29 @@ SavedModel load_model(const fs::path& file) {
       m.global_map.affine.t = read_vec(e.at("global_translation_mm"));
       m.global_map.shears.centre = read_vec(e.at("global_shear_centre_mm"));
       m.global_map.shears.c = Eigen::Map<const Eigen::Matrix<double, 9, 1>>(c.data());
+      // Shear fields (fitting::ShearFields): absent in models written before them.
+      if (e.contains("global_shear_fields") && !e.at("global_shear_fields").is_null()) {
+        const auto& f = e.at("global_shear_fields");
+        fitting::ShearFields fields;
+        fields.sigma_mm = f.at("sigma_mm").get<double>();
+        fields.origin_mm = read_vec(f.at("origin_mm"));
+        const auto count = f.at("count").get<std::vector<int>>();
+        const auto weights = f.at("weights_mm").get<std::vector<double>>();
+        if (count.size() != 3 || !(fields.sigma_mm > 0) || !fields.origin_mm.allFinite())
+          fail("embedding.global_shear_fields needs sigma_mm > 0, origin_mm and 3 counts");
+        for (int axis = 0; axis < 3; ++axis) {
+          if (count[axis] < 1 || count[axis] > 1000)
+            fail("embedding.global_shear_fields.count must be 1 to 1000 along each axis");
+          fields.count(axis) = count[axis];
+        }
+        if (weights.size() != static_cast<size_t>(3 * fields.block()))
+          fail(fmt::format("embedding.global_shear_fields.weights_mm needs {} numbers, has {}",
+                           3 * fields.block(), weights.size()));
+        fields.weights = Eigen::Map<const Eigen::VectorXd>(
+            weights.data(), static_cast<Eigen::Index>(weights.size()));
+        if (!fields.weights.allFinite()) fail("embedding.global_shear_fields: not finite");
+        m.global_map.fields = std::move(fields);
+      }
       if (!m.placed.allFinite() || !m.global_map.affine.a.allFinite() ||
           !m.global_map.shears.c.allFinite() ||
           std::abs(m.global_map.affine.a.determinant() - 1) > 1e-6)

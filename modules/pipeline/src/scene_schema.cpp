@@ -195,7 +195,9 @@ config::Schema build_schema() {
       .number("skin_voxel_r0", 0.5, "r0", 0.0, none, "voxel size of skin detection (0.5 r0 = rho)",
               true)
       .number("max_global_stretch", 1.5, "", 1.0, 10.0,
-              "spread: refuse points that ask the whole organ to stretch more than this");
+              "spread: refuse points that ask the whole organ to stretch more than this")
+      .number("global_shear_field_mm", 10.0, "mm", 0.0, 100.0,
+              "spread: width of the smooth shears the global map may add (0 = none)");
   s.section("export", "what to write for the planning system, on the planning CT's grid")
       .text("rtstruct", "", "DICOM RT Structure Set file name inside --out (empty: none)")
       .text("labels", "", "label map file name inside --out: .nrrd, .mha, .nii(.gz) (empty: none)")

@@ -76,6 +76,9 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   m.global_map.affine.a = Eigen::Vector3d(1.2, 1 / std::sqrt(1.2), 1 / std::sqrt(1.2)).asDiagonal();
   m.global_map.affine.t = Eigen::Vector3d(0.5, -1, 2);
   m.global_map.shears.c(3) = 0.003;
+  m.global_map.fields = fitting::ShearFields::over({-18, -15, -13}, {18, 15, 13}, 8.0);
+  for (Eigen::Index i = 0; i < m.global_map.fields.weights.size(); ++i)
+    m.global_map.fields.weights(i) = 0.5 * std::sin(0.7 * static_cast<double>(i));  // mm
   m.placed = m.state.x;
   for (Eigen::Index i = 0; i < m.placed.cols(); ++i)
     m.placed.col(i) = m.global_map.apply(m.state.x.col(i));
@@ -83,6 +86,7 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   m.state.x.row(1).array() += 0.4;
   save_model(dir_ / "fitted.json", m, "Prostate", std::nullopt, {});
   SavedModel back = load_model(dir_ / "fitted.json");
+  EXPECT_EQ(back.model.global_map.fields.weights, m.global_map.fields.weights);
   const fitting::EmbeddedBody a = organ_body(m), b = organ_body(back.model);
   for (const Eigen::Vector3d& q :
        {Eigen::Vector3d(0, 0.4, 2), Eigen::Vector3d(16, -1, 1), Eigen::Vector3d(-3, 11, 2)})
@@ -92,6 +96,12 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
       (a.pull_back(Eigen::Vector3d(0, 0.4, 2)) - m.global_map.inverse(Eigen::Vector3d(0, 0, 2)))
           .norm(),
       0, 1e-6);
+  // Shear fields whose heights do not match their grid are refused, naming the key.
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir_ / "fitted.json"));
+  j["embedding"]["global_shear_fields"]["weights_mm"].erase(0);
+  EXPECT_NE(error_of(j.dump()).find("bad.json: embedding.global_shear_fields.weights_mm needs"),
+            std::string::npos)
+      << error_of(j.dump());
   // A model saved at rest has no embedding.
   ModelStageResult rest = build("body:\n  shape: ellipsoid\n  size_mm: [30, 24, 20]\n");
   save_model(dir_ / "rest.json", rest, "Prostate", std::nullopt, {});
