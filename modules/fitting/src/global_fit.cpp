@@ -722,12 +722,23 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
   Eigen::MatrixXd jac;
   residuals(map, r, &jac);
   double e = objective(map, r);
+  // The step solves (J^T W J + lambda I) s = -g. With fewer points than heights (a GTV's
+  // grid has ~500), the same solve in the points' space by Woodbury's identity:
+  // (lambda I + J^T W J)^-1 = (I - J^T W (lambda I + J J^T W)^-1 J) / lambda; m^3, not n^3.
+  auto solve = [&](const VecX& w, const VecX& g) -> VecX {
+    if (m >= n) {
+      Eigen::MatrixXd h = jac.transpose() * w.asDiagonal() * jac;
+      h.diagonal().array() += lambda;
+      return h.ldlt().solve(g);
+    }
+    Eigen::MatrixXd k = jac * jac.transpose() * w.asDiagonal();
+    k.diagonal().array() += lambda;
+    return (g - jac.transpose() * w.cwiseProduct(k.partialPivLu().solve(jac * g))) / lambda;
+  };
   for (int it = 0; it < o.iterations; ++it) {
     const VecX w = geman_mcclure_weights(points, r, c2);
-    Eigen::MatrixXd h = jac.transpose() * w.asDiagonal() * jac;
-    h.diagonal().array() += lambda;
     const VecX grad = jac.transpose() * w.cwiseProduct(r) + lambda * map.fields.weights;
-    const VecX step = -h.ldlt().solve(grad);
+    const VecX step = -solve(w, grad);
     if (!step.allFinite()) break;
     bool accepted = false;
     double e_new = e;
@@ -745,12 +756,21 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
     residuals(map, r, &jac);
     if (settled) break;
   }
-  {  // the effective number of parameters at the end
+  {  // the effective number of parameters at the end, tr(J (J^T W J + lambda I)^-1 J^T W):
+     // tr(H^-1 J^T W J) in the heights' space, tr(K (K + lambda I)^-1), K = J J^T W, in
+     // the points' (10,000 points: never an m x m matrix)
     const VecX w = geman_mcclure_weights(points, r, c2);
-    Eigen::MatrixXd jtw = jac.transpose() * w.asDiagonal();
-    Eigen::MatrixXd h = jtw * jac;
-    h.diagonal().array() += lambda;
-    effective_dof = jac.rows() > 0 ? (h.ldlt().solve(jtw * jac)).trace() : 0.0;
+    if (m >= n) {
+      const Eigen::MatrixXd jtwj = jac.transpose() * w.asDiagonal() * jac;
+      Eigen::MatrixXd h = jtwj;
+      h.diagonal().array() += lambda;
+      effective_dof = h.ldlt().solve(jtwj).trace();
+    } else {
+      const Eigen::MatrixXd k = jac * jac.transpose() * w.asDiagonal();
+      Eigen::MatrixXd shifted = k;
+      shifted.diagonal().array() += lambda;
+      effective_dof = shifted.transpose().partialPivLu().solve(k.transpose()).trace();
+    }
   }
   map.rms_after_mm = map.affine.rms_after_mm =
       nearest_sample_rms(map, surface, points, o.outlier_mads);
