@@ -102,7 +102,7 @@ Eigen::Vector3d EmbeddedBody::unmove_locally(const Eigen::Vector3d& q, bool wide
 }
 
 Eigen::Vector3d EmbeddedBody::unmap_globally(const Eigen::Vector3d& q0) const {
-  return map_inverse_a_ * (map_.shears.inverse(map_.fields.inverse(q0)) - map_.affine.t);
+  return map_.inverse(q0, map_inverse_a_);
 }
 
 Eigen::Vector3d EmbeddedBody::pull_back(const Eigen::Vector3d& q) const {

@@ -265,56 +265,47 @@ int ShearFields::block() const {
   return most;
 }
 
-void ShearFields::bumps(int a, const Eigen::Vector3d& q,
-                        std::vector<std::pair<int, double>>& out) const {
-  out.clear();
-  if (!(sigma_mm > 0)) return;
+namespace {
+/// Calls visit(index, value) for each bump of field `a` of `f` at q at least 1e-6 (the
+/// centres within 5.3 sigmas of q's other two coordinates), in a fixed order.
+template <class Visit>
+void for_each_bump(const ShearFields& f, int a, const Eigen::Vector3d& q, Visit&& visit) {
+  if (!(f.sigma_mm > 0)) return;
   const auto [b, c] = other_axes(a);
   const double reach = 5.3;  // sigmas: exp(-5.3^2 / 2) < 1e-6
-  const double ub = (q(b) - origin_mm(b)) / sigma_mm, uc = (q(c) - origin_mm(c)) / sigma_mm;
+  const double ub = (q(b) - f.origin_mm(b)) / f.sigma_mm, uc = (q(c) - f.origin_mm(c)) / f.sigma_mm;
   const int i0 = std::max(0, static_cast<int>(std::ceil(ub - reach))),
-            i1 = std::min(count(b) - 1, static_cast<int>(std::floor(ub + reach)));
+            i1 = std::min(f.count(b) - 1, static_cast<int>(std::floor(ub + reach)));
   const int j0 = std::max(0, static_cast<int>(std::ceil(uc - reach))),
-            j1 = std::min(count(c) - 1, static_cast<int>(std::floor(uc + reach)));
+            j1 = std::min(f.count(c) - 1, static_cast<int>(std::floor(uc + reach)));
+  if (i1 - i0 >= 16) return;  // cannot happen: 2 x 5.3 sigmas span at most 11 centres
   // The Gaussian is separable: one exp per row and per column, not per bump.
   double along_b[16];
-  if (i1 - i0 >= 16) return;  // cannot happen: 2 x 5.3 sigmas span at most 11 centres
   for (int i = i0; i <= i1; ++i)
     along_b[i - i0] = std::exp(-0.5 * (ub - i) * (ub - i));
-  const int first = a * block();
+  const int first = a * f.block();
   for (int j = j0; j <= j1; ++j) {
     const double along_c = std::exp(-0.5 * (uc - j) * (uc - j));
     for (int i = i0; i <= i1; ++i) {
       const double e = along_b[i - i0] * along_c;
-      if (e >= 1e-6) out.emplace_back(first + i + count(b) * j, e);
+      if (e >= 1e-6) visit(first + i + f.count(b) * j, e);
     }
   }
 }
+}  // namespace
+
+void ShearFields::bumps(int a, const Eigen::Vector3d& q,
+                        std::vector<std::pair<int, double>>& out) const {
+  out.clear();
+  for_each_bump(*this, a, q, [&](int index, double value) { out.emplace_back(index, value); });
+}
 
 double ShearFields::field(int a, const Eigen::Vector3d& q) const {
-  if (weights.size() == 0 || !(sigma_mm > 0)) return 0.0;
-  // As bumps() (the same centres, the same 1e-6 cut), without the list: it is called for
-  // every lattice site of a re-fill and every voxel an evaluation asks about.
-  const auto [b, c] = other_axes(a);
-  const double reach = 5.3;
-  const double ub = (q(b) - origin_mm(b)) / sigma_mm, uc = (q(c) - origin_mm(c)) / sigma_mm;
-  const int i0 = std::max(0, static_cast<int>(std::ceil(ub - reach))),
-            i1 = std::min(count(b) - 1, static_cast<int>(std::floor(ub + reach)));
-  const int j0 = std::max(0, static_cast<int>(std::ceil(uc - reach))),
-            j1 = std::min(count(c) - 1, static_cast<int>(std::floor(uc + reach)));
-  if (i1 < i0 || j1 < j0 || i1 - i0 >= 16) return 0.0;
-  double along_b[16];
-  for (int i = i0; i <= i1; ++i)
-    along_b[i - i0] = std::exp(-0.5 * (ub - i) * (ub - i));
-  const double* w = weights.data() + a * block();
+  // Summed as visited, without a list: it is called for every lattice site of a re-fill
+  // and every voxel an evaluation asks about.
   double f = 0;
-  for (int j = j0; j <= j1; ++j) {
-    const double along_c = std::exp(-0.5 * (uc - j) * (uc - j));
-    for (int i = i0; i <= i1; ++i) {
-      const double e = along_b[i - i0] * along_c;
-      if (e >= 1e-6) f += w[i + count(b) * j] * e;
-    }
-  }
+  if (weights.size() == 0) return f;
+  for_each_bump(*this, a, q, [&](int index, double value) { f += weights(index) * value; });
   return f;
 }
 
@@ -335,7 +326,7 @@ Eigen::Vector3d ShearFields::inverse(const Eigen::Vector3d& q) const {
 }
 
 Eigen::Vector3d GlobalMap::inverse(const Eigen::Vector3d& q) const {
-  return affine.a.inverse() * (shears.inverse(fields.inverse(q)) - affine.t);
+  return inverse(q, affine.a.inverse());
 }
 
 namespace {
@@ -504,14 +495,17 @@ double point_to_plane_rms(const GlobalMap& map, const MappedSamples& mapped,
 
 /// Robust RMS (mm) of the points' distances to their nearest mapped surface samples, by
 /// the fits' outlier rule: what refine_global_map reports of its maps.
-double nearest_sample_rms(const GlobalMap& map, const SurfaceSamples& surface,
-                          const std::vector<AttractivePoint>& points, double mads) {
-  const MappedSamples mapped = map_samples(map, surface);
+double nearest_sample_rms(const MappedSamples& mapped, const std::vector<AttractivePoint>& points,
+                          double mads) {
   const SampleGrid grid(mapped.full);  // holds a reference to the samples
   std::vector<double> r(points.size()), w;
   for (size_t k = 0; k < points.size(); ++k)
     r[k] = std::sqrt(grid.nearest(points[k].p_mm).second);
   return robust_weights(r, points, mads, w);
+}
+double nearest_sample_rms(const GlobalMap& map, const SurfaceSamples& surface,
+                          const std::vector<AttractivePoint>& points, double mads) {
+  return nearest_sample_rms(map_samples(map, surface), points, mads);
 }
 
 /// Geman-McClure loss of scale sqrt(c2) (mm): sum_k conf_k c2 r_k^2 / (c2 + r_k^2), and the
@@ -545,7 +539,7 @@ struct MappedDistance {
 MappedDistance mapped_distance(const GlobalMap& map, const Eigen::Matrix3d& b,
                                const geometry::SignedDistance& distance, const Eigen::Vector3d& p) {
   MappedDistance out;
-  out.q = b * (map.shears.inverse(map.fields.inverse(p)) - map.affine.t);
+  out.q = map.inverse(p, b);
   Eigen::Vector3d grad;
   const double d = distance.at(out.q, &grad);
   out.gp = b.transpose() * grad;
@@ -679,21 +673,56 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
   return ends;
 }
 
+/// The ridge system (J^T W J + lambda I) of a fit with more unknowns (n, J's columns) than
+/// points (m, its rows) or fewer, factored in the smaller space: with fewer points (a
+/// GTV's fields have ~500 heights for 20 to 87 points) by Woodbury's identity,
+/// (lambda I + J^T W J)^-1 = (I - J^T W (lambda I + J J^T W)^-1 J) / lambda: m^3, not n^3;
+/// with more (10,000 points), never an m x m matrix.
+class RidgeSystem {
+ public:
+  RidgeSystem(const Eigen::MatrixXd& jac, const Eigen::VectorXd& w, double lambda)
+      : jac_(jac), w_(w), lambda_(lambda), in_points_(jac.rows() < jac.cols()) {
+    Eigen::MatrixXd s = in_points_ ? Eigen::MatrixXd(jac * jac.transpose() * w.asDiagonal())
+                                   : Eigen::MatrixXd(jac.transpose() * w.asDiagonal() * jac);
+    s.diagonal().array() += lambda;
+    lu_.compute(s);
+  }
+  /// (J^T W J + lambda I)^-1 g
+  Eigen::VectorXd solve(const Eigen::VectorXd& g) const {
+    if (!in_points_) return lu_.solve(g);
+    return (g - jac_.transpose() * w_.cwiseProduct(lu_.solve(jac_ * g))) / lambda_;
+  }
+  /// The effective number of unknowns, tr(J (J^T W J + lambda I)^-1 J^T W): the size of
+  /// the factored space less lambda tr(S^-1), S the matrix factored (either way).
+  double effective_dof() const {
+    const Eigen::Index size = lu_.rows();
+    return static_cast<double>(size) -
+           lambda_ * lu_.solve(Eigen::MatrixXd::Identity(size, size)).trace();
+  }
+
+ private:
+  const Eigen::MatrixXd& jac_;
+  const Eigen::VectorXd& w_;
+  double lambda_;
+  bool in_points_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
+};
+
 /// Smooth shear fields on top of `map` (its affine part and quadratic shears held): robust
 /// Gauss-Newton on the points' mapped_distance, Geman-McClure weights of scale
 /// distance_scale_mm, the bumps' heights pulled towards none by field_stiffness. The
 /// fields' Jacobian is taken to first order (each field's bumps at the point itself).
-/// The fields' grid covers the mapped surface. `effective_dof` gets the fit's effective
-/// number of parameters, tr(J (J^T W J + lambda I)^-1 J^T W) at the end.
+/// The fields' grid covers `mapped_surface`, the surface samples as `map` moves them.
+/// `effective_dof` gets the fit's effective number of parameters at the end. The map's
+/// rms_after_mm is left to the caller (it maps the samples anyway).
 GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distance,
-                           const SurfaceSamples& surface,
+                           const Eigen::Matrix3Xd& mapped_surface,
                            const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
                            double& effective_dof) {
   effective_dof = 0;
   const int m = static_cast<int>(points.size());
-  const MappedSamples mapped = map_samples(map, surface);
-  map.fields = ShearFields::over(mapped.full.rowwise().minCoeff(), mapped.full.rowwise().maxCoeff(),
-                                 o.field_sigma_mm);
+  map.fields = ShearFields::over(mapped_surface.rowwise().minCoeff(),
+                                 mapped_surface.rowwise().maxCoeff(), o.field_sigma_mm);
   const int n = static_cast<int>(map.fields.weights.size());
   if (n == 0 || m == 0) return map;
   using VecX = Eigen::VectorXd;
@@ -722,23 +751,10 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
   Eigen::MatrixXd jac;
   residuals(map, r, &jac);
   double e = objective(map, r);
-  // The step solves (J^T W J + lambda I) s = -g. With fewer points than heights (a GTV's
-  // grid has ~500), the same solve in the points' space by Woodbury's identity:
-  // (lambda I + J^T W J)^-1 = (I - J^T W (lambda I + J J^T W)^-1 J) / lambda; m^3, not n^3.
-  auto solve = [&](const VecX& w, const VecX& g) -> VecX {
-    if (m >= n) {
-      Eigen::MatrixXd h = jac.transpose() * w.asDiagonal() * jac;
-      h.diagonal().array() += lambda;
-      return h.ldlt().solve(g);
-    }
-    Eigen::MatrixXd k = jac * jac.transpose() * w.asDiagonal();
-    k.diagonal().array() += lambda;
-    return (g - jac.transpose() * w.cwiseProduct(k.partialPivLu().solve(jac * g))) / lambda;
-  };
   for (int it = 0; it < o.iterations; ++it) {
     const VecX w = geman_mcclure_weights(points, r, c2);
     const VecX grad = jac.transpose() * w.cwiseProduct(r) + lambda * map.fields.weights;
-    const VecX step = -solve(w, grad);
+    const VecX step = -RidgeSystem(jac, w, lambda).solve(grad);
     if (!step.allFinite()) break;
     bool accepted = false;
     double e_new = e;
@@ -756,24 +772,8 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
     residuals(map, r, &jac);
     if (settled) break;
   }
-  {  // the effective number of parameters at the end, tr(J (J^T W J + lambda I)^-1 J^T W):
-     // tr(H^-1 J^T W J) in the heights' space, tr(K (K + lambda I)^-1), K = J J^T W, in
-     // the points' (10,000 points: never an m x m matrix)
-    const VecX w = geman_mcclure_weights(points, r, c2);
-    if (m >= n) {
-      const Eigen::MatrixXd jtwj = jac.transpose() * w.asDiagonal() * jac;
-      Eigen::MatrixXd h = jtwj;
-      h.diagonal().array() += lambda;
-      effective_dof = h.ldlt().solve(jtwj).trace();
-    } else {
-      const Eigen::MatrixXd k = jac * jac.transpose() * w.asDiagonal();
-      Eigen::MatrixXd shifted = k;
-      shifted.diagonal().array() += lambda;
-      effective_dof = shifted.transpose().partialPivLu().solve(k.transpose()).trace();
-    }
-  }
-  map.rms_after_mm = map.affine.rms_after_mm =
-      nearest_sample_rms(map, surface, points, o.outlier_mads);
+  const VecX w = geman_mcclure_weights(points, r, c2);
+  effective_dof = RidgeSystem(jac, w, lambda).effective_dof();
   return map;
 }
 
@@ -947,9 +947,10 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   if (least_of_all != chosen) starts.push_back(least_of_all);
   for (const size_t c : starts) {
     double dof = 0;
-    GlobalMap f = fit_shear_fields(*candidates[c], *distance, surface, points, o, dof);
+    GlobalMap f = fit_shear_fields(*candidates[c], *distance, mapped[c].full, points, o, dof);
     const MappedSamples m = map_samples(f, surface);
     if (f.fields.empty() || !plausible(f, m, surface, o)) continue;
+    f.rms_after_mm = f.affine.rms_after_mm = nearest_sample_rms(m, points, o.outlier_mads);
     const double inflation = static_cast<double>(points.size()) /
                              std::max(1.0, static_cast<double>(points.size()) - dof);
     rms.push_back(truncated_rms(f, *distance, points, o.distance_scale_mm) * std::sqrt(inflation));

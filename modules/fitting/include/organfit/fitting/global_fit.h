@@ -160,6 +160,11 @@ struct GlobalMap {
     return fields.apply(shears.apply(affine.a * p + affine.t));
   }
   Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
+  /// The same with affine.a's inverse at hand (`a_inverse`), for callers that invert
+  /// many points through one map.
+  Eigen::Vector3d inverse(const Eigen::Vector3d& q, const Eigen::Matrix3d& a_inverse) const {
+    return a_inverse * (shears.inverse(fields.inverse(q)) - affine.t);
+  }
 };
 
 /// The surface samples moved by `map`: points mapped, normals turned by the inverse
@@ -192,10 +197,10 @@ double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface);
 /// points insist (freed, a stretch seen from one side was taken for a shift: that cube
 /// seen by 20 to 87 points, MSD 0.3-0.5 -> 1.1-3.8 mm); the fits by closest samples leave
 /// the translation free, and a real shift is found by them. Candidates are then judged
-/// on D too (with fewer than 21 points, the distance fit is affine, and a second
-/// one adds shears held stiffer: few_points_shear_stiffness): the RMS over all points of their
-/// distances capped at `distance_scale_mm` (judged over only the points each keeps, a fit that
-/// drops a third of them looked as good as one that explains them).
+/// on D too (with fewer than 21 points, the distance fit is affine, and two more add
+/// shears, as stated and held stiffer: few_points_shear_stiffness): the RMS over all points of
+/// their distances capped at `distance_scale_mm` (judged over only the points each keeps, a fit
+/// that drops a third of them looked as good as one that explains them).
 ///  * When the best fit of the points (robust RMS) stretches beyond max_stretch, it is
 ///    refused (the identity, marked so): points that can only be explained by crushing
 ///    the organ are not data to follow globally.
@@ -212,7 +217,7 @@ double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface);
 ///    linearised fit's hat matrix: what they lower it by chance), and the choice above is
 ///    made again. On the 225 target cases of `organfit bench fit --targets` (with both
 ///    shear stiffnesses for fewer than 21 points), against without: median MSD 0.471 ->
-///    0.437 mm, MSD <= 1 mm in 202 -> 215, HD95 <= 2.5 mm in 192 -> 209, volume within 1%
+///    0.437 mm, MSD <= 1 mm in 202 -> 214, HD95 <= 2.5 mm in 192 -> 209, volume within 1%
 ///    in 213 -> 223; indentations went from 0.34 to 0.25 of TPS's MSD. Without the raise,
 ///    fields fitted to the noise of 20 points put every other fit out of the window:
 ///    median 0.512 mm, HD95 1.41 mm.
