@@ -106,6 +106,17 @@ for r in part:
 "$bin" bench fit --quick --cases 3,21 --out "$tmp/beyond" > /dev/null 2> "$tmp/beyond.err"
 check bench.fit_case_beyond_the_grid_refused test $? -eq 2 -a "$(grep -c . "$tmp/beyond.err")" -eq 1 -a ! -e "$tmp/beyond"
 check bench.fit_case_beyond_the_grid_named grep -q -- "--cases: no case 21" "$tmp/beyond.err"
+# The 30 mm cube twisted by 38 degrees at its ends (corners moved 10 to 14 mm), seen on
+# half its surface by 20 and 50 points (0.5 mm noise): a twist is three shears (y z y),
+# which the global map holds since 2026-11 (HD95 3.5 to 4.2 mm with x y z alone; now
+# 2.5, MSD 0.77 and 0.68 mm).
+"$bin" --quiet bench fit --cases 723,729 --methods spread --out "$tmp/twist" > /dev/null 2>&1
+check bench.fit_follows_a_twist_seen_from_one_side /usr/bin/python3 -c "
+import csv
+rows = list(csv.DictReader(open('$tmp/twist/results.csv')))
+assert [(r['family'], r['magnitude_mm'], r['points']) for r in rows] == [('twist', '10', '20'), ('twist', '10', '50')], rows
+for r in rows:
+    assert float(r['msd_mm']) < 0.85 and float(r['hd95_mm']) < 3.0 and abs(float(r['volume_change_pct'])) < 1.0, r"
 "$bin" --quiet bench stability --out "$tmp/stab" > "$tmp/stab.json" 2> /dev/null
 check bench.stability_every_row_passes test $? -eq 0
 check bench.stability_table /usr/bin/python3 -c "

@@ -224,11 +224,15 @@ Eigen::Vector3d QuadraticShears::apply(const Eigen::Vector3d& q) const {
   u.x() += c(0) * u.y() * u.y() + c(1) * u.z() * u.z() + c(2) * u.y() * u.z();
   u.y() += c(3) * u.x() * u.x() + c(4) * u.z() * u.z() + c(5) * u.x() * u.z();
   u.z() += c(6) * u.x() * u.x() + c(7) * u.y() * u.y() + c(8) * u.x() * u.y();
+  u.y() += c(9) * u.x() * u.x() + c(10) * u.z() * u.z() + c(11) * u.x() * u.z();
+  u.x() += c(12) * u.y() * u.y() + c(13) * u.z() * u.z() + c(14) * u.y() * u.z();
   return centre + u;
 }
 
 Eigen::Vector3d QuadraticShears::inverse(const Eigen::Vector3d& q) const {
   Eigen::Vector3d u = q - centre;  // undo the shears in reverse order
+  u.x() -= c(12) * u.y() * u.y() + c(13) * u.z() * u.z() + c(14) * u.y() * u.z();
+  u.y() -= c(9) * u.x() * u.x() + c(10) * u.z() * u.z() + c(11) * u.x() * u.z();
   u.z() -= c(6) * u.x() * u.x() + c(7) * u.y() * u.y() + c(8) * u.x() * u.y();
   u.y() -= c(3) * u.x() * u.x() + c(4) * u.z() * u.z() + c(5) * u.x() * u.z();
   u.x() -= c(0) * u.y() * u.y() + c(1) * u.z() * u.z() + c(2) * u.y() * u.z();
@@ -341,15 +345,16 @@ bool within_stretch(const Eigen::Matrix3d& a, const AffineFitOptions& o) {
 /// candidate's samples are mapped once for the three questions asked of it (plausible,
 /// point_to_plane_rms, shape change).
 struct MappedSamples {
-  Eigen::Matrix3Xd affine, full;  ///< mm
+  Eigen::Matrix3Xd affine, sheared, full;  ///< mm
 };
 
 MappedSamples map_samples(const GlobalMap& map, const SurfaceSamples& surface) {
-  MappedSamples m{Eigen::Matrix3Xd(3, surface.points.cols()),
-                  Eigen::Matrix3Xd(3, surface.points.cols())};
-  for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
+  const Eigen::Index n = surface.points.cols();
+  MappedSamples m{Eigen::Matrix3Xd(3, n), Eigen::Matrix3Xd(3, n), Eigen::Matrix3Xd(3, n)};
+  for (Eigen::Index j = 0; j < n; ++j) {
     m.affine.col(j) = map.affine.a * surface.points.col(j) + map.affine.t;
-    m.full.col(j) = map.fields.apply(map.shears.apply(m.affine.col(j)));
+    m.sheared.col(j) = map.shears.apply(m.affine.col(j));
+    m.full.col(j) = map.fields.apply(m.sheared.col(j));
   }
   return m;
 }
@@ -361,19 +366,27 @@ double shape_change_of(const Eigen::Matrix3Xd& moved, const Eigen::Matrix3Xd& or
   return std::sqrt((d.colwise() - mean).colwise().squaredNorm().mean());
 }
 
-/// Stretches within bounds, and shears moving no surface sample by more than
-/// max_shear_mm x the body's size.
+/// Stretches within bounds, and neither the quadratic shears nor the shear fields moving
+/// any surface sample by more than max_shear_mm x the body's size. Each has its own
+/// bound: a 38-degree twist of the 30 mm cube moves its corners 14 mm by the shears, and
+/// the fields' dent on top of that was refused when they shared one.
 bool plausible(const GlobalMap& map, const MappedSamples& mapped, const SurfaceSamples& surface,
                const AffineFitOptions& o) {
   const double size =
       (surface.points.rowwise().maxCoeff() - surface.points.rowwise().minCoeff()).norm();
-  const double shear_move =
-      mapped.full.cols() > 0 ? (mapped.full - mapped.affine).colwise().norm().maxCoeff() : 0.0;
-  return within_stretch(map.affine.a, o) && shear_move <= o.max_shear_mm * size;
+  auto largest_move = [](const Eigen::Matrix3Xd& to, const Eigen::Matrix3Xd& from) {
+    return to.cols() > 0 ? (to - from).colwise().norm().maxCoeff() : 0.0;
+  };
+  return within_stretch(map.affine.a, o) &&
+         largest_move(mapped.sheared, mapped.affine) <= o.max_shear_mm * size &&
+         largest_move(mapped.full, mapped.sheared) <= o.max_shear_mm * size;
 }
 
 /// Gauss-Newton on the whole map (affine with det 1, then shears) from `map`, with the
-/// stiffness annealed from 1000x the stated one when `anneal`. Returns the map as it was
+/// stiffness annealed from 1000x the stated one when `anneal`. Only the first three shears
+/// (c0..c8) are fitted here, their images linearised at the affine image: the last two
+/// would repeat the second and the first to that order; the fit on the signed distance
+/// fits all five. Returns the map as it was
 /// at the end of each stiffness level, the final one last: each is a fit of the points
 /// by a stiffer map, a candidate in its own right.
 std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& surface,
@@ -468,7 +481,7 @@ std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& su
     t = image - a * centroid;
     map.affine.a = a;
     map.affine.t = t;
-    map.shears.c = theta.segment<9>(12);
+    map.shears.c.head<9>() = theta.segment<9>(12);
   }
   return ends;
 }
@@ -556,7 +569,7 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
                                        const std::vector<AttractivePoint>& points,
                                        const AffineFitOptions& o, bool with_shears) {
   const int m = static_cast<int>(points.size());
-  const int n = with_shears ? 21 : 12;  // a (row-major), t, c
+  const int n = with_shears ? 12 + QuadraticShears::kCount : 12;  // a (row-major), t, c
   using VecX = Eigen::VectorXd;
   const Eigen::Vector3d centroid = surface.points.rowwise().mean();
   double extent2 = 0;
@@ -564,13 +577,13 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
     extent2 += (p.p_mm - map.shears.centre).squaredNorm() / m;
   const double lambda_a_final = o.regularisation * m * extent2;
   const double lambda_c_final = o.shear_regularisation * m * extent2 * extent2;
-  auto theta_of = [n](const GlobalMap& g) {
+  auto theta_of = [n, with_shears](const GlobalMap& g) {
     VecX th(n);
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j)
         th(3 * i + j) = g.affine.a(i, j);
     th.segment<3>(9) = g.affine.t;
-    if (n == 21) th.segment<9>(12) = g.shears.c;
+    if (with_shears) th.tail<QuadraticShears::kCount>() = g.shears.c;
     return th;
   };
   auto map_of = [&](const VecX& th) {  // det(a) = 1 by scaling about the body's centre
@@ -579,7 +592,7 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
       for (int j = 0; j < 3; ++j)
         g.affine.a(i, j) = th(3 * i + j);
     g.affine.t = th.segment<3>(9);
-    if (n == 21) g.shears.c = th.segment<9>(12);
+    if (with_shears) g.shears.c = th.tail<QuadraticShears::kCount>();
     const double det = g.affine.a.determinant();
     if (!(det > 0) || !th.allFinite()) return std::optional<GlobalMap>();
     const Eigen::Vector3d image = g.affine.a * centroid + g.affine.t;
@@ -631,7 +644,7 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
     const double scale = o.distance_scale_mm * std::pow(2.0, 3 - level), c2 = scale * scale;
     VecX lambda = VecX::Constant(n, lambda_a_final * factor);
     lambda.segment<3>(9).setZero();  // t is pulled through the centre's displacement
-    if (n == 21) lambda.segment<9>(12).setConstant(lambda_c_final * factor);
+    if (with_shears) lambda.tail<QuadraticShears::kCount>().setConstant(lambda_c_final * factor);
     const double lambda_centre = lambda_a_final * factor;  // per mm^2
     Eigen::MatrixXd pull = lambda_centre * centre_shift.transpose() * centre_shift;
     pull.diagonal() += lambda;
@@ -830,7 +843,7 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     affine_only.rms_after_mm = affine_only.affine.rms_after_mm;
     affine_only.found_by = "affine";
     affine_fits.push_back(affine_only);
-    if (points.size() < 21 || surface.points.cols() == 0) continue;  // 21 unknowns
+    if (points.size() < 21 || surface.points.cols() == 0) continue;  // 21 unknowns (c0..c8)
     // Two starts: from the affine fit, and from its translation alone with the stiffness
     // annealed (each level's settled map kept). From the affine fit alone, a bend seen
     // from one side can be taken for a stretch and the shears stay in that minimum; from

@@ -312,14 +312,14 @@ TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
 }
 
 TEST(MapSurface, TurnsNormalsToStayNormalToTheMappedSurface) {
-  // A stretch and all nine shears: a mapped tangent stays orthogonal to the mapped normal,
+  // A stretch and all the shears: a mapped tangent stays orthogonal to the mapped normal,
   // and for the affine part alone the normal is a^-T n.
   const SurfaceSamples samples = ellipsoid_mask_surface();
   GlobalMap map;
   map.affine.a = Eigen::DiagonalMatrix<double, 3>(1.3, 1 / std::sqrt(1.3), 1 / std::sqrt(1.3));
   map.affine.t = Eigen::Vector3d(2, -1, 3);
   map.shears.centre = Eigen::Vector3d(1, 0, -1);
-  for (int c = 0; c < 9; ++c)
+  for (int c = 0; c < QuadraticShears::kCount; ++c)
     map.shears.c(c) = 0.004 * (c % 2 ? 1 : -1) * (1 + c / 3);
   const SurfaceSamples mapped = map_surface(map, samples);
   ASSERT_EQ(mapped.points.cols(), samples.points.cols());
@@ -412,6 +412,58 @@ TEST(GlobalFit, CarriesADentSeenFromOneSideThroughTheOrgan) {
   // (found at -27.0; the top at 13.0 for 12).
   EXPECT_NEAR(with_fields.apply(Eigen::Vector3d(0, -20, 0)).y(), -28.0, 2.0);
   EXPECT_NEAR(with_fields.apply(Eigen::Vector3d(0, 20, 0)).y(), 12.0, 1.5);
+}
+
+// A twist about x (cross-sections turned by phi(x) = 0.667 rad x / 15 mm: the 30 mm
+// cube's ends by 38 degrees, the twist family of `organfit bench fit` at 10 mm) is the
+// three shears y z y: y -= tan(phi/2) z, z += sin(phi) y, y -= tan(phi/2) z. Taken to
+// second order (phi linear in x), that is c5 = c11 = -tan(0.333) / 15 mm and c8 =
+// sin(0.667) / 15 mm: the cube's surface lands within 0.69 mm of the twisted one (5.85
+// unmoved). The first three shears alone (x y z) hold a twist to first order only,
+// c5 = -phi / x then c8 = phi / x: 5.4 mm off at worst, the cosine's part and the
+// second shear's squeeze (the bench's fits with them left HD95 3.5 to 4.2 mm).
+TEST(QuadraticShears, MakeATwistOfThreeShears) {
+  const geometry::LabelVolume mask = cube_mask();
+  const SurfaceSamples samples = reference_surface(mask, 2);
+  const double turn_per_mm = 0.667 / 15;
+  const auto turn = [&](const Eigen::Vector3d& p, double sign) {
+    return Eigen::Vector3d(Eigen::AngleAxisd(sign * turn_per_mm * p.x(), Eigen::Vector3d::UnitX()) *
+                           p);
+  };
+  // Worst distance (mm) of the cube's surface mapped by `shears` from the twisted cube's:
+  // untwisted (the turn keeps x, and distances within each cross-section), its distance
+  // from the cube's faces.
+  const auto worst_error = [&](const QuadraticShears& shears) {
+    double worst = 0;
+    for (Eigen::Index j = 0; j < samples.points.cols(); ++j) {
+      const Eigen::Vector3d q = turn(shears.apply(samples.points.col(j)), -1);
+      const Eigen::Vector3d outside = (q.cwiseAbs().array() - 15).max(0).matrix();
+      worst = std::max(worst, outside.norm() > 0 ? outside.norm() : 15 - q.cwiseAbs().maxCoeff());
+    }
+    return worst;
+  };
+  QuadraticShears three;
+  three.c(5) = three.c(11) = -std::tan(0.5 * turn_per_mm * 15) / 15;
+  three.c(8) = std::sin(turn_per_mm * 15) / 15;
+  QuadraticShears first_order;
+  first_order.c(5) = -turn_per_mm;
+  first_order.c(8) = turn_per_mm;
+  const double with_three = worst_error(three), to_first_order = worst_error(first_order),
+               unmoved = worst_error(QuadraticShears{});
+  EXPECT_LT(with_three, 0.7) << with_three;
+  EXPECT_GT(to_first_order, 5.0) << to_first_order;
+  EXPECT_GT(unmoved, 5.5) << unmoved;
+  // Still a twist's volume: Jacobian determinant 1 and an exact inverse.
+  for (Eigen::Index j = 0; j < samples.points.cols(); j += 97) {
+    const Eigen::Vector3d p = samples.points.col(j);
+    EXPECT_LT((three.inverse(three.apply(p)) - p).norm(), 1e-9);
+    Eigen::Matrix3d jacobian;
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::Vector3d e = 1e-4 * Eigen::Vector3d::Unit(c);
+      jacobian.col(c) = (three.apply(p + e) - three.apply(p - e)) / 2e-4;
+    }
+    EXPECT_NEAR(jacobian.determinant(), 1.0, 1e-6);
+  }
 }
 
 // Each field moves one coordinate by a function of the other two: the map keeps volume

@@ -98,7 +98,8 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
         {"global_affine", std::vector<double>(map.affine.a.data(), map.affine.a.data() + 9)},
         {"global_translation_mm", vec(map.affine.t)},
         {"global_shear_centre_mm", vec(map.shears.centre)},
-        {"global_shears", std::vector<double>(map.shears.c.data(), map.shears.c.data() + 9)},
+        {"global_shears",
+         std::vector<double>(map.shears.c.data(), map.shears.c.data() + map.shears.c.size())},
         {"global_shear_fields",
          map.fields.empty()
              ? nlohmann::json(nullptr)
@@ -200,13 +201,18 @@ SavedModel load_model(const fs::path& file) {
       const auto c = e.at("global_shears").get<std::vector<double>>();
       if (placed.size() != static_cast<size_t>(3 * n))
         fail("embedding.placed_positions_mm needs x, y, z per particle");
-      if (a.size() != 9 || c.size() != 9)
-        fail("embedding.global_affine and global_shears need 9 numbers each");
+      // global_shears: 15 coefficients (fitting::QuadraticShears); models written before
+      // its last two shears have 9.
+      if (a.size() != 9) fail("embedding.global_affine needs 9 numbers");
+      if (c.size() != 9 && c.size() != static_cast<size_t>(fitting::QuadraticShears::kCount))
+        fail("embedding.global_shears needs 15 numbers (9 in models written before 2026-11)");
       m.placed = Eigen::Map<const Eigen::Matrix3Xd>(placed.data(), 3, static_cast<Eigen::Index>(n));
       m.global_map.affine.a = Eigen::Map<const Eigen::Matrix3d>(a.data());
       m.global_map.affine.t = read_vec(e.at("global_translation_mm"));
       m.global_map.shears.centre = read_vec(e.at("global_shear_centre_mm"));
-      m.global_map.shears.c = Eigen::Map<const Eigen::Matrix<double, 9, 1>>(c.data());
+      m.global_map.shears.c.setZero();
+      m.global_map.shears.c.head(static_cast<Eigen::Index>(c.size())) =
+          Eigen::Map<const Eigen::VectorXd>(c.data(), static_cast<Eigen::Index>(c.size()));
       // Shear fields (fitting::ShearFields): absent in models written before them.
       if (e.contains("global_shear_fields") && !e.at("global_shear_fields").is_null()) {
         const auto& f = e.at("global_shear_fields");

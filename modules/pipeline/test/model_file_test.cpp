@@ -76,6 +76,7 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   m.global_map.affine.a = Eigen::Vector3d(1.2, 1 / std::sqrt(1.2), 1 / std::sqrt(1.2)).asDiagonal();
   m.global_map.affine.t = Eigen::Vector3d(0.5, -1, 2);
   m.global_map.shears.c(3) = 0.003;
+  m.global_map.shears.c(11) = -0.002;  // the second y shear (a twist's third)
   m.global_map.fields = fitting::ShearFields::over({-18, -15, -13}, {18, 15, 13}, 8.0);
   for (Eigen::Index i = 0; i < m.global_map.fields.weights.size(); ++i)
     m.global_map.fields.weights(i) = 0.5 * std::sin(0.7 * static_cast<double>(i));  // mm
@@ -87,6 +88,7 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   save_model(dir_ / "fitted.json", m, "Prostate", std::nullopt, {});
   SavedModel back = load_model(dir_ / "fitted.json");
   EXPECT_EQ(back.model.global_map.fields.weights, m.global_map.fields.weights);
+  EXPECT_EQ(back.model.global_map.shears.c, m.global_map.shears.c);
   const fitting::EmbeddedBody a = organ_body(m), b = organ_body(back.model);
   for (const Eigen::Vector3d& q :
        {Eigen::Vector3d(0, 0.4, 2), Eigen::Vector3d(16, -1, 1), Eigen::Vector3d(-3, 11, 2)})
@@ -102,6 +104,20 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   EXPECT_NE(error_of(j.dump()).find("bad.json: embedding.global_shear_fields.weights_mm needs"),
             std::string::npos)
       << error_of(j.dump());
+  // Models written before the last two shears have nine coefficients: they load, the
+  // last two shears none; any other count is refused, naming the key.
+  nlohmann::json old = nlohmann::json::parse(std::ifstream(dir_ / "fitted.json"));
+  std::vector<double> nine = old["embedding"]["global_shears"];
+  nine.resize(9);
+  old["embedding"]["global_shears"] = nine;
+  std::ofstream(dir_ / "old.json") << old.dump();
+  const fitting::QuadraticShears loaded = load_model(dir_ / "old.json").model.global_map.shears;
+  EXPECT_EQ(loaded.c(3), 0.003);
+  EXPECT_TRUE(loaded.c.tail<6>().isZero(0));
+  old["embedding"]["global_shears"].push_back(0.0);
+  EXPECT_NE(error_of(old.dump()).find("bad.json: embedding.global_shears needs 15 numbers"),
+            std::string::npos)
+      << error_of(old.dump());
   // A model saved at rest has no embedding.
   ModelStageResult rest = build("body:\n  shape: ellipsoid\n  size_mm: [30, 24, 20]\n");
   save_model(dir_ / "rest.json", rest, "Prostate", std::nullopt, {});

@@ -43,8 +43,8 @@ struct AffineFitOptions {
   /// robust scale of the fit on the signed distance (mm): point k weighs
   /// (c^2 / (c^2 + r_k^2))^2 (Geman-McClure), c from 8x this down to it
   double distance_scale_mm = 2.0;
-  /// with fewer points than the whole map's 21 unknowns, the fit on the signed distance
-  /// also fits the shears twice: their pull as stated, and this many times it (0: only as
+  /// with fewer points than the whole map's 21 unknowns (three shears), the fit on the signed
+  /// distance also fits the shears twice: their pull as stated, and this many times it (0: only as
   /// stated). On the 75 target cases with 20 points of `organfit bench fit --targets`,
   /// stiffer alone against none: median ratio of MSD to TPS's 0.56 -> 0.50 (3x: 11 cases
   /// better, 8 worse; 30x: 5 and 2); both against stiffer alone: median MSD 0.61 -> 0.54
@@ -60,8 +60,9 @@ struct AffineFitOptions {
   /// <= 1 mm in 218 -> 215, HD95 <= 2.5 mm in 210 -> 209, at most half TPS's 161 -> 166.
   double field_stiffness = 0.3;
   double max_stretch = 1.5;  ///< a map stretching by more (or by less than 1/this) is refused
-  double max_shear_mm =
-      0.25;  ///< ... and one whose shears move any sample by more than this x the body's size
+  /// ... and one whose quadratic shears, or whose shear fields, move any sample by more
+  /// than this x the body's size (each on its own)
+  double max_shear_mm = 0.25;
 };
 
 struct AffineFit {
@@ -98,16 +99,23 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
                                        const std::vector<AttractivePoint>& points,
                                        const AffineFitOptions& options);
 
-/// Bending and twisting on top of the affine map: three shears applied in turn about
+/// Bending and twisting on top of the affine map: five shears applied in turn about
 /// `centre` (u = q - centre),
 ///   x += c0 u_y^2 + c1 u_z^2 + c2 u_y u_z,
 ///   y += c3 u_x^2 + c4 u_z^2 + c5 u_x u_z,
 ///   z += c6 u_x^2 + c7 u_y^2 + c8 u_x u_y,
+///   y += c9 u_x^2 + c10 u_z^2 + c11 u_x u_z,
+///   x += c12 u_y^2 + c13 u_z^2 + c14 u_y u_z,
 /// each moving one coordinate by a function of the other two: every shear, and so the
-/// whole map, keeps volume exactly (Jacobian determinant 1), and inverts exactly.
+/// whole map, keeps volume exactly (Jacobian determinant 1), and inverts exactly. The
+/// last two make a twist about any axis (a rotation growing along it) a sequence of three
+/// shears, y z y about x (a rotation by phi is y -= tan(phi/2) z, z += sin(phi) y, y -=
+/// tan(phi/2) z), x z x about y, x y x about z: with the first three alone, a cube's
+/// corners twisted by 38 degrees were left 3 mm in (the cosine's part, second order).
 struct QuadraticShears {
+  static constexpr int kCount = 15;
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  Eigen::Matrix<double, 9, 1> c = Eigen::Matrix<double, 9, 1>::Zero();
+  Eigen::Matrix<double, kCount, 1> c = Eigen::Matrix<double, kCount, 1>::Zero();
   Eigen::Vector3d apply(const Eigen::Vector3d& q) const;
   Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
 };
@@ -204,9 +212,9 @@ double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface);
 ///  * When the best fit of the points (robust RMS) stretches beyond max_stretch, it is
 ///    refused (the identity, marked so): points that can only be explained by crushing
 ///    the organ are not data to follow globally.
-///  * Fits whose shears are out of range (moving the surface by more than max_shear_mm x
-///    its size) are dropped; when that drops every fit of the whole map, the affine part
-///    alone is what is left (marked shears_dropped); when nothing is left, refused.
+///  * Fits whose shears or fields are out of range (either moving the surface by more than
+///    max_shear_mm x its size) are dropped; when that drops every fit of the whole map, the affine
+///    part alone is what is left (marked shears_dropped); when nothing is left, refused.
 ///  * Of the rest, those within `equally_good_dof` / m of the best mean square (point-to-plane
 ///    RMS by the outlier rule; with `distance`, the capped RMS) explain the points equally well;
 ///    the one changing the shape least (surface displacement about its mean) is kept.
