@@ -29,6 +29,20 @@ std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
   return out;
 }
 
+ResidualSummary summarise_residuals(const std::vector<double>& residuals_mm) {
+  ResidualSummary out;
+  double sum = 0;
+  std::vector<double> kept;
+  for (double v : residuals_mm)
+    if (!std::isnan(v)) sum += v, out.max_mm = std::max(out.max_mm, v), kept.push_back(v);
+  if (kept.empty()) return out;
+  out.mean_mm = sum / static_cast<double>(kept.size());
+  const size_t k = static_cast<size_t>(std::ceil(0.95 * static_cast<double>(kept.size()))) - 1;
+  std::nth_element(kept.begin(), kept.begin() + static_cast<long>(k), kept.end());
+  out.p95_mm = kept[k];
+  return out;
+}
+
 FitResult run_fit(
     particles::Model& model, particles::State& state,
     const particles::IntegratorOptions& integrator_options,
@@ -63,17 +77,10 @@ FitResult run_fit(
     h.step = integ.stats().steps;
     const std::vector<double> r =
         data_residuals(points, state.x, skin_of(state.x), rho, status, &o.surface_feet);
-    double sum = 0, mx = 0;
-    std::vector<double> kept;
-    for (double v : r)
-      if (!std::isnan(v)) sum += v, mx = std::max(mx, v), kept.push_back(v);
-    h.residual_mean_mm = kept.empty() ? 0 : sum / static_cast<double>(kept.size());
-    h.residual_max_mm = mx;
-    if (!kept.empty()) {  // the 95th percentile (nearest rank)
-      const size_t k = static_cast<size_t>(std::ceil(0.95 * static_cast<double>(kept.size()))) - 1;
-      std::nth_element(kept.begin(), kept.begin() + static_cast<long>(k), kept.end());
-      h.residual_p95_mm = kept[k];
-    }
+    const ResidualSummary summary = summarise_residuals(r);
+    h.residual_mean_mm = summary.mean_mm;
+    h.residual_max_mm = summary.max_mm;
+    h.residual_p95_mm = summary.p95_mm;
     h.kinetic_energy_per_particle = integ.kinetic_energy(state) / n;
     h.volume_change_pct = std::numeric_limits<double>::quiet_NaN();
     if (o.volume && row % std::max(1, o.volume_every_rows) == 0) {

@@ -4,10 +4,27 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <numeric>
 
 namespace organfit::fitting {
 namespace {
+
+// Rejected points (NaN) are left out; the 95th percentile is by nearest rank: of 20
+// residuals 1..20 mm, the 19th.
+TEST(SummariseResiduals, LeavesOutRejectedPointsAndTakesTheNearestRank) {
+  std::vector<double> r;
+  for (int k = 20; k >= 1; --k)
+    r.push_back(k);
+  r.push_back(std::numeric_limits<double>::quiet_NaN());
+  const ResidualSummary s = summarise_residuals(r);
+  EXPECT_DOUBLE_EQ(s.mean_mm, 10.5);
+  EXPECT_DOUBLE_EQ(s.max_mm, 20.0);
+  EXPECT_DOUBLE_EQ(s.p95_mm, 19.0);
+  const ResidualSummary none = summarise_residuals({std::numeric_limits<double>::quiet_NaN()});
+  EXPECT_EQ(none.mean_mm, 0.0);
+  EXPECT_EQ(none.p95_mm, 0.0);
+}
 
 TEST(RunFit, OneFarPointDoesNotKeepAFitFromConverging) {
   // 20 particles at rest with no force on them, a point on each one's surface (residual

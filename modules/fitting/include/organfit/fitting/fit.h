@@ -20,6 +20,13 @@ std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
                                    const std::vector<PointStatus>* status = nullptr,
                                    const SurfaceFeet* feet = nullptr);
 
+/// Mean, largest and 95th percentile (nearest rank) of the residuals (mm), NaNs (rejected
+/// points) left out; zeros when none is left.
+struct ResidualSummary {
+  double mean_mm = 0, max_mm = 0, p95_mm = 0;
+};
+ResidualSummary summarise_residuals(const std::vector<double>& residuals_mm);
+
 struct FitOptions {
   double residual_mean_tolerance_mm = 0.5;  ///< converged: mean residual at most this
   double residual_max_tolerance_mm = 0.0;   ///< ... and the 95th percentile at most this (0: the
