@@ -561,6 +561,41 @@ MappedDistance mapped_distance(const GlobalMap& map, const Eigen::Matrix3d& b,
   return out;
 }
 
+/// Robust Gauss-Newton with a backtracking line search, the loop of both fits on the
+/// signed distance: `step_of(map, w)` is the step for the current residuals r, their
+/// Jacobian jac and Geman-McClure weights w (scale c2); `trial(map, step, alpha)` the map
+/// moved by alpha x step (nullopt: not a map); `residuals(g, r, jac or nullptr)` and
+/// `objective(g, r)` measure a map. Steps until `iterations`, until no step lowers the
+/// objective, or until it settles (a relative fall below 1e-6); r and jac are left the
+/// final map's.
+template <class StepOf, class Trial, class Residuals, class Objective>
+void robust_gauss_newton(GlobalMap& map, Eigen::VectorXd& r, Eigen::MatrixXd& jac,
+                         const std::vector<AttractivePoint>& points, double c2, int iterations,
+                         StepOf&& step_of, Trial&& trial, Residuals&& residuals,
+                         Objective&& objective) {
+  residuals(map, r, &jac);
+  double e = objective(map, r);
+  for (int it = 0; it < iterations; ++it) {
+    const Eigen::VectorXd step = step_of(map, geman_mcclure_weights(points, r, c2));
+    if (!step.allFinite()) break;
+    bool accepted = false;
+    double e_new = e;
+    for (double alpha = 1; alpha > 1e-3 && !accepted; alpha *= 0.5) {
+      std::optional<GlobalMap> moved = trial(map, step, alpha);
+      if (!moved) continue;
+      Eigen::VectorXd r_trial;
+      residuals(*moved, r_trial, nullptr);
+      e_new = objective(*moved, r_trial);
+      if (e_new < e) map = std::move(*moved), accepted = true;
+    }
+    if (!accepted) break;
+    const bool settled = e - e_new < 1e-6 * (1 + e);
+    e = e_new;
+    residuals(map, r, &jac);
+    if (settled) break;
+  }
+}
+
 /// The fit on the reference's signed distance (see fit_global_map): robust Gauss-Newton
 /// on the points' mapped_distance. Returns the map at the end of each stiffness level, the last
 /// last.
@@ -654,31 +689,18 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
     };
     VecX r;
     Eigen::MatrixXd jac;
-    residuals(map, r, &jac);
-    double e = objective(map, r);
-    for (int it = 0; it < o.iterations; ++it) {
-      const VecX w = geman_mcclure_weights(points, r, c2);
-      const VecX theta = theta_of(map);
-      Eigen::MatrixXd h = jac.transpose() * w.asDiagonal() * jac;
-      h += pull;
-      const VecX grad = jac.transpose() * w.cwiseProduct(r) + pull * (theta - identity);
-      const VecX step = -h.ldlt().solve(grad);
-      bool accepted = false;
-      double e_new = e;
-      for (double alpha = 1; alpha > 1e-3 && !accepted; alpha *= 0.5) {
-        const std::optional<GlobalMap> trial = map_of(theta + alpha * step);
-        if (!trial) continue;
-        VecX r_trial;
-        residuals(*trial, r_trial, nullptr);
-        e_new = objective(*trial, r_trial);
-        if (e_new < e) map = *trial, accepted = true;
-      }
-      if (!accepted) break;
-      const bool settled = e - e_new < 1e-6 * (1 + e);
-      e = e_new;
-      residuals(map, r, &jac);
-      if (settled) break;
-    }
+    robust_gauss_newton(
+        map, r, jac, points, c2, o.iterations,
+        [&](const GlobalMap& g, const VecX& w) -> VecX {
+          Eigen::MatrixXd h = jac.transpose() * w.asDiagonal() * jac;
+          h += pull;
+          return -h.ldlt().solve(jac.transpose() * w.cwiseProduct(r) +
+                                 pull * (theta_of(g) - identity));
+        },
+        [&](const GlobalMap& g, const VecX& step, double alpha) {
+          return map_of(theta_of(g) + alpha * step);
+        },
+        residuals, objective);
     map.rms_after_mm = map.affine.rms_after_mm =
         nearest_sample_rms(map, surface, points, o.outlier_mads);
     ends.push_back(map);
@@ -762,29 +784,18 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
   };
   VecX r;
   Eigen::MatrixXd jac;
-  residuals(map, r, &jac);
-  double e = objective(map, r);
-  for (int it = 0; it < o.iterations; ++it) {
-    const VecX w = geman_mcclure_weights(points, r, c2);
-    const VecX grad = jac.transpose() * w.cwiseProduct(r) + lambda * map.fields.weights;
-    const VecX step = -RidgeSystem(jac, w, lambda).solve(grad);
-    if (!step.allFinite()) break;
-    bool accepted = false;
-    double e_new = e;
-    for (double alpha = 1; alpha > 1e-3 && !accepted; alpha *= 0.5) {
-      GlobalMap trial = map;
-      trial.fields.weights += alpha * step;
-      VecX r_trial;
-      residuals(trial, r_trial, nullptr);
-      e_new = objective(trial, r_trial);
-      if (e_new < e) map = std::move(trial), accepted = true;
-    }
-    if (!accepted) break;
-    const bool settled = e - e_new < 1e-6 * (1 + e);
-    e = e_new;
-    residuals(map, r, &jac);
-    if (settled) break;
-  }
+  robust_gauss_newton(
+      map, r, jac, points, c2, o.iterations,
+      [&](const GlobalMap& g, const VecX& w) -> VecX {
+        return -RidgeSystem(jac, w, lambda)
+                    .solve(jac.transpose() * w.cwiseProduct(r) + lambda * g.fields.weights);
+      },
+      [](const GlobalMap& g, const VecX& step, double alpha) {
+        std::optional<GlobalMap> moved = g;
+        moved->fields.weights += alpha * step;
+        return moved;
+      },
+      residuals, objective);
   const VecX w = geman_mcclure_weights(points, r, c2);
   effective_dof = RidgeSystem(jac, w, lambda).effective_dof();
   return map;
