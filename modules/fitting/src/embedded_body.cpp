@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "cell_key.h"
+#include "organfit/geometry/image_geometry.h"
 #include "organfit/geometry/mask_ops.h"
 #include "sample_grid.h"
 
@@ -168,14 +169,10 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
             base.z() < nl[2] - 1) {
           const int a = static_cast<int>(base.x()), bb = static_cast<int>(base.y()),
                     c = static_cast<int>(base.z());
-          const Eigen::Vector3d f = t - base;
           Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-          for (int corner = 0; corner < 8; ++corner) {
-            const int di = corner & 1, dj = (corner >> 1) & 1, dk = (corner >> 2) & 1;
-            const double w =
-                (di ? f.x() : 1 - f.x()) * (dj ? f.y() : 1 - f.y()) * (dk ? f.z() : 1 - f.z());
+          geometry::for_each_trilinear_corner(t - base, [&](int di, int dj, int dk, double w) {
             sum += w * node(a + di, bb + dj, c + dk);
-          }
+          });
           local = q + sum;  // NaN when a corner had no particle near
         }
         // A lattice corner beyond the particles' reach (the edge of the support, or a

@@ -370,16 +370,20 @@ double shape_change_of(const Eigen::Matrix3Xd& moved, const Eigen::Matrix3Xd& or
 /// any surface sample by more than max_shear_mm x the body's size. Each has its own
 /// bound: a 38-degree twist of the 30 mm cube moves its corners 14 mm by the shears, and
 /// the fields' dent on top of that was refused when they shared one.
+LargestMoves largest_moves_of(const MappedSamples& mapped) {
+  auto largest_move = [](const Eigen::Matrix3Xd& to, const Eigen::Matrix3Xd& from) {
+    return to.cols() > 0 ? (to - from).colwise().norm().maxCoeff() : 0.0;
+  };
+  return {largest_move(mapped.sheared, mapped.affine), largest_move(mapped.full, mapped.sheared)};
+}
+
 bool plausible(const GlobalMap& map, const MappedSamples& mapped, const SurfaceSamples& surface,
                const AffineFitOptions& o) {
   const double size =
       (surface.points.rowwise().maxCoeff() - surface.points.rowwise().minCoeff()).norm();
-  auto largest_move = [](const Eigen::Matrix3Xd& to, const Eigen::Matrix3Xd& from) {
-    return to.cols() > 0 ? (to - from).colwise().norm().maxCoeff() : 0.0;
-  };
-  return within_stretch(map.affine.a, o) &&
-         largest_move(mapped.sheared, mapped.affine) <= o.max_shear_mm * size &&
-         largest_move(mapped.full, mapped.sheared) <= o.max_shear_mm * size;
+  const LargestMoves moves = largest_moves_of(mapped);
+  return within_stretch(map.affine.a, o) && moves.shears_mm <= o.max_shear_mm * size &&
+         moves.fields_mm <= o.max_shear_mm * size;
 }
 
 /// Gauss-Newton on the whole map (affine with det 1, then shears) from `map`, with the
@@ -836,6 +840,10 @@ SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface) 
 
 double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface) {
   return shape_change_of(map_samples(map, surface).full, surface.points);
+}
+
+LargestMoves largest_moves(const GlobalMap& map, const SurfaceSamples& surface) {
+  return largest_moves_of(map_samples(map, surface));
 }
 
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,

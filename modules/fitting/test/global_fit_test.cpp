@@ -364,6 +364,35 @@ TEST(GlobalFit, ImplausibleShearsFallBackToTheAffinePart) {
   EXPECT_NEAR(Eigen::JacobiSVD<Eigen::Matrix3d>(map.affine.a).singularValues()[0], 1.2, 0.08);
 }
 
+// The shears' move is measured from the affine image, the fields' from the sheared one:
+// x += 0.01 u_y^2 about the centre moves the sample at u_y = 20 mm by 4 mm, whatever the
+// translation; a field of one bump of height 1.5 mm moves the sample on its centre by 1.5.
+TEST(LargestMoves, MeasureTheShearsAndTheFieldsEachFromWhatTheyMove) {
+  SurfaceSamples samples;
+  samples.points.resize(3, 3);
+  samples.points << 0, 5, 0,  //
+      20, -10, 0,             //
+      0, 0, 0;
+  samples.normals = Eigen::Matrix3Xd::Zero(3, 3);
+  GlobalMap map;
+  map.affine.t = {10, -20, 2};  // on a bump centre of the fields below (x, y)
+  map.shears.centre = map.affine.t;
+  map.shears.c(0) = 0.01;  // per mm
+  LargestMoves moves = largest_moves(map, samples);
+  EXPECT_NEAR(moves.shears_mm, 4.0, 1e-12);
+  EXPECT_EQ(moves.fields_mm, 0.0);
+  map.fields = ShearFields::over({-100, -100, -100}, {100, 100, 100}, 10.0);
+  std::vector<std::pair<int, double>> near;
+  const Eigen::Vector3d third = map.shears.apply(map.affine.t);  // the third sample's image
+  map.fields.bumps(2, third, near);
+  ASSERT_FALSE(near.empty());
+  for (const auto& [index, value] : near)
+    if (value == 1.0) map.fields.weights(index) = 1.5;  // the bump centred there
+  moves = largest_moves(map, samples);
+  EXPECT_NEAR(moves.shears_mm, 4.0, 1e-12);
+  EXPECT_NEAR(moves.fields_mm, 1.5, 1e-9);
+}
+
 // A stretch far beyond max_stretch is refused: the identity, marked so.
 TEST(GlobalFit, RefusesAStretchBeyondTheLimit) {
   const Body b = ellipsoid_body();

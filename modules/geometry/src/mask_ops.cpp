@@ -239,17 +239,13 @@ bool inside_interpolated(const LabelVolume& mask, const Eigen::Vector3d& p_mm) {
   if ((base.array() < -1).any() || base.x() >= g.size[0] || base.y() >= g.size[1] ||
       base.z() >= g.size[2])
     return false;
-  const Eigen::Vector3d t = idx - base;
   double value = 0;
-  for (int c = 0; c < 8; ++c) {
-    const int i = static_cast<int>(base.x()) + (c & 1),
-              j = static_cast<int>(base.y()) + ((c >> 1) & 1),
-              k = static_cast<int>(base.z()) + ((c >> 2) & 1);
-    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) continue;
-    if (mask.at(i, j, k) != 1) continue;
-    value += ((c & 1) ? t.x() : 1 - t.x()) * (((c >> 1) & 1) ? t.y() : 1 - t.y()) *
-             (((c >> 2) & 1) ? t.z() : 1 - t.z());
-  }
+  for_each_trilinear_corner(idx - base, [&](int di, int dj, int dk, double weight) {
+    const int i = static_cast<int>(base.x()) + di, j = static_cast<int>(base.y()) + dj,
+              k = static_cast<int>(base.z()) + dk;
+    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) return;
+    if (mask.at(i, j, k) == 1) value += weight;
+  });
   return value >= 0.5;
 }
 

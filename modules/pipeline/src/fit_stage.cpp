@@ -292,11 +292,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
       count = static_cast<int>(std::lround(count * v0 / v));
     }
     const Eigen::Vector3d stretches = Eigen::JacobiSVD<Eigen::Matrix3d>(affine.a).singularValues();
-    double fields_move_mm = 0;  // how far the shear fields move the organ's surface at most
-    for (Eigen::Index j = 0; j < samples.points.cols(); ++j) {
-      const Eigen::Vector3d y = map.shears.apply(affine.a * samples.points.col(j) + affine.t);
-      fields_move_mm = std::max(fields_move_mm, (map.fields.apply(y) - y).norm());
-    }
+    const fitting::LargestMoves moves = fitting::largest_moves(map, samples);
     global = {{"rms_before_mm", affine.rms_before_mm},
               {"rms_after_mm", map.rms_after_mm},
               {"iterations", affine.iterations},
@@ -306,7 +302,8 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
                std::vector<double>(map.shears.c.data(), map.shears.c.data() + map.shears.c.size())},
               {"shears_dropped", map.shears_dropped},
               {"shear_fields_sigma_mm", map.fields.empty() ? 0.0 : map.fields.sigma_mm},
-              {"shear_fields_largest_move_mm", fields_move_mm},
+              {"shears_largest_move_mm", moves.shears_mm},
+              {"shear_fields_largest_move_mm", moves.fields_mm},
               {"found_by", map.found_by},
               {"shape_change_mm", fitting::shape_change_mm(map, samples)},
               {"refill_passes", passes},

@@ -7,6 +7,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "organfit/geometry/image_geometry.h"
 #include "organfit/ultrasound/sequence_metafile.h"
 
 namespace organfit::ultrasound {
@@ -93,17 +94,14 @@ BoundaryResult boundary_points(const geometry::ImageGeometry& g,
     ok = (base.array() >= 0).all() &&
          (base.array() < Eigen::Array3d(size[0] - 1, size[1] - 1, size[2] - 1)).all();
     if (!ok) return 0;
-    const Eigen::Vector3d t = idx - base;
     double value = 0;
-    for (int c = 0; c < 8; ++c) {
-      const int i = static_cast<int>(base.x()) + (c & 1),
-                j = static_cast<int>(base.y()) + ((c >> 1) & 1),
-                k = static_cast<int>(base.z()) + ((c >> 2) & 1);
+    geometry::for_each_trilinear_corner(idx - base, [&](int di, int dj, int dk, double weight) {
+      const int i = static_cast<int>(base.x()) + di, j = static_cast<int>(base.y()) + dj,
+                k = static_cast<int>(base.z()) + dk;
       const size_t at = i + static_cast<size_t>(size[0]) * (j + static_cast<size_t>(size[1]) * k);
       if (!roi_view[at]) ok = false;
-      value += ((c & 1) ? t.x() : 1 - t.x()) * (((c >> 1) & 1) ? t.y() : 1 - t.y()) *
-               (((c >> 2) & 1) ? t.z() : 1 - t.z()) * roi[at];
-    }
+      value += weight * roi[at];
+    });
     return value;
   };
 

@@ -184,6 +184,14 @@ SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface);
 /// translation).
 double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface);
 
+/// How far (mm) the quadratic shears, and the shear fields, each move any of the surface
+/// samples at most: the shears from the affine image, the fields from the sheared one.
+/// Each is bounded by max_shear_mm x the body's size for a map to be plausible.
+struct LargestMoves {
+  double shears_mm = 0, fields_mm = 0;
+};
+LargestMoves largest_moves(const GlobalMap& map, const SurfaceSamples& surface);
+
 /// Fits the whole map jointly (Gauss-Newton, point-to-plane plus a small point-to-point
 /// term, the same outlier rule), from two starts: the affine fit, and its translation
 /// alone with the stiffness of both parts annealed from 1000x down (from the affine fit

@@ -73,4 +73,16 @@ struct LabelVolume {
   }
 };
 
+/// Trilinear interpolation's corners: calls visit(di, dj, dk, weight) for the eight
+/// corners (di, dj, dk in {0, 1}) of the cell whose base corner is at fraction `f` (each
+/// coordinate in [0, 1]) below the point; the weights sum to 1.
+template <class Visit>
+void for_each_trilinear_corner(const Eigen::Vector3d& f, Visit&& visit) {
+  for (int c = 0; c < 8; ++c) {
+    const int di = c & 1, dj = (c >> 1) & 1, dk = (c >> 2) & 1;
+    visit(di, dj, dk,
+          (di ? f.x() : 1 - f.x()) * (dj ? f.y() : 1 - f.y()) * (dk ? f.z() : 1 - f.z()));
+  }
+}
+
 }  // namespace organfit::geometry
