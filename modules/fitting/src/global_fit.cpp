@@ -366,10 +366,7 @@ double shape_change_of(const Eigen::Matrix3Xd& moved, const Eigen::Matrix3Xd& or
   return std::sqrt((d.colwise() - mean).colwise().squaredNorm().mean());
 }
 
-/// Stretches within bounds, and neither the quadratic shears nor the shear fields moving
-/// any surface sample by more than max_shear_mm x the body's size. Each has its own
-/// bound: a 38-degree twist of the 30 mm cube moves its corners 14 mm by the shears, and
-/// the fields' dent on top of that was refused when they shared one.
+/// largest_moves (global_fit.h) of samples already mapped.
 LargestMoves largest_moves_of(const MappedSamples& mapped) {
   auto largest_move = [](const Eigen::Matrix3Xd& to, const Eigen::Matrix3Xd& from) {
     return to.cols() > 0 ? (to - from).colwise().norm().maxCoeff() : 0.0;
@@ -377,6 +374,10 @@ LargestMoves largest_moves_of(const MappedSamples& mapped) {
   return {largest_move(mapped.sheared, mapped.affine), largest_move(mapped.full, mapped.sheared)};
 }
 
+/// Stretches within bounds, and neither the quadratic shears nor the shear fields moving
+/// any surface sample by more than max_shear_mm x the body's size. Each has its own
+/// bound: a 38-degree twist of the 30 mm cube moves its corners 14 mm by the shears, and
+/// the fields' dent on top of that was refused when they shared one.
 bool plausible(const GlobalMap& map, const MappedSamples& mapped, const SurfaceSamples& surface,
                const AffineFitOptions& o) {
   const double size =
