@@ -64,6 +64,10 @@ int run_main(int argc, char** argv) {
                       "Series Instance UID when the folder holds several CT series");
   segment->add_option("--rtstruct", seg.rtstruct, "RT Structure Set to import from");
   segment->add_option("--roi", seg.roi, "ROI name in the structure set");
+  segment
+      ->add_option("--roi-number", seg.roi_number,
+                   "ROI Number in the structure set, when several ROIs share the name")
+      ->check(CLI::PositiveNumber);
   segment->add_option("--seed", seg.seed_mm, "Seed X,Y,Z in mm (patient LPS)")
       ->delimiter(',')
       ->expected(3);
@@ -122,6 +126,9 @@ int run_main(int argc, char** argv) {
       ->check(CLI::Range(0, 100000));
   us_points->add_option("--rays", usp.rays, "Search rays (3D volumes)")
       ->check(CLI::Range(16, 100000));
+  us_points->add_option("--ct", usp.ct,
+                        "The CT folder --registration maps into: its series is declared in the "
+                        "CSV, and a run refuses the points with another planning CT");
   us_points->add_option("-o,--out", usp.out, "Points CSV (x_mm,y_mm,z_mm,confidence)")->required();
 
   auto* synth = app.add_subcommand("synth", "Synthetic scans with known anatomy");
@@ -308,6 +315,7 @@ int run_main(int argc, char** argv) {
     std::cout << scene_file << ": valid (" << scene.sections().size() << " sections)\n";
   } else if (*run) {
     const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
+    organfit::set_wall_budget(scene.number("scene", "max_wall_s"), "scene.max_wall_s");
     organfit::pipeline::run_scene(scene, out_dir, run_options);
     spdlog::info("done: {}/run.json", out_dir);
   } else if (*bench_stability) {
@@ -335,17 +343,32 @@ int run_main(int argc, char** argv) {
 
 }  // namespace
 
+/// An error as one line: control characters (a library's newlines) as spaces, at most
+/// 2,000 characters.
+std::string one_line(const char* what) {
+  std::string s(what);
+  for (auto& c : s)
+    if (static_cast<unsigned char>(c) < 0x20) c = ' ';
+  return s.size() > 2000 ? s.substr(0, 2000) + "..." : s;
+}
+
 int main(int argc, char** argv) {
+  int code = 0;
   try {
-    return run_main(argc, argv);
+    code = run_main(argc, argv);
+    organfit::mark_finishing();
   } catch (const organfit::Error& e) {
-    std::cerr << "organfit: error: " << e.what() << "\n";
-    return static_cast<int>(e.code());
+    organfit::mark_finishing();
+    std::cerr << "organfit: error: " << one_line(e.what()) << "\n";
+    code = static_cast<int>(e.code());
   } catch (const std::invalid_argument& e) {  // a force term or integrator refused its input
-    std::cerr << "organfit: error: " << e.what() << "\n";
-    return static_cast<int>(ExitCode::kBadInput);
+    organfit::mark_finishing();
+    std::cerr << "organfit: error: " << one_line(e.what()) << "\n";
+    code = static_cast<int>(ExitCode::kBadInput);
   } catch (const std::exception& e) {
-    std::cerr << "organfit: internal error: " << e.what() << "\n";
-    return static_cast<int>(ExitCode::kInternal);
+    organfit::mark_finishing();
+    std::cerr << "organfit: internal error: " << one_line(e.what()) << "\n";
+    code = static_cast<int>(ExitCode::kInternal);
   }
+  return code;
 }

@@ -18,7 +18,9 @@ ct_files = sorted(os.listdir(os.path.join(base, 'ct')))
 SEGMENT = ['segment', '--ct', '{case}/ct', '--seed', '0,0,0', '--hu', '20,80', '--out', '{case}/out/mask.nrrd']
 IMPORT = ['segment', '--ct', '{case}/ct', '--rtstruct', '{case}/rtstruct.dcm', '--roi', 'Prostate', '--out', '{case}/out/mask.nrrd']
 
-def case(name, args, expect, code=2, names=None, ct=True, rtstruct=False):
+def case(name, args, expect, code=2, names=None, ct=True, rtstruct=False, secrets=(), cls='other'):
+    """One case. `secrets`: strings (patient names, IDs) that must appear in no output line;
+    `cls`: the class of defect it belongs to (issue 23's list), for the count."""
     d = os.path.join(out, name)
     os.makedirs(d, exist_ok=True)
     if ct:
@@ -26,7 +28,8 @@ def case(name, args, expect, code=2, names=None, ct=True, rtstruct=False):
     if rtstruct:
         shutil.copy(os.path.join(base, 'rtstruct.dcm'), os.path.join(d, 'rtstruct.dcm'))
     with open(os.path.join(d, 'case.json'), 'w') as f:
-        json.dump({'args': args, 'code': code, 'expect': expect, 'names': names}, f)
+        json.dump({'args': args, 'code': code, 'expect': expect, 'names': names,
+                   'secrets': ['Phantom^Pelvis', 'PELVIS-1'] + list(secrets), 'class': cls}, f)
     return d
 
 def edit_ct(d, index, fn):
@@ -93,12 +96,10 @@ def shift(ds):
     for c in prostate(ds).ContourSequence:
         c.ContourData = [v + 1000 if i % 3 == 0 else v for i, v in enumerate(c.ContourData)]
 edit_rtss(d, shift)
-d = case('rtss_two_point_contour', IMPORT, 'fewer than 3', rtstruct=True)
 def two(ds):
     c = prostate(ds).ContourSequence[0]
     c.ContourData = c.ContourData[:6]
     c.NumberOfContourPoints = 2
-edit_rtss(d, two)
 d = case('rtss_open_contour', IMPORT, 'OPEN_PLANAR', rtstruct=True)
 edit_rtss(d, lambda ds: setattr(prostate(ds).ContourSequence[0], 'ContourGeometricType', 'OPEN_PLANAR'))
 d = case('rtss_other_frame_of_reference', IMPORT, 'Frame of Reference', rtstruct=True)
@@ -127,8 +128,8 @@ d = case('us_not_an_image', ['us-points', '--us', '{case}/x.nrrd', '--out', '{ca
 open(os.path.join(d, 'x.nrrd'), 'w').write('NRRD0004\ntype: garbage\n\n')
 
 # --- point files through a scene ------------------------------------------------------------
-def points_case(name, content, expect):
-    d = case(name, ['run', '{case}/scene.yaml', '--out', '{case}/out'], expect, ct=False)
+def points_case(name, content, expect, cls='points'):
+    d = case(name, ['run', '{case}/scene.yaml', '--out', '{case}/out'], expect, ct=False, cls=cls)
     open(os.path.join(d, 'points.csv'), 'w').write(content)
     open(os.path.join(d, 'scene.yaml'), 'w').write('body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\n'
                                                    'points:\n  source: file\n  file: points.csv\nfit:\n  method: spread\n')
@@ -140,8 +141,8 @@ points_case('points_bad_confidence', 'x,y,z,c\n1,2,3,1.5\n', 'confidence must be
 points_case('points_empty', 'x,y,z\n', 'no points')
 
 # --- scene files ------------------------------------------------------------------------------
-def scene_case(name, text, expect, args=None):
-    d = case(name, args or ['run', '{case}/scene.yaml', '--out', '{case}/out'], expect, ct=False)
+def scene_case(name, text, expect, args=None, cls='scenes'):
+    d = case(name, args or ['run', '{case}/scene.yaml', '--out', '{case}/out'], expect, ct=False, cls=cls)
     open(os.path.join(d, 'scene.yaml'), 'w').write(text)
     return d
 scene_case('scene_unknown_key', 'body:\nmodel:\n  raduis_mm: 2\n', "unknown key (did you mean 'radius_mm'?)")
@@ -149,7 +150,7 @@ scene_case('scene_wrong_type', 'body:\nmodel:\n  radius_mm: two\n', "expected a 
 scene_case('scene_negative_radius', 'body:\nmodel:\n  radius_mm: -1\n', 'out of range')
 scene_case('scene_m_not_below_n', 'body:\nmodel:\n  exponent_m: 12\n  exponent_n: 6\n', 'must exceed the attractive m')
 scene_case('scene_missing_input', 'ct:\n  folder: no-such-folder\n', 'no such file or folder')
-scene_case('scene_out_is_its_folder', 'body:\nmodel:\n', "is the scene's own folder", args=['run', '{case}/scene.yaml', '--out', '{case}'])
+scene_case('scene_out_is_its_folder', 'body:\nmodel:\n', "--out is the folder of input", args=['run', '{case}/scene.yaml', '--out', '{case}'])
 scene_case('scene_out_unwritable', 'body:\nmodel:\n', 'cannot create the output folder', args=['run', '{case}/scene.yaml', '--out', '/proc/organfit/out'])
 scene_case('scene_unknown_section', 'modle:\n  radius_mm: 2\n', "unknown section (did you mean 'model'?)")
 scene_case('scene_yaml_syntax', 'body: [1, 2\nmodel:\n', 'scene.yaml:')
@@ -186,5 +187,225 @@ for name in ct_files:
 if os.path.isdir(os.path.join(data, 'ct-sts-002')):
     case('tolerated_references_by_position', ['segment', '--ct', '{data}/ct-sts-002/ct', '--rtstruct', '{data}/ct-sts-002/rtstruct.dcm',
          '--roi', 'GTV_Mass_CT', '--out', '{case}/out/m.nrrd'], 'matched by position', code=0, ct=False)
+
+# --- inputs that disagree with each other ---------------------------------------------------
+d = case('rtss_other_patient', IMPORT, 'its Patient ID differs from the CT', rtstruct=True, secrets=['OTHER-77'], cls='disagree')
+edit_rtss(d, lambda ds: setattr(ds, 'PatientID', 'OTHER-77'))
+d = case('rtss_other_study', IMPORT, 'its Study Instance UID differs from the CT', rtstruct=True, cls='disagree')
+edit_rtss(d, lambda ds: setattr(ds, 'StudyInstanceUID', '1.2.826.0.1.3680043.2.1125.99.11'))
+def no_frame(ds, keep_references):
+    for r in ds.StructureSetROISequence:
+        del r.ReferencedFrameOfReferenceUID
+    del ds.ReferencedFrameOfReferenceSequence
+    if not keep_references:
+        for c in prostate(ds).ContourSequence:
+            del c.ContourImageSequence
+d = case('rtss_no_frame_of_reference', IMPORT, 'names no Frame of Reference', rtstruct=True, cls='disagree')
+edit_rtss(d, lambda ds: no_frame(ds, False))
+d = case('tolerated_no_frame_of_reference_but_references', IMPORT, '', code=0, rtstruct=True, cls='disagree')
+edit_rtss(d, lambda ds: no_frame(ds, True))
+d = case('ct_two_files_one_sop_instance', SEGMENT, 'have the same SOP Instance UID', cls='disagree')
+ds = pydicom.dcmread(os.path.join(d, 'ct', ct_files[3]))
+ds.ImagePositionPatient = [ds.ImagePositionPatient[0], ds.ImagePositionPatient[1], 400.0]
+ds.save_as(os.path.join(d, 'ct', 'zz_copy.dcm'))
+def rename_bladder(ds):
+    next(r for r in ds.StructureSetROISequence if r.ROIName == 'Bladder').ROIName = 'Prostate'
+d = case('rtss_two_rois_one_name', IMPORT, "2 ROIs are named 'Prostate' (ROI numbers 2, 4)", rtstruct=True, cls='disagree')
+edit_rtss(d, rename_bladder)
+d = case('tolerated_roi_number_chooses', IMPORT[:-2] + ['--roi-number', '4', '--out', '{case}/out/mask.nrrd'], '', code=0, rtstruct=True, cls='disagree')
+edit_rtss(d, rename_bladder)
+d = case('rtss_roi_number_not_that_name', IMPORT[:-2] + ['--roi-number', '2', '--out', '{case}/out/mask.nrrd'], "ROI number 2 is named 'Bladder', not 'Prostate'", rtstruct=True, cls='disagree')
+
+# --- folders read completely or not at all ------------------------------------------------------
+d = case('tolerated_fifo_in_ct_folder', SEGMENT, '1 entry that are not regular files', code=0, cls='folders')
+os.mkfifo(os.path.join(d, 'ct', 'pipe'))
+d = case('tolerated_dangling_link_in_ct_folder', SEGMENT, '1 entry that are not regular files', code=0, cls='folders')
+os.symlink('no-such-file.dcm', os.path.join(d, 'ct', 'gone.dcm'))
+d = case('tolerated_looping_links_in_ct_folder', SEGMENT, '2 entries that are not regular files', code=0, cls='folders')
+os.symlink('b.dcm', os.path.join(d, 'ct', 'a.dcm'))
+os.symlink('a.dcm', os.path.join(d, 'ct', 'b.dcm'))
+d = case('tolerated_subfolder_and_socket', SEGMENT, '2 entries that are not regular files', code=0, cls='folders')
+os.makedirs(os.path.join(d, 'ct', 'sub'))
+import socket
+sock = socket.socket(socket.AF_UNIX)
+sock.bind(os.path.join(d, 'ct', 'sock'))
+sock.close()
+d = case('ct_dcm_file_that_is_not_dicom', SEGMENT, 'junk.dcm: a truncated or corrupt DICOM file', cls='folders')
+open(os.path.join(d, 'ct', 'junk.dcm'), 'w').write('this is not DICOM at all\n' * 20)
+d = case('ct_dicm_marker_then_garbage', SEGMENT, 'bad: a truncated or corrupt DICOM file', cls='folders')
+open(os.path.join(d, 'ct', 'bad'), 'wb').write(b'\0' * 128 + b'DICM' + b'\xff' * 300)
+
+# --- geometry is never invented ---------------------------------------------------------------
+def one_slice(d, keep):
+    for n in ct_files[1:]:
+        os.remove(os.path.join(d, 'ct', n))
+    def strip(ds):
+        if 'SpacingBetweenSlices' in ds: del ds.SpacingBetweenSlices
+        if not keep: del ds.SliceThickness
+    edit_ct(d, 0, strip)
+d = case('ct_one_slice_without_thickness', SEGMENT, 'states neither Spacing Between Slices nor Slice Thickness', cls='geometry')
+one_slice(d, False)
+d = case('tolerated_one_slice_with_thickness', ['segment', '--ct', '{case}/ct', '--seed', '0,0,-27.5', '--hu', '-2000,4000', '--search-box', '0', '--out', '{case}/out/mask.nrrd'], '', code=0, cls='geometry')
+one_slice(d, True)
+d = case('rtss_contour_value_count', IMPORT, 'not 3 x Number of Contour Points', rtstruct=True, cls='geometry')
+edit_rtss(d, lambda ds: setattr(prostate(ds).ContourSequence[0], 'NumberOfContourPoints', 9))
+d = case('rtss_contour_off_its_slice', IMPORT, 'lies on no slice of the CT', rtstruct=True, cls='geometry')
+def off(ds):
+    c = prostate(ds).ContourSequence[0]
+    c.ContourData = [v + 2.0 if i % 3 == 2 else v for i, v in enumerate(c.ContourData)]
+edit_rtss(d, off)
+d = case('ct_odd_slice_is_named', SEGMENT, 'slice CT0007.dcm lies at', cls='geometry')
+edit_ct(d, 6, lambda ds: setattr(ds, 'ImagePositionPatient', [ds.ImagePositionPatient[0], ds.ImagePositionPatient[1], float(ds.ImagePositionPatient[2]) + 1.5]))
+d = case('ct_odd_size_is_named', SEGMENT, 'slice CT0003.dcm is 64 x 32 pixels', cls='geometry')
+ds = pydicom.dcmread(os.path.join(d, 'ct', ct_files[2]))
+ds.Rows = 32
+ds.PixelData = ds.PixelData[: 32 * 64 * 2]
+ds.save_as(os.path.join(d, 'ct', ct_files[2]))
+d = case('tolerated_two_point_contour', IMPORT, 'has 2 point(s), fewer than 3: skipped', code=0, rtstruct=True, cls='geometry')
+edit_rtss(d, two)
+d = case('tolerated_zero_area_contour', IMPORT, 'has zero area: skipped', code=0, rtstruct=True, cls='geometry')
+def flat(ds):
+    c = prostate(ds).ContourSequence[1]
+    xyz = list(c.ContourData)
+    c.ContourData = [xyz[0], xyz[1], xyz[2], xyz[0] + 5, xyz[1], xyz[2], xyz[0] + 10, xyz[1], xyz[2]]
+    c.NumberOfContourPoints = 3
+edit_rtss(d, flat)
+
+# --- every legal encoding is read -----------------------------------------------------------------
+for name, flag in [('jpegls', '--jpegls'), ('jpeg2000', '--j2k'), ('jpeg_lossless', '--jpeg'), ('big_endian', None), ('deflated', None)]:
+    d = case('tolerated_ct_' + name, SEGMENT, '', code=0, cls='encodings')
+    for n in ct_files:
+        p = os.path.join(d, 'ct', n)
+        if flag:
+            subprocess.run(['gdcmconv', flag, p, p], check=True)
+        else:
+            ds = pydicom.dcmread(p)
+            if name == 'big_endian':
+                ds.file_meta.TransferSyntaxUID = pydicom.uid.ExplicitVRBigEndian
+                ds.is_little_endian, ds.is_implicit_VR = False, False
+                swapped = bytearray(ds.PixelData)  # 16-bit words, most significant byte first
+                swapped[0::2], swapped[1::2] = ds.PixelData[1::2], ds.PixelData[0::2]
+                ds.PixelData = bytes(swapped)
+            else:
+                ds.file_meta.TransferSyntaxUID = pydicom.uid.DeflatedExplicitVRLittleEndian
+                ds.is_little_endian, ds.is_implicit_VR = True, False
+            ds.save_as(p, write_like_original=False)
+d = case('tolerated_rtss_deflated', IMPORT, '', code=0, rtstruct=True, cls='encodings')
+def deflate(ds):
+    ds.file_meta.TransferSyntaxUID = pydicom.uid.DeflatedExplicitVRLittleEndian
+edit_rtss(d, deflate)
+def private_sequence(ds):
+    block = ds.private_block(0x0071, 'ORGANFIT TEST', create=True)
+    item = pydicom.Dataset()
+    item.add_new(0x00711001, 'LO', 'inside')
+    block.add_new(0x02, 'SQ', [item])
+d = case('tolerated_rtss_un_sequence', IMPORT, '', code=0, rtstruct=True, cls='encodings')
+edit_rtss(d, private_sequence)
+p = os.path.join(d, 'rtstruct.dcm')
+ds = pydicom.dcmread(p)
+ds.file_meta.TransferSyntaxUID = pydicom.uid.ImplicitVRLittleEndian
+ds.is_implicit_VR = True
+ds.save_as(p, write_like_original=False)
+subprocess.run(['gdcmconv', '--explicit', p, p], check=True)  # the private sequence becomes UN, undefined length
+d = case('tolerated_ct_un_sequences', SEGMENT, '', code=0, cls='encodings')
+for n in ct_files:
+    p = os.path.join(d, 'ct', n)
+    ds = pydicom.dcmread(p)
+    private_sequence(ds)
+    ds.file_meta.TransferSyntaxUID = pydicom.uid.ImplicitVRLittleEndian
+    ds.is_implicit_VR = True
+    ds.save_as(p, write_like_original=False)
+    subprocess.run(['gdcmconv', '--explicit', p, p], check=True)
+
+# --- output folders are safe ---------------------------------------------------------------------
+BODY_SCENE = 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 2\n'
+def out_case(name, out_arg, expect, extra=None, ct=False):
+    d = case(name, ['run', '{case}/scene.yaml', '--out', out_arg], expect, ct=ct, cls='outputs')
+    open(os.path.join(d, 'scene.yaml'), 'w').write(extra or BODY_SCENE)
+    return d
+out_case('out_is_root', '/', '--out is the root folder')
+out_case('out_is_tmp', '/tmp', '--out is a top-level system folder')
+out_case('out_is_etc', '/etc', '--out is a top-level system folder')
+out_case('out_is_home', os.environ.get('HOME', '/root'), '--out is')
+CT_SCENE = 'ct:\n  folder: ct\norgan:\n  source: seed\n  roi: organ\n  seed_mm: [0, 0, 0]\nmodel:\n  radius_mm: 4\n'
+out_case('out_is_the_ct_folder', '{case}/ct', '--out is the folder of input', CT_SCENE, ct=True)
+out_case('out_inside_the_ct_folder', '{case}/ct/out', '--out is inside input folder', CT_SCENE, ct=True)
+d = case('out_parent_of_the_points', ['run', '{case}/in/scene.yaml', '--out', '{case}'], '--out is a parent of the folder of input', ct=False, cls='outputs')
+os.makedirs(os.path.join(d, 'in'))
+open(os.path.join(d, 'in', 'points.csv'), 'w').write('1,2,3\n4,5,6\n7,8,9\n')
+open(os.path.join(d, 'in', 'scene.yaml'), 'w').write(BODY_SCENE + 'points:\n  source: file\n  file: points.csv\n')
+d = out_case('out_phantom_folder_holds_foreign_files', '{case}/out', 'phantom: exists and was not written by organfit', 'phantom:\n  columns: 64\n  rows: 64\n  slices: 12\n  pixel_mm: 6\n  slice_mm: 5\n')
+os.makedirs(os.path.join(d, 'out', 'phantom'))
+open(os.path.join(d, 'out', 'phantom', 'my_notes.txt'), 'w').write('mine\n')
+d = out_case('out_foreign_file_of_an_output_name', '{case}/out', 'run.json: exists and was not written by organfit')
+os.makedirs(os.path.join(d, 'out'))
+open(os.path.join(d, 'out', 'run.json'), 'w').write('{"mine": true}\n')
+case('segment_out_into_the_ct_folder', ['segment', '--ct', '{case}/ct', '--seed', '0,0,0', '--hu', '20,80', '--out', '{case}/ct/mask.nrrd'], '--out is the folder of input', cls='outputs')
+d = case('us_points_out_beside_its_input', ['us-points', '--us', '{case}/us/v.mha', '--out', '{case}/us/points.csv'], '--out is the folder of input', ct=False, cls='outputs')
+os.makedirs(os.path.join(d, 'us'))
+open(os.path.join(d, 'us', 'v.mha'), 'w').write('ObjectType = Image\n')
+case('synth_into_root', ['synth', 'pelvis', '--out', '/'], 'exists and is not an empty folder', ct=False, cls='outputs')
+
+# --- point files as users write them ----------------------------------------------------------------
+points_case('points_beyond_ten_metres', 'x,y,z\n1,2,3\n1,2,15000\n', 'points.csv:3: coordinate 15000 mm lies beyond 10 m')
+points_case('points_in_microns', 'x;y;z\n12500;-3000;800\n', 'points.csv:2: coordinate 12500 mm lies beyond 10 m')
+points_case('points_too_many', 'x,y,z\n' + '1,2,3\n' * 100001, 'more than 100000 points')
+points_case('points_binary', 'x,y,z\n1,2,3\n\0\0\0\0', 'not a text file')
+points_case('points_text_in_a_later_row', 'x,y,z\n1,2,3\n4,five,6\n', "points.csv:3: 'five' is not a number")
+def tolerated_points(name, content):
+    d = case(name, ['validate', '{case}/scene.yaml'], '', code=0, ct=False, cls='points')
+    open(os.path.join(d, 'points.csv'), 'wb').write(content)
+    open(os.path.join(d, 'scene.yaml'), 'w').write(BODY_SCENE + 'points:\n  source: file\n  file: points.csv\nfit:\n  method: spread\n')
+tolerated_points('tolerated_points_utf16_excel', 'x\ty\tz\r\n1,5\t2\t3\r\n4\t5,5\t6\r\n'.encode('utf-16'))
+tolerated_points('tolerated_points_semicolon_decimal_comma', 'x;y;z;confidence\r\n1,5;2;3;0,9\r\n'.encode())
+tolerated_points('tolerated_points_bom_crlf', '\ufeffx,y,z\r\n1.5,2,3\r\n'.encode('utf-8'))
+tolerated_points('tolerated_points_old_mac_lines', '1 2 3\r4 5 6\r'.encode())
+
+# --- keys the run would ignore -------------------------------------------------------------------------
+scene_case('scene_points_file_with_generate', BODY_SCENE + 'points:\n  file: scene.yaml\n', "points.file: not used when points.source is 'generate'", cls='ignored_keys')
+scene_case('scene_tracker_with_a_volume', BODY_SCENE + 'points:\n  source: ultrasound\nultrasound:\n  source: volume\n  file: scene.yaml\n  tracker: scene.yaml\n', "ultrasound.tracker: not used when ultrasound.source is 'volume'", cls='ignored_keys')
+scene_case('scene_paper_key_with_spread', BODY_SCENE + 'points:\nfit:\n  method: spread\n  alpha: 3\n', "fit.alpha: not used when fit.method is 'spread'", cls='ignored_keys')
+scene_case('scene_spread_key_with_paper', BODY_SCENE + 'points:\nfit:\n  method: paper\n  global_shear_field_mm: 5\n', "fit.global_shear_field_mm: not used when fit.method is 'paper'", cls='ignored_keys')
+scene_case('scene_seed_key_with_rtstruct', 'phantom:\norgan:\n  roi: Prostate\n  hu_low: 10\n', "organ.hu_low: not used when organ.source is 'rtstruct'", cls='ignored_keys')
+scene_case('scene_stretch_with_a_real_volume', BODY_SCENE + 'points:\n  source: ultrasound\n  stretch: 1.1\nultrasound:\n  source: volume\n  file: scene.yaml\n', "points.stretch: not used when ultrasound.source is 'volume'", cls='ignored_keys')
+scene_case('scene_noise_with_points_from_a_file', BODY_SCENE + 'points:\n  source: file\n  file: scene.yaml\n  noise_mm: 1\n', "points.noise_mm: not used when points.source is 'file'", cls='ignored_keys')
+
+# --- messages are bounded ------------------------------------------------------------------------------
+scene_case('scene_very_long_enum_value', BODY_SCENE + 'fit:\n  method: ' + 'x' * 5000 + '\n', "fit.method: '" + 'x' * 80 + "...' is not one of", cls='messages')
+scene_case('scene_very_long_key', BODY_SCENE.replace('radius_mm', 'r' * 1000), 'unknown key', cls='messages')
+points_case('points_very_long_cell', 'x,y,z\n1,2,' + '7' * 50 + 'z' * 5000 + '\n', "' is not a number", cls='messages')
+case('segment_very_long_roi_name', IMPORT[:-3] + ['R' * 4000, '--out', '{case}/out/mask.nrrd'], "no ROI named '" + 'R' * 80 + "...'", rtstruct=True, cls='messages')
+
+# --- a planning model and the CT a session names -------------------------------------------------------
+planning = os.path.join(out, '_planning')
+os.makedirs(planning)
+open(os.path.join(planning, 'planning.yaml'), 'w').write(
+    'phantom:\n  columns: 64\n  rows: 64\n  slices: 12\n  pixel_mm: 6\n  slice_mm: 5\n'
+    'organ:\n  roi: Prostate\nmodel:\n  radius_mm: 3\nexport:\n  model: model.json\n')
+subprocess.run([organfit, '--quiet', 'run', os.path.join(planning, 'planning.yaml'), '--out', os.path.join(planning, 'out')],
+               check=True, stdout=subprocess.DEVNULL)
+SESSION = 'planning:\n  model: ../_planning/out/model.json\nct:\n  folder: ct\npoints:\n  count: 20\nfit:\n  method: spread\n'
+def other_series(ds):
+    ds.SeriesInstanceUID = '1.2.826.0.1.3680043.2.1125.99.21'
+d = case('session_ct_of_another_series', ['--quiet', 'run', '{case}/scene.yaml', '--out', '{case}/out'], 'the planning model was built on another CT series', cls='disagree')
+edit_all(d, other_series)
+open(os.path.join(d, 'scene.yaml'), 'w').write(SESSION)
+d = case('tolerated_session_ct_of_the_model', ['run', '{case}/scene.yaml', '--out', '{case}/out'], '', code=0, cls='disagree')
+open(os.path.join(d, 'scene.yaml'), 'w').write(SESSION)
+d = case('export_ct_of_another_series', ['export', '--model', '{case}/../_planning/out/model.json', '--ct', '{case}/ct', '--labels', '{case}/out/l.nrrd'], 'is not the model', cls='disagree')
+edit_all(d, other_series)
+planned_ct = json.load(open(os.path.join(planning, 'out', 'model.json')))['ct']
+def points_in_ct(name, series, frame, expect, code=2):
+    d = case(name, ['--quiet', 'run', '{case}/scene.yaml', '--out', '{case}/out'], expect, code=code, ct=False, cls='disagree')
+    open(os.path.join(d, 'points.csv'), 'w').write(
+        f'# series_instance_uid: {series}\n# frame_of_reference_uid: {frame}\nx,y,z\n'
+        '0,0,10\n0,10,0\n10,0,0\n0,0,-10\n0,-10,0\n-10,0,0\n')
+    open(os.path.join(d, 'scene.yaml'), 'w').write(
+        'planning:\n  model: ../_planning/out/model.json\npoints:\n  source: file\n  file: points.csv\n')
+points_in_ct('points_declared_in_another_series', '1.2.826.0.1.3680043.2.1125.99.31', planned_ct['frame_of_reference_uid'],
+             "its Series Instance UID is not the planning CT's")
+points_in_ct('points_declared_in_another_frame', planned_ct['series_instance_uid'], '1.2.826.0.1.3680043.2.1125.99.32',
+             "its Frame of Reference UID is not the planning CT's")
+points_in_ct('tolerated_points_declared_in_their_ct', planned_ct['series_instance_uid'], planned_ct['frame_of_reference_uid'], '', code=0)
 shutil.rmtree(base)
 print(len([n for n in os.listdir(out) if os.path.isdir(os.path.join(out, n))]), 'cases')

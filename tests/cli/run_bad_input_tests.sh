@@ -11,6 +11,7 @@ tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
 passed=0
 failed=0
+classes=()
 if ! /usr/bin/python3 -c 'import pydicom' 2> /dev/null || [[ ! -d "$data/us-plus" ]]; then
   echo "skip: the corpus needs python3-pydicom and ../shared/data (scripts/setup.sh installs pydicom)"
   exit 0
@@ -18,6 +19,7 @@ fi
 /usr/bin/python3 "$src/tests/bad_inputs/make_corpus.py" "$tmp/corpus" "$bin" "$data" > /dev/null || { echo "FAIL corpus generation"; exit 1; }
 for dir in "$tmp"/corpus/*/; do
   name=$(basename "$dir")
+  [[ "$name" == _* ]] && continue  # shared inputs of several cases
   dir=${dir%/}
   mapfile -t args < <(/usr/bin/python3 -c "
 import json, sys
@@ -26,6 +28,7 @@ for a in c['args']: print(a.replace('{case}', '$dir').replace('{data}', '$data')
   code=$(/usr/bin/python3 -c "import json; print(json.load(open('$dir/case.json'))['code'])")
   expect=$(/usr/bin/python3 -c "import json; print(json.load(open('$dir/case.json'))['expect'])")
   before=$(cd "$dir" && find . -path ./out -prune -o -type f -print0 | sort -z | xargs -0 md5sum | md5sum)
+  out_before=$(cd "$dir" && [[ -d out ]] && find out -print0 | sort -z | xargs -0 md5sum 2>&1 | md5sum)
   data_before=$(find "$data/us-plus" "$data/us-dicom" -type f -print0 | sort -z | xargs -0 md5sum | md5sum)
   timeout 120 "$bin" "${args[@]}" > "$tmp/out.txt" 2> "$tmp/err.txt"
   got=$?
@@ -33,18 +36,26 @@ for a in c['args']: print(a.replace('{case}', '$dir').replace('{data}', '$data')
   data_after=$(find "$data/us-plus" "$data/us-dicom" -type f -print0 | sort -z | xargs -0 md5sum | md5sum)
   lines=$(grep -c . "$tmp/err.txt")
   why=""
-  [[ $got -ne $code ]] && why="exit $got, expected $code"
+  # No patient name or ID in any output line, and every line bounded.
+  while IFS= read -r secret; do
+    [[ -n "$secret" ]] && grep -qF -- "$secret" "$tmp/out.txt" "$tmp/err.txt" && why="prints the patient's '$secret'"
+  done < <(/usr/bin/python3 -c "import json; print('\n'.join(json.load(open('$dir/case.json')).get('secrets', [])))")
+  longest=$(awk '{ if (length($0) > m) m = length($0) } END { print m + 0 }' "$tmp/err.txt")
+  [[ -z "$why" && $longest -gt 600 ]] && why="a stderr line of $longest characters"
+  [[ -z "$why" && $got -ne $code ]] && why="exit $got, expected $code"
   [[ -z "$why" && -n "$expect" ]] && ! grep -qF -- "$expect" "$tmp/err.txt" && why="stderr lacks '$expect'"
   if [[ -z "$why" && $code -eq 2 ]]; then
     [[ $lines -ne 1 ]] && why="$lines lines on stderr"
     [[ -z "$why" ]] && ! grep -qE "(/|\.yaml:[0-9]+: [a-z_]+\.|--[a-z]+|segment: )" "$tmp/err.txt" && why="names no file, key or option"
-    [[ -z "$why" && -d "$dir/out" && -n "$(ls -A "$dir/out")" ]] && why="left outputs: $(ls -A "$dir/out")"
+    out_after=$(cd "$dir" && [[ -d out ]] && find out -print0 | sort -z | xargs -0 md5sum 2>&1 | md5sum)
+    [[ -z "$why" && "$out_before" != "$out_after" ]] && why="--out not left as it was: $(ls -A "$dir/out" 2> /dev/null)"
   fi
   [[ -z "$why" && "$before" != "$after" ]] && why="an input file changed"
   [[ -z "$why" && "$data_before" != "$data_after" ]] && why="a shared data file changed"
   if [[ -z "$why" ]]; then
     echo "ok   bad_input.$name"
     passed=$((passed + 1))
+    classes+=("$(/usr/bin/python3 -c "import json; print(json.load(open('$dir/case.json')).get('class', 'other'))")")
   else
     echo "FAIL bad_input.$name: $why: $(head -c 300 "$tmp/err.txt")"
     failed=$((failed + 1))
@@ -65,5 +76,6 @@ for f in "$src"/tests/fuzz/regressions/*.mha; do
   if [[ $code -eq 2 && $(grep -c . "$tmp/err.txt") -eq 1 ]]; then echo "ok   fuzz_regression.$(basename "$f")"; passed=$((passed + 1));
   else echo "FAIL fuzz_regression.$(basename "$f"): exit $code"; failed=$((failed + 1)); fi
 done
+printf '%s\n' "${classes[@]}" | sort | uniq -c | sed 's/^/cases by class: /'
 echo "$passed passed, $failed failed"
-[[ $failed -eq 0 && $passed -ge 40 ]]
+[[ $failed -eq 0 && $passed -ge 100 ]]

@@ -81,7 +81,7 @@ check run.no_temporary_files_left test -z "$(find "$tmp/run1" -name '.*tmp*')"
 expect run.scene_without_scene_section 0 "" -- --quiet run "$scenes/no-scene-section.yaml" --out "$tmp/run3"
 check run.default_name_is_the_file_stem grep -q '"name": "no-scene-section"' "$tmp/run3/run.json"
 mkdir -p "$tmp/scene_dir" && cp "$scenes/small-model.yaml" "$tmp/scene_dir/s.yaml"
-expect run.out_equal_to_scene_folder 2 "is the scene's own folder" -- run "$tmp/scene_dir/s.yaml" --out "$tmp/scene_dir"
+expect run.out_equal_to_scene_folder 2 "--out is the folder of input" -- run "$tmp/scene_dir/s.yaml" --out "$tmp/scene_dir"
 check run.scene_folder_untouched test "$(ls "$tmp/scene_dir")" = "s.yaml"
 expect run.unwritable_out 2 "/dev/null/out: cannot create the output folder" -- run "$scenes/small-model.yaml" --out /dev/null/out
 expect run.bad_scene_writes_nothing 2 "unknown key" -- run "$scenes/bad-misspelled-key.yaml" --out "$tmp/run2"
@@ -143,7 +143,7 @@ assert not any(i in text for i in ids), ids"
   for f in "$ct"/*.dcm; do cp "$f" "$tmp/two/a_$(basename "$f")"; done
   for f in "$src/../shared/data/ct-sts-004/ct"/*.dcm; do cp "$f" "$tmp/two/b_$(basename "$f")"; done
   before=$(cat "$ct"/*.dcm | md5sum)
-  for case in missing:"missing slice" dup:"duplicate slice position" two:"2 CT series; choose one"; do
+  for case in missing:"missing slice" dup:"000010.dcm and again.dcm have the same SOP Instance UID" two:"2 CT series; choose one"; do
     expect "ct.defect_${case%%:*}" 2 "${case#*:}" -- segment --ct "$tmp/${case%%:*}" --seed 80,130,-550 --hu 0,100 --out "$tmp/none.nrrd"
   done
   check ct.inputs_unchanged test "$(cat "$ct"/*.dcm | md5sum)" = "$before"
@@ -290,6 +290,13 @@ expect synth.ultrasound 0 "" -- --quiet synth ultrasound --labels "$tmp/default/
 check synth.ultrasound_files test -s "$tmp/sus/volume.mha" -a -s "$tmp/sus/sweep.igs.mha" -a -s "$tmp/sus/true_boundary.csv"
 expect us.points_from_simulated_sweep 0 "" -- --quiet us-points --us "$tmp/sus/sweep.igs.mha" --centre 0,0,0 --radius 35 --out "$tmp/sus_sweep.csv"
 expect us.points_from_simulated_volume 0 "" -- --quiet us-points --us "$tmp/sus/volume.mha" --centre 0,0,0 --radius 35 --out "$tmp/sus_volume.csv"
+# Points found with --ct declare that CT; a run on another planning CT refuses them.
+expect us.points_declare_their_ct 0 "" -- --quiet us-points --us "$tmp/sus/volume.mha" --ct "$tmp/default/phantom/ct" --centre 0,0,0 --radius 35 --out "$tmp/sus_declared/points.csv"
+check us.points_declaration_is_the_cts /usr/bin/python3 -c "
+import pydicom, sys
+lines = open('$tmp/sus_declared/points.csv').read().splitlines()
+ct = pydicom.dcmread('$tmp/default/phantom/ct/CT0001.dcm', stop_before_pixels=True)
+sys.exit(not (lines[0] == '# series_instance_uid: ' + ct.SeriesInstanceUID and lines[1] == '# frame_of_reference_uid: ' + ct.FrameOfReferenceUID and lines[2].startswith('x_mm')))"
 for kind in sweep volume; do
   check "us.simulated_${kind}_points_on_the_visible_surface" /usr/bin/python3 -c "
 import math
@@ -380,6 +387,51 @@ check interrupt.exit_130 test $code -eq 130
 check interrupt.within_a_second test $took_ms -lt 1000
 check interrupt.no_outputs_left test -z "$(ls -A "$tmp/interrupted" 2>/dev/null)"
 check interrupt.says_so grep -q "interrupted" "$tmp/err"
+
+# The CT's character set is honoured: a Latin-1 patient's name and ID reach the exported
+# structure set as the same text (pydicom decodes both alike), in the set it declares.
+if /usr/bin/python3 -c 'import pydicom' 2> /dev/null; then
+  "$bin" --quiet synth pelvis --out "$tmp/latin" --columns 64 --rows 64 --pixel-mm 6 --slices 12 --slice-mm 5 > /dev/null
+  /usr/bin/python3 - "$tmp/latin" << 'PY'
+import os, sys, pydicom
+d = sys.argv[1]
+for n in os.listdir(os.path.join(d, 'ct')):
+    p = os.path.join(d, 'ct', n)
+    ds = pydicom.dcmread(p)
+    ds.SpecificCharacterSet = 'ISO_IR 100'
+    ds.PatientName = 'Müller^Jörg'
+    ds.PatientID = 'ÅB-12'
+    ds.save_as(p)
+ds = pydicom.dcmread(os.path.join(d, 'rtstruct.dcm'))
+ds.PatientID = 'ÅB-12'
+ds.save_as(os.path.join(d, 'rtstruct.dcm'))
+PY
+  printf 'ct:
+  folder: ct
+organ:
+  rtstruct: rtstruct.dcm
+  roi: Prostate
+model:
+  radius_mm: 3
+export:
+  rtstruct: fit.dcm
+' > "$tmp/latin/scene.yaml"
+  expect charset.latin1_ct_exports 0 "" -- --quiet run "$tmp/latin/scene.yaml" --out "$tmp/latin_out"
+  check charset.same_text_in_the_export /usr/bin/python3 -c "
+import pydicom, sys
+ct = pydicom.dcmread('$tmp/latin/ct/CT0001.dcm'); rt = pydicom.dcmread('$tmp/latin_out/fit.dcm')
+sys.exit(not (str(rt.PatientName) == str(ct.PatientName) == 'Müller^Jörg' and rt.PatientID == ct.PatientID == 'ÅB-12'))"
+  check charset.not_in_logs bash -c "! grep -q 'Müller' '$tmp/err'"
+fi
+
+# A header with a detached data file names its final data file, and nothing temporary stays.
+"$bin" --quiet synth pelvis --out "$tmp/detached_ct" --columns 40 --rows 40 --pixel-mm 10 --slices 8 --slice-mm 10 > /dev/null
+for ext in mhd nhdr; do
+  expect "detached.$ext" 0 "" -- --quiet segment --ct "$tmp/detached_ct/ct" --seed 0,0,0 --hu -2000,4000 --search-box 0 --out "$tmp/detached/mask.$ext"
+done
+check detached.mhd_names_its_data_file bash -c "grep -aq '^ElementDataFile = mask.zraw' '$tmp/detached/mask.mhd' && test -s '$tmp/detached/mask.zraw'"
+check detached.nhdr_names_its_data_file bash -c "grep -aq '^data file: mask.raw.gz' '$tmp/detached/mask.nhdr' && test -s '$tmp/detached/mask.raw.gz'"
+check detached.nothing_temporary_left test "$(ls -A "$tmp/detached" | grep -c tmp)" -eq 0
 
 echo "$passed passed, $failed failed"
 [[ $failed -eq 0 ]]

@@ -14,6 +14,8 @@ namespace fs = std::filesystem;
 namespace organfit::config {
 namespace {
 
+using Condition = UseCondition;
+
 /// Levenshtein distance, for "did you mean" on misspelled keys.
 size_t edit_distance(const std::string& a, const std::string& b) {
   std::vector<size_t> prev(b.size() + 1), cur(b.size() + 1);
@@ -44,7 +46,7 @@ class Parser {
   Parser(fs::path file, const Schema& schema) : file_(std::move(file)), schema_(schema) {}
 
   [[noreturn]] void fail(int line0, const std::string& key, const std::string& reason) const {
-    throw InputError(fmt::format("{}:{}: {}{}{}", file_.string(), line0 + 1, key,
+    throw InputError(fmt::format("{}:{}: {}{}{}", file_.string(), line0 + 1, echo(key),
                                  key.empty() ? "" : ": ", reason));
   }
 
@@ -63,10 +65,10 @@ class Parser {
       if (!n.IsScalar() || !YAML::convert<double>::decode(n, v)) {
         fail(n.Mark().line, key,
              fmt::format("expected {}, got '{}'", what,
-                         n.IsScalar() ? n.Scalar() : std::string("a list")));
+                         n.IsScalar() ? echo(n.Scalar()) : std::string("a list")));
       }
       if (!std::isfinite(v))
-        fail(n.Mark().line, key, fmt::format("must be finite, got '{}'", n.Scalar()));
+        fail(n.Mark().line, key, fmt::format("must be finite, got '{}'", echo(n.Scalar())));
       return v;
     };
     auto check_range = [&](double v, int at) {
@@ -87,7 +89,7 @@ class Parser {
         const std::string s = scalar_text();
         long long v = 0;
         if (!YAML::convert<long long>::decode(node, v)) {
-          fail(line, key, fmt::format("expected an integer, got '{}'", s));
+          fail(line, key, fmt::format("expected an integer, got '{}'", echo(s)));
         }
         check_range(static_cast<double>(v), line);
         return v;
@@ -96,7 +98,7 @@ class Parser {
         const std::string s = scalar_text();
         bool v = false;
         if (!YAML::convert<bool>::decode(node, v)) {
-          fail(line, key, fmt::format("expected true or false, got '{}'", s));
+          fail(line, key, fmt::format("expected true or false, got '{}'", echo(s)));
         }
         return v;
       }
@@ -106,7 +108,7 @@ class Parser {
         const std::string s = scalar_text();
         if (std::find(spec.choices.begin(), spec.choices.end(), s) == spec.choices.end()) {
           fail(line, key,
-               fmt::format("'{}' is not one of {}{}", s, spec.range_text(),
+               fmt::format("'{}' is not one of {}{}", echo(s), spec.range_text(),
                            suggestion(s, spec.choices)));
         }
         return s;
@@ -116,7 +118,8 @@ class Parser {
         if (s.empty()) fail(line, key, "empty path");
         fs::path p(s);
         if (p.is_relative()) p = file_.parent_path() / p;
-        if (!fs::exists(p)) fail(line, key, fmt::format("no such file or folder: {}", p.string()));
+        if (!fs::exists(p))
+          fail(line, key, fmt::format("no such file or folder: {}", echo(p.string(), 200)));
         return fs::absolute(p).lexically_normal().string();
       }
       case ParamType::kVec3: {
@@ -224,6 +227,41 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
       if (p->required()) parser.fail(0, p->key(), "required key is missing");
       scene.entries_[p->key()] = {p->default_value, 1, false};
     }
+  }
+  // A key the run would ignore is refused: its value would silently not be what ran.
+  for (const auto& [key, entry] : scene.entries_) {
+    if (!entry.given) continue;
+    const ParamSpec* spec =
+        schema.find(key.substr(0, key.find('.')), key.substr(key.find('.') + 1));
+    if (!spec || spec->used_when.empty()) continue;
+    // The condition to name: the first that fails in the alternative that came closest.
+    const Condition* failed = nullptr;
+    size_t best_held = 0;
+    bool used = false;
+    for (const auto& alternative : spec->used_when) {
+      size_t held = 0;
+      for (const auto& c : alternative) {
+        const auto it = scene.entries_.find(c.key);
+        const std::string* value =
+            it == scene.entries_.end() ? nullptr : std::get_if<std::string>(&it->second.value);
+        if (!value || std::find(c.values.begin(), c.values.end(), *value) == c.values.end()) {
+          if (!failed || held > best_held) failed = &c, best_held = held;
+          break;
+        }
+        ++held;
+      }
+      used = used || held == alternative.size();
+    }
+    if (used) continue;
+    const auto it = scene.entries_.find(failed->key);
+    const std::string* value =
+        it == scene.entries_.end() ? nullptr : std::get_if<std::string>(&it->second.value);
+    parser.fail(entry.line - 1, key,
+                fmt::format("not used when {}: the run would ignore it (it is used with {})",
+                            value ? failed->key + " is '" + echo(*value) + "'"
+                                  : "the scene has no '" +
+                                        failed->key.substr(0, failed->key.find('.')) + "' section",
+                            spec->used_when_text()));
   }
   return scene;
 }

@@ -71,6 +71,30 @@ std::string ParamSpec::range_text() const {
                      max ? format_number(*max) : "inf");
 }
 
+std::string ParamSpec::used_when_text() const {
+  std::string out;
+  for (const auto& alternative : used_when) {
+    std::string all;
+    for (const auto& c : alternative) {
+      std::string values;
+      for (const auto& v : c.values)
+        values += (values.empty() ? "" : " or ") + v;
+      all += (all.empty() ? "" : " and ") + c.key + ": " + values;
+    }
+    out += (out.empty() ? "" : "; or ") + all;
+  }
+  return out;
+}
+
+Schema& Schema::used_when(std::vector<UseCondition> conditions) {
+  if (params_.empty()) throw std::logic_error("schema: used_when before any key");
+  for (const auto& c : conditions)
+    if (c.key.find('.') == std::string::npos || c.values.empty())
+      throw std::logic_error("schema: a condition names section.key and its values");
+  params_.back().used_when.push_back(std::move(conditions));
+  return *this;
+}
+
 Schema& Schema::section(const std::string& name, const std::string& doc, bool always_present) {
   if (find_section(name)) throw std::logic_error("schema: section declared twice: " + name);
   sections_.push_back({name, doc, always_present});
@@ -219,9 +243,11 @@ std::string Schema::to_text() const {
   for (const auto& sec : sections_) {
     out << sec.name << ":  # " << sec.doc << "\n";
     for (const auto* p : params_of(sec.name)) {
-      out << fmt::format("  {:<22} {:<8} default {:<16} {:<6} {:<14} {}\n", p->name,
+      const std::string when = p->used_when_text();
+      out << fmt::format("  {:<22} {:<8} default {:<16} {:<6} {:<14} {}{}\n", p->name,
                          to_string(p->type), value_to_text(p->default_value),
-                         p->unit.empty() ? "-" : p->unit, p->range_text(), p->doc);
+                         p->unit.empty() ? "-" : p->unit, p->range_text(), p->doc,
+                         when.empty() ? "" : " [used with " + when + "]");
     }
   }
   return out.str();
@@ -238,7 +264,8 @@ nlohmann::json Schema::to_json() const {
                           {"default", p->required() ? "" : value_to_text(p->default_value)},
                           {"unit", p->unit},
                           {"range", p->range_text()},
-                          {"doc", p->doc}};
+                          {"doc", p->doc},
+                          {"used_when", p->used_when_text()}};
       keys.push_back(k);
     }
     sections.push_back({{"section", sec.name}, {"doc", sec.doc}, {"keys", keys}});

@@ -1,7 +1,6 @@
 #include "organfit/dicom/ct_series.h"
 
 #include <fmt/format.h>
-#include <gdcmDirectory.h>
 #include <gdcmImage.h>
 #include <gdcmImageReader.h>
 #include <gdcmReader.h>
@@ -10,6 +9,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <sstream>
@@ -27,7 +27,8 @@ const gdcm::Tag kModality(0x0008, 0x0060), kSeriesUid(0x0020, 0x000e),
     kSeriesDescription(0x0008, 0x103e), kSopUid(0x0008, 0x0018), kSopClass(0x0008, 0x0016),
     kPosition(0x0020, 0x0032), kOrientation(0x0020, 0x0037), kPixelSpacing(0x0028, 0x0030),
     kRows(0x0028, 0x0010), kColumns(0x0028, 0x0011), kFrameOfReference(0x0020, 0x0052),
-    kGantryTilt(0x0018, 0x1120);
+    kGantryTilt(0x0018, 0x1120), kSliceThickness(0x0018, 0x0050),
+    kSpacingBetweenSlices(0x0018, 0x0088);
 
 std::string trimmed(const char* v) {
   if (!v) return {};
@@ -43,7 +44,7 @@ struct Header {
   std::string file, series_uid, description, sop_uid, sop_class, frame_of_reference;
   std::vector<double> position, orientation, spacing;
   int rows = 0, columns = 0;
-  double tilt = 0;
+  double tilt = 0, thickness = 0, spacing_between = 0;  ///< mm; 0 when not stated
 };
 
 }  // namespace
@@ -55,25 +56,52 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   if (!fs::is_directory(folder, ec)) fail("not a folder");
 
   detail::quiet_gdcm();
-  gdcm::Directory directory;
-  directory.Load(folder.string(), false);
+  // The folder is listed here, entry by entry, so that no entry stops the listing and
+  // none is lost without a word: what is not a regular file is counted and skipped.
   std::vector<std::string> files;
-  int unsafe = 0;  // files that are not DICOM at all: ignored with a warning
-  for (const auto& f : directory.GetFilenames()) {
-    if (detail::safe_for_gdcm(f)) {
-      files.push_back(f);
-    } else if (detail::is_part10(f)) {  // a DICOM file whose lengths run past its end
-      fail(fs::path(f).filename().string() +
-           ": a truncated or corrupt DICOM file (its elements run past its end)");
-    } else {
-      ++unsafe;
+  int unsafe = 0;     // files that are not DICOM at all: ignored with a warning
+  int irregular = 0;  // FIFOs, sockets, devices, folders, dangling or looping links
+  {
+    fs::directory_iterator it(folder, ec), end;
+    if (ec) fail("cannot list the folder: " + ec.message());
+    for (; it != end; it.increment(ec)) {
+      if (ec) fail("cannot list the folder: " + ec.message());
+      std::error_code status_ec;
+      if (!fs::is_regular_file(it->path(), status_ec)) {  // follows links to files
+        ++irregular;
+        continue;
+      }
+      const std::string f = it->path().string();
+      if (detail::safe_for_gdcm(f)) {
+        files.push_back(f);
+      } else if (detail::looks_like_dicom(f)) {  // a DICOM file whose lengths run past its end
+        fail(it->path().filename().string() +
+             ": a truncated or corrupt DICOM file (its elements run past its end, or it cannot "
+             "be read)");
+      } else {
+        ++unsafe;
+      }
     }
+    if (ec) fail("cannot list the folder: " + ec.message());
   }
-  if (files.empty() && unsafe == 0) fail("the folder is empty: no CT series");
+  std::sort(files.begin(), files.end());
+  if (files.empty() && unsafe == 0 && irregular == 0) fail("the folder is empty: no CT series");
+  const gdcm::Tag header_tags[] = {kModality,
+                                   kSeriesUid,
+                                   kSeriesDescription,
+                                   kSopUid,
+                                   kSopClass,
+                                   kPosition,
+                                   kOrientation,
+                                   kPixelSpacing,
+                                   kRows,
+                                   kColumns,
+                                   kFrameOfReference,
+                                   kGantryTilt,
+                                   kSliceThickness,
+                                   kSpacingBetweenSlices};
   gdcm::Scanner scanner;
-  for (const auto& t :
-       {kModality, kSeriesUid, kSeriesDescription, kSopUid, kSopClass, kPosition, kOrientation,
-        kPixelSpacing, kRows, kColumns, kFrameOfReference, kGantryTilt})
+  for (const auto& t : header_tags)
     scanner.AddTag(t);
   bool scanned = true;
   {
@@ -86,31 +114,65 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   int not_dicom = unsafe, other_modality = 0;
   std::map<std::string, std::vector<Header>> by_series;
   for (const auto& f : files) {
+    // The scanner reads headers only up to the tags it needs and cannot do so in every
+    // transfer syntax (a deflated data set): such a file's header is read whole instead.
+    std::map<gdcm::Tag, std::string> read_whole;
     if (!scanner.IsKey(f.c_str())) {
-      ++not_dicom;
-      continue;
+      gdcm::Reader reader;
+      reader.SetFileName(f.c_str());
+      bool read_ok = false;
+      {
+        ReadingInput guard(f.c_str(), "GDCM");
+        read_ok = reader.Read();
+      }
+      if (!read_ok) {
+        if (detail::looks_like_dicom(f))
+          fail(fs::path(f).filename().string() + ": a DICOM file that cannot be read");
+        ++not_dicom;
+        continue;
+      }
+      gdcm::StringFilter sf;
+      sf.SetFile(reader.GetFile());
+      for (const auto& t : header_tags)
+        if (reader.GetFile().GetDataSet().FindDataElement(t)) read_whole[t] = sf.ToString(t);
     }
-    const std::string modality = trimmed(scanner.GetValue(f.c_str(), kModality));
+    auto value = [&](const gdcm::Tag& t) -> std::string {
+      if (scanner.IsKey(f.c_str())) return trimmed(scanner.GetValue(f.c_str(), t));
+      const auto it = read_whole.find(t);
+      return it == read_whole.end() ? std::string() : trimmed(it->second.c_str());
+    };
+    const std::string modality = value(kModality);
     if (modality != "CT") {
       ++other_modality;
       continue;
     }
     Header h;
     h.file = f;
-    h.series_uid = trimmed(scanner.GetValue(f.c_str(), kSeriesUid));
-    h.description = trimmed(scanner.GetValue(f.c_str(), kSeriesDescription));
-    h.sop_uid = trimmed(scanner.GetValue(f.c_str(), kSopUid));
-    h.sop_class = trimmed(scanner.GetValue(f.c_str(), kSopClass));
-    h.frame_of_reference = trimmed(scanner.GetValue(f.c_str(), kFrameOfReference));
-    h.position = numbers(trimmed(scanner.GetValue(f.c_str(), kPosition)));
-    h.orientation = numbers(trimmed(scanner.GetValue(f.c_str(), kOrientation)));
-    h.spacing = numbers(trimmed(scanner.GetValue(f.c_str(), kPixelSpacing)));
-    h.rows = std::atoi(trimmed(scanner.GetValue(f.c_str(), kRows)).c_str());
-    h.columns = std::atoi(trimmed(scanner.GetValue(f.c_str(), kColumns)).c_str());
-    const std::string tilt = trimmed(scanner.GetValue(f.c_str(), kGantryTilt));
+    h.series_uid = value(kSeriesUid);
+    h.description = value(kSeriesDescription);
+    h.sop_uid = value(kSopUid);
+    h.sop_class = value(kSopClass);
+    h.frame_of_reference = value(kFrameOfReference);
+    h.position = numbers(value(kPosition));
+    h.orientation = numbers(value(kOrientation));
+    h.spacing = numbers(value(kPixelSpacing));
+    h.rows = std::atoi(value(kRows).c_str());
+    h.columns = std::atoi(value(kColumns).c_str());
+    const std::string tilt = value(kGantryTilt);
     h.tilt = tilt.empty() ? 0.0 : std::atof(tilt.c_str());
+    auto positive = [&](const gdcm::Tag& t) {
+      const double v = std::atof(value(t).c_str());
+      return std::isfinite(v) && v > 0 ? v : 0.0;
+    };
+    h.thickness = positive(kSliceThickness);
+    h.spacing_between = positive(kSpacingBetweenSlices);
     by_series[h.series_uid].push_back(std::move(h));
   }
+  if (irregular > 0)
+    series.warnings.push_back(fmt::format(
+        "{}: {} entr{} that are not regular files (folders, FIFOs, sockets, devices, dangling or "
+        "looping links) were skipped",
+        where, irregular, irregular == 1 ? "y" : "ies"));
   if (not_dicom > 0)
     series.warnings.push_back(
         fmt::format("{}: {} file(s) that are not DICOM were ignored", where, not_dicom));
@@ -118,31 +180,46 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     series.warnings.push_back(
         fmt::format("{}: {} DICOM object(s) that are not CT were ignored", where, other_modality));
   if (by_series.empty()) fail("no CT series (no DICOM file with Modality CT)");
+  // One SOP Instance UID, one image: two files claiming the same one are two exports of a
+  // slice, or a copy edited by hand; which is the CT cannot be told.
+  {
+    std::map<std::string, std::string> file_of_uid;
+    for (const auto& [uid, hs] : by_series)
+      for (const auto& h : hs) {
+        if (h.sop_uid.empty()) continue;
+        const auto [it, fresh] = file_of_uid.emplace(h.sop_uid, h.file);
+        if (!fresh)
+          fail(fmt::format("{} and {} have the same SOP Instance UID",
+                           fs::path(it->second).filename().string(),
+                           fs::path(h.file).filename().string()));
+      }
+  }
 
   // Choose the series.
   auto describe = [&]() {
     std::string list;
     for (const auto& [uid, hs] : by_series)
-      list += fmt::format("{}{} ('{}', {} slices)", list.empty() ? "" : "; ", uid,
-                          hs.front().description, hs.size());
-    return list;
+      list += fmt::format("{}{} ('{}', {} slices)", list.empty() ? "" : "; ", echo(uid, 64),
+                          echo(hs.front().description, 40), hs.size());
+    return echo(list, 400);
   };
   const std::vector<Header>* chosen = nullptr;
   if (!options.series_instance_uid.empty()) {
     auto it = by_series.find(options.series_instance_uid);
     if (it == by_series.end())
-      fail("no CT series with UID " + options.series_instance_uid + "; found: " + describe());
+      fail("no CT series with UID " + echo(options.series_instance_uid) + "; found: " + describe());
     chosen = &it->second;
   } else if (!options.series_description.empty()) {
     for (const auto& [uid, hs] : by_series)
       if (hs.front().description == options.series_description) {
         if (chosen)
-          fail("several CT series are described '" + options.series_description +
+          fail("several CT series are described '" + echo(options.series_description) +
                "': " + describe());
         chosen = &hs;
       }
     if (!chosen)
-      fail("no CT series described '" + options.series_description + "'; found: " + describe());
+      fail("no CT series described '" + echo(options.series_description) +
+           "'; found: " + describe());
   } else if (by_series.size() == 1) {
     chosen = &by_series.begin()->second;
   } else {
@@ -151,26 +228,50 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   }
   std::vector<Header> slices = *chosen;
 
-  // Consistent geometry across slices.
-  const Header& first = slices.front();
-  if (first.orientation.size() != 6 || first.spacing.size() != 2 || first.position.size() != 3 ||
-      first.rows <= 0 || first.columns <= 0)
-    fail("slice " + fs::path(first.file).filename().string() +
-         " lacks its geometry (orientation, spacing, position or size)");
-  for (const auto& h : slices) {
-    if (h.rows != first.rows || h.columns != first.columns)
-      fail("slices differ in size (" + fs::path(h.file).filename().string() + ")");
-    if (h.spacing.size() != 2 || std::abs(h.spacing[0] - first.spacing[0]) > 1e-4 ||
-        std::abs(h.spacing[1] - first.spacing[1]) > 1e-4)
-      fail("inconsistent pixel spacing (" + fs::path(h.file).filename().string() + ")");
-    if (h.orientation.size() != 6 || h.position.size() != 3)
-      fail("slice " + fs::path(h.file).filename().string() + " lacks its orientation or position");
+  // Consistent geometry across slices, judged against what most slices say, so that an
+  // error names the odd slice rather than whichever was read first.
+  auto name_of = [](const Header& h) { return fs::path(h.file).filename().string(); };
+  for (const auto& h : slices)
+    if (h.orientation.size() != 6 || h.spacing.size() != 2 || h.position.size() != 3 ||
+        h.rows <= 0 || h.columns <= 0)
+      fail("slice " + name_of(h) + " lacks its geometry (orientation, spacing, position or size)");
+  auto most_common = [&](auto key) {
+    std::map<decltype(key(slices.front())), int> count;
+    for (const auto& h : slices)
+      ++count[key(h)];
+    return std::max_element(count.begin(), count.end(),
+                            [](const auto& a, const auto& b) { return a.second < b.second; })
+        ->first;
+  };
+  const auto size = most_common([](const Header& h) { return std::make_pair(h.rows, h.columns); });
+  const auto spacing = most_common([](const Header& h) {
+    return std::make_pair(std::lround(h.spacing[0] * 1e4), std::lround(h.spacing[1] * 1e4));
+  });
+  const auto orientation = most_common([](const Header& h) {
+    std::array<long, 6> o{};
     for (int c = 0; c < 6; ++c)
-      if (std::abs(h.orientation[c] - first.orientation[c]) > 1e-4)
-        fail("slices differ in orientation (" + fs::path(h.file).filename().string() + ")");
+      o[c] = std::lround(h.orientation[c] * 1e4);
+    return o;
+  });
+  const Header* reference = nullptr;
+  for (const auto& h : slices) {
+    if (std::make_pair(h.rows, h.columns) != size)
+      fail(fmt::format("slice {} is {} x {} pixels, the others {} x {}: slices differ in size",
+                       name_of(h), h.columns, h.rows, size.second, size.first));
+    if (std::abs(h.spacing[0] * 1e4 - spacing.first) > 1 ||
+        std::abs(h.spacing[1] * 1e4 - spacing.second) > 1)
+      fail(fmt::format(
+          "slice {} has inconsistent pixel spacing ({:g} x {:g} mm, the others {:g} x "
+          "{:g})",
+          name_of(h), h.spacing[0], h.spacing[1], spacing.first * 1e-4, spacing.second * 1e-4));
+    for (int c = 0; c < 6; ++c)
+      if (std::abs(h.orientation[c] * 1e4 - orientation[c]) > 1)
+        fail("slices differ in orientation (" + name_of(h) + ")");
     if (std::abs(h.tilt) > 1e-3)
       fail(fmt::format("gantry tilt of {} degrees: tilted series are not supported", h.tilt));
+    if (!reference) reference = &h;
   }
+  const Header first = *reference;  // a copy: the slices are sorted below
   const Eigen::Vector3d row_dir(first.orientation[0], first.orientation[1], first.orientation[2]);
   const Eigen::Vector3d col_dir(first.orientation[3], first.orientation[4], first.orientation[5]);
   const Eigen::Vector3d normal = row_dir.cross(col_dir).normalized();
@@ -193,8 +294,15 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
                        fs::path(slices[s].file).filename().string()));
     gaps.push_back(gap);
   }
-  double slice_gap = 1.0;
-  if (!gaps.empty()) {
+  double slice_gap = 0;
+  if (gaps.empty()) {
+    // One slice: its thickness is stated, never assumed.
+    slice_gap = first.spacing_between > 0 ? first.spacing_between : first.thickness;
+    if (!(slice_gap > 0))
+      fail("slice " + name_of(first) +
+           " is the only one and states neither Spacing Between Slices nor Slice Thickness: its "
+           "thickness is unknown");
+  } else {
     std::vector<double> sorted = gaps;
     std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
     slice_gap = sorted[sorted.size() / 2];
@@ -205,11 +313,24 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
       if (std::abs(ratio - std::round(ratio)) < 0.05 && ratio > 1.5)
         fail(
             fmt::format("missing slice: a gap of {:.2f} mm between {:.2f} and {:.2f} mm (slices "
-                        "are {:.2f} mm apart)",
-                        gaps[s], lo, hi, slice_gap));
+                        "are {:.2f} mm apart; between {} and {})",
+                        gaps[s], lo, hi, slice_gap, name_of(slices[s]), name_of(slices[s + 1])));
+      // The odd slice: the one farthest from the regular lattice the others lie on.
+      std::vector<double> offsets;
+      for (size_t k = 0; k < slices.size(); ++k)
+        offsets.push_back(along(slices[k]) - slice_gap * static_cast<double>(k));
+      std::vector<double> sorted_offsets = offsets;
+      std::nth_element(sorted_offsets.begin(), sorted_offsets.begin() + sorted_offsets.size() / 2,
+                       sorted_offsets.end());
+      const double lattice = sorted_offsets[sorted_offsets.size() / 2];
+      size_t odd = 0;
+      for (size_t k = 1; k < slices.size(); ++k)
+        if (std::abs(offsets[k] - lattice) > std::abs(offsets[odd] - lattice)) odd = k;
       fail(fmt::format(
-          "irregular slice spacing: {:.2f} mm between {:.2f} and {:.2f} mm, {:.2f} mm elsewhere",
-          gaps[s], lo, hi, slice_gap));
+          "irregular slice spacing: slice {} lies at {:.2f} mm, {:+.2f} mm off the {:.2f} mm "
+          "spacing of the others ({:.2f} mm between {:.2f} and {:.2f} mm)",
+          name_of(slices[odd]), along(slices[odd]), offsets[odd] - lattice, slice_gap, gaps[s], lo,
+          hi));
     }
     // Positions must advance along the normal only (else the series is tilted or sheared).
     const Eigen::Vector3d p0(first.position[0], first.position[1], first.position[2]);
@@ -231,6 +352,7 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   g.direction.col(0) = row_dir;
   g.direction.col(1) = col_dir;
   g.direction.col(2) = normal;
+  series.folder = folder;
   series.series_instance_uid = first.series_uid;
   series.series_description = first.description;
   series.frame_of_reference_uid = first.frame_of_reference;
@@ -310,6 +432,32 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
       p.study_description = get(0x0008, 0x1030);
       p.accession_number = get(0x0008, 0x0050);
       p.referring_physician_name = get(0x0008, 0x0090);
+      // Text in the source's character set becomes UTF-8, which organfit declares.
+      const std::string charset = get(0x0008, 0x0005);
+      bool converted = true;
+      for (std::string* text : {&p.patient_name, &p.patient_id, &p.study_id, &p.study_description,
+                                &p.accession_number, &p.referring_physician_name}) {
+        std::string utf8;
+        if (converted && detail::to_utf8(*text, charset, utf8))
+          *text = utf8;
+        else
+          converted = false;
+      }
+      if (!converted) {  // kept as they were, in the source's own character set
+        p = {};
+        p.patient_name = get(0x0010, 0x0010);
+        p.patient_id = get(0x0010, 0x0020);
+        p.patient_birth_date = get(0x0010, 0x0030);
+        p.patient_sex = get(0x0010, 0x0040);
+        p.study_instance_uid = get(0x0020, 0x000d);
+        p.study_id = get(0x0020, 0x0010);
+        p.study_date = get(0x0008, 0x0020);
+        p.study_time = get(0x0008, 0x0030);
+        p.study_description = get(0x0008, 0x1030);
+        p.accession_number = get(0x0008, 0x0050);
+        p.referring_physician_name = get(0x0008, 0x0090);
+        p.specific_character_set = charset;
+      }
     }
   }
   return series;

@@ -75,7 +75,9 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
     gdcm::Writer writer;
     gdcm::DataSet& ds = writer.GetFile().GetDataSet();
     // SOP Common, Patient, General Study.
-    put(ds, 0x0008, 0x0005, V::CS, "ISO_IR 192");
+    put(ds, 0x0008, 0x0005, V::CS,
+        ct.patient.specific_character_set.empty() ? "ISO_IR 192"
+                                                  : ct.patient.specific_character_set);
     put(ds, 0x0008, 0x0008, V::CS, "ORIGINAL\\PRIMARY\\AXIAL");
     detail::put_patient_study(ds, ct.patient);  // Patient, General Study: verbatim
     put(ds, 0x0008, 0x0016, V::UI, kCtImageClass);

@@ -1,12 +1,15 @@
 #include "dicom_values.h"
 
 #include <gdcmTrace.h>
+#include <iconv.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <sstream>
@@ -117,7 +120,12 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
       length = r32(e + 8);
       if (length ==
           0xFFFFFFFFLL) {  // undefined length: a sequence, or encapsulated pixel fragments
-        at = walk(b, at + 12, end, depth + 1, ok, implicit, vr != "SQ", big, true);
+        // UN of undefined length is a sequence in implicit VR little endian (PS3.5
+        // 6.2.2), as gdcmconv writes private sequences; OB/OW ones hold pixel fragments.
+        if (vr == "UN")
+          at = walk(b, at + 12, end, depth + 1, ok, true, false, false, true);
+        else
+          at = walk(b, at + 12, end, depth + 1, ok, implicit, vr != "SQ", big, true);
         if (!ok) return -1;
         continue;
       }
@@ -135,6 +143,28 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
   return at;
 }
 
+/// Inflates a raw deflate stream (RFC 1951, as the Deflated Explicit VR Little Endian
+/// transfer syntax stores the data set). False when it is not one, or would exceed 2 GiB.
+bool inflate_raw(const unsigned char* data, size_t size, std::vector<unsigned char>& out) {
+  z_stream z{};
+  if (inflateInit2(&z, -MAX_WBITS) != Z_OK) return false;
+  z.next_in = const_cast<unsigned char*>(data);
+  z.avail_in = static_cast<uInt>(size);
+  unsigned char chunk[1 << 16];
+  int rc = Z_OK;
+  while (rc == Z_OK) {
+    z.next_out = chunk;
+    z.avail_out = sizeof chunk;
+    rc = inflate(&z, Z_NO_FLUSH);
+    if (rc != Z_OK && rc != Z_STREAM_END) break;
+    out.insert(out.end(), chunk, chunk + (sizeof chunk - z.avail_out));
+    if (out.size() > (size_t{1} << 31)) rc = Z_MEM_ERROR;
+    if (rc == Z_OK && z.avail_in == 0 && z.avail_out != 0) rc = Z_BUF_ERROR;  // cut short
+  }
+  inflateEnd(&z);
+  return rc == Z_STREAM_END;
+}
+
 }  // namespace
 
 bool is_part10(const std::string& file) {
@@ -142,6 +172,57 @@ bool is_part10(const std::string& file) {
   char head[132] = {};
   in.read(head, sizeof head);
   return in.gcount() == 132 && std::memcmp(head + 128, "DICM", 4) == 0;
+}
+
+bool to_utf8(const std::string& value, const std::string& charset, std::string& utf8) {
+  std::string term = charset;
+  while (!term.empty() && (term.back() == ' ' || term.back() == '\0'))
+    term.pop_back();
+  while (!term.empty() && term.front() == ' ')
+    term.erase(term.begin());
+  if (term.find('\\') != std::string::npos || term.rfind("ISO 2022", 0) == 0) return false;
+  static const std::pair<const char*, const char*> names[] = {{"", "ISO-8859-1"},
+                                                              {"ISO_IR 6", "ISO-8859-1"},
+                                                              {"ISO_IR 100", "ISO-8859-1"},
+                                                              {"ISO_IR 101", "ISO-8859-2"},
+                                                              {"ISO_IR 109", "ISO-8859-3"},
+                                                              {"ISO_IR 110", "ISO-8859-4"},
+                                                              {"ISO_IR 144", "ISO-8859-5"},
+                                                              {"ISO_IR 127", "ISO-8859-6"},
+                                                              {"ISO_IR 126", "ISO-8859-7"},
+                                                              {"ISO_IR 138", "ISO-8859-8"},
+                                                              {"ISO_IR 148", "ISO-8859-9"},
+                                                              {"ISO_IR 203", "ISO-8859-15"},
+                                                              {"ISO_IR 166", "TIS-620"},
+                                                              {"ISO_IR 13", "JIS_X0201"},
+                                                              {"ISO_IR 192", "UTF-8"},
+                                                              {"GB18030", "GB18030"},
+                                                              {"GBK", "GBK"}};
+  const char* from = nullptr;
+  for (const auto& [dicom, iconv_name] : names)
+    if (term == dicom) from = iconv_name;
+  if (!from) return false;
+  iconv_t cd = iconv_open("UTF-8", from);
+  if (cd == reinterpret_cast<iconv_t>(-1)) return false;
+  std::string in = value;
+  std::string out(4 * in.size() + 4, '\0');
+  char* in_p = in.data();
+  size_t in_left = in.size();
+  char* out_p = out.data();
+  size_t out_left = out.size();
+  const size_t rc = iconv(cd, &in_p, &in_left, &out_p, &out_left);
+  iconv_close(cd);
+  if (rc == static_cast<size_t>(-1)) return false;
+  out.resize(out.size() - out_left);
+  utf8 = out;
+  return true;
+}
+
+bool looks_like_dicom(const std::string& file) {
+  std::string ext = std::filesystem::path(file).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext == ".dcm" || ext == ".dicom" || is_part10(file);
 }
 
 bool safe_for_gdcm(const std::string& file) {
@@ -190,6 +271,14 @@ bool safe_for_gdcm(const std::string& file) {
   // length before reading: a corrupt length cost 1.8 GB per file (found by fuzzing).
   while (!syntax.empty() && (syntax.back() == '\0' || syntax.back() == ' '))
     syntax.pop_back();
+  if (syntax == "1.2.840.10008.1.2.1.99") {  // deflated explicit VR: walk it inflated
+    std::vector<unsigned char> inflated;
+    if (!inflate_raw(b.data() + meta_end, static_cast<size_t>(size - meta_end), inflated))
+      return false;
+    bool ok = true;
+    const long long n = static_cast<long long>(inflated.size());
+    return walk(inflated, 0, n, 0, ok, false, false, false) == n && ok;
+  }
   bool ok = true;  // explicit big endian (retired) is walked too: GDCM allocated 2.4 GB on one
   const long long end = walk(b, meta_end, size, 0, ok, syntax == "1.2.840.10008.1.2", false,
                              syntax == "1.2.840.10008.1.2.2");

@@ -16,10 +16,20 @@ bool safe_for_gdcm(const std::string& file);
 /// True when the file has the DICOM Part 10 marker ("DICM" after a 128-byte preamble).
 bool is_part10(const std::string& file);
 
+/// True when a file claims to be DICOM: the Part 10 marker, or a .dcm / .dicom name. Such
+/// a file that cannot be read is an error, never "not DICOM".
+bool looks_like_dicom(const std::string& file);
+
 /// False when a file's native (unencapsulated) Pixel Data element runs past the end of
 /// the file: the element is found by its tag (7FE0,0010) in explicit or implicit little
 /// endian, and its declared length must fit.
 bool native_pixel_data_complete(const std::string& file);
+
+/// A text value of a data set whose Specific Character Set (0008,0005) is `charset`, as
+/// UTF-8 (PS3.3 C.12.1.1.2's defined terms; none declared: ISO-IR 6, bytes above 0x7F
+/// read as Latin-1, as pydicom does). False for a character set with code extensions
+/// (ISO 2022 ...), whose text is kept as it is, or bytes the character set has not.
+bool to_utf8(const std::string& value, const std::string& charset, std::string& utf8);
 
 /// A multi-valued DICOM number string ("1.5\-2\3") as numbers; NaN where a value is not
 /// a number (the caller decides whether that is an error).

@@ -48,6 +48,19 @@ const Roi* StructureSet::find(const std::string& name) const {
   return nullptr;
 }
 
+std::vector<const Roi*> StructureSet::rois_named(const std::string& name) const {
+  std::vector<const Roi*> out;
+  for (const auto& r : rois)
+    if (r.name == name) out.push_back(&r);
+  return out;
+}
+
+const Roi* StructureSet::find_number(int number) const {
+  for (const auto& r : rois)
+    if (r.number == number) return &r;
+  return nullptr;
+}
+
 StructureSet read_rtstruct(const fs::path& file) {
   const std::string where = file.string();
   detail::quiet_gdcm();
@@ -67,6 +80,13 @@ StructureSet read_rtstruct(const fs::path& file) {
     throw InputError(where + ": not an RT Structure Set (Modality '" + text(ds, 0x0008, 0x0060) +
                      "')");
   StructureSet rtss;
+  rtss.patient_id = text(ds, 0x0010, 0x0020);
+  if (std::string utf8; detail::to_utf8(rtss.patient_id, text(ds, 0x0008, 0x0005), utf8))
+    rtss.patient_id = utf8;  // compared with the CT's, which is UTF-8 too
+  rtss.study_instance_uid = text(ds, 0x0020, 0x000d);
+  if (auto sq = sequence(ds, 0x3006, 0x0010); sq && sq->GetNumberOfItems() > 0)
+    rtss.referenced_frame_of_reference_uid =
+        text(sq->GetItem(1).GetNestedDataSet(), 0x0020, 0x0052);
   std::map<int, Roi> by_number;
   if (auto sq = sequence(ds, 0x3006, 0x0020)) {  // Structure Set ROI Sequence
     for (size_t i = 1; i <= sq->GetNumberOfItems(); ++i) {
@@ -100,6 +120,9 @@ StructureSet read_rtstruct(const fs::path& file) {
           contour.referenced_sop_instance_uid =
               text(images->GetItem(1).GetNestedDataSet(), 0x0008, 0x1155);
         const std::vector<double> xyz = numbers(text(cds, 0x3006, 0x0050));
+        contour.value_count = static_cast<long>(xyz.size());
+        const std::string declared = text(cds, 0x3006, 0x0046);
+        if (!declared.empty()) contour.declared_points = std::atol(declared.c_str());
         for (size_t p = 0; p + 2 < xyz.size(); p += 3)
           contour.points_mm.emplace_back(xyz[p], xyz[p + 1], xyz[p + 2]);
         roi.contours.push_back(std::move(contour));
@@ -114,25 +137,47 @@ StructureSet read_rtstruct(const fs::path& file) {
 
 namespace {
 
-/// The CT slice a contour lies on: the one its Referenced SOP Instance UID names, else
-/// the slice at its mean position along the normal (within a tenth of the slice gap);
-/// -1 when none.
+enum class Placement { kNone, kByReference, kByPosition };
+
+/// The CT slice a contour lies on: the one its Referenced SOP Instance UID names when its
+/// mean position along the normal is within kContourSliceTolerance of it, else the slice
+/// at that position (within the same tolerance); -1 when none.
 int slice_of_contour(const Contour& contour, const CtSeries& ct,
-                     const std::map<std::string, int>& slice_of_uid, bool& by_position) {
-  by_position = false;
-  const auto it = slice_of_uid.find(contour.referenced_sop_instance_uid);
-  if (it != slice_of_uid.end()) return it->second;
+                     const std::map<std::string, int>& slice_of_uid, Placement& how) {
+  how = Placement::kNone;
   if (contour.points_mm.empty()) return -1;
   double k_sum = 0;
   for (const auto& p : contour.points_mm)
     k_sum += ct.geometry.physical_to_index(p).z();
   const double k = k_sum / static_cast<double>(contour.points_mm.size());
+  if (!std::isfinite(k)) return -1;
+  const auto it = slice_of_uid.find(contour.referenced_sop_instance_uid);
+  if (it != slice_of_uid.end() && std::abs(k - it->second) <= kContourSliceTolerance) {
+    how = Placement::kByReference;
+    return it->second;
+  }
   const long nearest = std::lround(k);
-  if (!std::isfinite(k) || nearest < 0 || nearest >= ct.geometry.size[2] ||
-      std::abs(k - nearest) > 0.1)
+  if (nearest < 0 || nearest >= ct.geometry.size[2] ||
+      std::abs(k - nearest) > kContourSliceTolerance)
     return -1;
-  by_position = true;
+  how = Placement::kByPosition;
   return static_cast<int>(nearest);
+}
+
+/// Twice the signed area of a polygon in the plane.
+double twice_area(const std::vector<Eigen::Vector2d>& poly) {
+  double a = 0;
+  for (size_t e = 0; e < poly.size(); ++e) {
+    const Eigen::Vector2d& p = poly[e];
+    const Eigen::Vector2d& q = poly[(e + 1) % poly.size()];
+    a += p.x() * q.y() - q.x() * p.y();
+  }
+  return a;
+}
+
+/// True when a contour's Contour Data holds 3 values per declared point.
+bool value_count_agrees(const Contour& c) {
+  return c.declared_points < 0 ? c.value_count % 3 == 0 : c.value_count == 3 * c.declared_points;
 }
 
 std::map<std::string, int> slices_by_uid(const CtSeries& ct) {
@@ -148,15 +193,18 @@ RoiOnSlices roi_on_slices(const Roi& roi, const CtSeries& ct) {
   RoiOnSlices out;
   const auto slice_of_uid = slices_by_uid(ct);
   for (const auto& contour : roi.contours) {
-    bool by_position = false;
-    const int k = contour.geometric_type == "CLOSED_PLANAR" && contour.points_mm.size() >= 3
-                      ? slice_of_contour(contour, ct, slice_of_uid, by_position)
-                      : -1;
-    if (k < 0) {
+    Placement how = Placement::kNone;
+    const bool usable = contour.geometric_type == "CLOSED_PLANAR" &&
+                        contour.points_mm.size() >= 3 && value_count_agrees(contour);
+    const int k = usable ? slice_of_contour(contour, ct, slice_of_uid, how) : -1;
+    std::vector<Eigen::Vector2d> poly;
+    for (const auto& p : contour.points_mm)
+      poly.emplace_back(p.x(), p.y());
+    if (k < 0 || !(std::abs(twice_area(poly)) > 0)) {
       ++out.skipped;
       continue;
     }
-    out.matched_by_position += by_position;
+    out.matched_by_position += how == Placement::kByPosition;
     geometry::SliceContour c;
     c.k = k;
     c.points_mm = contour.points_mm;
@@ -165,22 +213,74 @@ RoiOnSlices roi_on_slices(const Roi& roi, const CtSeries& ct) {
   return out;
 }
 
-RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, const CtSeries& ct,
-                            const std::string& source) {
-  auto fail = [&](const std::string& why) { throw InputError(source + ": " + why); };
-  const Roi* roi = rtss.find(name);
-  if (!roi) {
-    std::string names;
-    for (const auto& r : rtss.rois)
-      names += (names.empty() ? "" : ", ") + ("'" + r.name + "'");
-    fail(fmt::format("no ROI named '{}' (the structure set has {})", name,
-                     names.empty() ? "none" : names));
+void check_structure_set_matches_ct(const StructureSet& rtss, const Roi& roi, const CtSeries& ct,
+                                    const std::string& source) {
+  const std::string ct_name = ct.folder.empty() ? std::string("the CT") : ct.folder.string();
+  auto fail = [&](const std::string& why) {
+    throw InputError(
+        fmt::format("{}: {} ({}): not a structure set of this CT", source, why, ct_name));
+  };
+  if (!rtss.patient_id.empty() && !ct.patient.patient_id.empty() &&
+      rtss.patient_id != ct.patient.patient_id)
+    fail("its Patient ID differs from the CT's");
+  if (!rtss.study_instance_uid.empty() && !ct.patient.study_instance_uid.empty() &&
+      rtss.study_instance_uid != ct.patient.study_instance_uid)
+    fail("its Study Instance UID differs from the CT's");
+  const std::string& frame = !roi.frame_of_reference_uid.empty()
+                                 ? roi.frame_of_reference_uid
+                                 : rtss.referenced_frame_of_reference_uid;
+  if (!frame.empty() && frame != ct.frame_of_reference_uid)
+    fail(fmt::format("ROI '{}' is in another Frame of Reference than the CT", echo(roi.name)));
+  if (frame.empty()) {
+    const auto slice_of_uid = slices_by_uid(ct);
+    for (const auto& c : roi.contours)
+      if (!slice_of_uid.count(c.referenced_sop_instance_uid))
+        fail(fmt::format(
+            "it names no Frame of Reference and ROI '{}' has contours that reference no slice of "
+            "the CT",
+            echo(roi.name)));
   }
-  if (!roi->frame_of_reference_uid.empty() &&
-      roi->frame_of_reference_uid != ct.frame_of_reference_uid)
-    fail(fmt::format("ROI '{}' is in another Frame of Reference than the CT ({} vs {})", name,
-                     roi->frame_of_reference_uid, ct.frame_of_reference_uid));
-  if (roi->contours.empty()) fail(fmt::format("ROI '{}' has no contours", name));
+}
+
+const Roi& choose_roi(const StructureSet& rtss, const std::string& name, int roi_number,
+                      const std::string& source) {
+  auto fail = [&](const std::string& why) { throw InputError(source + ": " + why); };
+  auto names = [&]() {
+    std::string list;
+    for (const auto& r : rtss.rois)
+      list += (list.empty() ? "" : ", ") + ("'" + echo(r.name, 40) + "'");
+    return list.empty() ? std::string("none") : echo(list, 400);
+  };
+  if (roi_number > 0) {
+    const Roi* roi = rtss.find_number(roi_number);
+    if (!roi) fail(fmt::format("no ROI number {} (the structure set has {})", roi_number, names()));
+    if (!name.empty() && roi->name != name)
+      fail(fmt::format("ROI number {} is named '{}', not '{}'", roi_number, echo(roi->name),
+                       echo(name)));
+    return *roi;
+  }
+  const std::vector<const Roi*> named = rtss.rois_named(name);
+  if (named.empty())
+    fail(fmt::format("no ROI named '{}' (the structure set has {})", echo(name), names()));
+  if (named.size() > 1) {
+    std::string numbers;
+    for (const Roi* r : named)
+      numbers += (numbers.empty() ? "" : ", ") + std::to_string(r->number);
+    fail(
+        fmt::format("{} ROIs are named '{}' (ROI numbers {}): choose one by its number "
+                    "(organ.roi_number, or segment --roi-number)",
+                    named.size(), echo(name), numbers));
+  }
+  return *named.front();
+}
+
+RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, const CtSeries& ct,
+                            const std::string& source, int roi_number) {
+  auto fail = [&](const std::string& why) { throw InputError(source + ": " + why); };
+  const Roi* roi = &choose_roi(rtss, name, roi_number, source);
+  const std::string shown = echo(roi->name);
+  check_structure_set_matches_ct(rtss, *roi, ct, source);
+  if (roi->contours.empty()) fail(fmt::format("ROI '{}' has no contours", shown));
 
   const geometry::ImageGeometry& g = ct.geometry;
   RasterisedRoi out;
@@ -189,26 +289,45 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
 
   // Group each contour's polygon (in continuous i, j index) under its slice.
   std::vector<std::vector<std::vector<Eigen::Vector2d>>> polygons(g.size[2]);
+  int placed = 0;
   for (size_t c = 0; c < roi->contours.size(); ++c) {
     const Contour& contour = roi->contours[c];
-    const std::string which = fmt::format("ROI '{}' contour {}", name, c + 1);
+    const std::string which = fmt::format("ROI '{}' contour {}", shown, c + 1);
     if (contour.geometric_type != "CLOSED_PLANAR")
-      fail(fmt::format("{} is {} (a volume needs CLOSED_PLANAR contours)", which,
-                       contour.geometric_type.empty() ? "of no type" : contour.geometric_type));
-    if (contour.points_mm.size() < 3)
-      fail(fmt::format("{} has {} point(s), fewer than 3", which, contour.points_mm.size()));
+      fail(fmt::format(
+          "{} is {} (a volume needs CLOSED_PLANAR contours)", which,
+          contour.geometric_type.empty() ? "of no type" : echo(contour.geometric_type)));
+    if (!value_count_agrees(contour))
+      fail(fmt::format("{}: its Contour Data has {} values, not 3 x Number of Contour Points ({})",
+                       which, contour.value_count, contour.declared_points));
     std::vector<Eigen::Vector2d> poly;
     for (const auto& p : contour.points_mm) {
       if (!p.allFinite()) fail(which + " has a non-finite coordinate");
       const Eigen::Vector3d idx = g.physical_to_index(p);
       poly.emplace_back(idx.x(), idx.y());
     }
-    bool by_position = false;
-    const int slice = slice_of_contour(contour, ct, slice_of_uid, by_position);
+    Placement how = Placement::kNone;
+    const int slice = slice_of_contour(contour, ct, slice_of_uid, how);
+    const double along =
+        contour.points_mm.empty() ? 0.0 : g.direction.col(2).dot(contour.points_mm.front());
+    const std::string on_slice = slice >= 0 ? fmt::format("on slice {} (z {:.2f} mm)", slice, along)
+                                            : fmt::format("at z {:.2f} mm", along);
+    // Degenerate contours carry no area: skipped, as plastimatch does, the organ kept.
+    if (contour.points_mm.size() < 3 || !(std::abs(twice_area(poly)) > 1e-9)) {
+      out.warnings.push_back(
+          fmt::format("{}: {} {} {}: skipped", source, which, on_slice,
+                      contour.points_mm.size() < 3
+                          ? fmt::format("has {} point(s), fewer than 3", contour.points_mm.size())
+                          : std::string("has zero area")));
+      ++out.skipped;
+      continue;
+    }
     if (slice < 0)
-      fail(fmt::format("{} lies on no slice of the CT (at {:.2f} mm along the slice normal)", which,
-                       g.direction.col(2).dot(contour.points_mm.front())));
-    if (by_position) ++out.matched_by_position;
+      fail(
+          fmt::format("{} lies on no slice of the CT (at {:.2f} mm along the slice normal, more "
+                      "than {} slice gap from the nearest)",
+                      which, along, kContourSliceTolerance));
+    if (how == Placement::kByPosition) ++out.matched_by_position;
     const auto [xmin, xmax] = std::minmax_element(poly.begin(), poly.end(),
                                                   [](auto& a, auto& b) { return a.x() < b.x(); });
     const auto [ymin, ymax] = std::minmax_element(poly.begin(), poly.end(),
@@ -217,13 +336,18 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
         ymin->y() > g.size[1] - 0.5)
       fail(which + " lies outside the image");
     polygons[slice].push_back(std::move(poly));
-    ++out.contours;
+    ++placed;
   }
+  out.contours = placed;
+  if (placed == 0)
+    fail(
+        fmt::format("ROI '{}' has no usable contour ({} skipped: fewer than 3 points or zero area)",
+                    shown, out.skipped));
   if (out.matched_by_position > 0)
     out.warnings.push_back(
-        fmt::format("{}: {} of {} contours of ROI '{}' reference CT slices that are not in this "
-                    "series; matched by position",
-                    source, out.matched_by_position, out.contours, name));
+        fmt::format("{}: {} of {} contours of ROI '{}' reference no slice of this series that they "
+                    "lie on; matched by position",
+                    source, out.matched_by_position, out.contours, shown));
 
   // Even-odd scanline fill per slice, over all the slice's contours together.
   for (int k = 0; k < g.size[2]; ++k) {

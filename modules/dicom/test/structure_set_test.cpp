@@ -82,10 +82,107 @@ TEST(RasteriseRoi, RefusesBadStructureSetsNamingTheProblem) {
   EXPECT_EQ(error_of(s, "Organ", ct),
             "rt.dcm: ROI 'Organ' contour 1 is OPEN_PLANAR (a volume needs CLOSED_PLANAR contours)");
   s.rois[0].contours = {{"CLOSED_PLANAR", "", {{1, 1, 2}, {5, 1, 2}}}};
-  EXPECT_EQ(error_of(s, "Organ", ct), "rt.dcm: ROI 'Organ' contour 1 has 2 point(s), fewer than 3");
+  EXPECT_EQ(error_of(s, "Organ", ct),
+            "rt.dcm: ROI 'Organ' has no usable contour (1 skipped: fewer than 3 points or zero "
+            "area)");
+  s.rois[0].contours = {square(4.5, 4.5, 10, 2)};
+  s.rois[0].contours[0].value_count = 11;
+  s.rois[0].contours[0].declared_points = 4;
+  EXPECT_EQ(error_of(s, "Organ", ct),
+            "rt.dcm: ROI 'Organ' contour 1: its Contour Data has 11 values, not 3 x Number of "
+            "Contour Points (4)");
   s.rois[0].contours = {square(100, 100, 10, 2)};
   EXPECT_EQ(error_of(s, "Organ", ct), "rt.dcm: ROI 'Organ' contour 1 lies outside the image");
   s.rois[0].contours = {square(4.5, 4.5, 10, 3.0)};  // between slices 1 and 2
+  EXPECT_NE(error_of(s, "Organ", ct).find("lies on no slice"), std::string::npos);
+}
+
+TEST(RasteriseRoi, RefusesAStructureSetOfAnotherPatientStudyOrFrameNamingNoValue) {
+  CtSeries ct = small_ct();
+  ct.folder = "ctdir";
+  ct.patient.patient_id = "PAT-001";
+  ct.patient.study_instance_uid = "1.2.3.9";
+  StructureSet s;
+  s.patient_id = "PAT-001";
+  s.study_instance_uid = "1.2.3.9";
+  Roi roi;
+  roi.name = "Organ";
+  roi.frame_of_reference_uid = "1.2.3.4";
+  roi.contours = {square(4.5, 4.5, 10, 2)};
+  s.rois.push_back(roi);
+  EXPECT_EQ(error_of(s, "Organ", ct), "no error");
+  s.patient_id = "PAT-002";
+  EXPECT_EQ(error_of(s, "Organ", ct),
+            "rt.dcm: its Patient ID differs from the CT's (ctdir): not a structure set of this CT");
+  s.patient_id = "PAT-001";
+  s.study_instance_uid = "1.2.3.8";
+  EXPECT_EQ(error_of(s, "Organ", ct),
+            "rt.dcm: its Study Instance UID differs from the CT's (ctdir): not a structure set of "
+            "this CT");
+  s.study_instance_uid = "1.2.3.9";
+  // No Frame of Reference anywhere: only contours that reference the CT's slices place it.
+  s.rois[0].frame_of_reference_uid.clear();
+  EXPECT_NE(error_of(s, "Organ", ct).find("names no Frame of Reference"), std::string::npos);
+  s.rois[0].contours = {square(4.5, 4.5, 10, 2, "1.2.3.4.5.1")};
+  EXPECT_EQ(error_of(s, "Organ", ct), "no error");
+  // The set's own Referenced Frame of Reference stands for an ROI that names none.
+  s.referenced_frame_of_reference_uid = "7.7";
+  EXPECT_NE(error_of(s, "Organ", ct).find("another Frame of Reference"), std::string::npos);
+}
+
+TEST(RasteriseRoi, TwoRoisOfOneNameNeedTheirNumber) {
+  const CtSeries ct = small_ct();
+  StructureSet s;
+  for (int n : {3, 7}) {
+    Roi roi;
+    roi.number = n;
+    roi.name = "GTV";
+    roi.frame_of_reference_uid = "1.2.3.4";
+    roi.contours = {square(4.5, 4.5, n == 3 ? 10 : 20, 2)};
+    s.rois.push_back(roi);
+  }
+  EXPECT_EQ(error_of(s, "GTV", ct),
+            "rt.dcm: 2 ROIs are named 'GTV' (ROI numbers 3, 7): choose one by its number "
+            "(organ.roi_number, or segment --roi-number)");
+  EXPECT_EQ(rasterise_roi(s, "GTV", ct, "rt.dcm", 7).mask.count(1), 20 * 20);
+  EXPECT_EQ(rasterise_roi(s, "", ct, "rt.dcm", 3).mask.count(1), 10 * 10);
+  EXPECT_THROW(rasterise_roi(s, "GTV", ct, "rt.dcm", 5), InputError);
+}
+
+TEST(RasteriseRoi, DegenerateContoursAreSkippedNamingTheirSlice) {
+  const CtSeries ct = small_ct();
+  StructureSet s;
+  Roi roi;
+  roi.name = "Organ";
+  roi.frame_of_reference_uid = "1.2.3.4";
+  roi.contours = {square(4.5, 4.5, 10, 2, "1.2.3.4.5.1"),
+                  {"CLOSED_PLANAR", "", {{1, 1, 4}, {5, 1, 4}}},
+                  {"CLOSED_PLANAR", "", {{1, 1, 0}, {5, 1, 0}, {9, 1, 0}}}};
+  s.rois.push_back(roi);
+  const RasterisedRoi r = rasterise_roi(s, "Organ", ct, "rt.dcm");
+  EXPECT_EQ(r.mask.count(1), 10 * 10);
+  EXPECT_EQ(r.skipped, 2);
+  ASSERT_EQ(r.warnings.size(), 2u);
+  EXPECT_EQ(r.warnings[0],
+            "rt.dcm: ROI 'Organ' contour 2 on slice 2 (z 4.00 mm) has 2 point(s), fewer than 3: "
+            "skipped");
+  EXPECT_EQ(r.warnings[1],
+            "rt.dcm: ROI 'Organ' contour 3 on slice 0 (z 0.00 mm) has zero area: skipped");
+}
+
+TEST(RasteriseRoi, AReferenceItsPositionContradictsIsPlacedByPosition) {
+  const CtSeries ct = small_ct();
+  StructureSet s;
+  Roi roi;
+  roi.name = "Organ";
+  roi.frame_of_reference_uid = "1.2.3.4";
+  roi.contours = {square(4.5, 4.5, 10, 4, "1.2.3.4.5.0")};  // references slice 0, lies on 2
+  s.rois.push_back(roi);
+  const RasterisedRoi r = rasterise_roi(s, "Organ", ct, "rt.dcm");
+  EXPECT_EQ(r.mask.at(7, 7, 2), 1);
+  EXPECT_EQ(r.mask.at(7, 7, 0), 0);
+  EXPECT_EQ(r.matched_by_position, 1);
+  s.rois[0].contours = {square(4.5, 4.5, 10, 3.0, "1.2.3.4.5.1")};  // half a gap off its slice
   EXPECT_NE(error_of(s, "Organ", ct).find("lies on no slice"), std::string::npos);
 }
 

@@ -3,11 +3,13 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <memory>
 #include <optional>
 
 #include "organfit/pipeline/export_stage.h"
 #include "organfit/pipeline/model_file.h"
 #include "organfit/support/error.h"
+#include "organfit/support/output_folder.h"
 
 namespace fs = std::filesystem;
 
@@ -16,7 +18,17 @@ namespace organfit::pipeline {
 nlohmann::json run_export_command(const ExportCommand& c) {
   if (c.rtstruct.empty() && c.labels.empty() && c.mesh.empty())
     throw InputError("export: name at least one output (--rtstruct, --labels, --mesh)");
+  std::vector<fs::path> inputs = {c.model, c.ct, c.copy_rois_from};
+  for (const auto& f : {c.rtstruct, c.labels, c.mesh})
+    if (!f.empty())
+      check_output_location(f.parent_path().empty() ? fs::path(".") : f.parent_path(), inputs,
+                            "the output", OutputKind::kFile);
   const SavedModel saved = load_model(c.model);
+  if (saved.ct)
+    for (const auto& f : {c.rtstruct, c.labels, c.mesh})
+      if (!f.empty())
+        check_output_location(f.parent_path().empty() ? fs::path(".") : f.parent_path(),
+                              {saved.ct->folder}, "the output", OutputKind::kFile);
   ExportRequest request;
   request.rtstruct = c.rtstruct, request.labels = c.labels, request.mesh = c.mesh;
   request.roi_name = c.roi_name.empty() ? saved.organ_name + "_fit" : c.roi_name;
@@ -43,6 +55,9 @@ nlohmann::json run_export_command(const ExportCommand& c) {
   if (!c.copy_rois_from.empty()) {
     if (c.rtstruct.empty()) throw InputError("export: --copy-rois-from needs --rtstruct");
     other = dicom::read_rtstruct(c.copy_rois_from);
+    if (ct)
+      for (const auto& roi : other->rois)
+        dicom::check_structure_set_matches_ct(*other, roi, *ct, c.copy_rois_from.string());
     request.copy_rois_from = &*other;
     request.skip_roi = saved.organ_name;
   }
@@ -50,11 +65,13 @@ nlohmann::json run_export_command(const ExportCommand& c) {
                                          ct ? &*ct : nullptr, request);
   for (const auto& w : pending.warnings)
     spdlog::warn(w);
-  for (const auto& f : {c.rtstruct, c.labels, c.mesh}) {
-    std::error_code ec;
-    if (!f.empty() && !f.parent_path().empty()) fs::create_directories(f.parent_path(), ec);
-  }
+  std::vector<std::unique_ptr<CreatedFolders>> folders;
+  for (const auto& f : {c.rtstruct, c.labels, c.mesh})
+    if (!f.empty() && !f.parent_path().empty())
+      folders.push_back(std::make_unique<CreatedFolders>(f.parent_path()));
   pending.commit();
+  for (auto& f : folders)
+    f->keep();
   return pending.summary;
 }
 

@@ -24,6 +24,7 @@
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
+#include "organfit/support/output_folder.h"
 #include "organfit/support/resources.h"
 
 namespace fs = std::filesystem;
@@ -305,6 +306,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   }
   // The folder only once the options are known to be good: a refused run leaves nothing.
   std::error_code ec;
+  check_output_location(o.out, {}, "--out");
   fs::create_directories(o.out, ec);
   if (ec) throw InputError(o.out.string() + ": cannot create the folder: " + ec.message());
   std::vector<Row> rows;
@@ -368,8 +370,9 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                 if (method == "spread" || method == "paper") {
                   const config::Scene scene = config::parse_scene(
                       fmt::format("scene:\n  seed: {}\n{}points:\n  source: generate\nfit:\n  "
-                                  "method: {}\n  max_wall_s: 20\n  max_global_stretch: 2.0\n",
-                                  case_id, shape.yaml, method),
+                                  "method: {}\n  max_wall_s: 20\n{}",
+                                  case_id, shape.yaml, method,
+                                  method == "spread" ? "  max_global_stretch: 2.0\n" : ""),
                       o.out / "bench.yaml", scene_schema());
                   ModelStageResult m = clone(model);
                   FitStageResult fit;

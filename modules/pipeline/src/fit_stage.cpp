@@ -24,50 +24,6 @@ namespace fs = std::filesystem;
 
 namespace organfit::pipeline {
 
-std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
-  std::ifstream in(file);
-  if (!in) throw InputError(file.string() + ": cannot read the points file");
-  std::vector<fitting::AttractivePoint> points;
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    const auto first = line.find_first_not_of(" \t\r");
-    if (first == std::string::npos || line[first] == '#') continue;
-    std::vector<std::string> cells;
-    std::stringstream ss(line);
-    std::string cell;
-    while (std::getline(ss, cell, ','))
-      cells.push_back(cell);
-    auto fail = [&](const std::string& why) {
-      throw InputError(fmt::format("{}:{}: {}", file.string(), line_no, why));
-    };
-    std::vector<double> v;
-    for (const auto& c : cells) {
-      size_t used = 0;
-      double d = 0;
-      try {
-        d = std::stod(c, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used == 0 || c.find_first_not_of(" \t\r", used) != std::string::npos) {
-        if (points.empty() && v.empty()) goto next_line;  // a header line
-        fail(fmt::format("'{}' is not a number", c));
-      }
-      if (!std::isfinite(d)) fail("non-finite coordinate");
-      v.push_back(d);
-    }
-    if (v.size() != 3 && v.size() != 4)
-      fail(fmt::format("expected x,y,z[,confidence], got {} columns", v.size()));
-    if (v.size() == 4 && !(v[3] > 0 && v[3] <= 1)) fail("confidence must be in (0, 1]");
-    points.push_back({Eigen::Vector3d(v[0], v[1], v[2]), v.size() == 4 ? v[3] : 1.0});
-  next_line:;
-  }
-  if (points.empty()) throw InputError(file.string() + ": no points in the file");
-  return points;
-}
-
 std::vector<fitting::AttractivePoint> read_points_file(const fs::path& file) {
   const std::string ext = file.extension().string();
   std::vector<fitting::AttractivePoint> points;
@@ -410,6 +366,8 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
                      {"finite", state.x.allFinite()}};
   if (!global.is_null()) out.fit_summary["global"] = global;
   if (pts.truth) {
+    spdlog::info("fit: done in {} steps; measuring it against the known deformation ({} mm grid)",
+                 out.fit.steps, truth_voxel);
     Stopwatch truth_clock;
     // The discretisation floor (the organ as the model carried it before the fit against
     // the shape it was made from), the undeformed error, and the fit's.

@@ -6,6 +6,7 @@
 
 #include <functional>
 #include <optional>
+#include <set>
 
 #include "organfit/dicom/rtstruct_writer.h"
 #include "organfit/dicom/structure_set.h"
@@ -23,6 +24,7 @@
 #include "organfit/segmentation/segment.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
+#include "organfit/support/output_folder.h"
 #include "organfit/support/resources.h"
 
 namespace fs = std::filesystem;
@@ -42,26 +44,42 @@ const std::vector<StageInfo>& pipeline_stages() {
 
 namespace {
 
-void prepare_output_folder(const config::Scene& scene, const fs::path& out_dir) {
-  std::error_code ec;
-  if (fs::exists(out_dir, ec) && !fs::is_directory(out_dir, ec)) {
-    throw InputError(out_dir.string() + ": --out exists and is not a folder");
-  }
-  const fs::path scene_dir = fs::absolute(scene.file()).parent_path();
-  if (fs::exists(out_dir, ec) && fs::equivalent(out_dir, scene_dir, ec)) {
-    throw InputError(out_dir.string() +
-                     ": --out is the scene's own folder; choose a separate output folder so "
-                     "inputs are never overwritten");
-  }
-  fs::create_directories(out_dir, ec);
-  if (ec) throw InputError(out_dir.string() + ": cannot create the output folder: " + ec.message());
+/// Every input the scene names (the scene file, each given file or folder key), which
+/// --out may not be, hold or lie in (see check_output_location).
+std::vector<fs::path> scene_inputs(const config::Scene& scene) {
+  std::vector<fs::path> inputs = {scene.file()};
+  for (const auto& spec : scene.schema().params())
+    if (spec.type == config::ParamType::kInputPath && scene.has_section(spec.section) &&
+        scene.is_given(spec.section, spec.name))
+      inputs.push_back(scene.path(spec.section, spec.name));
+  return inputs;
+}
+
+/// The entries of --out a run of this scene writes (a folder ends in '/').
+std::set<std::string> names_written(const config::Scene& scene) {
+  std::set<std::string> names = {"run.json", "resolved.yaml"};
+  if (scene.has_section("phantom")) names.insert("phantom/");
+  if (scene.has_section("fit")) names.insert("history.csv");
+  if (scene.has_section("export"))
+    for (const char* key : {"rtstruct", "labels", "mesh", "model"})
+      if (!scene.text("export", key).empty()) names.insert(scene.text("export", key));
+  if (scene.has_section("ultrasound") && !scene.text("ultrasound", "save_volume").empty())
+    names.insert(scene.text("ultrasound", "save_volume"));
+  if (scene.has_section("report")) names.insert(scene.text("report", "file"));
+  return names;
 }
 
 }  // namespace
 
 nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
                          const RunOptions& run_options) {
-  prepare_output_folder(scene, out_dir);
+  std::error_code ec;
+  if (fs::exists(out_dir, ec) && !fs::is_directory(out_dir, ec))
+    throw InputError(out_dir.string() + ": --out exists and is not a folder");
+  check_output_location(out_dir, scene_inputs(scene), "--out");
+  // Everything is written under the staging folder and moved into --out at the end.
+  OutputFolder output(out_dir, names_written(scene));
+  const fs::path& stage = output.staging();
   const long long threads = scene.integer("scene", "threads");
   if (threads > 0) omp_set_num_threads(static_cast<int>(threads));
 
@@ -88,6 +106,35 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     spdlog::warn(w);
     run["warnings"].push_back(w);
   };
+  std::optional<ModelStageResult> model;
+  std::string organ_name = scene.has_section("organ") ? scene.text("organ", "roi") : "organ";
+  std::optional<CtReference> ct_reference;
+  // A session starts from its planning model (loaded first: the CT a session scene names
+  // is checked against it before anything else is done).
+  std::optional<CtReference> planning_ct;
+  double planning_modelling_s = -1;  // the saved model's own modelling time, for a session
+  if (scene.has_section("planning")) {
+    Stopwatch clock;
+    const fs::path file = scene.path("planning", "model");
+    SavedModel saved = load_model(file);
+    model = std::move(saved.model);
+    organ_name = saved.organ_name;
+    ct_reference = saved.ct;
+    planning_ct = saved.ct;
+    if (ct_reference) check_output_location(out_dir, {ct_reference->folder}, "--out");
+    planning_modelling_s = saved.provenance.value("modelling_wall_s", -1.0);
+    model->summary = {
+        {"particles", model->state.size()},
+        {"radius_mm", model->model->radius_mm()},
+        {"skeleton_nodes", model->skeleton ? model->skeleton->skeleton().node_count() : 0},
+        {"from_planning_model", file.filename().string()},
+        {"planning_scene", saved.provenance.value("scene", "")}};
+    record_stage("planning_model", clock.elapsed_s());
+    run["model"] = model->summary;
+    spdlog::info(
+        "planning model: {} particles of {} from {} (built in {:.2f} s by its planning run)",
+        model->state.size(), organ_name, file.filename().string(), planning_modelling_s);
+  }
   // A phantom is written as DICOM and read back like any planning CT.
   fs::path ct_folder, phantom_rtstruct;
   if (scene.has_section("phantom")) {
@@ -100,18 +147,15 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     p.pixel_mm = scene.number("phantom", "pixel_mm");
     p.slice_mm = scene.number("phantom", "slice_mm");
     p.noise_hu = scene.number("phantom", "noise_hu");
-    const fs::path folder = out_dir / "phantom";
-    std::error_code ec;
-    fs::remove_all(folder, ec);  // a phantom of an earlier run in this --out
+    const fs::path folder = stage / "phantom";
     const SynthResult made = run_synth_pelvis(folder, p);
     ct_folder = folder / "ct";
     phantom_rtstruct = folder / "rtstruct.dcm";
     run["phantom"] = {{"kind", scene.text("phantom", "kind")},
                       {"folder", "phantom"},
                       {"true_prostate_volume_cm3", made.prostate_volume_cm3}};
-    run["outputs"].push_back("phantom/");
     spdlog::info("phantom: pelvis, {} slices, true prostate {:.2f} cm3, in {}", made.slices,
-                 made.prostate_volume_cm3, folder.string());
+                 made.prostate_volume_cm3, (out_dir / "phantom").string());
     record_stage("phantom", clock.elapsed_s());
   }
   std::optional<dicom::CtSeries> ct;
@@ -124,6 +168,14 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
       ct_folder = scene.path("ct", "folder");
     }
     ct = dicom::read_ct_series(ct_folder, o);
+    // A session's CT, when the scene names one, must be the one the model was built on.
+    if (scene.has_section("planning") &&
+        (!planning_ct || ct->series_instance_uid != planning_ct->series_instance_uid ||
+         ct->frame_of_reference_uid != planning_ct->frame_of_reference_uid))
+      throw InputError(fmt::format(
+          "{}: the planning model was built on another CT series (or Frame of Reference) than "
+          "the scene's ct.folder {}",
+          scene.path("planning", "model").string(), ct_folder.string()));
     record_stage("ct", clock.elapsed_s());
     for (const auto& w : ct->warnings)
       warn(w);
@@ -158,7 +210,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
       const fs::path file =
           scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct") : phantom_rtstruct;
       dicom::RasterisedRoi r =
-          dicom::rasterise_roi(dicom::read_rtstruct(file), roi, *ct, file.string());
+          dicom::rasterise_roi(dicom::read_rtstruct(file), roi, *ct, file.string(),
+                               static_cast<int>(scene.integer("organ", "roi_number")));
       for (const auto& w : r.warnings)
         warn(w);
       run["organ"] = {{"roi", roi},
@@ -171,38 +224,17 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
       mask = std::move(r.mask);
     }
     if (mask.count(1) == 0)
-      scene.fail("organ", "roi", "the organ '" + roi + "' covers no voxel of the CT");
+      scene.fail("organ", "roi", "the organ '" + echo(roi) + "' covers no voxel of the CT");
     organ =
         evaluation::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(mask)));
     record_stage("organ", clock.elapsed_s());
   }
-  std::optional<ModelStageResult> model;
-  std::string organ_name = scene.has_section("organ") ? scene.text("organ", "roi") : "organ";
-  std::optional<CtReference> ct_reference;
-  if (ct)
-    ct_reference = CtReference{fs::absolute(ct_folder).lexically_normal().string(),
-                               ct->series_instance_uid, ct->frame_of_reference_uid};
-  double planning_modelling_s = -1;  // the saved model's own modelling time, for a session
-  if (scene.has_section("planning")) {
-    Stopwatch clock;
-    const fs::path file = scene.path("planning", "model");
-    SavedModel saved = load_model(file);
-    model = std::move(saved.model);
-    organ_name = saved.organ_name;
-    ct_reference = saved.ct;
-    planning_modelling_s = saved.provenance.value("modelling_wall_s", -1.0);
-    model->summary = {
-        {"particles", model->state.size()},
-        {"radius_mm", model->model->radius_mm()},
-        {"skeleton_nodes", model->skeleton ? model->skeleton->skeleton().node_count() : 0},
-        {"from_planning_model", file.filename().string()},
-        {"planning_scene", saved.provenance.value("scene", "")}};
-    record_stage("planning_model", clock.elapsed_s());
-    run["model"] = model->summary;
-    spdlog::info(
-        "planning model: {} particles of {} from {} (built in {:.2f} s by its planning run)",
-        model->state.size(), organ_name, file.filename().string(), planning_modelling_s);
-  }
+  if (ct && !scene.has_section("planning"))
+    ct_reference = CtReference{
+        fs::absolute(phantom_rtstruct.empty() ? ct_folder : out_dir / "phantom" / "ct")
+            .lexically_normal()
+            .string(),
+        ct->series_instance_uid, ct->frame_of_reference_uid};  // where the phantom will be
   // The modelling this run did itself (phantom, CT, organ, model), for the comparison
   // of initial modelling against a session's update.
   auto modelling_s = [&run]() {
@@ -291,11 +323,29 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
       if (!save.empty() && us.bmode) {
         auto volume = std::make_shared<geometry::LabelVolume>(std::move(*us.bmode));
         deferred_writes.push_back(
-            [volume, file = out_dir / save] { itkbridge::write_label_volume(file, *volume); });
+            [volume, file = stage / save] { itkbridge::write_label_volume(file, *volume); });
         deferred_outputs.push_back(save);
       }
     } else {
       points = run_points_stage(scene, *model);
+      // Points declared in another CT than the planning CT are in other coordinates.
+      if (scene.text("points", "source") == "file" && ct_reference) {
+        const fs::path file = scene.path("points", "file");
+        const PointsCt declared = read_points_ct(file);
+        const char* differs =
+            !declared.series_instance_uid.empty() &&
+                    declared.series_instance_uid != ct_reference->series_instance_uid
+                ? "Series Instance UID"
+            : !declared.frame_of_reference_uid.empty() &&
+                    declared.frame_of_reference_uid != ct_reference->frame_of_reference_uid
+                ? "Frame of Reference UID"
+                : nullptr;
+        if (differs)
+          throw InputError(
+              fmt::format("{}: its {} is not the planning CT's ({}): the points are "
+                          "in another CT's coordinates",
+                          file.string(), differs, ct_reference->folder));
+      }
       record_stage("points", clock.elapsed_s());
     }
     run["points"] = points->summary;
@@ -368,7 +418,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     ExportRequest request;
     auto in_out = [&](const char* key) {
       const std::string& file = scene.text("export", key);
-      return file.empty() ? fs::path() : out_dir / file;
+      return file.empty() ? fs::path() : stage / file;
     };
     request.rtstruct = in_out("rtstruct");
     request.labels = in_out("labels");
@@ -408,6 +458,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     model_file = scene.text("export", "model");
     if (!model_file.empty()) exported.push_back(model_file);
     record_stage("export", clock.elapsed_s());
+    spdlog::info("export: {} file(s) prepared", exported.size());
   }
   // Initial modelling against update: what the paper claims is faster.
   {
@@ -437,6 +488,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   run["wall_s"] = total.elapsed_s();
   run["peak_memory_mib"] = peak_memory_mib();
   run["outputs"] = {"resolved.yaml", "run.json"};
+  if (!phantom_rtstruct.empty()) run["outputs"].push_back("phantom/");
   for (const auto& f : files)
     run["outputs"].push_back(f.first);
   for (const auto& f : exported)
@@ -447,7 +499,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   // Files are committed only now: a run that fails with an error leaves none. A fit
   // that did not converge still writes its results (run.json says so), then exits 3.
   for (const auto& f : files)
-    write_file_atomically(out_dir / f.first, f.second);
+    write_file_atomically(stage / f.first, f.second);
   for (const auto& write : deferred_writes)
     write();
   if (pending) {
@@ -460,7 +512,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         {"scene", name},
         {"modelling_wall_s", planning_modelling_s >= 0 ? planning_modelling_s : modelling_s()},
         {"fitted", scene.has_section("fit")}};
-    save_model(out_dir / model_file, *model, organ_name, ct_reference, provenance);
+    save_model(stage / model_file, *model, organ_name, ct_reference, provenance);
   }
   if (scene.has_section("report")) {
     Stopwatch clock;
@@ -487,12 +539,13 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     run["outputs"].push_back(file);
     record_stage("report", clock.elapsed_s());  // the page's own time is shown without itself
     context.run = run;
-    write_file_atomically(out_dir / file, build_report(context));
+    write_file_atomically(stage / file, build_report(context));
     run["stages"].back()["wall_s"] = clock.elapsed_s();
     spdlog::info("report: {}", (out_dir / file).string());
   }
-  write_file_atomically(out_dir / "resolved.yaml", scene.resolved_yaml());
-  write_file_atomically(out_dir / "run.json", run.dump(2) + "\n");
+  write_file_atomically(stage / "resolved.yaml", scene.resolved_yaml());
+  write_file_atomically(stage / "run.json", run.dump(2) + "\n");
+  output.commit();
   if (!not_converged.empty()) throw TargetNotMetError(not_converged);
   return run;
 }

@@ -18,7 +18,10 @@ config::Schema build_schema() {
       .text("name", "", "name shown in run.json and the report (default: the file's stem)")
       .text("description", "", "one line saying what the scene does")
       .integer("seed", 1, 0, none, "seed of every random choice (same seed, same result)")
-      .integer("threads", 0, 0, 256, "worker threads; 0 = all cores");
+      .integer("threads", 0, 0, 256, "worker threads; 0 = all cores")
+      .number("max_wall_s", 0.0, "s", 0.0, none,
+              "wall-time budget of the whole run, every stage included (0 = none); past it the "
+              "run stops, writes nothing and exits 3");
 
   s.section("planning", "start from a saved planning model instead of building one (a session)")
       .input_path("model", "model file written by a planning scene's export.model");
@@ -47,19 +50,29 @@ config::Schema build_schema() {
               "from organ.seed_mm")
       .input_path("rtstruct",
                   "the RT Structure Set file (default with a phantom: its true structures)", false)
+      .used_when({{"organ.source", {"rtstruct"}}})
       .text("roi", std::nullopt,
             "the organ's ROI name: the one imported, or the name given to the segmented organ")
+      .integer("roi_number", 0, 0, none,
+               "ROI Number to import when several ROIs share the name (0: by name alone)")
+      .used_when({{"organ.source", {"rtstruct"}}})
       .vec3("seed_mm", Vector3d(0, 0, 0), "mm", none,
             "seed inside the organ, patient coordinates (source: seed)")
+      .used_when({{"organ.source", {"seed"}}})
       .number("hu_low", 20.0, "HU", -1024.0, 3071.0, "lowest HU grown into (source: seed)")
+      .used_when({{"organ.source", {"seed"}}})
       .number("hu_high", 80.0, "HU", -1024.0, 3071.0, "highest HU grown into (source: seed)")
+      .used_when({{"organ.source", {"seed"}}})
       .integer("smoothing_iterations", 5, 0, 100,
                "curvature-flow iterations before growing (source: seed)")
+      .used_when({{"organ.source", {"seed"}}})
       .integer("opening_radius_voxels", 1, 0, 10,
                "morphological opening that cuts thin leaks (source: seed)")
+      .used_when({{"organ.source", {"seed"}}})
       .number("search_box_mm", 200.0, "mm", 0.0, 2000.0,
               "side of the cube around the seed the organ is grown in; 0 = the whole CT (source: "
-              "seed)");
+              "seed)")
+      .used_when({{"organ.source", {"seed"}}});
 
   s.section("body", "an analytic organ shape, for scenes without CT")
       .choice("shape", "ellipsoid", {"ellipsoid", "box", "egg", "lung"},
@@ -104,26 +117,45 @@ config::Schema build_schema() {
                   "points in mm: CSV x,y,z[,confidence], or the vertices of a .ply/.vtk/.vtp "
                   "(source: file)",
                   false)
+      .used_when({{"points.source", {"file"}}})
       .integer("count", 87, 1, 100000, "number of points to generate")
+      .used_when({{"points.source", {"generate", "ultrasound"}}})
       .number("noise_mm", 0.5, "mm", 0.0, 20.0, "Gaussian noise added to generated points")
+      .used_when({{"points.source", {"generate"}}})
       .number("outlier_fraction", 0.0, "", 0.0, 0.5,
               "fraction of generated points moved 5-15 mm off")
+      .used_when({{"points.source", {"generate"}}})
       .choice("coverage", "full", {"full", "half"}, "surface the points cover (half: the +y side)")
+      .used_when({{"points.source", {"generate"}}})
       .number("stretch", 1.0, "", 0.5, 2.0,
               "volume-preserving stretch along x of the true deformation")
+      .used_when({{"points.source", {"generate"}}})
+      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
       .number("bend_mm", 0.0, "mm", -30.0, 30.0,
               "sideways (y) displacement of the ends in the true deformation")
+      .used_when({{"points.source", {"generate"}}})
+      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
       .number("twist_deg", 0.0, "deg", -90.0, 90.0,
               "turn of the ends about the x axis in the true deformation")
+      .used_when({{"points.source", {"generate"}}})
+      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
       .number("indent_mm", 0.0, "mm", -20.0, 20.0,
               "Gaussian column shift along y (rectal filling: < 0 moves it anteriorly)")
+      .used_when({{"points.source", {"generate"}}})
+      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
       .number("push_mm", 0.0, "mm", -20.0, 20.0,
               "Gaussian column shift along z (bladder push: < 0 moves it inferiorly)")
+      .used_when({{"points.source", {"generate"}}})
+      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
       .number("bump_sigma_mm", 8.0, "mm", 1.0, 100.0, "width of the indent and push bumps", true)
+      .used_when({{"points.source", {"generate"}}})
+      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
       .choice("target_shape", "same", {"same", "ellipsoid", "box", "egg", "lung"},
               "sample a different shape than the body (same = the body, deformed)")
+      .used_when({{"points.source", {"generate"}}})
       .vec3("target_size_mm", Eigen::Vector3d(40, 30, 60), "mm", 0.0,
-            "target_shape's proportions; scaled to the body's volume", true);
+            "target_shape's proportions; scaled to the body's volume", true)
+      .used_when({{"points.source", {"generate"}}});
 
   s.section("ultrasound",
             "the day's ultrasound, segmented into attractive points (points.source: ultrasound)")
@@ -135,31 +167,45 @@ config::Schema build_schema() {
       .input_path("file",
                   "the ultrasound input (volume .mha/.nrrd/.nii, sequence metafile, or .dcm)",
                   false)
+      .used_when({{"ultrasound.source", {"volume", "sweep", "dicom"}}})
       .input_path("tracker",
                   "sequence metafile with the probe's poses, matched by timestamp (source: sweep)",
                   false)
+      .used_when({{"ultrasound.source", {"sweep"}}})
       .text("transform", "",
             "tracked transform name (default: the file's own, e.g. ProbeToTrackerTransform)")
+      .used_when({{"ultrasound.source", {"sweep"}}})
       .matrix4("calibration", "image (mm) to probe: the probe's calibration (sweep, dicom)")
+      .used_when({{"ultrasound.source", {"sweep", "dicom"}}})
       .matrix4("registration",
                "tracker (or volume) to CT patient coordinates; rigid (volume, sweep, dicom)")
+      .used_when({{"ultrasound.source", {"volume", "sweep", "dicom"}}})
       .number("pixel_mm", 0.0, "mm", 0.0, 10.0,
               "pixel size of a DICOM image without a calibrated region (0: from it)")
+      .used_when({{"ultrasound.source", {"dicom"}}})
       .vec3("probe_offset_mm", Vector3d(0, 38, 0), "mm", none,
             "probe position from the organ's centre (simulate)")
+      .used_when({{"ultrasound.source", {"simulate"}}})
       .vec3("probe_axis", Vector3d(0, -1, 0), "", none,
             "beam direction (simulate; default: anterior, transrectal)")
+      .used_when({{"ultrasound.source", {"simulate"}}})
       .vec3("probe_lateral", Vector3d(1, 0, 0), "", none,
             "image's lateral direction, perpendicular to the axis")
+      .used_when({{"ultrasound.source", {"simulate"}}})
       .number("probe_radius_mm", 12.0, "mm", 0.0, 50.0,
               "imaging starts this far from the probe's centre (its face; it displaces rectal gas)")
+      .used_when({{"ultrasound.source", {"simulate"}}})
       .number("max_depth_mm", 70.0, "mm", 10.0, 300.0,
               "imaging depth from the probe's centre (simulate)")
+      .used_when({{"ultrasound.source", {"simulate"}}})
       .number("half_angle_deg", 50.0, "deg", 5.0, 80.0,
               "half-angle of the field of view (simulate)")
+      .used_when({{"ultrasound.source", {"simulate"}}})
       .number("speckle", 1.0, "", 0.0, 1.0,
               "speckle level: 0 none, 1 fully developed Rayleigh (simulate)")
+      .used_when({{"ultrasound.source", {"simulate"}}})
       .number("voxel_mm", 0.5, "mm", 0.1, 5.0, "voxel size of the simulated volume", true)
+      .used_when({{"ultrasound.source", {"simulate"}}})
       .integer("rays", 2000, 16, 100000, "edge-search rays from the organ's centre")
       .number("band_mm", 8.0, "mm", 1.0, 100.0,
               "search band around the model's surface along each ray")
@@ -185,19 +231,27 @@ config::Schema build_schema() {
       .number("kinetic_tolerance", 1e-4, "E", 0.0, none,
               "settled when KE per particle is below this", true)
       .number("alpha", 2.0, "", 1.0, 20.0, "fall-off exponent alpha_k of eq. 5")
+      .used_when({{"fit.method", {"paper"}}})
       .number("influence_radius_min_r0", 1.2, "r0", 0.0, none, "influence radius at contact", true)
+      .used_when({{"fit.method", {"paper"}}})
       .number("influence_growth", 0.5, "", 0.0, none, "extra influence radius per mm of distance")
+      .used_when({{"fit.method", {"paper"}}})
       .number("influence_radius_max_r0", 4.0, "r0", 0.0, none, "bound on the influence radius",
               true)
+      .used_when({{"fit.method", {"paper"}}})
       .number("total_force_factor", 3.0, "", 1.0, none, "a point's total force <= this x F_max_k")
+      .used_when({{"fit.method", {"paper"}}})
       .number("outlier_distance_mm", 0.0, "mm", 0.0, none,
               "reject points farther than this from the model (0 = half its diameter)")
+      .used_when({{"fit.method", {"paper"}}})
       .number("skin_voxel_r0", 0.5, "r0", 0.0, none, "voxel size of skin detection (0.5 r0 = rho)",
               true)
       .number("max_global_stretch", 1.5, "", 1.0, 10.0,
               "spread: refuse points that ask the whole organ to stretch more than this")
+      .used_when({{"fit.method", {"spread"}}})
       .number("global_shear_field_mm", 10.0, "mm", 0.0, 100.0,
-              "spread: width of the smooth shears the global map may add (0 = none)");
+              "spread: width of the smooth shears the global map may add (0 = none)")
+      .used_when({{"fit.method", {"spread"}}});
   s.section("export", "what to write for the planning system, on the planning CT's grid")
       .text("rtstruct", "", "DICOM RT Structure Set file name inside --out (empty: none)")
       .text("labels", "", "label map file name inside --out: .nrrd, .mha, .nii(.gz) (empty: none)")

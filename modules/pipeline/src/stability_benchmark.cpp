@@ -13,6 +13,7 @@
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
+#include "organfit/support/output_folder.h"
 #include "organfit/support/resources.h"
 
 namespace fs = std::filesystem;
@@ -52,6 +53,7 @@ struct Case {
 nlohmann::json run_stability_benchmark(const StabilityBenchOptions& o) {
   if (o.out.empty()) throw InputError("bench stability: --out DIR is required");
   std::error_code ec;
+  check_output_location(o.out, {}, "--out");
   fs::create_directories(o.out / "runs", ec);
   if (ec) throw InputError(o.out.string() + ": cannot create the folder: " + ec.message());
   if (o.threads > 0) omp_set_num_threads(o.threads);

@@ -9,6 +9,7 @@
 #include "organfit/itkbridge/itk_images.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
+#include "organfit/support/output_folder.h"
 
 namespace fs = std::filesystem;
 
@@ -18,8 +19,9 @@ SynthResult run_synth_pelvis(const fs::path& out, const phantom::PelvisOptions& 
   std::error_code ec;
   if (fs::exists(out, ec) && !(fs::is_directory(out, ec) && fs::is_empty(out, ec)))
     throw InputError(out.string() + ": exists and is not an empty folder");
-  fs::create_directories(out, ec);
-  if (ec) throw InputError(out.string() + ": cannot create the folder: " + ec.message());
+  check_output_location(out, {}, "--out");
+  OutputFolder folder(out, {});  // written whole or not at all
+  const fs::path& dir = folder.staging();
 
   phantom::PelvisPhantom ph = phantom::make_pelvis_phantom(options);
   const std::string key = fmt::format("organfit-pelvis|{}|{}x{}x{}|{}|{}|{}", options.seed,
@@ -39,7 +41,7 @@ SynthResult run_synth_pelvis(const fs::path& out, const phantom::PelvisOptions& 
   write.uid_key = key;
   write.body_part_examined = "PELVIS";
   SynthResult result;
-  result.clipped_voxels = dicom::write_ct_series(out / "ct", ct, write);
+  result.clipped_voxels = dicom::write_ct_series(dir / "ct", ct, write);
   result.slices = ph.geometry.size[2];
 
   std::vector<dicom::RtstructRoi> rois;
@@ -54,8 +56,8 @@ SynthResult run_synth_pelvis(const fs::path& out, const phantom::PelvisOptions& 
   dicom::RtstructWriteOptions rt;
   rt.label = "TRUTH";
   rt.fixed_uids_and_dates = true;
-  dicom::write_rtstruct(out / "rtstruct.dcm", ct, rois, rt);
-  itkbridge::write_label_volume(out / "labels.nrrd", ph.labels);
+  dicom::write_rtstruct(dir / "rtstruct.dcm", ct, rois, rt);
+  itkbridge::write_label_volume(dir / "labels.nrrd", ph.labels);
 
   result.prostate_volume_cm3 = ph.labels.volume_mm3(phantom::kProstate) / 1000.0;
   nlohmann::ordered_json j;
@@ -79,7 +81,8 @@ SynthResult run_synth_pelvis(const fs::path& out, const phantom::PelvisOptions& 
   }
   j["structures"] = structures;
   j["files"] = {{"ct", "ct/"}, {"rtstruct", "rtstruct.dcm"}, {"labels", "labels.nrrd"}};
-  write_file_atomically(out / "phantom.json", j.dump(2) + "\n");
+  write_file_atomically(dir / "phantom.json", j.dump(2) + "\n");
+  folder.commit();
   return result;
 }
 

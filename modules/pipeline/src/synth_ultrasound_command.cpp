@@ -12,6 +12,7 @@
 #include "organfit/pipeline/ultrasound_stage.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
+#include "organfit/support/output_folder.h"
 #include "organfit/ultrasound/sequence_metafile.h"
 #include "organfit/ultrasound/simulator.h"
 
@@ -23,6 +24,7 @@ nlohmann::json run_synth_ultrasound(const SynthUltrasoundCommand& c) {
   std::error_code ec;
   if (fs::exists(c.out, ec) && !(fs::is_directory(c.out, ec) && fs::is_empty(c.out, ec)))
     throw InputError(c.out.string() + ": exists and is not an empty folder");
+  check_output_location(c.out, {c.labels, c.ct}, "--out");
   if (!(c.probe.empty() || c.probe.size() == 3 || c.probe.size() == 6 || c.probe.size() == 9))
     throw InputError("synth ultrasound: --probe takes X,Y,Z[,AX,AY,AZ[,LX,LY,LZ]]");
   if (c.sweep_frames < 1) throw InputError("synth ultrasound: --frames must be at least 1");
@@ -114,16 +116,16 @@ nlohmann::json run_synth_ultrasound(const SynthUltrasoundCommand& c) {
     sweep.frames.push_back(std::move(frame));
   }
 
-  fs::create_directories(c.out, ec);
-  if (ec) throw InputError(c.out.string() + ": cannot create the folder: " + ec.message());
+  OutputFolder folder(c.out, {});  // written whole or not at all
+  const fs::path& dir = folder.staging();
   geometry::LabelVolume volume(sim.geometry);
   volume.labels = sim.bmode;
-  itkbridge::write_label_volume(c.out / "volume.mha", volume);
-  ultrasound::write_sequence_metafile(c.out / "sweep.igs.mha", sweep, px);
+  itkbridge::write_label_volume(dir / "volume.mha", volume);
+  ultrasound::write_sequence_metafile(dir / "sweep.igs.mha", sweep, px);
   std::string csv = "x_mm,y_mm,z_mm\n";
   for (const auto& p : sim.true_boundary_mm)
     csv += fmt::format("{:.3f},{:.3f},{:.3f}\n", p.x(), p.y(), p.z());
-  write_file_atomically(c.out / "true_boundary.csv", csv);
+  write_file_atomically(dir / "true_boundary.csv", csv);
   nlohmann::json summary = {
       {"labels", c.labels.string()},
       {"seed", c.seed},
@@ -138,7 +140,8 @@ nlohmann::json run_synth_ultrasound(const SynthUltrasoundCommand& c) {
       {"frame_size", {width, height}},
       {"true_boundary_points", sim.true_boundary_mm.size()},
       {"files", {"volume.mha", "sweep.igs.mha", "true_boundary.csv"}}};
-  write_file_atomically(c.out / "ultrasound.json", summary.dump(2) + "\n");
+  write_file_atomically(dir / "ultrasound.json", summary.dump(2) + "\n");
+  folder.commit();
   return summary;
 }
 

@@ -7,10 +7,13 @@
 #include <fstream>
 #include <optional>
 
+#include "organfit/dicom/ct_series.h"
 #include "organfit/dicom/us_image.h"
 #include "organfit/itkbridge/itk_images.h"
+#include "organfit/pipeline/points_file.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
+#include "organfit/support/output_folder.h"
 #include "organfit/support/resources.h"
 #include "organfit/ultrasound/boundary_points.h"
 #include "organfit/ultrasound/sequence_metafile.h"
@@ -62,6 +65,8 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
   const Eigen::Matrix4d calibration = matrix_of(c.calibration, "--calibration");
   const Eigen::Matrix4d registration = matrix_of(c.registration, "--registration");
   if (c.out.empty()) throw InputError("us-points: --out POINTS.csv is required");
+  const fs::path out_folder = c.out.parent_path().empty() ? fs::path(".") : c.out.parent_path();
+  check_output_location(out_folder, {c.input, c.tracker, c.ct}, "--out", OutputKind::kFile);
   std::error_code ec;
   if (!fs::exists(c.input, ec)) throw InputError(c.input.string() + ": no such file");
   const std::string name = lower_extension(c.input);
@@ -166,12 +171,18 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
     throw TargetNotMetError(
         c.input.string() + ": no boundary points found in the region of interest (centre " +
         summary["centre_mm"].dump() + " mm, radius " + fmt::format("{:.1f}", o.r_max_mm) + " mm)");
-  std::string csv = "x_mm,y_mm,z_mm,confidence\n";
+  std::string csv;
+  if (!c.ct.empty()) {  // the CT these coordinates are in, for a run to check
+    const dicom::CtSeries ct = dicom::read_ct_series(c.ct);
+    csv += points_ct_comment({ct.series_instance_uid, ct.frame_of_reference_uid});
+  }
+  csv += "x_mm,y_mm,z_mm,confidence\n";
   for (const auto& p : found.points)
     csv += fmt::format("{:.3f},{:.3f},{:.3f},{:.3f}\n", p.p_mm.x(), p.p_mm.y(), p.p_mm.z(),
                        p.confidence);
-  if (!c.out.parent_path().empty()) fs::create_directories(c.out.parent_path(), ec);
+  CreatedFolders folders(out_folder);
   write_file_atomically(c.out, csv);
+  folders.keep();
   summary["out"] = c.out.string();
   return summary;
 }

@@ -1,39 +1,153 @@
 #include "organfit/support/interrupt.h"
 
 #include <fcntl.h>
+#include <pthread.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <map>
+#include <mutex>
+#include <string>
+#include <thread>
 
 #include "organfit/support/error.h"
 
 namespace organfit {
 namespace {
-volatile std::sig_atomic_t g_interrupted = 0;
-extern "C" void on_signal(int) {
-  g_interrupted = 1;
-}  // async-signal-safe: a flag only
+
+enum Stop : int { kRunning = 0, kSignalled = 1, kOutOfTime = 2 };
+std::atomic<int> g_stop{kRunning};
+std::atomic<bool> g_finishing{false};
+std::atomic<int> g_committing{0};
+std::atomic<double> g_deadline_s{0};  // on the steady clock; 0: none
+const char* g_budget_name = "the wall budget";
+double g_budget_s = 0;
+
+double now_s() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+struct Partial {
+  std::filesystem::path path;
+  bool only_if_empty = false;
+};
+std::mutex g_partial_mutex;
+std::map<int, Partial> g_partial;  // by registration order: later ones inside earlier ones
+int g_next_id = 0;
+
+std::string stop_message() {
+  if (g_stop.load() == kOutOfTime) {
+    char text[256];
+    std::snprintf(text, sizeof text,
+                  "the run took longer than %s (%g s) and was stopped: nothing was written",
+                  g_budget_name, g_budget_s);
+    return text;
+  }
+  return "interrupted (SIGINT or SIGTERM): nothing was written";
+}
+
+/// The watchdog: takes SIGINT and SIGTERM (blocked in every other thread), watches the
+/// wall budget, and ends a process that has not stopped by itself kStopGrace later.
+void watchdog(sigset_t signals) {
+  double stop_at = 0;
+  for (;;) {
+    timespec wait{0, 20'000'000};  // 20 ms
+    const int sig = sigtimedwait(&signals, nullptr, &wait);
+    if (sig == SIGINT || sig == SIGTERM) {
+      int expected = kRunning;
+      g_stop.compare_exchange_strong(expected, kSignalled);
+    }
+    const double deadline = g_deadline_s.load();
+    if (deadline > 0 && now_s() > deadline) {
+      int expected = kRunning;
+      g_stop.compare_exchange_strong(expected, kOutOfTime);
+    }
+    if (g_stop.load() == kRunning) continue;
+    if (stop_at == 0) stop_at = now_s() + kStopGrace;
+    if (now_s() < stop_at || g_finishing.load() || g_committing.load() > 0) continue;
+    // The run did not stop in time: remove what is partial, innermost first, and end.
+    {
+      std::lock_guard<std::mutex> lock(g_partial_mutex);
+      for (auto it = g_partial.rbegin(); it != g_partial.rend(); ++it) {
+        std::error_code ec;
+        if (it->second.only_if_empty) {
+          if (std::filesystem::is_empty(it->second.path, ec))
+            std::filesystem::remove(it->second.path, ec);
+        } else {
+          std::filesystem::remove_all(it->second.path, ec);
+        }
+      }
+      const std::string line = "organfit: error: " + stop_message() + "\n";
+      (void)!::write(2, line.data(), line.size());
+      ::_exit(g_stop.load() == kOutOfTime ? static_cast<int>(ExitCode::kTargetNotMet)
+                                          : static_cast<int>(ExitCode::kInterrupted));
+    }
+  }
+}
+
 }  // namespace
 
 void install_abort_guard();
 
 void install_interrupt_handlers() {
+  static bool installed = false;
+  if (installed) return;
+  installed = true;
   install_abort_guard();
-  struct sigaction action {};
-  action.sa_handler = on_signal;
-  sigemptyset(&action.sa_mask);
-  sigaction(SIGINT, &action, nullptr);
-  sigaction(SIGTERM, &action, nullptr);
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);  // inherited by every later thread
+  std::thread(watchdog, signals).detach();
 }
 
 bool interrupted() {
-  return g_interrupted != 0;
+  if (g_stop.load() != kRunning) return true;
+  const double deadline = g_deadline_s.load();
+  return deadline > 0 && now_s() > deadline;
 }
 
 void throw_if_interrupted() {
-  if (g_interrupted)
-    throw Error(ExitCode::kInterrupted, "interrupted (SIGINT or SIGTERM): nothing was written");
+  if (!interrupted()) return;
+  if (g_stop.load() == kRunning) {
+    int expected = kRunning;
+    g_stop.compare_exchange_strong(expected, kOutOfTime);
+  }
+  throw Error(g_stop.load() == kOutOfTime ? ExitCode::kTargetNotMet : ExitCode::kInterrupted,
+              stop_message());
+}
+
+void set_wall_budget(double seconds, const char* what) {
+  g_budget_name = what;
+  g_budget_s = seconds;
+  g_deadline_s.store(seconds > 0 ? now_s() + seconds : 0);
+}
+
+void mark_finishing() {
+  g_finishing.store(true);
+}
+
+PartialPath::PartialPath(std::filesystem::path path, bool only_if_empty) {
+  std::lock_guard<std::mutex> lock(g_partial_mutex);
+  id_ = g_next_id++;
+  g_partial[id_] = {std::move(path), only_if_empty};
+}
+
+PartialPath::~PartialPath() {
+  std::lock_guard<std::mutex> lock(g_partial_mutex);
+  g_partial.erase(id_);
+}
+
+ScopedCommit::ScopedCommit() {
+  ++g_committing;
+}
+
+ScopedCommit::~ScopedCommit() {
+  --g_committing;
 }
 
 }  // namespace organfit

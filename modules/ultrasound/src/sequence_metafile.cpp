@@ -58,7 +58,7 @@ SequenceMetafile read_sequence_metafile(const fs::path& file, bool read_pixels) 
     const std::string key = trim(line.substr(0, eq)), value = trim(line.substr(eq + 1));
     if (key.rfind("Seq_Frame", 0) == 0) {
       const auto underscore = key.find('_', 9);
-      if (underscore == std::string::npos) fail("malformed frame field '" + key + "'");
+      if (underscore == std::string::npos) fail("malformed frame field '" + echo(key) + "'");
       const int index = std::atoi(key.substr(9, underscore - 9).c_str());
       frames[index].index = index;
       frames[index].fields[key.substr(underscore + 1)] = value;

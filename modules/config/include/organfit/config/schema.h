@@ -30,6 +30,12 @@ const char* to_string(ParamType type);
 using Value = std::variant<std::monostate, double, long long, bool, std::string, Eigen::Vector3d,
                            Eigen::Matrix4d>;
 
+/// One condition on another key: `key` ("section.name") has one of `values`.
+struct UseCondition {
+  std::string key;
+  std::vector<std::string> values;
+};
+
 /// One declared scene key.
 struct ParamSpec {
   std::string section;  ///< e.g. "model"
@@ -41,9 +47,15 @@ struct ParamSpec {
   bool min_exclusive = false;        ///< true: value must be > min (e.g. a radius)
   std::vector<std::string> choices;  ///< allowed values of an enum
   std::string doc;                   ///< one line
+  /// When the run uses the key: any alternative whose conditions all hold. Empty: always.
+  /// A key given in a scene where none holds is refused (the run would ignore it).
+  std::vector<std::vector<UseCondition>> used_when;
 
   std::string key() const { return section + "." + name; }
   bool required() const { return std::holds_alternative<std::monostate>(default_value); }
+  /// "points.source: file" or "points.source: generate, or ultrasound.source: simulate and
+  /// ..." for messages and the listing; "" when always used.
+  std::string used_when_text() const;
   /// "(0, inf)", "[0, 1]", "{paper, spread}" or "" for the schema listing.
   std::string range_text() const;
 };
@@ -60,6 +72,10 @@ class Schema {
   /// Declares a section; keys added after it belong to it. An `always_present`
   /// section (run-wide settings) takes its defaults when a scene does not name it.
   Schema& section(const std::string& name, const std::string& doc, bool always_present = false);
+  /// The last declared key is used only when all of `conditions` hold, or when another
+  /// alternative given by a further call holds (e.g. `points.file` only with
+  /// `points.source: file`).
+  Schema& used_when(std::vector<UseCondition> conditions);
   /// Declares a key of the current section. Throws std::logic_error on a duplicate
   /// or a default outside the key's own range (a bug in the declaration).
   Schema& add(ParamSpec spec);

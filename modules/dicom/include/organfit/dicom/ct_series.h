@@ -26,6 +26,10 @@ struct PatientStudy {
   std::string patient_name, patient_id, patient_birth_date, patient_sex;
   std::string study_instance_uid, study_id, study_date, study_time, study_description;
   std::string accession_number, referring_physician_name;
+  /// The text above is UTF-8 (converted from the source's character set), unless this
+  /// holds the source's Specific Character Set (one with ISO 2022 code extensions, whose
+  /// bytes are kept as they are): exported objects then declare it.
+  std::string specific_character_set;
 };
 
 struct CtSlice {
@@ -36,6 +40,7 @@ struct CtSlice {
 };
 
 struct CtSeries {
+  std::filesystem::path folder;  ///< where it was read from (for messages)
   geometry::ImageGeometry geometry;
   std::vector<float> hu;  ///< geometry.voxel_count() values, i fastest
   std::string series_instance_uid, series_description, frame_of_reference_uid;

@@ -9,6 +9,7 @@
 #include "organfit/fitting/fit.h"
 #include "organfit/fitting/global_fit.h"
 #include "organfit/pipeline/model_stage.h"
+#include "organfit/pipeline/points_file.h"
 
 namespace organfit::pipeline {
 
@@ -18,10 +19,6 @@ struct PointsStageResult {
   evaluation::Shape truth_shape;                 ///< the shape they were sampled on
   nlohmann::json summary;
 };
-
-/// Reads `x,y,z[,confidence]` lines (mm; '#' comments and a header line allowed).
-/// Throws InputError "file:line: reason" on text, missing columns, NaN or Inf.
-std::vector<fitting::AttractivePoint> read_points_csv(const std::filesystem::path& file);
 
 /// A point set by extension: CSV (read_points_csv), or the vertices of a .ply, .vtk or
 /// .vtp. Throws InputError naming the file on bad content or no points.

@@ -13,6 +13,7 @@ struct SegmentRequest {
   std::string series_uid;
   std::filesystem::path rtstruct;  ///< with roi: import
   std::string roi;
+  int roi_number = 0;             ///< or by ROI Number (> 0), when names repeat
   std::vector<double> seed_mm;    ///< x,y,z with hu: grow from a seed
   std::vector<double> hu_window;  ///< low,high
   double search_box_mm = 200;     ///< cube around the seed grown in (0: the whole CT)

@@ -15,6 +15,7 @@ namespace organfit::pipeline {
 
 struct UsPointsCommand {
   std::filesystem::path input, tracker, out;
+  std::filesystem::path ct;          ///< the CT the registration maps into: declared in the CSV
   std::vector<double> calibration;   ///< 16 numbers, row-major: image (mm) -> probe
   std::vector<double> registration;  ///< 16 numbers, row-major: tracker/volume -> CT (rigid)
   std::string transform;             ///< tracked transform name (default: the file's own)

@@ -7,9 +7,12 @@
 // temporary file: an exception or a signal never leaves a half-written final file.
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <string>
 
 namespace organfit {
+
+class PartialPath;
 
 class AtomicFile {
  public:
@@ -31,13 +34,15 @@ class AtomicFile {
   std::filesystem::path final_path_;
   std::filesystem::path temp_path_;
   std::ofstream out_;
+  std::unique_ptr<PartialPath> partial_;
   bool committed_ = false;
 };
 
 /// The same for writers that take a file name (ITK, VTK, GDCM): they write to path(),
-/// a temporary name beside the final one that keeps its extension (formats are chosen by
-/// extension); commit() renames it into place. Destroyed uncommitted, the temporary is
-/// removed. It may also be a folder written file by file (a DICOM series).
+/// the final name inside a temporary folder beside it (formats are chosen by extension,
+/// and a .mhd or .nhdr names its data file by its own name); commit() renames what was
+/// written into place. Destroyed uncommitted, the temporary folder is removed. path()
+/// may also be a folder written file by file (a DICOM series).
 class TempPath {
  public:
   explicit TempPath(std::filesystem::path final_path);
@@ -50,7 +55,8 @@ class TempPath {
   void commit();
 
  private:
-  std::filesystem::path final_path_, temp_path_;
+  std::filesystem::path final_path_, temp_dir_, temp_path_;
+  std::unique_ptr<PartialPath> partial_;
   bool committed_ = false;
 };
 

@@ -40,6 +40,11 @@ class TargetNotMetError : public Error {
       : Error(ExitCode::kTargetNotMet, message) {}
 };
 
+/// A value echoed in a message: at most `max_chars` characters (longer ones end in "..."),
+/// control characters shown as '?', so that an error stays one readable line whatever a
+/// file holds. Cut on a UTF-8 character boundary.
+std::string echo(const std::string& value, size_t max_chars = 80);
+
 /// Maps an exception escaping a command to its exit code (Error: its own; else kInternal).
 ExitCode exit_code_of(const std::exception& e);
 

@@ -1,15 +1,60 @@
 #pragma once
-// SIGINT / SIGTERM: the run stops at its next check (long loops check often: within a
-// second), unwinds through RAII (temporary files removed, no final-named file written)
-// and the command exits 130.
+// SIGINT / SIGTERM, and the run's wall budget: the run stops at its next check (long
+// loops check often), unwinds through RAII (temporary files removed, no final-named file
+// written) and the command exits 130 (3 when the budget ran out).
+//
+// Where no check comes in time (inside a library call: ITK, GDCM, VTK; a loop of a
+// module that knows nothing of signals), a watchdog thread ends the process itself
+// kStopGrace after the signal: it removes every path registered as "partial" (staging
+// folders, temporary files, folders created for outputs), prints the same one line and
+// exits with the same code. So every stage stops within a second and leaves nothing
+// partial, whether or not its loops check. A commit in progress (ScopedCommit) is let
+// finish first: it only renames, in milliseconds.
+#include <filesystem>
+
 namespace organfit {
 
-/// Installs the handlers (once, at start-up of the command).
+/// How long after a signal the watchdog waits for the run to stop by itself (s).
+constexpr double kStopGrace = 0.5;
+
+/// Installs the handlers and the watchdog (once, at start-up of the command, before any
+/// other thread exists: the signals are taken by the watchdog thread alone).
 void install_interrupt_handlers();
-/// True once SIGINT or SIGTERM arrived.
+/// True once SIGINT or SIGTERM arrived, or the wall budget ran out.
 bool interrupted();
-/// Throws Error(kInterrupted) when interrupted (call in long loops).
+/// Throws Error(kInterrupted) when interrupted, Error(kTargetNotMet) when the wall budget
+/// ran out (call in long loops).
 void throw_if_interrupted();
+/// The whole command's wall budget (s) from now; 0: none. When it runs out the command
+/// stops as on a signal, exit 3, the message naming `what` (e.g. "scene.max_wall_s").
+void set_wall_budget(double seconds, const char* what);
+/// Tells the watchdog that the command is ending by itself (its message is being printed):
+/// it no longer steps in.
+void mark_finishing();
+
+/// A path that is partial while this lives (a staging folder, a temporary file, a folder
+/// made for outputs): removed by the watchdog if the process is stopped. `only_if_empty`:
+/// a folder removed only when empty (one that outputs were made in).
+class PartialPath {
+ public:
+  explicit PartialPath(std::filesystem::path path, bool only_if_empty = false);
+  ~PartialPath();
+  PartialPath(const PartialPath&) = delete;
+  PartialPath& operator=(const PartialPath&) = delete;
+
+ private:
+  int id_;
+};
+
+/// While alive, the watchdog waits instead of stopping the process (outputs being moved
+/// into place).
+class ScopedCommit {
+ public:
+  ScopedCommit();
+  ~ScopedCommit();
+  ScopedCommit(const ScopedCommit&) = delete;
+  ScopedCommit& operator=(const ScopedCommit&) = delete;
+};
 
 /// The last line of defence against third-party aborts on malformed input: GDCM 3.0
 /// asserts on some corrupt files that organfit's own checks let through (found by

@@ -1,0 +1,240 @@
+#include "organfit/pipeline/points_file.h"
+
+#include <fmt/format.h>
+
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <sstream>
+#include <string>
+
+#include "organfit/support/error.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::pipeline {
+namespace {
+
+constexpr size_t kMaxFileBytes = size_t{64} << 20;  // 100,000 points take about 4 MB
+
+void append_utf8(std::string& out, char32_t c) {
+  if (c < 0x80) {
+    out += static_cast<char>(c);
+  } else if (c < 0x800) {
+    out += static_cast<char>(0xC0 | (c >> 6));
+    out += static_cast<char>(0x80 | (c & 0x3F));
+  } else if (c < 0x10000) {
+    out += static_cast<char>(0xE0 | (c >> 12));
+    out += static_cast<char>(0x80 | ((c >> 6) & 0x3F));
+    out += static_cast<char>(0x80 | (c & 0x3F));
+  } else {
+    out += static_cast<char>(0xF0 | (c >> 18));
+    out += static_cast<char>(0x80 | ((c >> 12) & 0x3F));
+    out += static_cast<char>(0x80 | ((c >> 6) & 0x3F));
+    out += static_cast<char>(0x80 | (c & 0x3F));
+  }
+}
+
+/// The file's text as UTF-8: a UTF-8 mark dropped, UTF-16 (by its mark, or by the zero
+/// bytes of ASCII text without one) converted. Empty optional: not text.
+bool decode(const std::string& bytes, std::string& text) {
+  auto u8 = [&](size_t i) { return static_cast<unsigned char>(bytes[i]); };
+  const size_t n = bytes.size();
+  int utf16 = 0;  // 1 little endian, 2 big endian
+  size_t start = 0;
+  if (n >= 3 && u8(0) == 0xEF && u8(1) == 0xBB && u8(2) == 0xBF) {
+    start = 3;
+  } else if (n >= 2 && u8(0) == 0xFF && u8(1) == 0xFE) {
+    utf16 = 1, start = 2;
+  } else if (n >= 2 && u8(0) == 0xFE && u8(1) == 0xFF) {
+    utf16 = 2, start = 2;
+  } else if (n >= 4 && n % 2 == 0 && u8(0) != 0 && u8(1) == 0 && u8(2) != 0 && u8(3) == 0) {
+    utf16 = 1;
+  } else if (n >= 4 && n % 2 == 0 && u8(0) == 0 && u8(1) != 0 && u8(2) == 0 && u8(3) != 0) {
+    utf16 = 2;
+  }
+  if (!utf16) {
+    text = bytes.substr(start);
+    return text.find('\0') == std::string::npos;  // NUL bytes: a binary file
+  }
+  if ((n - start) % 2 != 0) return false;
+  text.clear();
+  for (size_t i = start; i + 1 < n; i += 2) {
+    char32_t unit = utf16 == 1 ? u8(i) | (u8(i + 1) << 8) : (u8(i) << 8) | u8(i + 1);
+    if (unit >= 0xD800 && unit < 0xDC00 && i + 3 < n) {  // a surrogate pair
+      const char32_t low = utf16 == 1 ? u8(i + 2) | (u8(i + 3) << 8) : (u8(i + 2) << 8) | u8(i + 3);
+      if (low < 0xDC00 || low > 0xDFFF) return false;
+      unit = 0x10000 + ((unit - 0xD800) << 10) + (low - 0xDC00);
+      i += 2;
+    } else if (unit >= 0xD800 && unit <= 0xDFFF) {
+      return false;
+    }
+    if (unit == 0) return false;
+    append_utf8(text, unit);
+  }
+  return true;
+}
+
+std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t\"'");
+  const auto e = s.find_last_not_of(" \t\"'");
+  return b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
+}
+
+/// A line's cells: split at ';' (then ',' is a decimal comma), else at tabs (likewise),
+/// else at ',', else at runs of spaces.
+std::vector<std::string> cells_of(const std::string& line) {
+  std::vector<std::string> cells;
+  char sep = ' ';
+  bool decimal_comma = false;
+  if (line.find(';') != std::string::npos) {
+    sep = ';', decimal_comma = true;
+  } else if (line.find('\t') != std::string::npos) {
+    sep = '\t', decimal_comma = true;
+  } else if (line.find(',') != std::string::npos) {
+    sep = ',';
+  }
+  std::string cell;
+  auto push = [&]() {
+    std::string c = trim(cell);
+    if (decimal_comma && c.find(',') != std::string::npos && c.find('.') == std::string::npos)
+      for (auto& ch : c)
+        if (ch == ',') ch = '.';
+    if (sep != ' ' || !c.empty()) cells.push_back(c);
+    cell.clear();
+  };
+  for (char ch : line) {
+    if (ch == sep || (sep == ' ' && ch == '\t')) {
+      push();
+    } else {
+      cell += ch;
+    }
+  }
+  push();
+  // A trailing separator (as some spreadsheets write) adds no column.
+  if (sep != ' ' && cells.size() > 1 && cells.back().empty()) cells.pop_back();
+  return cells;
+}
+
+/// The whole cell as a number (locale-independent), or false.
+bool parse_number(const std::string& cell, double& v) {
+  if (cell.empty()) return false;
+  const char* b = cell.data();
+  const char* e = b + cell.size();
+  if (*b == '+') ++b;
+  const auto [end, ec] = std::from_chars(b, e, v);
+  if (ec == std::errc::result_out_of_range) {
+    v = std::numeric_limits<double>::infinity();
+    return end == e;
+  }
+  return ec == std::errc() && end == e;
+}
+
+}  // namespace
+
+namespace {
+
+/// The file's text, decoded (InputError naming it when it cannot be).
+std::string text_of(const fs::path& file) {
+  const std::string name = file.string();
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) throw InputError(name + ": not a regular file");
+  if (fs::file_size(file, ec) > kMaxFileBytes)
+    throw InputError(fmt::format("{}: larger than {} MiB: not a points file of at most {} points",
+                                 name, kMaxFileBytes >> 20, kMaxPointsInFile));
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw InputError(name + ": cannot read the points file");
+  const std::string bytes((std::istreambuf_iterator<char>(in)), {});
+  std::string text;
+  if (!decode(bytes, text))
+    throw InputError(name + ": not a text file (neither UTF-8 nor UTF-16 text)");
+  return text;
+}
+
+}  // namespace
+
+PointsCt read_points_ct(const fs::path& file) {
+  const std::string text = text_of(file);
+  PointsCt ct;
+  std::istringstream lines(text);
+  std::string line;
+  while (std::getline(lines, line, '\n')) {
+    const auto first = line.find_first_not_of(" \t");
+    if (first == std::string::npos || line[first] != '#') continue;
+    const auto colon = line.find(':', first);
+    if (colon == std::string::npos) continue;
+    const std::string key = trim(line.substr(first + 1, colon - first - 1));
+    std::string value = trim(line.substr(colon + 1));
+    while (!value.empty() && (value.back() == '\r' || value.back() == ' '))
+      value.pop_back();
+    if (key == "series_instance_uid") ct.series_instance_uid = value;
+    if (key == "frame_of_reference_uid") ct.frame_of_reference_uid = value;
+  }
+  return ct;
+}
+
+std::string points_ct_comment(const PointsCt& ct) {
+  std::string out;
+  if (!ct.series_instance_uid.empty())
+    out += "# series_instance_uid: " + ct.series_instance_uid + "\n";
+  if (!ct.frame_of_reference_uid.empty())
+    out += "# frame_of_reference_uid: " + ct.frame_of_reference_uid + "\n";
+  return out;
+}
+
+std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
+  const std::string name = file.string();
+  const std::string text = text_of(file);
+
+  std::vector<fitting::AttractivePoint> points;
+  int line_no = 0;
+  bool header_seen = false;
+  size_t at = 0;
+  while (at <= text.size()) {
+    size_t end = text.find_first_of("\r\n", at);
+    if (end == std::string::npos) end = text.size();
+    const std::string line = text.substr(at, end - at);
+    at = end + ((end + 1 < text.size() && text[end] == '\r' && text[end + 1] == '\n') ? 2 : 1);
+    ++line_no;
+    auto fail = [&](const std::string& why) {
+      throw InputError(fmt::format("{}:{}: {}", name, line_no, why));
+    };
+    const auto first = line.find_first_not_of(" \t");
+    if (first == std::string::npos || line[first] == '#') continue;
+    const std::vector<std::string> cells = cells_of(line);
+    std::vector<double> v;
+    for (const auto& c : cells) {
+      double d = 0;
+      if (!parse_number(c, d)) {
+        // One line of column names may come before the first point.
+        if (points.empty() && v.empty() && !header_seen) break;
+        fail(fmt::format("'{}' is not a number", echo(c)));
+      }
+      if (!std::isfinite(d)) fail("non-finite coordinate");
+      v.push_back(d);
+    }
+    if (v.empty()) {
+      header_seen = true;
+      continue;
+    }
+    if (v.size() != 3 && v.size() != 4)
+      fail(fmt::format("expected x,y,z[,confidence], got {} columns", v.size()));
+    for (int c = 0; c < 3; ++c)
+      if (std::abs(v[c]) > kMaxCoordinateMm)
+        fail(
+            fmt::format("coordinate {:g} mm lies beyond 10 m: no patient is there (mm are "
+                        "expected; metres or another column?)",
+                        v[c]));
+    if (v.size() == 4 && !(v[3] > 0 && v[3] <= 1)) fail("confidence must be in (0, 1]");
+    if (static_cast<long>(points.size()) == kMaxPointsInFile)
+      throw InputError(fmt::format("{}: more than {} points (the most a points file may hold)",
+                                   name, kMaxPointsInFile));
+    points.push_back({Eigen::Vector3d(v[0], v[1], v[2]), v.size() == 4 ? v[3] : 1.0});
+  }
+  if (points.empty()) throw InputError(name + ": no points in the file");
+  return points;
+}
+
+}  // namespace organfit::pipeline
