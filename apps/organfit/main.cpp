@@ -41,13 +41,24 @@ int run_main(int argc, char** argv) {
                "never in logs");
 
   std::string scene_file, out_dir;
+  std::vector<std::string> overrides;
   auto* run = app.add_subcommand("run", "Run a scene: the stages it names, outputs into --out");
   run->add_option("scene", scene_file, "Scene file (YAML)")->required();
+  auto add_set = [&overrides](CLI::App* command) {
+    command
+        ->add_option("--set", overrides,
+                     "section.key=value: sets a scene key for this run (repeatable; validated "
+                     "as the file is; recorded in resolved.yaml)")
+        ->expected(1)
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  };
+  add_set(run);
   run->add_option("-o,--out", out_dir, "Output folder (created; not the scene's folder)")
       ->required();
 
   auto* validate = app.add_subcommand("validate", "Check a scene without running it");
   validate->add_option("scene", scene_file, "Scene file (YAML)")->required();
+  add_set(validate);
 
   bool schema_json = false;
   auto* schema =
@@ -311,10 +322,10 @@ int run_main(int argc, char** argv) {
     std::cout << synth_out << ": pelvis phantom, " << result.slices << " slices, prostate "
               << result.prostate_volume_cm3 << " cm3\n";
   } else if (*validate) {
-    const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
+    const auto scene = organfit::pipeline::load_and_check_scene(scene_file, overrides);
     std::cout << scene_file << ": valid (" << scene.sections().size() << " sections)\n";
   } else if (*run) {
-    const auto scene = organfit::pipeline::load_and_check_scene(scene_file);
+    const auto scene = organfit::pipeline::load_and_check_scene(scene_file, overrides);
     organfit::set_wall_budget(scene.number("scene", "max_wall_s"), "scene.max_wall_s");
     organfit::pipeline::run_scene(scene, out_dir, run_options);
     spdlog::info("done: {}/run.json", out_dir);

@@ -50,6 +50,16 @@ expect validate.yaml_syntax 2 "bad-yaml-syntax.yaml:" -- validate "$scenes/bad-y
 expect validate.model_without_body 2 "model.radius_mm: the model needs a body" -- validate "$scenes/bad-model-without-body.yaml"
 expect validate.missing_file 2 "no-such-scene.yaml: cannot read the scene file" -- validate "$scenes/no-such-scene.yaml"
 expect validate.good 0 "" -- validate "$scenes/small-model.yaml"
+# --set section.key=value: validated as the file is, errors naming --set, recorded.
+expect set.out_of_range 2 "--set model.radius_mm=-1: -1 is out of range (0, 100] mm" -- validate "$scenes/small-model.yaml" --set model.radius_mm=-1
+expect set.unknown_key 2 "--set model.raduis_mm=2: unknown key (did you mean 'radius_mm'?)" -- validate "$scenes/small-model.yaml" --set model.raduis_mm=2
+expect set.not_key_value 2 "--set model.radius_mm: expected section.key=value" -- validate "$scenes/small-model.yaml" --set model.radius_mm
+expect set.twice 2 "--set model.radius_mm=3: the key is set twice" -- validate "$scenes/small-model.yaml" --set model.radius_mm=2 --set model.radius_mm=3
+expect set.cross_key_rule 2 "--set model.exponent_n=6: the repulsive exponent n (6) must exceed the attractive m (12)" -- validate "$scenes/small-model.yaml" --set model.exponent_m=12 --set model.exponent_n=6
+expect set.ignored_key 2 "not used when points.source is 'generate'" -- validate "$scenes/small-model.yaml" --set "points.file=$scenes/small-model.yaml"
+expect set.run 0 "" -- --quiet run "$scenes/small-model.yaml" --set model.radius_mm=2.5 --set "points.count=20" --out "$tmp/set_out"
+check set.recorded_in_resolved_yaml bash -c "grep -q '^  radius_mm: 2.5 ' '$tmp/set_out/resolved.yaml' && grep -q '^# Set on the command line: --set model.radius_mm=2.5' '$tmp/set_out/resolved.yaml' && grep -q '^  count: 20 ' '$tmp/set_out/resolved.yaml'"
+check set.resolved_yaml_reruns_the_same "$bin" --quiet validate "$tmp/set_out/resolved.yaml"
 expect validate.default_scene 0 "" -- validate "$src/pipelines/default.yaml"
 
 # usage errors are exit 2; help is 0

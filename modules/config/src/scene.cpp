@@ -45,7 +45,12 @@ class Parser {
  public:
   Parser(fs::path file, const Schema& schema) : file_(std::move(file)), schema_(schema) {}
 
+  /// Keys given by --set, with the text that gave them (for messages).
+  std::map<std::string, std::string> overrides;
+
   [[noreturn]] void fail(int line0, const std::string& key, const std::string& reason) const {
+    if (const auto it = overrides.find(key); it != overrides.end())
+      throw InputError(fmt::format("--set {}: {}", echo(it->second), reason));
     throw InputError(fmt::format("{}:{}: {}{}{}", file_.string(), line0 + 1, echo(key),
                                  key.empty() ? "" : ": ", reason));
   }
@@ -117,7 +122,9 @@ class Parser {
         const std::string s = scalar_text();
         if (s.empty()) fail(line, key, "empty path");
         fs::path p(s);
-        if (p.is_relative()) p = file_.parent_path() / p;
+        // A path on the command line is the user's, from where they are.
+        if (p.is_relative())
+          p = (overrides.count(key) ? fs::current_path() : file_.parent_path()) / p;
         if (!fs::exists(p))
           fail(line, key, fmt::format("no such file or folder: {}", echo(p.string(), 200)));
         return fs::absolute(p).lexically_normal().string();
@@ -171,7 +178,8 @@ std::vector<std::string> section_names(const Schema& schema) {
 
 }  // namespace
 
-Scene parse_scene(const std::string& text, const fs::path& file, const Schema& schema) {
+Scene parse_scene(const std::string& text, const fs::path& file, const Schema& schema,
+                  const std::vector<std::string>& overrides) {
   Parser parser(file, schema);
   YAML::Node root;
   try {
@@ -179,8 +187,42 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
   } catch (const YAML::Exception& e) {
     parser.fail(std::max(0, e.mark.line), "", "YAML syntax error: " + e.msg);
   }
-  if (!root || root.IsNull()) parser.fail(0, "", "the scene is empty");
+  if ((!root || root.IsNull()) && overrides.empty()) parser.fail(0, "", "the scene is empty");
+  if (!root || root.IsNull()) root = YAML::Node(YAML::NodeType::Map);
   if (!root.IsMap()) parser.fail(root.Mark().line, "", "a scene is a mapping of sections");
+  // --set section.key=value: into the tree before validation, which then names --set.
+  for (const auto& o : overrides) {
+    auto refuse = [&](const std::string& why) {
+      throw InputError(fmt::format("--set {}: {}", echo(o), why));
+    };
+    const auto eq = o.find('=');
+    const std::string key = o.substr(0, eq);
+    const auto dot = key.find('.');
+    if (eq == std::string::npos || dot == std::string::npos || dot == 0 || dot + 1 == key.size())
+      refuse("expected section.key=value");
+    const std::string sec = key.substr(0, dot), name = key.substr(dot + 1);
+    if (!schema.find_section(sec))
+      refuse("unknown section" + suggestion(sec, section_names(schema)));
+    if (!schema.find(sec, name)) {
+      std::vector<std::string> known;
+      for (const auto* p : schema.params_of(sec))
+        known.push_back(p->name);
+      refuse("unknown key" + suggestion(name, known));
+    }
+    if (parser.overrides.count(key)) refuse("the key is set twice");
+    YAML::Node value;
+    try {
+      value = YAML::Load(o.substr(eq + 1));
+    } catch (const YAML::Exception& e) {
+      refuse("YAML syntax error: " + e.msg);
+    }
+    if (!value || value.IsNull()) refuse("no value");
+    if (!root[sec] || root[sec].IsNull()) root[sec] = YAML::Node(YAML::NodeType::Map);
+    if (!root[sec].IsMap())
+      parser.fail(root[sec].Mark().line, sec, "a section is a mapping of keys");
+    root[sec][name] = value;
+    parser.overrides[key] = o;
+  }
 
   Scene scene;
   scene.file_ = file;
@@ -210,7 +252,9 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
           parser.fail(line, sec + "." + name, "unknown key" + suggestion(name, known));
         }
         if (scene.entries_.count(spec->key())) parser.fail(line, spec->key(), "key given twice");
-        scene.entries_[spec->key()] = {parser.convert(*spec, item.second), line + 1, true};
+        const auto set = parser.overrides.find(spec->key());
+        scene.entries_[spec->key()] = {parser.convert(*spec, item.second), line + 1, true,
+                                       set == parser.overrides.end() ? "" : set->second};
       }
     }
     for (const auto* p : schema.params_of(sec)) {
@@ -234,24 +278,8 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
     const ParamSpec* spec =
         schema.find(key.substr(0, key.find('.')), key.substr(key.find('.') + 1));
     if (!spec || spec->used_when.empty()) continue;
-    // The condition to name: the first that fails in the alternative that came closest.
-    const Condition* failed = nullptr;
-    size_t best_held = 0;
-    bool used = false;
-    for (const auto& alternative : spec->used_when) {
-      size_t held = 0;
-      for (const auto& c : alternative) {
-        const auto it = scene.entries_.find(c.key);
-        const std::string* value =
-            it == scene.entries_.end() ? nullptr : std::get_if<std::string>(&it->second.value);
-        if (!value || std::find(c.values.begin(), c.values.end(), *value) == c.values.end()) {
-          if (!failed || held > best_held) failed = &c, best_held = held;
-          break;
-        }
-        ++held;
-      }
-      used = used || held == alternative.size();
-    }
+    const Condition* failed = scene.unmet_condition(*spec);
+    const bool used = failed == nullptr;
     if (used) continue;
     const auto it = scene.entries_.find(failed->key);
     const std::string* value =
@@ -266,7 +294,8 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
   return scene;
 }
 
-Scene load_scene(const fs::path& file, const Schema& schema) {
+Scene load_scene(const fs::path& file, const Schema& schema,
+                 const std::vector<std::string>& overrides) {
   std::error_code ec;
   if (fs::is_directory(file, ec))
     throw InputError(file.string() + ": is a folder, not a scene file");
@@ -274,7 +303,7 @@ Scene load_scene(const fs::path& file, const Schema& schema) {
   if (!in) throw InputError(file.string() + ": cannot read the scene file");
   std::stringstream ss;
   ss << in.rdbuf();
-  return parse_scene(ss.str(), file, schema);
+  return parse_scene(ss.str(), file, schema, overrides);
 }
 
 bool Scene::is_given(const std::string& section, const std::string& name) const {
@@ -322,6 +351,28 @@ Eigen::Vector3d Scene::vec3(const std::string& s, const std::string& n) const {
   return std::get<Eigen::Vector3d>(entry(s, n, ParamType::kVec3).value);
 }
 
+const UseCondition* Scene::unmet_condition(const ParamSpec& spec) const {
+  if (spec.used_when.empty()) return nullptr;
+  // The condition to name: the first that fails in the alternative that came closest.
+  const UseCondition* failed = nullptr;
+  size_t best_held = 0;
+  for (const auto& alternative : spec.used_when) {
+    size_t held = 0;
+    for (const auto& c : alternative) {
+      const auto it = entries_.find(c.key);
+      const std::string* value =
+          it == entries_.end() ? nullptr : std::get_if<std::string>(&it->second.value);
+      if (!value || std::find(c.values.begin(), c.values.end(), *value) == c.values.end()) {
+        if (!failed || held > best_held) failed = &c, best_held = held;
+        break;
+      }
+      ++held;
+    }
+    if (held == alternative.size()) return nullptr;
+  }
+  return failed;
+}
+
 int Scene::line_of(const std::string& s, const std::string& n) const {
   auto it = entries_.find(s + "." + n);
   if (it != entries_.end()) return it->second.line;
@@ -330,6 +381,9 @@ int Scene::line_of(const std::string& s, const std::string& n) const {
 }
 
 void Scene::fail(const std::string& s, const std::string& n, const std::string& reason) const {
+  if (const auto it = entries_.find(s + "." + n);
+      it != entries_.end() && !it->second.set_on_command_line.empty())
+    throw InputError(fmt::format("--set {}: {}", echo(it->second.set_on_command_line), reason));
   // An empty key: the rule is about the whole section.
   throw InputError(fmt::format("{}:{}: {}{}{}: {}", file_.string(), line_of(s, n), s,
                                n.empty() ? "" : ".", n, reason));
@@ -339,6 +393,9 @@ std::string Scene::resolved_yaml() const {
   std::ostringstream out;
   out << "# Fully resolved scene: every key of each section used, defaults filled in.\n";
   out << "# Source: " << file_.string() << "\n";
+  for (const auto& [key, e] : entries_)
+    if (!e.set_on_command_line.empty())
+      out << "# Set on the command line: --set " << e.set_on_command_line << "\n";
   for (const auto& sec : schema_->sections()) {
     if (!has_section(sec.name)) continue;
     out << sec.name << ":\n";
@@ -350,8 +407,13 @@ std::string Scene::resolved_yaml() const {
         em << YAML::DoubleQuoted << v;
         v = em.c_str();
       }
-      out << fmt::format("  {}: {}  # {}{}{}\n", p->name, v, p->unit.empty() ? "" : p->unit + "; ",
-                         e.given ? "" : "default; ", p->doc);
+      // What this run does not use is shown, commented out, so that the file stays a
+      // scene that runs the same.
+      const bool unused = unmet_condition(*p) != nullptr ||
+                          (p->type == ParamType::kInputPath && value_to_text(e.value).empty());
+      out << fmt::format("  {}{}: {}  # {}{}{}{}\n", unused ? "# " : "", p->name, v,
+                         p->unit.empty() ? "" : p->unit + "; ", e.given ? "" : "default; ",
+                         unused ? "not used by this run; " : "", p->doc);
     }
   }
   return out.str();

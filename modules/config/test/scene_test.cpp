@@ -160,3 +160,72 @@ TEST(Schema, TextListsEveryKeyWithUnitAndRange) {
 
 }  // namespace
 }  // namespace organfit::config
+
+namespace organfit::config {
+namespace {
+
+Schema schema_with_modes() {
+  Schema s;
+  s.section("fit", "the fit")
+      .choice("method", "spread", {"paper", "spread"}, "fit variant")
+      .number("alpha", 2.0, "", 1.0, 20.0, "paper only")
+      .used_when({{"fit.method", {"paper"}}})
+      .number("stretch", 1.5, "", 1.0, 10.0, "spread only")
+      .used_when({{"fit.method", {"spread"}}});
+  return s;
+}
+
+std::string override_error(const std::string& text, const std::vector<std::string>& sets) {
+  const Schema schema = schema_with_modes();
+  try {
+    parse_scene(text, "/scenes/s.yaml", schema, sets);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+TEST(SceneParse, AKeyTheRunWouldIgnoreIsRefusedNamingTheKeyThatDecides) {
+  EXPECT_EQ(override_error("fit:\n  method: spread\n  alpha: 3\n", {}),
+            "/scenes/s.yaml:3: fit.alpha: not used when fit.method is 'spread': the run would "
+            "ignore it (it is used with fit.method: paper)");
+  EXPECT_EQ(override_error("fit:\n  method: paper\n  alpha: 3\n", {}), "no error");
+  // A default that the mode does not use is not an error: only a given key is.
+  EXPECT_EQ(override_error("fit:\n  method: paper\n", {}), "no error");
+}
+
+TEST(SceneParse, SetOnTheCommandLineIsValidatedAsTheFileIsAndNamed) {
+  const Schema schema = schema_with_modes();
+  const Scene scene = parse_scene("fit:\n  method: paper\n", "/s.yaml", schema,
+                                  {"fit.method=spread", "fit.stretch=2.5"});
+  EXPECT_EQ(scene.text("fit", "method"), "spread");
+  EXPECT_DOUBLE_EQ(scene.number("fit", "stretch"), 2.5);
+  EXPECT_TRUE(scene.is_given("fit", "stretch"));
+  EXPECT_EQ(override_error("fit:\n", {"fit.stretch=20"}),
+            "--set fit.stretch=20: 20 is out of range [1, 10]");
+  EXPECT_EQ(override_error("fit:\n", {"fit.strech=2"}),
+            "--set fit.strech=2: unknown key (did you mean 'stretch'?)");
+  EXPECT_EQ(override_error("fit:\n", {"fit.alpha=3"}),
+            "--set fit.alpha=3: not used when fit.method is 'spread': the run would ignore it (it "
+            "is used with fit.method: paper)");
+  EXPECT_EQ(override_error("fit:\n", {"fit"}), "--set fit: expected section.key=value");
+  // A section may come from the command line alone.
+  EXPECT_EQ(override_error("", {"fit.method=paper"}), "no error");
+}
+
+TEST(SceneResolved, CommentsOutWhatTheRunDoesNotUseAndRecordsTheCommandLine) {
+  const Schema schema = schema_with_modes();
+  const Scene scene = parse_scene("fit:\n  method: paper\n", "/s.yaml", schema, {"fit.alpha=4"});
+  const std::string yaml = scene.resolved_yaml();
+  EXPECT_NE(yaml.find("# Set on the command line: --set fit.alpha=4\n"), std::string::npos);
+  EXPECT_NE(yaml.find("\n  alpha: 4  # "), std::string::npos) << yaml;
+  EXPECT_NE(yaml.find("\n  # stretch: 1.5  # default; not used by this run; "), std::string::npos)
+      << yaml;
+  // And it parses back to the same values.
+  const Scene again = parse_scene(yaml, "/resolved.yaml", schema);
+  EXPECT_DOUBLE_EQ(again.number("fit", "alpha"), 4.0);
+  EXPECT_EQ(again.text("fit", "method"), "paper");
+}
+
+}  // namespace
+}  // namespace organfit::config

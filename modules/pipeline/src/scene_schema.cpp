@@ -393,8 +393,9 @@ void check_scene_rules(const config::Scene& scene) {
   }
 }
 
-config::Scene load_and_check_scene(const std::filesystem::path& file) {
-  config::Scene scene = config::load_scene(file, scene_schema());
+config::Scene load_and_check_scene(const std::filesystem::path& file,
+                                   const std::vector<std::string>& overrides) {
+  config::Scene scene = config::load_scene(file, scene_schema(), overrides);
   check_scene_rules(scene);
   return scene;
 }

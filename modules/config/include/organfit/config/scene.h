@@ -7,6 +7,7 @@
 #include <map>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "organfit/config/schema.h"
 
@@ -33,6 +34,9 @@ class Scene {
   Eigen::Vector3d vec3(const std::string& section, const std::string& name) const;
   Eigen::Matrix4d matrix4(const std::string& section, const std::string& name) const;
 
+  /// The first condition of `spec.used_when` this scene does not meet (nullptr: the run
+  /// uses the key).
+  const UseCondition* unmet_condition(const ParamSpec& spec) const;
   /// Line (1-based) where the key was given, or where its section starts when defaulted.
   int line_of(const std::string& section, const std::string& name) const;
   /// Throws InputError "file:line: section.name: reason" (for cross-key rules).
@@ -46,11 +50,13 @@ class Scene {
   nlohmann::json to_json() const;
 
  private:
-  friend Scene parse_scene(const std::string&, const std::filesystem::path&, const Schema&);
+  friend Scene parse_scene(const std::string&, const std::filesystem::path&, const Schema&,
+                           const std::vector<std::string>&);
   struct Entry {
     Value value;
     int line = 0;
     bool given = false;
+    std::string set_on_command_line;  ///< "section.key=value" when --set gave it
   };
   const Entry& entry(const std::string& section, const std::string& name, ParamType type) const;
 
@@ -66,9 +72,16 @@ class Scene {
 /// problem: YAML syntax, an unknown section or key (with the nearest declared name),
 /// a duplicate key, a wrong type, a value out of range, a missing required key or
 /// a missing input file. The schema must outlive the scene.
-Scene parse_scene(const std::string& text, const std::filesystem::path& file, const Schema& schema);
+///
+/// `overrides` ("section.key=value", from `organfit run --set`) replace or add keys (and
+/// their sections) before the same validation; the value is YAML ("[1, 2, 3]" a list); a
+/// relative path is taken from the current folder. Their errors read "--set
+/// section.key=value: reason".
+Scene parse_scene(const std::string& text, const std::filesystem::path& file, const Schema& schema,
+                  const std::vector<std::string>& overrides = {});
 
-/// Reads and parses a scene file (InputError when it cannot be read).
-Scene load_scene(const std::filesystem::path& file, const Schema& schema);
+/// Reads and parses a scene file (InputError when it cannot be read), with `overrides`.
+Scene load_scene(const std::filesystem::path& file, const Schema& schema,
+                 const std::vector<std::string>& overrides = {});
 
 }  // namespace organfit::config
