@@ -420,43 +420,32 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
       auto get = [&](uint16_t gr, uint16_t el) {
         return trimmed(sf.ToString(gdcm::Tag(gr, el)).c_str());
       };
-      PatientStudy& p = series.patient;
-      p.patient_name = get(0x0010, 0x0010);
-      p.patient_id = get(0x0010, 0x0020);
-      p.patient_birth_date = get(0x0010, 0x0030);
-      p.patient_sex = get(0x0010, 0x0040);
-      p.study_instance_uid = get(0x0020, 0x000d);
-      p.study_id = get(0x0020, 0x0010);
-      p.study_date = get(0x0008, 0x0020);
-      p.study_time = get(0x0008, 0x0030);
-      p.study_description = get(0x0008, 0x1030);
-      p.accession_number = get(0x0008, 0x0050);
-      p.referring_physician_name = get(0x0008, 0x0090);
-      // Text in the source's character set becomes UTF-8, which organfit declares.
+      PatientStudy as_read;
+      as_read.patient_name = get(0x0010, 0x0010);
+      as_read.patient_id = get(0x0010, 0x0020);
+      as_read.patient_birth_date = get(0x0010, 0x0030);
+      as_read.patient_sex = get(0x0010, 0x0040);
+      as_read.study_instance_uid = get(0x0020, 0x000d);
+      as_read.study_id = get(0x0020, 0x0010);
+      as_read.study_date = get(0x0008, 0x0020);
+      as_read.study_time = get(0x0008, 0x0030);
+      as_read.study_description = get(0x0008, 0x1030);
+      as_read.accession_number = get(0x0008, 0x0050);
+      as_read.referring_physician_name = get(0x0008, 0x0090);
+      // Text in the source's character set becomes UTF-8, which organfit declares; in a
+      // set it cannot convert (ISO 2022 code extensions) it is kept, with that set.
       const std::string charset = get(0x0008, 0x0005);
-      bool converted = true;
+      PatientStudy& p = series.patient;
+      p = as_read;
       for (std::string* text : {&p.patient_name, &p.patient_id, &p.study_id, &p.study_description,
                                 &p.accession_number, &p.referring_physician_name}) {
         std::string utf8;
-        if (converted && detail::to_utf8(*text, charset, utf8))
-          *text = utf8;
-        else
-          converted = false;
-      }
-      if (!converted) {  // kept as they were, in the source's own character set
-        p = {};
-        p.patient_name = get(0x0010, 0x0010);
-        p.patient_id = get(0x0010, 0x0020);
-        p.patient_birth_date = get(0x0010, 0x0030);
-        p.patient_sex = get(0x0010, 0x0040);
-        p.study_instance_uid = get(0x0020, 0x000d);
-        p.study_id = get(0x0020, 0x0010);
-        p.study_date = get(0x0008, 0x0020);
-        p.study_time = get(0x0008, 0x0030);
-        p.study_description = get(0x0008, 0x1030);
-        p.accession_number = get(0x0008, 0x0050);
-        p.referring_physician_name = get(0x0008, 0x0090);
-        p.specific_character_set = charset;
+        if (!detail::to_utf8(*text, charset, utf8)) {
+          p = as_read;
+          p.specific_character_set = charset;
+          break;
+        }
+        *text = utf8;
       }
     }
   }

@@ -35,6 +35,17 @@ Contour square(double x0, double y0, double side, double z, const std::string& u
           {{x0, y0, z}, {x0 + side, y0, z}, {x0 + side, y0 + side, z}, {x0, y0 + side, z}}};
 }
 
+/// A structure set of one ROI "Organ" in the small CT's Frame of Reference.
+StructureSet organ_of(std::vector<Contour> contours) {
+  StructureSet s;
+  Roi roi;
+  roi.name = "Organ";
+  roi.frame_of_reference_uid = "1.2.3.4";
+  roi.contours = std::move(contours);
+  s.rois.push_back(roi);
+  return s;
+}
+
 std::string error_of(const StructureSet& s, const std::string& roi, const CtSeries& ct) {
   try {
     rasterise_roi(s, roi, ct, "rt.dcm");
@@ -67,12 +78,7 @@ TEST(RasteriseRoi, EvenOddRuleMakesHolesAndIslands) {
 
 TEST(RasteriseRoi, RefusesBadStructureSetsNamingTheProblem) {
   const CtSeries ct = small_ct();
-  StructureSet s;
-  Roi roi;
-  roi.name = "Organ";
-  roi.frame_of_reference_uid = "1.2.3.4";
-  roi.contours = {square(4.5, 4.5, 10, 2)};
-  s.rois.push_back(roi);
+  StructureSet s = organ_of({square(4.5, 4.5, 10, 2)});
   EXPECT_EQ(error_of(s, "Bladder", ct),
             "rt.dcm: no ROI named 'Bladder' (the structure set has 'Organ')");
   s.rois[0].frame_of_reference_uid = "9.9";
@@ -151,14 +157,9 @@ TEST(RasteriseRoi, TwoRoisOfOneNameNeedTheirNumber) {
 
 TEST(RasteriseRoi, DegenerateContoursAreSkippedNamingTheirSlice) {
   const CtSeries ct = small_ct();
-  StructureSet s;
-  Roi roi;
-  roi.name = "Organ";
-  roi.frame_of_reference_uid = "1.2.3.4";
-  roi.contours = {square(4.5, 4.5, 10, 2, "1.2.3.4.5.1"),
-                  {"CLOSED_PLANAR", "", {{1, 1, 4}, {5, 1, 4}}},
-                  {"CLOSED_PLANAR", "", {{1, 1, 0}, {5, 1, 0}, {9, 1, 0}}}};
-  s.rois.push_back(roi);
+  StructureSet s = organ_of({square(4.5, 4.5, 10, 2, "1.2.3.4.5.1"),
+                             {"CLOSED_PLANAR", "", {{1, 1, 4}, {5, 1, 4}}},
+                             {"CLOSED_PLANAR", "", {{1, 1, 0}, {5, 1, 0}, {9, 1, 0}}}});
   const RasterisedRoi r = rasterise_roi(s, "Organ", ct, "rt.dcm");
   EXPECT_EQ(r.mask.count(1), 10 * 10);
   EXPECT_EQ(r.skipped, 2);
