@@ -14,6 +14,7 @@
 #include "organfit/particles/cohesion_force.h"
 #include "organfit/particles/integrator.h"
 #include "organfit/particles/lattice_fill.h"
+#include "organfit/support/interrupt.h"
 #include "organfit/support/resources.h"
 
 namespace fs = std::filesystem;
@@ -126,7 +127,8 @@ LammpsResult run_lammps(const std::string& binary, long long requested, long lon
   }
   const std::string cmd = "cd '" + dir.string() + "' && OMP_NUM_THREADS=1 " + binary +
                           " -in in.lj -log log.lammps -screen none > /dev/null 2>&1";
-  const int status = std::system(cmd.c_str());
+  const PartialPath partial(dir);  // removed too if the process is stopped
+  const int status = run_command(cmd);
   std::ifstream log(dir / "log.lammps");
   std::stringstream ss;
   ss << log.rdbuf();

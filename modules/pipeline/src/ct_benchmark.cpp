@@ -8,6 +8,7 @@
 #include "organfit/pipeline/runner.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
+#include "organfit/support/interrupt.h"
 #include "organfit/support/resources.h"
 
 namespace fs = std::filesystem;
@@ -27,6 +28,7 @@ nlohmann::json run_ct_benchmark(const CtBenchOptions& o) {
       fs::remove_all(dir, ec);
     }
   } cleanup{work};
+  const PartialPath partial(work);  // removed too if the process is stopped
 
   fs::path ct = o.ct;
   double synth_s = 0;
@@ -37,8 +39,7 @@ nlohmann::json run_ct_benchmark(const CtBenchOptions& o) {
         "/dev/null",
         fs::read_symlink("/proc/self/exe").string(), (work / "phantom").string(), o.columns, o.rows,
         o.slices, 400.0 / std::max(o.columns, o.rows));
-    if (std::system(cmd.c_str()) != 0)
-      throw InputError("bench ct: making the phantom failed: " + cmd);
+    if (run_command(cmd) != 0) throw InputError("bench ct: making the phantom failed: " + cmd);
     synth_s = clock.elapsed_s();
     ct = work / "phantom" / "ct";
   }

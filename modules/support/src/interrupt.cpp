@@ -2,6 +2,8 @@
 
 #include <fcntl.h>
 #include <pthread.h>
+#include <spawn.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -10,6 +12,7 @@
 #include <cstdio>
 #include <map>
 #include <mutex>
+#include <set>
 #include <string>
 #include <thread>
 
@@ -37,6 +40,15 @@ struct Partial {
 std::mutex g_partial_mutex;
 std::map<int, Partial> g_partial;  // by registration order: later ones inside earlier ones
 int g_next_id = 0;
+
+std::mutex g_children_mutex;
+std::set<pid_t> g_children;  // run_command's children still running
+
+void stop_children() {
+  std::lock_guard<std::mutex> lock(g_children_mutex);
+  for (pid_t pid : g_children)
+    ::kill(-pid, SIGTERM);  // the child's whole process group: the shell and what it runs
+}
 
 std::string stop_message() {
   if (g_stop.load() == kOutOfTime) {
@@ -66,7 +78,10 @@ void watchdog(sigset_t signals) {
       g_stop.compare_exchange_strong(expected, kOutOfTime);
     }
     if (g_stop.load() == kRunning) continue;
-    if (stop_at == 0) stop_at = now_s() + kStopGrace;
+    if (stop_at == 0) {
+      stop_at = now_s() + kStopGrace;
+      stop_children();
+    }
     if (now_s() < stop_at || g_finishing.load() || g_committing.load() > 0) continue;
     // The run did not stop in time: remove what is partial, innermost first, and end.
     {
@@ -125,6 +140,46 @@ void set_wall_budget(double seconds, const char* what) {
   g_budget_name = what;
   g_budget_s = seconds;
   g_deadline_s.store(seconds > 0 ? now_s() + seconds : 0);
+}
+
+int run_command(const std::string& shell_command) {
+  posix_spawnattr_t attr;
+  posix_spawnattr_init(&attr);
+  sigset_t none, defaults;
+  sigemptyset(&none);
+  sigemptyset(&defaults);
+  sigaddset(&defaults, SIGINT);
+  sigaddset(&defaults, SIGTERM);
+  posix_spawnattr_setsigmask(&attr, &none);
+  posix_spawnattr_setsigdefault(&attr, &defaults);
+  posix_spawnattr_setpgroup(&attr, 0);  // a group of its own, signalled as a whole
+  posix_spawnattr_setflags(&attr,
+                           POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF | POSIX_SPAWN_SETPGROUP);
+  const char* argv[] = {"sh", "-c", shell_command.c_str(), nullptr};
+  pid_t pid = 0;
+  int status = -1;
+  {
+    std::lock_guard<std::mutex> lock(g_children_mutex);
+    const int rc =
+        posix_spawn(&pid, "/bin/sh", nullptr, &attr, const_cast<char* const*>(argv), environ);
+    posix_spawnattr_destroy(&attr);
+    if (rc != 0) return -1;
+    g_children.insert(pid);
+  }
+  bool told = false;  // the watchdog may have told the group already
+  while (::waitpid(pid, &status, WNOHANG) == 0) {
+    if (interrupted() && !told) ::kill(-pid, SIGTERM), told = true;
+    ::usleep(20'000);
+  }
+  // What the shell ran may outlive it by its own clean-up: wait for the group to go.
+  for (int i = 0; interrupted() && i < 20 && ::kill(-pid, 0) == 0; ++i)
+    ::usleep(20'000);
+  {
+    std::lock_guard<std::mutex> lock(g_children_mutex);
+    g_children.erase(pid);
+  }
+  throw_if_interrupted();
+  return status;
 }
 
 void mark_finishing() {

@@ -11,6 +11,7 @@
 // partial, whether or not its loops check. A commit in progress (ScopedCommit) is let
 // finish first: it only renames, in milliseconds.
 #include <filesystem>
+#include <string>
 
 namespace organfit {
 
@@ -45,6 +46,12 @@ class PartialPath {
  private:
   int id_;
 };
+
+/// Runs `shell_command` with /bin/sh as a child that takes SIGINT and SIGTERM as usual
+/// (its signals are not blocked as this process's are) and returns its wait status, as
+/// std::system does. On a stop the child gets SIGTERM at once (from the watchdog, or here
+/// when this thread sees the stop first), so that no child outlives the command.
+int run_command(const std::string& shell_command);
 
 /// While alive, the watchdog waits instead of stopping the process (outputs being moved
 /// into place).
