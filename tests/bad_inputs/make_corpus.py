@@ -406,6 +406,14 @@ points_in_ct('points_declared_in_another_series', '1.2.826.0.1.3680043.2.1125.99
              "its Series Instance UID is not the planning CT's")
 points_in_ct('points_declared_in_another_frame', planned_ct['series_instance_uid'], '1.2.826.0.1.3680043.2.1125.99.32',
              "its Frame of Reference UID is not the planning CT's")
+# A binary PLY declares no CT: its points are taken as they are, not read as text.
+d = case('tolerated_binary_ply_points_in_a_session', ['--quiet', 'run', '{case}/scene.yaml', '--out', '{case}/out'], '', code=0, ct=False, cls='points')
+import struct
+open(os.path.join(d, 'points.ply'), 'wb').write(
+    b'ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\n'
+    b'property float z\nend_header\n' + b''.join(struct.pack('<fff', *p) for p in [(0, 0, 10), (0, 10, 0), (10, 0, 0), (0, 0, -10)]))
+open(os.path.join(d, 'scene.yaml'), 'w').write(
+    'planning:\n  model: ../_planning/out/model.json\npoints:\n  source: file\n  file: points.ply\n')
 points_in_ct('tolerated_points_declared_in_their_ct', planned_ct['series_instance_uid'], planned_ct['frame_of_reference_uid'], '', code=0)
 shutil.rmtree(base)
 print(len([n for n in os.listdir(out) if os.path.isdir(os.path.join(out, n))]), 'cases')

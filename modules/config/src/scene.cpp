@@ -14,8 +14,6 @@ namespace fs = std::filesystem;
 namespace organfit::config {
 namespace {
 
-using Condition = UseCondition;
-
 /// Levenshtein distance, for "did you mean" on misspelled keys.
 size_t edit_distance(const std::string& a, const std::string& b) {
   std::vector<size_t> prev(b.size() + 1), cur(b.size() + 1);
@@ -277,10 +275,9 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
     if (!entry.given) continue;
     const ParamSpec* spec =
         schema.find(key.substr(0, key.find('.')), key.substr(key.find('.') + 1));
-    if (!spec || spec->used_when.empty()) continue;
-    const Condition* failed = scene.unmet_condition(*spec);
-    const bool used = failed == nullptr;
-    if (used) continue;
+    if (!spec) continue;
+    const UseCondition* failed = scene.unmet_condition(*spec);
+    if (!failed) continue;
     const auto it = scene.entries_.find(failed->key);
     const std::string* value =
         it == scene.entries_.end() ? nullptr : std::get_if<std::string>(&it->second.value);

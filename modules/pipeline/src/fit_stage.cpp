@@ -24,22 +24,19 @@ namespace fs = std::filesystem;
 
 namespace organfit::pipeline {
 
-std::vector<fitting::AttractivePoint> read_points_file(const fs::path& file) {
+PointsTable read_points_file(const fs::path& file) {
   const std::string ext = file.extension().string();
-  std::vector<fitting::AttractivePoint> points;
-  if (ext == ".ply" || ext == ".vtk" || ext == ".vtp") {
-    for (const auto& p : meshing::read_point_set(file)) {
-      if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])))
-        throw InputError(file.string() + ": a point has a non-finite coordinate");
-      if (!(p[3] > 0 && p[3] <= 1))
-        throw InputError(file.string() + ": a confidence is outside (0, 1]");
-      points.push_back({Eigen::Vector3d(p[0], p[1], p[2]), p[3]});
-    }
-  } else {
-    points = read_points_csv(file);
+  if (ext != ".ply" && ext != ".vtk" && ext != ".vtp") return read_points_table(file);
+  PointsTable table;  // a mesh's vertices declare no CT
+  for (const auto& p : meshing::read_point_set(file)) {
+    if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])))
+      throw InputError(file.string() + ": a point has a non-finite coordinate");
+    if (!(p[3] > 0 && p[3] <= 1))
+      throw InputError(file.string() + ": a confidence is outside (0, 1]");
+    table.points.push_back({Eigen::Vector3d(p[0], p[1], p[2]), p[3]});
   }
-  if (points.empty()) throw InputError(file.string() + ": no points in the file");
-  return points;
+  if (table.points.empty()) throw InputError(file.string() + ": no points in the file");
+  return table;
 }
 
 evaluation::Deformation deformation_from(const config::Scene& scene,
@@ -59,7 +56,9 @@ evaluation::Deformation deformation_from(const config::Scene& scene,
 PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model) {
   PointsStageResult r;
   if (scene.text("points", "source") == "file") {
-    r.points = read_points_file(scene.path("points", "file"));
+    PointsTable table = read_points_file(scene.path("points", "file"));
+    r.points = std::move(table.points);
+    r.declared_ct = table.ct;
     r.summary = {{"source", "file"}, {"count", r.points.size()}};
     return r;
   }

@@ -7,7 +7,6 @@
 #include <fstream>
 #include <iterator>
 #include <limits>
-#include <sstream>
 #include <string>
 
 #include "organfit/support/error.h"
@@ -132,10 +131,6 @@ bool parse_number(const std::string& cell, double& v) {
   return ec == std::errc() && end == e;
 }
 
-}  // namespace
-
-namespace {
-
 /// The file's text, decoded (InputError naming it when it cannot be).
 std::string text_of(const fs::path& file) {
   const std::string name = file.string();
@@ -153,27 +148,17 @@ std::string text_of(const fs::path& file) {
   return text;
 }
 
-}  // namespace
-
-PointsCt read_points_ct(const fs::path& file) {
-  const std::string text = text_of(file);
-  PointsCt ct;
-  std::istringstream lines(text);
-  std::string line;
-  while (std::getline(lines, line, '\n')) {
-    const auto first = line.find_first_not_of(" \t");
-    if (first == std::string::npos || line[first] != '#') continue;
-    const auto colon = line.find(':', first);
-    if (colon == std::string::npos) continue;
-    const std::string key = trim(line.substr(first + 1, colon - first - 1));
-    std::string value = trim(line.substr(colon + 1));
-    while (!value.empty() && (value.back() == '\r' || value.back() == ' '))
-      value.pop_back();
-    if (key == "series_instance_uid") ct.series_instance_uid = value;
-    if (key == "frame_of_reference_uid") ct.frame_of_reference_uid = value;
-  }
-  return ct;
+/// A comment line "# key: value" that declares the table's CT, taken into `ct`.
+void take_declaration(const std::string& comment, PointsCt& ct) {
+  const auto colon = comment.find(':');
+  if (colon == std::string::npos) return;
+  const std::string key = trim(comment.substr(0, colon));
+  const std::string value = trim(comment.substr(colon + 1));
+  if (key == "series_instance_uid") ct.series_instance_uid = value;
+  if (key == "frame_of_reference_uid") ct.frame_of_reference_uid = value;
 }
+
+}  // namespace
 
 std::string points_ct_comment(const PointsCt& ct) {
   std::string out;
@@ -185,10 +170,15 @@ std::string points_ct_comment(const PointsCt& ct) {
 }
 
 std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
+  return read_points_table(file).points;
+}
+
+PointsTable read_points_table(const fs::path& file) {
   const std::string name = file.string();
   const std::string text = text_of(file);
 
-  std::vector<fitting::AttractivePoint> points;
+  PointsTable table;
+  std::vector<fitting::AttractivePoint>& points = table.points;
   int line_no = 0;
   bool header_seen = false;
   size_t at = 0;
@@ -202,7 +192,11 @@ std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
       throw InputError(fmt::format("{}:{}: {}", name, line_no, why));
     };
     const auto first = line.find_first_not_of(" \t");
-    if (first == std::string::npos || line[first] == '#') continue;
+    if (first == std::string::npos) continue;
+    if (line[first] == '#') {
+      take_declaration(line.substr(first + 1), table.ct);
+      continue;
+    }
     const std::vector<std::string> cells = cells_of(line);
     std::vector<double> v;
     for (const auto& c : cells) {
@@ -234,7 +228,7 @@ std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
     points.push_back({Eigen::Vector3d(v[0], v[1], v[2]), v.size() == 4 ? v[3] : 1.0});
   }
   if (points.empty()) throw InputError(name + ": no points in the file");
-  return points;
+  return table;
 }
 
 }  // namespace organfit::pipeline

@@ -329,9 +329,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     } else {
       points = run_points_stage(scene, *model);
       // Points declared in another CT than the planning CT are in other coordinates.
-      if (scene.text("points", "source") == "file" && ct_reference) {
-        const fs::path file = scene.path("points", "file");
-        const PointsCt declared = read_points_ct(file);
+      if (ct_reference) {
+        const PointsCt& declared = points->declared_ct;
         const char* differs =
             !declared.series_instance_uid.empty() &&
                     declared.series_instance_uid != ct_reference->series_instance_uid
@@ -344,7 +343,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
           throw InputError(
               fmt::format("{}: its {} is not the planning CT's ({}): the points are "
                           "in another CT's coordinates",
-                          file.string(), differs, ct_reference->folder));
+                          scene.path("points", "file").string(), differs, ct_reference->folder));
       }
       record_stage("points", clock.elapsed_s());
     }

@@ -84,6 +84,22 @@ TEST_F(PointsFile, RefusesWhatNoPatientHasNamingTheRow) {
             ":2: '" + std::string(80, 'a') + "...' is not a number");
 }
 
+TEST_F(PointsFile, ReadsTheCtItDeclaresWithItsPointsInOnePass) {
+  const PointsCt ct{"1.2.3.4", "1.2.3.5"};
+  for (const std::string& ends : {"\n", "\r\n", "\r"}) {
+    std::string text = points_ct_comment(ct) + "x,y,z\n1,2,3\n# a note: not a declaration\n";
+    for (size_t at = text.find('\n'); at != std::string::npos;
+         at = text.find('\n', at + ends.size()))
+      text.replace(at, 1, ends);
+    const PointsTable table = read_points_table(write(text));
+    EXPECT_EQ(table.ct.series_instance_uid, "1.2.3.4");
+    EXPECT_EQ(table.ct.frame_of_reference_uid, "1.2.3.5");
+    ASSERT_EQ(table.points.size(), 1u);
+    EXPECT_EQ(table.points[0].p_mm, Eigen::Vector3d(1, 2, 3));
+  }
+  EXPECT_TRUE(read_points_table(write("1,2,3\n")).ct.series_instance_uid.empty());
+}
+
 TEST_F(PointsFile, RefusesMoreThanTheLimit) {
   std::string many;
   for (long i = 0; i <= kMaxPointsInFile; ++i)

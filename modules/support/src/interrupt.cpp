@@ -121,17 +121,11 @@ void install_interrupt_handlers() {
 }
 
 bool interrupted() {
-  if (g_stop.load() != kRunning) return true;
-  const double deadline = g_deadline_s.load();
-  return deadline > 0 && now_s() > deadline;
+  return g_stop.load() != kRunning;  // the watchdog sets it, for signals and the budget alike
 }
 
 void throw_if_interrupted() {
   if (!interrupted()) return;
-  if (g_stop.load() == kRunning) {
-    int expected = kRunning;
-    g_stop.compare_exchange_strong(expected, kOutOfTime);
-  }
   throw Error(g_stop.load() == kOutOfTime ? ExitCode::kTargetNotMet : ExitCode::kInterrupted,
               stop_message());
 }

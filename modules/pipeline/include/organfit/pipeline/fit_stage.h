@@ -17,12 +17,14 @@ struct PointsStageResult {
   std::vector<fitting::AttractivePoint> points;
   std::optional<evaluation::Deformation> truth;  ///< set when the points were generated
   evaluation::Shape truth_shape;                 ///< the shape they were sampled on
+  PointsCt declared_ct;                          ///< the CT a points file declares
   nlohmann::json summary;
 };
 
-/// A point set by extension: CSV (read_points_csv), or the vertices of a .ply, .vtk or
-/// .vtp. Throws InputError naming the file on bad content or no points.
-std::vector<fitting::AttractivePoint> read_points_file(const std::filesystem::path& file);
+/// A point set by extension: a table (read_points_table, with the CT it declares), or the
+/// vertices of a .ply, .vtk or .vtp. Throws InputError naming the file on bad content or
+/// no points.
+PointsTable read_points_file(const std::filesystem::path& file);
 
 PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model);
 

@@ -25,18 +25,25 @@ constexpr long kMaxPointsInFile = 100000;
 /// larger one is a unit or column mistake.
 constexpr double kMaxCoordinateMm = 10000.0;
 
-/// Reads a point table. Throws InputError "FILE:LINE: reason" on text where a number
-/// belongs, a wrong number of columns, NaN or Inf, a coordinate beyond kMaxCoordinateMm, a
-/// confidence outside (0, 1]; "FILE: reason" on an unreadable or undecodable file, no
-/// points, or more than kMaxPointsInFile.
-std::vector<fitting::AttractivePoint> read_points_csv(const std::filesystem::path& file);
-
 /// The CT a point table declares it is in (empty strings: not declared).
 struct PointsCt {
   std::string series_instance_uid, frame_of_reference_uid;
 };
-/// Reads the declarations (InputError as read_points_csv for an unreadable file).
-PointsCt read_points_ct(const std::filesystem::path& file);
+
+/// A point table as read: its points and the CT it declares.
+struct PointsTable {
+  std::vector<fitting::AttractivePoint> points;
+  PointsCt ct;
+};
+
+/// Reads a point table. Throws InputError "FILE:LINE: reason" on text where a number
+/// belongs, a wrong number of columns, NaN or Inf, a coordinate beyond kMaxCoordinateMm, a
+/// confidence outside (0, 1]; "FILE: reason" on an unreadable or undecodable file, no
+/// points, or more than kMaxPointsInFile.
+PointsTable read_points_table(const std::filesystem::path& file);
+/// Its points alone.
+std::vector<fitting::AttractivePoint> read_points_csv(const std::filesystem::path& file);
+
 /// The comment lines that declare `ct` (empty when nothing is declared).
 std::string points_ct_comment(const PointsCt& ct);
 

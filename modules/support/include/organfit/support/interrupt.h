@@ -21,7 +21,8 @@ constexpr double kStopGrace = 0.5;
 /// Installs the handlers and the watchdog (once, at start-up of the command, before any
 /// other thread exists: the signals are taken by the watchdog thread alone).
 void install_interrupt_handlers();
-/// True once SIGINT or SIGTERM arrived, or the wall budget ran out.
+/// True once SIGINT or SIGTERM arrived, or the wall budget ran out (both as the watchdog
+/// saw them: within 20 ms).
 bool interrupted();
 /// Throws Error(kInterrupted) when interrupted, Error(kTargetNotMet) when the wall budget
 /// ran out (call in long loops).
