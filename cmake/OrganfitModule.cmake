@@ -26,6 +26,6 @@ function(organfit_module NAME)
       ORGANFIT_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
       ORGANFIT_SHARED_DATA_DIR="${ORGANFIT_SHARED_DATA_DIR}")
     gtest_discover_tests(${NAME}_tests TEST_PREFIX "${NAME}." DISCOVERY_TIMEOUT 60
-                         PROPERTIES LABELS ${NAME})
+                         PROPERTIES LABELS ${NAME} ENVIRONMENT "${ORGANFIT_TEST_ENV}")
   endif()
 endfunction()

@@ -12,6 +12,7 @@
 #include "organfit/pipeline/export_command.h"
 #include "organfit/pipeline/fit_benchmark.h"
 #include "organfit/pipeline/runner.h"
+#include "organfit/pipeline/scale_benchmark.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/pipeline/segment_command.h"
 #include "organfit/pipeline/stability_benchmark.h"
@@ -272,6 +273,21 @@ int run_main(int argc, char** argv) {
           "--methods", fb.methods,
           "Only these methods, comma-separated: spread, paper, tps, cpd, icp (default: all)")
       ->delimiter(',');
+  bench_fit->add_flag("--defaults-only", fb.defaults_only,
+                      "Each method at its default setting only (the same results.csv rows; no "
+                      "work-precision settings besides)");
+
+  organfit::pipeline::ScaleBenchOptions scb;
+  auto* bench_scale = bench->add_subcommand(
+      "scale", "Organs from 35 cm3 to 2.3 L and 1M particles: each stage's time and memory");
+  bench_scale->add_option("-o,--out", scb.out, "Output folder (new): scenes, runs, scale.json")
+      ->required();
+  bench_scale
+      ->add_option("--cases", scb.cases,
+                   "Only these, comma-separated: prostate, gtv, lung, million (default: all)")
+      ->delimiter(',');
+  bench_scale->add_option("--threads", scb.threads, "OpenMP threads of each run (0: all)")
+      ->check(CLI::Range(0, 256));
 
   organfit::pipeline::StabilityBenchOptions stb;
   auto* bench_stability = bench->add_subcommand(
@@ -335,6 +351,8 @@ int run_main(int argc, char** argv) {
     if (!summary["all_pass"].get<bool>()) return static_cast<int>(ExitCode::kTargetNotMet);
   } else if (*bench_fit) {
     std::cout << organfit::pipeline::run_fit_benchmark(fb).dump() << "\n";
+  } else if (*bench_scale) {
+    std::cout << organfit::pipeline::run_scale_benchmark(scb).dump() << "\n";
   } else if (*bench_us) {
     std::cout << organfit::pipeline::run_us_benchmark(usb).dump() << "\n";
   } else if (*bench_ct) {

@@ -279,13 +279,14 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
     const UseCondition* failed = scene.unmet_condition(*spec);
     if (!failed) continue;
     const auto it = scene.entries_.find(failed->key);
-    const std::string* value =
-        it == scene.entries_.end() ? nullptr : std::get_if<std::string>(&it->second.value);
+    const std::string value =
+        it == scene.entries_.end() ? std::string() : value_to_text(it->second.value);
     parser.fail(entry.line - 1, key,
                 fmt::format("not used when {}: the run would ignore it (it is used with {})",
-                            value ? failed->key + " is '" + echo(*value) + "'"
-                                  : "the scene has no '" +
-                                        failed->key.substr(0, failed->key.find('.')) + "' section",
+                            it != scene.entries_.end()
+                                ? failed->key + " is '" + echo(value) + "'"
+                                : "the scene has no '" +
+                                      failed->key.substr(0, failed->key.find('.')) + "' section",
                             spec->used_when_text()));
   }
   return scene;
@@ -356,10 +357,12 @@ const UseCondition* Scene::unmet_condition(const ParamSpec& spec) const {
   for (const auto& alternative : spec.used_when) {
     size_t held = 0;
     for (const auto& c : alternative) {
+      // A condition compares the value's text: "rtstruct", "0", "true".
       const auto it = entries_.find(c.key);
-      const std::string* value =
-          it == entries_.end() ? nullptr : std::get_if<std::string>(&it->second.value);
-      if (!value || std::find(c.values.begin(), c.values.end(), *value) == c.values.end()) {
+      const bool set =
+          it != entries_.end() && !std::holds_alternative<std::monostate>(it->second.value);
+      const std::string value = set ? value_to_text(it->second.value) : std::string();
+      if (!set || std::find(c.values.begin(), c.values.end(), value) == c.values.end()) {
         if (!failed || held > best_held) failed = &c, best_held = held;
         break;
       }

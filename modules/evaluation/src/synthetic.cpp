@@ -156,11 +156,12 @@ std::vector<fitting::AttractivePoint> sample_deformed_surface(const Shape& shape
 
 namespace {
 /// Compares a body on a grid (label 1) with a body given by its inside test, sampled at
-/// the same grid's voxel centres.
+/// the same grid's voxel centres (from several threads: the test must be thread-safe).
 geometry::SurfaceComparison compare_mask_with_body(
     const geometry::LabelVolume& body, const std::function<bool(const Eigen::Vector3d&)>& inside) {
   const geometry::ImageGeometry& g = body.geometry;
   geometry::LabelVolume truth(g);
+#pragma omp parallel for schedule(dynamic, 1) collapse(2)
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
       for (int i = 0; i < g.size[0]; ++i)

@@ -7,14 +7,14 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "cell_key.h"
 #include "organfit/geometry/image_geometry.h"
 #include "organfit/geometry/mask_ops.h"
-#include "sample_grid.h"
+#include "organfit/geometry/sample_grid.h"
 
 namespace organfit::fitting {
 namespace {
 constexpr double kMaxExtentMm = 2000;  // larger than any organ: grids over it are not made
+constexpr double kMaxCells = 1 << 26;  // the particle buckets (4 bytes a cell)
 }  // namespace
 
 EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> reference, GlobalMap map,
@@ -39,10 +39,28 @@ EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> referenc
         "embedded body: the particles span more than 2 m (the model has come apart)");
   lo_ = current_.cols() > 0 ? Eigen::Vector3d(current_.rowwise().minCoeff())
                             : Eigen::Vector3d::Zero();
+  if (current_.cols() == 0) return;
+  const Eigen::Vector3d extent = current_.rowwise().maxCoeff() - lo_;
+  for (int d = 0; d < 3; ++d)
+    dims_[d] = static_cast<int>(std::floor(extent[d] / h_)) + 1;
+  if (1.0 * dims_[0] * dims_[1] * dims_[2] > kMaxCells)
+    throw std::invalid_argument(
+        "embedded body: the support is too small for the particles' extent (over 2^26 cells)");
+  cell_start_.assign(static_cast<size_t>(dims_.prod()) + 1, 0);
+  std::vector<int> cell(static_cast<size_t>(current_.cols()));
   for (Eigen::Index i = 0; i < current_.cols(); ++i) {
-    const Eigen::Vector3d c = ((current_.col(i) - lo_) / h_).array().floor();
-    cells_[cell_key(c.cast<int>())].push_back(static_cast<int>(i));
+    const Eigen::Vector3i c =
+        ((current_.col(i) - lo_) / h_).array().floor().cast<int>().min(dims_.array() - 1);
+    cell[static_cast<size_t>(i)] = c.x() + dims_.x() * (c.y() + dims_.y() * c.z());
+    ++cell_start_[static_cast<size_t>(cell[static_cast<size_t>(i)]) + 1];
   }
+  for (size_t c = 1; c < cell_start_.size(); ++c)
+    cell_start_[c] += cell_start_[c - 1];
+  cell_order_.resize(static_cast<size_t>(current_.cols()));
+  std::vector<int> fill(cell_start_.begin(), cell_start_.end() - 1);
+  for (Eigen::Index i = 0; i < current_.cols(); ++i)
+    cell_order_[static_cast<size_t>(fill[static_cast<size_t>(cell[static_cast<size_t>(i)])]++)] =
+        static_cast<int>(i);
 }
 
 Eigen::Vector3d EmbeddedBody::unmove_locally(const Eigen::Vector3d& q, bool widen_if_needed) const {
@@ -65,9 +83,12 @@ Eigen::Vector3d EmbeddedBody::unmove_locally(const Eigen::Vector3d& q, bool wide
     for (int dk = -reach; dk <= reach; ++dk)
       for (int dj = -reach; dj <= reach; ++dj)
         for (int di = -reach; di <= reach; ++di) {
-          const auto it = cells_.find(cell_key(cq + Eigen::Vector3i(di, dj, dk)));
-          if (it == cells_.end()) continue;
-          for (int p : it->second) {
+          const Eigen::Vector3i cc = cq + Eigen::Vector3i(di, dj, dk);
+          if ((cc.array() < 0).any() || (cc.array() >= dims_.array()).any()) continue;
+          const size_t cell =
+              static_cast<size_t>(cc.x() + dims_.x() * (cc.y() + dims_.y() * cc.z()));
+          for (int k = cell_start_[cell]; k < cell_start_[cell + 1]; ++k) {
+            const int p = cell_order_[static_cast<size_t>(k)];
             const Eigen::Vector3d d = current_.col(p) - q;
             const double s = d.squaredNorm() / h2;
             if (s >= 1) continue;
@@ -204,7 +225,7 @@ SurfaceFeet surface_feet(const particles::Positions& x, const SurfaceSamples& sa
     feet.normal.col(i) = away, feet.offset_mm.col(i) = reach * away;
   }
   if (samples.points.cols() == 0 || !(reach > 0)) return feet;
-  const SampleGrid grid(samples.points);
+  const geometry::SampleGrid grid(samples.points);
 #pragma omp parallel for schedule(static)
   for (Eigen::Index i = 0; i < x.cols(); ++i) {
     const int nearest = grid.nearest(x.col(i), reach).first;

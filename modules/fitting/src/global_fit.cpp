@@ -11,9 +11,9 @@
 
 #include "organfit/fitting/robust.h"
 #include "organfit/geometry/mask_ops.h"
+#include "organfit/geometry/sample_grid.h"
 #include "organfit/particles/diagnostics.h"
 #include "organfit/particles/lattice_fill.h"
-#include "sample_grid.h"
 
 namespace organfit::fitting {
 
@@ -146,7 +146,7 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
   std::vector<double> r(m), w(m);
   auto correspond = [&](const Eigen::Matrix3d& a, const Eigen::Vector3d& t) {
     const Eigen::Matrix3Xd moved = (a * surface.points).colwise() + t;
-    const SampleGrid grid(moved);
+    const geometry::SampleGrid grid(moved);
     for (int k = 0; k < m; ++k) {
       const auto [j, d2] = grid.nearest(p.col(k));
       r[k] = std::sqrt(d2);
@@ -428,7 +428,7 @@ std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& su
     Eigen::Matrix3Xd moved(3, affine_img.cols());
     for (Eigen::Index j = 0; j < affine_img.cols(); ++j)
       moved.col(j) = map.shears.apply(affine_img.col(j));
-    const SampleGrid grid(moved);
+    const geometry::SampleGrid grid(moved);
     for (int k = 0; k < m; ++k) {
       const auto [j, d2] = grid.nearest(p.col(k));
       r[k] = std::sqrt(d2);
@@ -502,7 +502,7 @@ double point_to_plane_rms(const GlobalMap& map, const MappedSamples& mapped,
   const Eigen::Matrix3Xd& moved = mapped.full;
   const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
   std::vector<double> r(points.size()), w;
-  const SampleGrid grid(moved);
+  const geometry::SampleGrid grid(moved);
   for (size_t k = 0; k < points.size(); ++k) {
     const int j = grid.nearest(points[k].p_mm).first;
     r[k] = std::abs(
@@ -515,7 +515,7 @@ double point_to_plane_rms(const GlobalMap& map, const MappedSamples& mapped,
 /// the fits' outlier rule: what refine_global_map reports of its maps.
 double nearest_sample_rms(const MappedSamples& mapped, const std::vector<AttractivePoint>& points,
                           double mads) {
-  const SampleGrid grid(mapped.full);  // holds a reference to the samples
+  const geometry::SampleGrid grid(mapped.full);  // holds a reference to the samples
   std::vector<double> r(points.size()), w;
   for (size_t k = 0; k < points.size(); ++k)
     r[k] = std::sqrt(grid.nearest(points[k].p_mm).second);

@@ -7,9 +7,9 @@
 #include <Eigen/SVD>
 #include <random>
 
-#include "../src/sample_grid.h"
 #include "organfit/fitting/skin.h"
 #include "organfit/geometry/mask_ops.h"
+#include "organfit/geometry/sample_grid.h"
 #include "organfit/particles/lattice_fill.h"
 
 namespace organfit::fitting {
@@ -286,7 +286,7 @@ TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
   SurfaceSamples s = ellipsoid_mask_surface();
   s.points.conservativeResize(Eigen::NoChange, s.points.cols() + 1);
   s.points.col(s.points.cols() - 1) = s.points.col(7);
-  const SampleGrid grid(s.points);
+  const geometry::SampleGrid grid(s.points);
   std::mt19937 rng(5);
   std::normal_distribution<double> g(0.0, 1.0);
   for (double scale : {0.0, 0.5, 2.6, 40.0}) {
@@ -308,7 +308,7 @@ TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
   EXPECT_EQ(grid.nearest(out, std::sqrt(top2) - 0.01).first, -1);
   EXPECT_EQ(grid.nearest(Eigen::Vector3d::Zero(), 10.0).first, -1);  // 17 mm from the centre
   const Eigen::Matrix3Xd none(3, 0);
-  EXPECT_EQ(SampleGrid(none).nearest(Eigen::Vector3d::Zero()).first, -1);
+  EXPECT_EQ(geometry::SampleGrid(none).nearest(Eigen::Vector3d::Zero()).first, -1);
 }
 
 TEST(MapSurface, TurnsNormalsToStayNormalToTheMappedSurface) {

@@ -5,6 +5,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "organfit/geometry/sample_grid.h"
+
 namespace organfit::geometry {
 namespace {
 
@@ -63,17 +65,22 @@ std::vector<double> squared_distance_transform(const std::vector<std::uint8_t>& 
     const int n = dims[axis];
     const long long stride = strides[axis];
     const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
-    std::vector<double> line(n), out(n), z(n + 1);
-    std::vector<int> v(n);
-    for (int p = 0; p < dims[a1]; ++p)
-      for (int q = 0; q < dims[a2]; ++q) {
-        const long long base = p * strides[a1] + q * strides[a2];
-        for (int t = 0; t < n; ++t)
-          line[t] = d[base + t * stride];
-        edt_1d(line.data(), out.data(), n, g.spacing_mm[axis], v, z);
-        for (int t = 0; t < n; ++t)
-          d[base + t * stride] = out[t];
-      }
+    // The lines along an axis are independent: each thread takes whole lines.
+#pragma omp parallel
+    {
+      std::vector<double> line(n), out(n), z(n + 1);
+      std::vector<int> v(n);
+#pragma omp for schedule(static) collapse(2)
+      for (int p = 0; p < dims[a1]; ++p)
+        for (int q = 0; q < dims[a2]; ++q) {
+          const long long base = p * strides[a1] + q * strides[a2];
+          for (int t = 0; t < n; ++t)
+            line[t] = d[base + t * stride];
+          edt_1d(line.data(), out.data(), n, g.spacing_mm[axis], v, z);
+          for (int t = 0; t < n; ++t)
+            d[base + t * stride] = out[t];
+        }
+    }
   }
   return d;
 }
@@ -116,10 +123,12 @@ LabelVolume rasterize_balls(const Eigen::Matrix3Xd& centres, double radius_mm,
 void close_mask(LabelVolume& mask, double radius_mm) {
   if (radius_mm <= 0) return;
   const double r2 = radius_mm * radius_mm;
-  const auto to_body = squared_distance_transform(mask.labels, mask.geometry);
   std::vector<std::uint8_t> outside(mask.labels.size());
-  for (size_t i = 0; i < outside.size(); ++i)
-    outside[i] = to_body[i] > r2;  // complement of dilation
+  {  // one distance map at a time: 8 bytes a voxel each
+    const auto to_body = squared_distance_transform(mask.labels, mask.geometry);
+    for (size_t i = 0; i < outside.size(); ++i)
+      outside[i] = to_body[i] > r2;  // complement of dilation
+  }
   const auto to_outside = squared_distance_transform(outside, mask.geometry);
   for (size_t i = 0; i < outside.size(); ++i)
     mask.labels[i] = to_outside[i] > r2;
@@ -175,17 +184,59 @@ std::vector<std::uint8_t> surface_of(const LabelVolume& mask) {
   return s;
 }
 
+namespace {
+/// The surface voxels' linear indices, ascending, and their centres in index space
+/// scaled by the spacing (mm): the distance transform's metric, direction ignored.
+struct SurfaceVoxels {
+  std::vector<long long> index;
+  Eigen::Matrix3Xd at_mm;
+};
+
+SurfaceVoxels surface_voxels(const std::vector<std::uint8_t>& surface, const ImageGeometry& g) {
+  SurfaceVoxels s;
+  for (size_t i = 0; i < surface.size(); ++i)
+    if (surface[i]) s.index.push_back(static_cast<long long>(i));
+  s.at_mm.resize(3, static_cast<Eigen::Index>(s.index.size()));
+  const long long nx = g.size[0], nxy = nx * g.size[1];
+  for (size_t k = 0; k < s.index.size(); ++k) {
+    const long long v = s.index[k];
+    s.at_mm.col(static_cast<Eigen::Index>(k)) =
+        Eigen::Vector3d(static_cast<double>(v % nx), static_cast<double>((v / nx) % g.size[1]),
+                        static_cast<double>(v / nxy))
+            .cwiseProduct(g.spacing_mm);
+  }
+  return s;
+}
+
+/// Distance (mm) from each of `from`'s voxels to the nearest of `to`'s (infinity when
+/// `to` has none): the same values as a distance transform of `to`, read at `from`.
+std::vector<double> distances_to(const SurfaceVoxels& from, const SurfaceVoxels& to) {
+  std::vector<double> d(from.index.size());
+  const SampleGrid nearest(to.at_mm);
+#pragma omp parallel for schedule(dynamic, 256)
+  for (long long k = 0; k < static_cast<long long>(d.size()); ++k)
+    d[static_cast<size_t>(k)] =
+        std::sqrt(nearest.nearest(from.at_mm.col(static_cast<Eigen::Index>(k))).second);
+  return d;
+}
+}  // namespace
+
 SurfaceComparison compare_masks(const LabelVolume& a, const LabelVolume& b) {
   if (a.geometry.size != b.geometry.size) throw std::invalid_argument("compare: different grids");
   SurfaceComparison r;
+  // Surface distances by nearest-voxel queries among the surface voxels alone: the
+  // values a distance transform of the whole grid gives, at a cost set by the surfaces'
+  // areas rather than the grid's volume.
   const auto sa = surface_of(a), sb = surface_of(b);
-  const auto da = squared_distance_transform(sa, a.geometry);
-  const auto db = squared_distance_transform(sb, b.geometry);
+  const SurfaceVoxels va = surface_voxels(sa, a.geometry), vb = surface_voxels(sb, b.geometry);
+  const std::vector<double> a_to_b = distances_to(va, vb), b_to_a = distances_to(vb, va);
   std::vector<double> dist;
+  dist.reserve(a_to_b.size() + b_to_a.size());
   long long inter = 0, na = 0, nb = 0;
+  size_t ka = 0, kb = 0;
   for (size_t i = 0; i < sa.size(); ++i) {
-    if (sa[i]) dist.push_back(std::sqrt(db[i]));
-    if (sb[i]) dist.push_back(std::sqrt(da[i]));
+    if (sa[i]) dist.push_back(a_to_b[ka++]);
+    if (sb[i]) dist.push_back(b_to_a[kb++]);
     na += a.labels[i] != 0;
     nb += b.labels[i] != 0;
     inter += a.labels[i] != 0 && b.labels[i] != 0;

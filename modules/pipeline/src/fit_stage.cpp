@@ -368,23 +368,29 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     spdlog::info("fit: done in {} steps; measuring it against the known deformation ({} mm grid)",
                  out.fit.steps, truth_voxel);
     Stopwatch truth_clock;
+    Progress truth_progress("truth", 4);
     // The discretisation floor (the organ as the model carried it before the fit against
     // the shape it was made from), the undeformed error, and the fit's.
     const auto floor = evaluation::compare_with_body(
         organ_before, [&](const Eigen::Vector3d& p) { return model.shape.inside(p); },
         model.shape.bounds(), truth_voxel);
     throw_if_interrupted();
+    truth_progress.update(1, "the model before the fit against its shape");
     const auto undeformed = evaluation::compare_with_body(
         organ_before, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
         deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
     throw_if_interrupted();
+    truth_progress.update(2, "the organ left undeformed");
     const auto fitted = evaluation::compare_with_body(
         organ_after, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
         deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
     throw_if_interrupted();
+    truth_progress.update(3, "the fitted organ");
     const auto fitted_balls = evaluation::compare_with_body(
         state.x, rho, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
         deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
+    truth_progress.update(4, "the fitted particles' balls");
+    truth_progress.finish();
     const double denom = undeformed.msd_mm - floor.msd_mm;
     out.truth_summary = {
         {"msd_mm", fitted.msd_mm},

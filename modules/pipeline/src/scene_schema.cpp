@@ -84,6 +84,10 @@ config::Schema build_schema() {
   s.section("model", "the particle model: cohesion (paper eq. 1-4), fill and relaxation")
       .number("radius_mm", 1.85, "mm", 0.0, 100.0,
               "particle radius rho; the LJ equilibrium distance r0 is 2 rho", true)
+      .used_when({{"model.particles", {"0"}}})
+      .integer("particles", 0, 0, 20000000,
+               "about this many particles instead of radius_mm: the radius follows the body's "
+               "volume (0: radius_mm sets it)")
       .number("cohesion_energy", 1.0, "E", 0.0, none, "well depth E0 of the LJ potential", true)
       .integer("exponent_m", 6, 1, 63, "attractive exponent m of the LJ law")
       .integer("exponent_n", 12, 2, 64, "repulsive exponent n of the LJ law (n > m)")
@@ -305,6 +309,8 @@ void check_scene_rules(const config::Scene& scene) {
       scene.fail("model", "radius_mm",
                  "the model needs a body to fill: add an 'organ' or a 'body' section");
     }
+    if (scene.integer("model", "particles") == 1)  // 0 is "radius_mm sets it"
+      scene.fail("model", "particles", "a model needs at least 2 particles");
   }
   const bool has_model = scene.has_section("model") || scene.has_section("planning");
   if (scene.has_section("phantom") && scene.has_section("ct"))

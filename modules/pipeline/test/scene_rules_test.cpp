@@ -1,4 +1,5 @@
 // organfit's own scene schema: cross-key rules and the model stage's summary.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include "organfit/pipeline/model_stage.h"
@@ -39,6 +40,28 @@ TEST(SceneSchema, EveryKeyHasADocAndDefaultsPassTheirOwnRules) {
   for (const auto& p : scene_schema().params())
     EXPECT_FALSE(p.doc.empty()) << p.key();
   EXPECT_NO_THROW(parse("scene:\nbody:\nmodel:\n"));
+}
+
+// model.particles sets the radius from the body's volume: rounded bodies of different
+// sizes get the count asked for within 5%, and radius_mm beside it is a key the run
+// would ignore.
+TEST(ModelStage, ParticlesSetTheRadiusFromTheBodysVolume) {
+  for (const char* body :
+       {"  shape: ellipsoid\n  size_mm: [60, 40, 30]\n", "  shape: egg\n  size_mm: [90, 50, 40]\n"})
+    for (int count : {800, 6000}) {
+      const config::Scene scene =
+          parse(fmt::format("body:\n{}model:\n  particles: {}\n  skeleton: false\n", body, count));
+      const ModelStageResult r = run_model_stage(scene);
+      EXPECT_NEAR(r.state.size(), count, 0.05 * count) << body << count;
+      EXPECT_NEAR(r.summary["radius_mm"].get<double>(), r.settings.radius_mm, 1e-12);
+    }
+  EXPECT_EQ(error_of("body:\nmodel:\n  particles: 5000\n  radius_mm: 2\n"),
+            "/s.yaml:4: model.radius_mm: not used when model.particles is '5000': the run would "
+            "ignore it (it is used with model.particles: 0)");
+  const config::Scene resolved_again = parse(
+      parse("body:\nmodel:\n  particles: 5000\n").resolved_yaml());  // radius_mm commented out
+  EXPECT_EQ(resolved_again.integer("model", "particles"), 5000);
+  EXPECT_FALSE(resolved_again.is_given("model", "radius_mm"));
 }
 
 TEST(ModelStage, FillsAndRelaxesTheBodyIntoOneComponent) {

@@ -98,7 +98,7 @@ inline constexpr double kTruthVoxelMm = 0.5;
 
 /// Compares the closed body of a particle set (balls of `radius_mm`, closed by the same)
 /// with a body given by its inside test, on a grid of `voxel_mm` covering both
-/// (mask_ops.h has the definitions).
+/// (mask_ops.h has the definitions). `inside` is called from several threads.
 geometry::SurfaceComparison compare_with_body(
     const Eigen::Matrix3Xd& particles, double radius_mm,
     const std::function<bool(const Eigen::Vector3d&)>& inside, const geometry::Aabb& body_bounds,
@@ -106,7 +106,7 @@ geometry::SurfaceComparison compare_with_body(
 
 /// Compares the organ a model carries (fitting/embedded_body.h) with a body given by its
 /// inside test, on a grid of `voxel_mm` covering both with a margin of 2 voxels
-/// (volume_a_mm3: the organ's volume on that grid).
+/// (volume_a_mm3: the organ's volume on that grid). `inside` is called from several threads.
 geometry::SurfaceComparison compare_with_body(
     const fitting::EmbeddedBody& organ, const std::function<bool(const Eigen::Vector3d&)>& inside,
     const geometry::Aabb& body_bounds, double voxel_mm);

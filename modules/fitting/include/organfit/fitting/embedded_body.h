@@ -21,7 +21,6 @@
 // within the support are outside.
 #include <Eigen/Core>
 #include <memory>
-#include <unordered_map>
 #include <vector>
 
 #include "organfit/fitting/global_fit.h"
@@ -58,8 +57,11 @@ class EmbeddedBody {
   Eigen::Matrix3d map_inverse_a_;
   particles::Positions placed_, current_;
   double h_;
-  Eigen::Vector3d lo_;  // hash grid origin (mm), cells of size h_
-  std::unordered_map<long long, std::vector<int>> cells_;
+  // The particles bucketed on a grid of cells of size h_ from lo_ (mm), dims_ cells a
+  // side: cell c holds cell_order_[cell_start_[c] .. cell_start_[c + 1]), ascending.
+  Eigen::Vector3d lo_;
+  Eigen::Vector3i dims_ = Eigen::Vector3i::Zero();
+  std::vector<int> cell_start_, cell_order_;
   /// Step 1: q + u(q) (NaN when no particle is within the support of q); the support
   /// widens where the neighbours spread too little, unless told not to.
   Eigen::Vector3d unmove_locally(const Eigen::Vector3d& q_mm, bool widen_if_needed = true) const;

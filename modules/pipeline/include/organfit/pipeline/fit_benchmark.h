@@ -61,6 +61,9 @@ struct FitBenchOptions {
   /// run only these of spread, paper, tps, cpd, icp (empty: all); an unknown name is an
   /// InputError
   std::vector<std::string> methods;
+  /// each method at its default setting only: no work-precision settings besides (the
+  /// rows of results.csv are the same; work_precision.csv has one setting per method)
+  bool defaults_only = false;
   int threads = 0;
 };
 

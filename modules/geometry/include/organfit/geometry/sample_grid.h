@@ -1,5 +1,6 @@
 #pragma once
-// Nearest-sample queries for the global fits (internal to the fitting module).
+// Exact nearest-point queries among a fixed set of points (mm): the global fits ask
+// them every iteration, the surface comparisons (mask_ops.h) once per surface voxel.
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
@@ -7,7 +8,7 @@
 #include <utility>
 #include <vector>
 
-namespace organfit::fitting {
+namespace organfit::geometry {
 
 /// Nearest-sample queries among surface samples, bucketed on a grid of about cbrt(S)
 /// cells a side: exact (ties go to the lower index, as a scan would), and O(points x a
@@ -95,4 +96,4 @@ class SampleGrid {
   std::vector<int> start_, order_;
 };
 
-}  // namespace organfit::fitting
+}  // namespace organfit::geometry
