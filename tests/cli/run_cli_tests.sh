@@ -106,6 +106,16 @@ for k in ['attractive_points', 'iterations', 'wall_s', 'converged', 'residual_me
 for k in ['msd_mm', 'hd95_mm', 'msd_undeformed_mm', 'msd_floor_mm', 'recovery']: assert k in t, k
 assert f['converged'] and f['method'] == 'spread' and d['model']['skin_particles'] > 0
 assert t['msd_mm'] < t['msd_undeformed_mm']"
+# fit.measure_truth: false leaves the truth out (the same fit), and is refused where the
+# points have no truth to measure against.
+expect fit.without_truth_runs 0 "" -- --quiet run "$src/pipelines/paper-prostate.yaml" --set fit.measure_truth=false --out "$tmp/fit1b"
+check fit.without_truth_same_fit_no_truth python3 -c "
+import json; a = json.load(open('$tmp/fit1/run.json')); b = json.load(open('$tmp/fit1b/run.json'))
+assert 'truth' not in b and 'truth' not in [s['name'] for s in b['stages']]
+assert a['fit']['residual_mean_mm'] == b['fit']['residual_mean_mm'] and a['fit']['volume_change_pct'] == b['fit']['volume_change_pct']"
+printf 'x_mm,y_mm,z_mm\n0,0,0\n' > "$tmp/p.csv"
+printf 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\npoints:\n  source: file\n  file: p.csv\nfit:\n  measure_truth: false\n' > "$tmp/truth_file.yaml"
+expect fit.measure_truth_refused_for_points_from_a_file 2 "truth_file.yaml:9: fit.measure_truth: not used when points.source is 'file'" -- validate "$tmp/truth_file.yaml"
 check fit.history_csv_has_rows python3 -c "
 rows = open('$tmp/fit1/history.csv').read().splitlines()
 assert rows[0] == 'step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,kinetic_energy_per_particle' and len(rows) > 2"

@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "organfit/geometry/image_geometry.h"
+#include "organfit/geometry/sample_grid.h"
 #include "organfit/particles/neighbour_list.h"
 
 namespace organfit::particles {
@@ -47,7 +48,7 @@ namespace {
 /// body's surface, `min_lambda_mm` is the sampling's own scale (see below).
 Skeleton medial_nodes(const Positions& rest, const std::vector<std::vector<int>>& graph,
                       const std::vector<char>& surface_flags, double min_lambda_mm,
-                      double node_spacing_mm, double cell_mm) {
+                      double node_spacing_mm) {
   const int n = static_cast<int>(rest.cols());
   Skeleton skeleton;
   // Depth and feature: the Euclidean distance to, and index of, the nearest surface
@@ -59,52 +60,17 @@ Skeleton medial_nodes(const Positions& rest, const std::vector<std::vector<int>>
   std::vector<double> depth(n, 0.0);
   std::vector<int> feature(n, -1);
   if (!surface.empty()) {
-    const double cell = cell_mm;
-    const Eigen::Vector3d lo = rest.rowwise().minCoeff();
-    const Eigen::Vector3d hi = rest.rowwise().maxCoeff();
-    const Eigen::Vector3i dims = ((hi - lo) / cell).array().floor().cast<int>() + 1;
-    auto cell_of = [&](const Eigen::Vector3d& p) {
-      return ((p - lo) / cell)
-          .array()
-          .floor()
-          .cast<int>()
-          .min(dims.array() - 1)
-          .max(0)
-          .matrix()
-          .eval();
-    };
-    std::vector<std::vector<int>> bins(static_cast<size_t>(dims.prod()));
-    auto bin_index = [&](const Eigen::Vector3i& c) {
-      return c.x() + dims.x() * (c.y() + dims.y() * c.z());
-    };
-    for (int i : surface)
-      bins[bin_index(cell_of(rest.col(i)))].push_back(i);
+    Eigen::Matrix3Xd at(3, static_cast<Eigen::Index>(surface.size()));
+    for (size_t k = 0; k < surface.size(); ++k)
+      at.col(static_cast<Eigen::Index>(k)) = rest.col(surface[k]);
+    // Buckets sized by the surface's extent, not by the sampling: a point deep inside
+    // searches a few rings of them, where rings of sample-sized cells would be thousands.
+    const geometry::SampleGrid nearest(at);
 #pragma omp parallel for schedule(dynamic, 64) if (n >= kParallelMinParticles)
     for (int i = 0; i < n; ++i) {
-      const Eigen::Vector3i c = cell_of(rest.col(i));
-      double best2 = std::numeric_limits<double>::infinity();
-      int best = -1;
-      for (int ring = 0;; ++ring) {
-        // Everything within ring * cell has been seen once ring rings are searched.
-        if (best >= 0 && (ring - 1) * cell > 0 &&
-            ((ring - 1) * cell) * ((ring - 1) * cell) >= best2)
-          break;
-        if (ring > dims.maxCoeff()) break;
-        for (int z = c.z() - ring; z <= c.z() + ring; ++z)
-          for (int y = c.y() - ring; y <= c.y() + ring; ++y)
-            for (int x = c.x() - ring; x <= c.x() + ring; ++x) {
-              if (std::max({std::abs(x - c.x()), std::abs(y - c.y()), std::abs(z - c.z())}) != ring)
-                continue;
-              if (x < 0 || y < 0 || z < 0 || x >= dims.x() || y >= dims.y() || z >= dims.z())
-                continue;
-              for (int j : bins[bin_index({x, y, z})]) {
-                const double d2 = (rest.col(j) - rest.col(i)).squaredNorm();
-                if (d2 < best2 || (d2 == best2 && j < best)) best2 = d2, best = j;
-              }
-            }
-      }
-      depth[i] = std::sqrt(best2);
-      feature[i] = best;
+      const auto [k, d2] = nearest.nearest(rest.col(i));  // ties: the lower index
+      depth[i] = std::sqrt(d2);
+      feature[i] = surface[static_cast<size_t>(k)];
     }
   }
   // Medial: the lambda-medial axis (Chazal & Lieutier 2005), stable under surface noise.
@@ -178,7 +144,7 @@ Skeleton medial_skeleton(const Positions& rest, double a_nn_mm, double node_spac
   for (int i = 0; i < n; ++i)
     surface[i] = graph[i].size() < 12;
   // Neighbours may pick features up to a + 1.2 a + a apart: lambda >= 2 a.
-  return medial_nodes(rest, graph, surface, 2.0 * a_nn_mm, node_spacing_mm, a_nn_mm);
+  return medial_nodes(rest, graph, surface, 2.0 * a_nn_mm, node_spacing_mm);
 }
 
 Skeleton medial_skeleton(const geometry::LabelVolume& mask, double node_spacing_mm) {
@@ -214,7 +180,7 @@ Skeleton medial_skeleton(const geometry::LabelVolume& mask, double node_spacing_
       }
   }
   const double voxel_mm = g.spacing_mm.maxCoeff();
-  return medial_nodes(rest, graph, surface, 2.0 * voxel_mm, node_spacing_mm, voxel_mm);
+  return medial_nodes(rest, graph, surface, 2.0 * voxel_mm, node_spacing_mm);
 }
 
 SkeletonForce::SkeletonForce(const Skeleton& skeleton, const Positions& rest,
