@@ -222,7 +222,7 @@ config::Schema build_schema() {
 
   s.section("fit", "deform the model onto the attractive points (paper s.3)")
       .choice("method", "spread", {"paper", "spread"},
-              "paper = the literal method with METHOD s.8's fixes; spread = ours (README)")
+              "paper = the literal method with METHOD s.8's fixes; spread = ours (docs/method.md)")
       .flag("measure_truth", true,
             "measure the fit against the known deformation the points came from (run.json "
             "truth; 0.5 mm voxels over the organ: tens of seconds for a lung)")
