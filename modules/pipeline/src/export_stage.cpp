@@ -8,6 +8,7 @@
 #include "organfit/itkbridge/itk_images.h"
 #include "organfit/meshing/surface.h"
 #include "organfit/support/error.h"
+#include "organfit/support/progress.h"
 
 namespace organfit::pipeline {
 
@@ -21,12 +22,16 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
                              const dicom::CtSeries* ct, const ExportRequest& r) {
   PendingExport out;
   out.summary = nlohmann::json::object();
-  if (!r.rtstruct.empty() || !r.labels.empty()) {
+  const bool on_ct = !r.rtstruct.empty() || !r.labels.empty();
+  Progress progress("export", (on_ct ? 2 : 0) + (r.mesh.empty() ? 0 : 1));
+  if (on_ct) {
     if (!ct) throw InputError("export: an RT Structure Set or label map needs the planning CT");
     auto mask = std::make_shared<geometry::LabelVolume>(organ.on_grid(ct->geometry));
+    progress.update(1, "the organ on the planning CT's grid");
     if (mask->count(1) == 0)
       throw InputError("export: the model lies outside the planning CT's grid");
     auto contours = geometry::slice_contours(*mask, 1);
+    progress.update(2, "its contours");
     out.summary["roi"] = r.roi_name;
     out.summary["contours"] = contours.size();
     out.summary["volume_on_ct_grid_cm3"] = mask->volume_mm3(1) / 1000.0;
@@ -71,6 +76,7 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     // the voxel steps.
     const geometry::ImageGeometry fine = geometry::grid_covering(organ.bounds(), rho, rho);
     auto body = std::make_shared<geometry::LabelVolume>(organ.on_grid(fine));
+    progress.update(on_ct ? 3 : 1, "the organ on the mesh's grid");
     out.summary["model_volume_mm3"] = body->volume_mm3(1);
     out.files.push_back(r.mesh.filename().string());
     const std::filesystem::path file = r.mesh;
