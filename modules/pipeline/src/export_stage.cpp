@@ -28,6 +28,7 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     if (!ct) throw InputError("export: an RT Structure Set or label map needs the planning CT");
     auto mask = std::make_shared<geometry::LabelVolume>(organ.on_grid(ct->geometry));
     progress.update(1, "the organ on the planning CT's grid");
+    out.organ_on_ct = mask;
     if (mask->count(1) == 0)
       throw InputError("export: the model lies outside the planning CT's grid");
     auto contours = geometry::slice_contours(*mask, 1);
@@ -77,6 +78,7 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     const geometry::ImageGeometry fine = geometry::grid_covering(organ.bounds(), rho, rho);
     auto body = std::make_shared<geometry::LabelVolume>(organ.on_grid(fine));
     progress.update(on_ct ? 3 : 1, "the organ on the mesh's grid");
+    out.organ_on_mesh_grid = body;
     out.summary["model_volume_mm3"] = body->volume_mm3(1);
     out.files.push_back(r.mesh.filename().string());
     const std::filesystem::path file = r.mesh;

@@ -8,6 +8,7 @@
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/meshing/surface.h"
 #include "organfit/report/report.h"
+#include "organfit/support/progress.h"
 
 namespace organfit::pipeline {
 namespace {
@@ -35,17 +36,21 @@ std::string build_report(const ReportContext& c) {
   in.residuals_mm = c.residuals_mm;
   if (c.show_patient && c.ct)
     in.patient = c.ct->patient.patient_name + " (ID " + c.ct->patient.patient_id + ")";
+  Progress progress("report", 2);
   if (c.fitted) {
     // The fitted surface as the mesh export makes it (the organ on a grid of rho).
     const geometry::LabelVolume body =
-        c.fitted->on_grid(geometry::grid_covering(c.fitted->bounds(), c.rho_mm, c.rho_mm));
+        c.fitted_on_mesh_grid
+            ? *c.fitted_on_mesh_grid
+            : c.fitted->on_grid(geometry::grid_covering(c.fitted->bounds(), c.rho_mm, c.rho_mm));
     meshing::SurfaceMesh mesh = meshing::surface_mesh(body);
+    progress.update(1, "the 3D view");
     in.surface_vertex_mm = std::move(mesh.vertex_mm);
     in.surface_triangles = std::move(mesh.triangle_ids);
   }
   if (c.ct && c.fitted) {
     const auto& g = c.ct->geometry;
-    const geometry::LabelVolume fitted = c.fitted->on_grid(g);
+    const geometry::LabelVolume fitted = c.fitted_on_ct ? *c.fitted_on_ct : c.fitted->on_grid(g);
     const geometry::LabelVolume planning =
         c.planning ? shape_on_grid(*c.planning, g) : geometry::LabelVolume(g);
     std::array<int, 3> lo{g.size[0], g.size[1], g.size[2]}, hi{-1, -1, -1};
@@ -77,6 +82,7 @@ std::string build_report(const ReportContext& c) {
                                               plan, &fitted, c.points_mm, c.residuals_mm, slab));
     }
   }
+  progress.update(2, "the CT views");
   return report::report_html(in);
 }
 

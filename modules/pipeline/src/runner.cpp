@@ -527,6 +527,10 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     if (model) fitted_organ.emplace(organ_body(*model));
     context.fitted = fitted_organ ? &*fitted_organ : nullptr;
     context.rho_mm = model ? model->model->radius_mm() : 0;
+    if (pending) {  // the organ the export made, not made a second time
+      context.fitted_on_ct = pending->organ_on_ct.get();
+      context.fitted_on_mesh_grid = pending->organ_on_mesh_grid.get();
+    }
     if (points)
       for (const auto& p : points->points)
         context.points_mm.push_back(p.p_mm);

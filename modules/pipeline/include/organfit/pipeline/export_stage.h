@@ -11,6 +11,7 @@
 // so a failure leaves no partial output.
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -37,6 +38,9 @@ class PendingExport {
   nlohmann::json summary;          ///< run.json "export"; the mesh adds its report on commit
   std::vector<std::string> files;  ///< what commit() will write
   std::vector<std::string> warnings;
+  /// The organ the files are made from, on the planning CT's grid and on the mesh's grid
+  /// of rho (null when not exported): the report shows these same masks.
+  std::shared_ptr<const geometry::LabelVolume> organ_on_ct, organ_on_mesh_grid;
   /// Writes the files. Throws InputError naming a file that cannot be written.
   void commit();
 

@@ -20,6 +20,10 @@ struct ReportContext {
   const fitting::EmbeddedBody* fitted =
       nullptr;        ///< the organ after the fit (pipeline::organ_body)
   double rho_mm = 0;  ///< the particles' radius: the 3D view's voxel
+  /// The fitted organ as the export made it, on the CT's grid and on the grid of rho
+  /// (pipeline::PendingExport); null: made here from `fitted`.
+  const geometry::LabelVolume* fitted_on_ct = nullptr;
+  const geometry::LabelVolume* fitted_on_mesh_grid = nullptr;
   std::vector<Eigen::Vector3d> points_mm;
   std::vector<double> residuals_mm;
   bool show_patient = false;  ///< the scene asked for name and ID
