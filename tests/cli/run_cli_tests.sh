@@ -130,6 +130,19 @@ import json; d = json.load(open('$tmp/real/run.json'))
 assert d['ct']['slices'] == 48 and abs(d['organ']['volume_cm3'] - 53.30) < 0.01
 assert d['organ']['matched_by_position'] == 16 and any('matched by position' in w for w in d['warnings'])
 assert d['truth']['recovery'] > 0.5 and abs(d['fit']['volume_change_pct']) < 1.0"
+  check real.fitted_roi_keeps_the_source_colour_and_type /usr/bin/python3 -c "
+import json, pydicom
+d = pydicom.dcmread('$tmp/real/gtv_fit_rtstruct.dcm')
+assert [o.RTROIInterpretedType for o in d.RTROIObservationsSequence] == ['GTV']
+assert [list(map(int, c.ROIDisplayColor)) for c in d.ROIContourSequence] == [[255, 0, 0]]
+e = json.load(open('$tmp/real/run.json'))['export']
+assert e['roi_colour'] == [255, 0, 0] and e['roi_interpreted_type'] == 'GTV', e"
+  expect real.roi_color_set 0 "" -- --quiet run "$src/pipelines/real-sts-002.yaml" --set "export.roi_color=[10, 20, 30]" --out "$tmp/real_colour"
+  check real.roi_color_written /usr/bin/python3 -c "
+import pydicom
+d = pydicom.dcmread('$tmp/real_colour/gtv_fit_rtstruct.dcm')
+assert [list(map(int, c.ROIDisplayColor)) for c in d.ROIContourSequence] == [[10, 20, 30]]"
+  expect real.roi_color_out_of_range_refused 2 "--set export.roi_color=[300, 0, 0]: three integers from 0 to 255" -- validate "$src/pipelines/real-sts-002.yaml" --set "export.roi_color=[300, 0, 0]"
   check real.exports_rtstruct_and_labels test -s "$tmp/real/gtv_fit_rtstruct.dcm" -a -s "$tmp/real/gtv_fit_labels.nrrd"
   check real.mesh_is_watertight_outward_and_holds_the_volume /usr/bin/python3 -c "
 import json; e = json.load(open('$tmp/real/run.json'))['export']; m = e['mesh']
@@ -240,6 +253,13 @@ assert names[0] == 'planning_model' and not any(n in names for n in ['phantom', 
 t = d['timing']; assert t['update_s'] < t['planning_modelling_s'], t
 assert d['fit']['converged'] and d['model']['from_planning_model'] == 'prostate_model.json'"
 check workflow.session_rtstruct_on_the_planning_ct test -s "$tmp/wf/out/prostate-session/prostate_session_rtstruct.dcm"
+# The fitted ROI keeps the source ROI's look: the phantom's Prostate is red, an ORGAN,
+# through the saved model into the session's structure set.
+check workflow.session_roi_keeps_the_source_look /usr/bin/python3 -c "
+import pydicom
+d = pydicom.dcmread('$tmp/wf/out/prostate-session/prostate_session_rtstruct.dcm')
+assert [list(map(int, c.ROIDisplayColor)) for c in d.ROIContourSequence] == [[255, 0, 0]]
+assert [o.RTROIInterpretedType for o in d.RTROIObservationsSequence] == ['ORGAN']"
 expect workflow.session_rtstruct_reads_back 0 "" -- --quiet segment --ct "$tmp/wf/out/prostate-planning/phantom/ct" --rtstruct "$tmp/wf/out/prostate-session/prostate_session_rtstruct.dcm" --roi Prostate_fit --out "$tmp/wf/back.nrrd"
 expect export.from_a_model 0 "" -- --quiet export --model "$tmp/wf/out/prostate-planning/prostate_model.json" --rtstruct "$tmp/wf/e.dcm" --labels "$tmp/wf/e.nrrd" --mesh "$tmp/wf/e.stl" --copy-rois-from "$tmp/wf/out/prostate-planning/phantom/rtstruct.dcm"
 check export.summary_lists_copied_rois_and_a_watertight_mesh /usr/bin/python3 -c "

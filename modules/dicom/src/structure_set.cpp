@@ -129,6 +129,13 @@ StructureSet read_rtstruct(const fs::path& file) {
       }
     }
   }
+  if (auto sq = sequence(ds, 0x3006, 0x0080)) {  // RT ROI Observations Sequence
+    for (size_t i = 1; i <= sq->GetNumberOfItems(); ++i) {
+      const gdcm::DataSet& item = sq->GetItem(i).GetNestedDataSet();
+      const auto it = by_number.find(std::atoi(text(item, 0x3006, 0x0084).c_str()));
+      if (it != by_number.end()) it->second.interpreted_type = text(item, 0x3006, 0x00a4);
+    }
+  }
   for (auto& [number, roi] : by_number)
     rtss.rois.push_back(std::move(roi));
   if (!rtss.rois.empty()) rtss.frame_of_reference_uid = rtss.rois.front().frame_of_reference_uid;
@@ -285,6 +292,8 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
   const geometry::ImageGeometry& g = ct.geometry;
   RasterisedRoi out;
   out.mask = geometry::LabelVolume(g);
+  out.colour = roi->colour;
+  out.interpreted_type = roi->interpreted_type;
   const auto slice_of_uid = slices_by_uid(ct);
 
   // Group each contour's polygon (in continuous i, j index) under its slice.

@@ -32,6 +32,8 @@ nlohmann::json run_export_command(const ExportCommand& c) {
   ExportRequest request;
   request.rtstruct = c.rtstruct, request.labels = c.labels, request.mesh = c.mesh;
   request.roi_name = c.roi_name.empty() ? saved.organ_name + "_fit" : c.roi_name;
+  request.roi_colour = saved.organ_look.colour;
+  request.roi_type = saved.organ_look.interpreted_type;
   std::optional<dicom::CtSeries> ct;
   if (!c.rtstruct.empty() || !c.labels.empty()) {
     if (c.ct.empty() && !saved.ct)

@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+
 #include "organfit/dicom/rtstruct_writer.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/slice_contours.h"
@@ -17,6 +19,18 @@ void PendingExport::commit() {
     write(summary);
   writes_.clear();
 }
+
+namespace {
+/// An RT ROI Interpreted Type as read, if it is a DICOM code string (A-Z, 0-9, space,
+/// underscore; at most 16 characters), else ORGAN.
+std::string type_or_organ(const std::string& type) {
+  const bool code_string =
+      !type.empty() && type.size() <= 16 && std::all_of(type.begin(), type.end(), [](char ch) {
+        return (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') || ch == ' ' || ch == '_';
+      });
+  return code_string ? type : "ORGAN";
+}
+}  // namespace
 
 PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
                              const dicom::CtSeries* ct, const ExportRequest& r) {
@@ -38,7 +52,9 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     out.summary["volume_on_ct_grid_cm3"] = mask->volume_mm3(1) / 1000.0;
     if (!r.rtstruct.empty()) {
       auto rois = std::make_shared<std::vector<dicom::RtstructRoi>>();
-      rois->push_back({r.roi_name, {0, 200, 255}, std::move(contours)});
+      rois->push_back({r.roi_name, r.roi_colour, std::move(contours), type_or_organ(r.roi_type)});
+      out.summary["roi_colour"] = r.roi_colour;
+      out.summary["roi_interpreted_type"] = rois->back().interpreted_type;
       nlohmann::json copied = nlohmann::json::array();
       if (r.copy_rois_from) {
         for (const auto& roi : r.copy_rois_from->rois) {
@@ -50,7 +66,8 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
                 "slice of the CT)",
                 roi.name, placed.skipped));
           if (placed.contours.empty()) continue;
-          dicom::RtstructRoi copy{roi.name, roi.colour, std::move(placed.contours)};
+          dicom::RtstructRoi copy{roi.name, roi.colour, std::move(placed.contours),
+                                  type_or_organ(roi.interpreted_type)};
           copy.generation_algorithm = "";  // copied: not ours to call AUTOMATIC
           rois->push_back(std::move(copy));
           copied.push_back(roi.name);

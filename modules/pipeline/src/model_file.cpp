@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 
@@ -66,12 +67,16 @@ nlohmann::json mask_to_json(const geometry::LabelVolume& mask) {
 }  // namespace
 
 void save_model(const fs::path& file, const ModelStageResult& m, const std::string& organ_name,
-                const std::optional<CtReference>& ct, const nlohmann::json& provenance) {
+                const OrganLook& look, const std::optional<CtReference>& ct,
+                const nlohmann::json& provenance) {
   nlohmann::ordered_json j;
   j["format"] = kFormat;
   j["format_version"] = kFormatVersion;
   j["provenance"] = provenance;
-  j["organ"] = {{"name", organ_name}, {"reference_volume_mm3", m.reference.volume_mm3(1)}};
+  j["organ"] = {{"name", organ_name},
+                {"colour", look.colour},
+                {"interpreted_type", look.interpreted_type},
+                {"reference_volume_mm3", m.reference.volume_mm3(1)}};
   j["settings"] = to_json(m.settings);
   nlohmann::json shape = {{"kind", m.shape.kind},
                           {"size_mm", vec(m.shape.size_mm)},
@@ -242,6 +247,15 @@ SavedModel load_model(const fs::path& file) {
         fail("embedding: not finite, or the global map does not keep volume (det != 1)");
     }
     saved.organ_name = j.at("organ").at("name").get<std::string>();
+    const auto& organ = j.at("organ");
+    if (organ.contains("colour")) {  // files written before the look was kept have none
+      const auto c = organ.at("colour").get<std::vector<int>>();
+      if (c.size() != 3 || std::any_of(c.begin(), c.end(), [](int v) { return v < 0 || v > 255; }))
+        fail("organ.colour: three integers from 0 to 255");
+      saved.organ_look.colour = {c[0], c[1], c[2]};
+    }
+    if (organ.contains("interpreted_type"))
+      saved.organ_look.interpreted_type = organ.at("interpreted_type").get<std::string>();
     if (!j.at("ct").is_null()) {
       const auto& c = j.at("ct");
       saved.ct = CtReference{c.at("folder").get<std::string>(),

@@ -108,6 +108,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   };
   std::optional<ModelStageResult> model;
   std::string organ_name = scene.has_section("organ") ? scene.text("organ", "roi") : "organ";
+  OrganLook organ_look;  // the source ROI's colour and type, kept by the exported ROI
   std::optional<CtReference> ct_reference;
   // A session starts from its planning model (loaded first: the CT a session scene names
   // is checked against it before anything else is done).
@@ -119,6 +120,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     SavedModel saved = load_model(file);
     model = std::move(saved.model);
     organ_name = saved.organ_name;
+    organ_look = saved.organ_look;
     ct_reference = saved.ct;
     planning_ct = saved.ct;
     if (ct_reference) check_output_location(out_dir, {ct_reference->folder}, "--out");
@@ -221,6 +223,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
                       {"volume_cm3", r.mask.volume_mm3(1) / 1000.0}};
       spdlog::info("organ: ROI '{}', {} contours, {:.2f} cm3", roi, r.contours,
                    r.mask.volume_mm3(1) / 1000.0);
+      organ_look = {r.colour, r.interpreted_type.empty() ? "ORGAN" : r.interpreted_type};
       mask = std::move(r.mask);
     }
     if (mask.count(1) == 0)
@@ -425,6 +428,13 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     request.roi_name = scene.text("export", "roi_name");
     request.fixed_uids = scene.flag("export", "fixed_uids");
     if (request.roi_name.empty()) request.roi_name = organ_name + "_fit";
+    request.roi_colour = organ_look.colour;
+    request.roi_type = organ_look.interpreted_type;
+    if (const Eigen::Vector3d c = scene.vec3("export", "roi_color");
+        c != Eigen::Vector3d(-1, -1, -1)) {
+      for (int i = 0; i < 3; ++i)
+        request.roi_colour[static_cast<size_t>(i)] = static_cast<int>(std::lround(c[i]));
+    }
     double ct_read_s = 0;  // its own stage, not the export's
     if ((!request.rtstruct.empty() || !request.labels.empty() ||
          (scene.has_section("report") && ct_reference)) &&
@@ -513,7 +523,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         {"scene", name},
         {"modelling_wall_s", planning_modelling_s >= 0 ? planning_modelling_s : modelling_s()},
         {"fitted", scene.has_section("fit")}};
-    save_model(stage / model_file, *model, organ_name, ct_reference, provenance);
+    save_model(stage / model_file, *model, organ_name, organ_look, ct_reference, provenance);
   }
   if (scene.has_section("report")) {
     Stopwatch clock;

@@ -266,6 +266,8 @@ config::Schema build_schema() {
       .text("labels", "", "label map file name inside --out: .nrrd, .mha, .nii(.gz) (empty: none)")
       .text("mesh", "", "surface mesh file name inside --out: .stl, .vtp, .ply, .obj (empty: none)")
       .text("roi_name", "", "name of the exported ROI (default: the organ's ROI name + _fit)")
+      .vec3("roi_color", Eigen::Vector3d(-1, -1, -1), "", -1.0,
+            "display colour R, G, B (0-255) of the exported ROI; [-1, -1, -1]: the source ROI's")
       .flag("copy_other_rois", false,
             "copy the input structure set's other ROIs into the exported one")
       .flag("fixed_uids", false,
@@ -288,6 +290,14 @@ const config::Schema& scene_schema() {
 }
 
 void check_scene_rules(const config::Scene& scene) {
+  if (scene.has_section("export")) {
+    const Eigen::Vector3d c = scene.vec3("export", "roi_color");
+    const bool source = c == Eigen::Vector3d(-1, -1, -1);
+    if (!source && ((c.array() < 0).any() || (c.array() > 255).any() ||
+                    (c.array() != c.array().round()).any()))
+      scene.fail("export", "roi_color",
+                 "three integers from 0 to 255 (or [-1, -1, -1] for the source ROI's colour)");
+  }
   if (scene.has_section("planning")) {
     for (const char* section : {"phantom", "organ", "body", "model"})
       if (scene.has_section(section))

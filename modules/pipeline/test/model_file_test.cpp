@@ -46,9 +46,12 @@ TEST_F(ModelFile, SavedAndLoadedModelsAreTheSame) {
   ModelStageResult m = build("body:\n  shape: egg\n  size_mm: [30, 24, 20]\n");
   ASSERT_NE(m.skeleton, nullptr);
   const CtReference ct{"/data/ct", "1.2.3", "1.2.4"};
-  save_model(dir_ / "m.json", m, "Prostate", ct, {{"scene", "t"}, {"modelling_wall_s", 1.5}});
+  save_model(dir_ / "m.json", m, "Prostate", OrganLook{{12, 34, 56}, "GTV"}, ct,
+             {{"scene", "t"}, {"modelling_wall_s", 1.5}});
   SavedModel back = load_model(dir_ / "m.json");
   EXPECT_EQ(back.organ_name, "Prostate");
+  EXPECT_EQ(back.organ_look.colour, (std::array<int, 3>{12, 34, 56}));  // the source ROI's look
+  EXPECT_EQ(back.organ_look.interpreted_type, "GTV");
   ASSERT_TRUE(back.ct.has_value());
   EXPECT_EQ(back.ct->series_instance_uid, "1.2.3");
   EXPECT_EQ(back.provenance.value("modelling_wall_s", 0.0), 1.5);
@@ -85,7 +88,7 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
     m.placed.col(i) = m.global_map.apply(m.state.x.col(i));
   m.state.x = m.placed;
   m.state.x.row(1).array() += 0.4;
-  save_model(dir_ / "fitted.json", m, "Prostate", std::nullopt, {});
+  save_model(dir_ / "fitted.json", m, "Prostate", OrganLook{}, std::nullopt, {});
   SavedModel back = load_model(dir_ / "fitted.json");
   EXPECT_EQ(back.model.global_map.fields.weights, m.global_map.fields.weights);
   EXPECT_EQ(back.model.global_map.shears.c, m.global_map.shears.c);
@@ -120,7 +123,7 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
       << error_of(old.dump());
   // A model saved at rest has no embedding.
   ModelStageResult rest = build("body:\n  shape: ellipsoid\n  size_mm: [30, 24, 20]\n");
-  save_model(dir_ / "rest.json", rest, "Prostate", std::nullopt, {});
+  save_model(dir_ / "rest.json", rest, "Prostate", OrganLook{}, std::nullopt, {});
   EXPECT_EQ(load_model(dir_ / "rest.json").model.placed.cols(), 0);
 }
 
@@ -140,7 +143,7 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
       config::parse_scene("organ:\n  roi: X\n  rtstruct: rt.dcm\nmodel:\n  radius_mm: 2.0\n",
                           dir_ / "s.yaml", scene_schema());
   const ModelStageResult m = run_model_stage(scene, &organ);
-  save_model(dir_ / "m.json", m, "X", std::nullopt, nlohmann::json::object());
+  save_model(dir_ / "m.json", m, "X", OrganLook{}, std::nullopt, nlohmann::json::object());
   const SavedModel back = load_model(dir_ / "m.json");
   ASSERT_TRUE(back.model.shape.mask);
   EXPECT_FALSE(back.ct.has_value());
@@ -156,7 +159,7 @@ TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
   EXPECT_EQ(error_of("{\"format\": \"organfit-model\", \"format_version\": 9}"),
             f + ": model format version 9 is not 1 (made by another organfit version)");
   const ModelStageResult m = build("body:\n");
-  save_model(dir_ / "m.json", m, "X", std::nullopt, nlohmann::json::object());
+  save_model(dir_ / "m.json", m, "X", OrganLook{}, std::nullopt, nlohmann::json::object());
   std::ifstream in(dir_ / "m.json");
   nlohmann::json j = nlohmann::json::parse(in);
   j["particles"] = j["particles"].get<int>() + 1;

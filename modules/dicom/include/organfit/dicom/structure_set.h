@@ -26,7 +26,8 @@ struct Contour {
 struct Roi {
   int number = 0;
   std::string name;
-  std::array<int, 3> colour{255, 0, 0};
+  std::array<int, 3> colour{255, 0, 0};  ///< ROI Display Color (red when absent)
+  std::string interpreted_type;  ///< RT ROI Interpreted Type (ORGAN, GTV, ...; may be empty)
   std::string frame_of_reference_uid;
   std::vector<Contour> contours;
 };
@@ -52,8 +53,10 @@ StructureSet read_rtstruct(const std::filesystem::path& file);
 struct RasterisedRoi {
   geometry::LabelVolume mask;  ///< on the CT's grid, label 1 inside
   int contours = 0;
-  int matched_by_position = 0;  ///< contours whose referenced slice is not in the CT
-  int skipped = 0;              ///< degenerate contours (fewer than 3 points, zero area)
+  int matched_by_position = 0;           ///< contours whose referenced slice is not in the CT
+  int skipped = 0;                       ///< degenerate contours (fewer than 3 points, zero area)
+  std::array<int, 3> colour{255, 0, 0};  ///< the ROI's display colour
+  std::string interpreted_type;          ///< the ROI's RT ROI Interpreted Type (may be empty)
   std::vector<std::string> warnings;
 };
 

@@ -9,6 +9,7 @@
 //   mesh      the body's surface (STL, VTP, PLY, OBJ), independent of the CT grid
 // Everything is computed first; files are written only by commit(), each atomically,
 // so a failure leaves no partial output.
+#include <array>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -27,6 +28,10 @@ namespace organfit::pipeline {
 struct ExportRequest {
   std::filesystem::path rtstruct, labels, mesh;  ///< empty: not written
   std::string roi_name;                          ///< the fitted organ's ROI
+  std::array<int, 3> roi_colour{0, 200, 255};    ///< its ROI Display Color (R, G, B)
+  /// its RT ROI Interpreted Type; one that is not a DICOM code string (A-Z, 0-9, space,
+  /// underscore; 16 characters) is written as ORGAN
+  std::string roi_type = "ORGAN";
   /// ROIs to copy into the RT Structure Set beside the fitted one (from the input one).
   const dicom::StructureSet* copy_rois_from = nullptr;
   std::string skip_roi;     ///< not copied (the organ the fit replaces is kept under its own name)

@@ -12,6 +12,7 @@
 //                 UID (export re-reads the CT there and checks the UIDs)
 //   provenance    organfit version, scene, date, and the planning run's stage times
 // Positions are written with full double precision: a loaded model is the saved one.
+#include <array>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -26,17 +27,25 @@ struct CtReference {
   std::string series_instance_uid, frame_of_reference_uid;
 };
 
+/// The organ as a structure set shows it: the exported ROI keeps the source ROI's colour
+/// and RT ROI Interpreted Type (an organ grown from a seed: cyan, ORGAN).
+struct OrganLook {
+  std::array<int, 3> colour{0, 200, 255};
+  std::string interpreted_type = "ORGAN";
+};
+
 struct SavedModel {
   ModelStageResult model;  ///< state, force terms (cohesion, skeleton), shape, reference
   std::string organ_name;  ///< e.g. Prostate
+  OrganLook organ_look;
   std::optional<CtReference> ct;
   nlohmann::json provenance;
 };
 
 /// Writes the model (atomically). `organ_name` names the organ for exports.
 void save_model(const std::filesystem::path& file, const ModelStageResult& model,
-                const std::string& organ_name, const std::optional<CtReference>& ct,
-                const nlohmann::json& provenance);
+                const std::string& organ_name, const OrganLook& look,
+                const std::optional<CtReference>& ct, const nlohmann::json& provenance);
 
 /// Reads a model file and rebuilds its force terms. Throws InputError "FILE: reason" on
 /// a file that is not an organfit model, of another format version, or inconsistent
