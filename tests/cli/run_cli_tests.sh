@@ -143,6 +143,10 @@ import pydicom
 d = pydicom.dcmread('$tmp/real_colour/gtv_fit_rtstruct.dcm')
 assert [list(map(int, c.ROIDisplayColor)) for c in d.ROIContourSequence] == [[10, 20, 30]]"
   expect real.roi_color_out_of_range_refused 2 "--set export.roi_color=[300, 0, 0]: three integers from 0 to 255" -- validate "$src/pipelines/real-sts-002.yaml" --set "export.roi_color=[300, 0, 0]"
+  # The Patient and Study modules are copied whole (Patient Identity Removed,
+  # De-identification Method and its code sequence, from an implicit-VR CT): dcentvfy
+  # finds the structure set consistent with every CT slice.
+  check real.dcentvfy_rtstruct_agrees_with_the_ct bash -c "out=\$(dcentvfy '$src/../shared/data/ct-sts-002/ct/'*.dcm '$tmp/real/gtv_fit_rtstruct.dcm' 2>&1); [[ -z \$(grep -E '^(Warning|Error)' <<< \"\$out\") ]] || { echo \"\$out\" | head -3; exit 1; }"
   check real.exports_rtstruct_and_labels test -s "$tmp/real/gtv_fit_rtstruct.dcm" -a -s "$tmp/real/gtv_fit_labels.nrrd"
   check real.mesh_is_watertight_outward_and_holds_the_volume /usr/bin/python3 -c "
 import json; e = json.load(open('$tmp/real/run.json'))['export']; m = e['mesh']

@@ -1,10 +1,14 @@
 #include "organfit/dicom/ct_series.h"
 
 #include <fmt/format.h>
+#include <gdcmDict.h>
+#include <gdcmDicts.h>
+#include <gdcmGlobal.h>
 #include <gdcmImage.h>
 #include <gdcmImageReader.h>
 #include <gdcmReader.h>
 #include <gdcmScanner.h>
+#include <gdcmSequenceOfItems.h>
 #include <gdcmStringFilter.h>
 
 #include <Eigen/Geometry>
@@ -15,6 +19,7 @@
 #include <sstream>
 
 #include "dicom_values.h"
+#include "dicom_writing.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
 
@@ -435,17 +440,61 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
       // Text in the source's character set becomes UTF-8, which organfit declares; in a
       // set it cannot convert (ISO 2022 code extensions) it is kept, with that set.
       const std::string charset = get(0x0008, 0x0005);
+      // The modules' other attributes, whole (sequences included), with their VRs made
+      // explicit where an implicit-VR file has none (the dictionary's).
+      auto raw = std::make_shared<CopiedModules>();
+      const gdcm::Dict& dict = gdcm::Global::GetInstance().GetDicts().GetPublicDict();
+      const gdcm::DataSet& source = reader.GetFile().GetDataSet();
+      for (auto at = source.Begin(); at != source.End(); ++at) {
+        const gdcm::DataElement& de = *at;
+        if (!detail::is_copied_patient_or_study_tag(de.GetTag())) continue;
+        gdcm::DataElement copy = de;
+        if (copy.GetVR() == gdcm::VR::INVALID || copy.GetVR() == gdcm::VR::UN) {
+          const gdcm::VR vr = dict.GetDictEntry(de.GetTag()).GetVR();
+          if (vr == gdcm::VR::INVALID || vr == gdcm::VR::UN) continue;
+          if (vr == gdcm::VR::US_SS || vr == gdcm::VR::OB_OW || vr == gdcm::VR::US_SS_OW)
+            continue;  // a VR only the data could tell: left out
+          if (vr == gdcm::VR::SQ && !de.GetValueAsSQ()) continue;  // not parsed: left out
+          copy.SetVR(vr);
+        }
+        raw->elements.Insert(copy);
+      }
       PatientStudy& p = series.patient;
       p = as_read;
+      auto converted = std::make_shared<CopiedModules>(*raw);
+      bool all_converted = true;
       for (std::string* text : {&p.patient_name, &p.patient_id, &p.study_id, &p.study_description,
                                 &p.accession_number, &p.referring_physician_name}) {
         std::string utf8;
         if (!detail::to_utf8(*text, charset, utf8)) {
-          p = as_read;
-          p.specific_character_set = charset;
+          all_converted = false;
           break;
         }
         *text = utf8;
+      }
+      // The copied text attributes likewise (a sequence's nested text is kept: codes).
+      for (auto it = raw->elements.Begin(); all_converted && it != raw->elements.End(); ++it) {
+        const gdcm::VR vr = it->GetVR();
+        const gdcm::ByteValue* bv = it->GetByteValue();
+        if (!bv || !(vr & (gdcm::VR::PN | gdcm::VR::LO | gdcm::VR::SH | gdcm::VR::LT |
+                           gdcm::VR::ST | gdcm::VR::UT | gdcm::VR::UC)))
+          continue;
+        std::string utf8;
+        if (!detail::to_utf8(std::string(bv->GetPointer(), bv->GetLength()), charset, utf8)) {
+          all_converted = false;
+          break;
+        }
+        gdcm::DataElement de = *it;
+        if (utf8.size() % 2) utf8 += ' ';
+        de.SetByteValue(utf8.data(), static_cast<uint32_t>(utf8.size()));
+        converted->elements.Replace(de);
+      }
+      if (all_converted) {
+        p.other_attributes = converted;
+      } else {  // a set it cannot convert (ISO 2022 code extensions): kept, with that set
+        p = as_read;
+        p.specific_character_set = charset;
+        p.other_attributes = raw;
       }
     }
   }

@@ -31,6 +31,30 @@ void put_patient_study(gdcm::DataSet& ds, const PatientStudy& p) {
   put(ds, 0x0010, 0x0040, V::CS, p.patient_sex);
   put(ds, 0x0020, 0x000d, V::UI, p.study_instance_uid);
   put(ds, 0x0020, 0x0010, V::SH, p.study_id);
+  if (p.other_attributes)
+    for (auto at = p.other_attributes->elements.Begin(); at != p.other_attributes->elements.End();
+         ++at)
+      ds.Replace(*at);
+}
+
+bool is_copied_patient_or_study_tag(const gdcm::Tag& t) {
+  const std::uint16_t g = t.GetGroup(), e = t.GetElement();
+  if (t.IsPrivate() || t.IsGroupLength()) return false;
+  switch (g) {
+    case 0x0010:  // Patient, Patient Study (age, size, weight, ...)
+      return e != 0x0010 && e != 0x0020 && e != 0x0030 && e != 0x0040;
+    case 0x0012:  // Clinical Trial Subject, Patient Identity Removed, De-identification
+      return e < 0x0050 || (e >= 0x0062 && e <= 0x0064) || e == 0x0081 || e == 0x0082;
+    case 0x0008:  // General Study, Patient Study, beyond the named ones
+      return e == 0x0051 || e == 0x0096 || e == 0x1032 || e == 0x1048 || e == 0x1049 ||
+             e == 0x1060 || e == 0x1062 || e == 0x1080 || e == 0x1084 || e == 0x1110;
+    case 0x0032:  // General Study: requesting, requested procedure
+      return e == 0x1033 || e == 0x1034 || e == 0x1060 || e == 0x1064 || e == 0x1066 || e == 0x1067;
+    case 0x0038:  // Patient Study: admission, service episode
+      return e == 0x0010 || e == 0x0014 || e == 0x0060 || e == 0x0062 || e == 0x0064 || e == 0x0500;
+    default:
+      return false;
+  }
 }
 
 gdcm::Item new_item() {

@@ -10,7 +10,19 @@
 
 #include "organfit/dicom/ct_series.h"
 
+namespace organfit::dicom {
+/// See ct_series.h: the source's other Patient and Study attributes, as GDCM read them.
+struct CopiedModules {
+  gdcm::DataSet elements;
+};
+}  // namespace organfit::dicom
+
 namespace organfit::dicom::detail {
+
+/// Whether the tag belongs to the Patient, Patient Study, Clinical Trial Subject or
+/// General Study modules (the Patient and Study IEs an exported object shares with its
+/// CT), other than the attributes PatientStudy holds by name.
+bool is_copied_patient_or_study_tag(const gdcm::Tag& tag);
 
 /// Inserts (or replaces) a string element, padded to even length (UIDs with NUL, other
 /// VRs with a space). The value is written as given: callers copy source attributes

@@ -1,6 +1,7 @@
 #include "organfit/dicom/rtstruct_writer.h"
 
 #include <fmt/format.h>
+#include <gdcmFileExplicitFilter.h>
 #include <gdcmFileMetaInformation.h>
 #include <gdcmWriter.h>
 
@@ -146,6 +147,12 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
   gdcm::FileMetaInformation& meta = writer.GetFile().GetHeader();
   meta.SetDataSetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
   meta.SetSourceApplicationEntityTitle("ORGANFIT");
+  // Attributes copied from an implicit-VR CT (a sequence's nested elements) get their
+  // VRs from the dictionary, as explicit VR needs.
+  gdcm::FileExplicitFilter explicit_vr;
+  explicit_vr.SetFile(writer.GetFile());
+  explicit_vr.SetChangePrivateTags(false);
+  if (!explicit_vr.Change()) throw InputError(where + ": cannot write the structure set");
   TempPath temp(file);
   writer.SetFileName(temp.path().string().c_str());
   if (!writer.Write()) throw InputError(where + ": cannot write the structure set");

@@ -14,6 +14,7 @@
 // spacing, gantry tilt, non-axial slices, slices whose size, pixel spacing or orientation
 // differ. Tolerated with a warning: files that are not DICOM, other modalities.
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -22,6 +23,13 @@
 namespace organfit::dicom {
 
 /// Who and what the CT belongs to, copied into exported objects. Never logged.
+/// The Patient, Patient Study, Clinical Trial Subject and General Study attributes of a
+/// CT that PatientStudy does not name (age, weight, Patient Identity Removed,
+/// De-identification Method and its code sequence, physicians of record, ...), as read:
+/// the exported objects copy them so that they agree with the CT (dcentvfy). Opaque to
+/// the rest of organfit (this module's GDCM data set).
+struct CopiedModules;
+
 struct PatientStudy {
   std::string patient_name, patient_id, patient_birth_date, patient_sex;
   std::string study_instance_uid, study_id, study_date, study_time, study_description;
@@ -30,6 +38,7 @@ struct PatientStudy {
   /// holds the source's Specific Character Set (one with ISO 2022 code extensions, whose
   /// bytes are kept as they are): exported objects then declare it.
   std::string specific_character_set;
+  std::shared_ptr<const CopiedModules> other_attributes;  ///< null: none read
 };
 
 struct CtSlice {
