@@ -270,7 +270,24 @@ check export.summary_lists_copied_rois_and_a_watertight_mesh /usr/bin/python3 -c
 import json; d = json.loads(open('$tmp/out').read())
 assert d['roi'] == 'Prostate_fit' and 'Bladder' in d['copied_rois'] and 'Prostate' not in d['copied_rois'], d
 assert d['mesh']['boundary_edges'] == 0 and d['mesh']['non_manifold_edges'] == 0 and d['mesh']['outward']"
+cp "$tmp/out" "$tmp/wf/export_summary.json"
 check export.wrote_the_three_files test -s "$tmp/wf/e.dcm" -a -s "$tmp/wf/e.nrrd" -a -s "$tmp/wf/e.stl"
+# A session copies the planning structure set's other ROIs from where its model file says
+# they came from: the same set as organfit export --copy-rois-from, the fitted ROI's
+# source (Prostate) not among them.
+expect workflow.session_copies_other_rois 0 "" -- --quiet run "$tmp/wf/pipelines/prostate-session.yaml" --set export.copy_other_rois=true --out "$tmp/wf/out/session-copy"
+check workflow.session_and_export_copy_the_same_rois /usr/bin/python3 -c "
+import json, pydicom
+e = json.load(open('$tmp/wf/export_summary.json'))['copied_rois']
+s = json.load(open('$tmp/wf/out/session-copy/run.json'))['export']['copied_rois']
+assert s == e and 'Bladder' in s and 'Prostate' not in s, (s, e)
+d = pydicom.dcmread('$tmp/wf/out/session-copy/prostate_session_rtstruct.dcm')
+assert [r.ROIName for r in d.StructureSetROISequence] == ['Prostate_fit'] + s"
+/usr/bin/python3 -c "
+import json; m = json.load(open('$tmp/wf/out/prostate-planning/prostate_model.json')); del m['ct']['structure_set']
+json.dump(m, open('$tmp/wf/no_rtss_model.json', 'w'))"
+expect workflow.session_copy_needs_a_structure_set_in_the_model 2 "the planning model records no structure set" -- --quiet run "$tmp/wf/pipelines/prostate-session.yaml" --set "planning.model=$tmp/wf/no_rtss_model.json" --set export.copy_other_rois=true --out "$tmp/wf/out/no-copy"
+check workflow.refused_copy_wrote_nothing test ! -e "$tmp/wf/out/no-copy"
 expect export.needs_an_output 2 "name at least one output" -- export --model "$tmp/wf/out/prostate-planning/prostate_model.json"
 expect export.not_a_model 2 "not an organfit model" -- export --model "$scenes/small-model.yaml" --mesh "$tmp/wf/x.stl"
 check export.refusal_writes_nothing test ! -e "$tmp/wf/x.stl"

@@ -56,12 +56,9 @@ nlohmann::json run_export_command(const ExportCommand& c) {
   std::optional<dicom::StructureSet> other;
   if (!c.copy_rois_from.empty()) {
     if (c.rtstruct.empty()) throw InputError("export: --copy-rois-from needs --rtstruct");
-    other = dicom::read_rtstruct(c.copy_rois_from);
-    if (ct)
-      for (const auto& roi : other->rois)
-        dicom::check_structure_set_matches_ct(*other, roi, *ct, c.copy_rois_from.string());
+    other = read_rois_to_copy(c.copy_rois_from, *ct);
     request.copy_rois_from = &*other;
-    request.skip_roi = saved.organ_name;
+    request.skip_roi = saved.organ_name;  // the fitted ROI replaces its source
   }
   PendingExport pending = prepare_export(organ_body(saved.model), saved.model.model->radius_mm(),
                                          ct ? &*ct : nullptr, request);

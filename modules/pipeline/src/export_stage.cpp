@@ -32,6 +32,14 @@ std::string type_or_organ(const std::string& type) {
 }
 }  // namespace
 
+dicom::StructureSet read_rois_to_copy(const std::filesystem::path& file,
+                                      const dicom::CtSeries& ct) {
+  dicom::StructureSet set = dicom::read_rtstruct(file);
+  for (const auto& roi : set.rois)
+    dicom::check_structure_set_matches_ct(set, roi, ct, file.string());
+  return set;
+}
+
 PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
                              const dicom::CtSeries* ct, const ExportRequest& r) {
   PendingExport out;

@@ -85,7 +85,8 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
   j["shape"] = shape;
   j["ct"] = ct ? nlohmann::json{{"folder", ct->folder},
                                 {"series_instance_uid", ct->series_instance_uid},
-                                {"frame_of_reference_uid", ct->frame_of_reference_uid}}
+                                {"frame_of_reference_uid", ct->frame_of_reference_uid},
+                                {"structure_set", ct->structure_set}}
                : nlohmann::json(nullptr);
   j["lattice_spacing_mm"] = m.lattice_spacing_mm;
   j["particles"] = m.state.size();
@@ -261,6 +262,8 @@ SavedModel load_model(const fs::path& file) {
       saved.ct = CtReference{c.at("folder").get<std::string>(),
                              c.at("series_instance_uid").get<std::string>(),
                              c.at("frame_of_reference_uid").get<std::string>()};
+      if (c.contains("structure_set"))
+        saved.ct->structure_set = c.at("structure_set").get<std::string>();
     }
     saved.provenance = j.value("provenance", nlohmann::json::object());
   } catch (const nlohmann::json::exception& e) {

@@ -189,6 +189,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
                  g.size[2], g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z());
   }
   std::optional<evaluation::Shape> organ;
+  fs::path organ_structure_set;  // where the organ came from (the phantom's: where it will be)
   if (scene.has_section("organ") && ct) {
     Stopwatch clock;
     const std::string roi = scene.text("organ", "roi");
@@ -211,6 +212,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     } else {
       const fs::path file =
           scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct") : phantom_rtstruct;
+      organ_structure_set =
+          scene.is_given("organ", "rtstruct") ? file : out_dir / "phantom" / "rtstruct.dcm";
       dicom::RasterisedRoi r =
           dicom::rasterise_roi(dicom::read_rtstruct(file), roi, *ct, file.string(),
                                static_cast<int>(scene.integer("organ", "roi_number")));
@@ -237,7 +240,11 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         fs::absolute(phantom_rtstruct.empty() ? ct_folder : out_dir / "phantom" / "ct")
             .lexically_normal()
             .string(),
-        ct->series_instance_uid, ct->frame_of_reference_uid};  // where the phantom will be
+        ct->series_instance_uid, ct->frame_of_reference_uid,
+        organ_structure_set.empty()
+            ? std::string()
+            : fs::absolute(organ_structure_set).lexically_normal().string()};  // where the
+                                                                               // phantom will be
   // The modelling this run did itself (phantom, CT, organ, model), for the comparison
   // of initial modelling against a session's update.
   auto modelling_s = [&run]() {
@@ -455,10 +462,21 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     }
     std::optional<dicom::StructureSet> input_rtss;
     if (scene.flag("export", "copy_other_rois")) {
-      const fs::path file =
-          scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct") : phantom_rtstruct;
-      input_rtss = dicom::read_rtstruct(file);
+      // The organ's own structure set; a session's, as its model file records it.
+      fs::path file;
+      if (scene.has_section("planning")) {
+        if (!ct_reference || ct_reference->structure_set.empty())
+          scene.fail("export", "copy_other_rois",
+                     "the planning model records no structure set (its organ was not imported "
+                     "from one)");
+        file = ct_reference->structure_set;
+      } else {
+        file = scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct")
+                                                   : phantom_rtstruct;
+      }
+      input_rtss = read_rois_to_copy(file, *ct);
       request.copy_rois_from = &*input_rtss;
+      request.skip_roi = organ_name;  // the fitted ROI replaces its source
     }
     pending =
         prepare_export(organ_body(*model), model->model->radius_mm(), ct ? &*ct : nullptr, request);

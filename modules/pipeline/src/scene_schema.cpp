@@ -269,7 +269,8 @@ config::Schema build_schema() {
       .vec3("roi_color", Eigen::Vector3d(-1, -1, -1), "", -1.0,
             "display colour R, G, B (0-255) of the exported ROI; [-1, -1, -1]: the source ROI's")
       .flag("copy_other_rois", false,
-            "copy the input structure set's other ROIs into the exported one")
+            "copy the organ's structure set's other ROIs into the exported one (not the "
+            "fitted ROI's source, which it replaces)")
       .flag("fixed_uids", false,
             "derive the RT Structure Set's UIDs from the CT's and fix its dates (tests)")
       .text("model", "",
@@ -371,9 +372,14 @@ void check_scene_rules(const config::Scene& scene) {
       scene.fail("export", "rtstruct",
                  "the export section names nothing to write (rtstruct, labels, mesh or model)");
     if (scene.flag("export", "copy_other_rois") &&
-        !(scene.has_section("organ") && scene.text("organ", "source") == "rtstruct"))
+        !(scene.has_section("planning") ||
+          (scene.has_section("organ") && scene.text("organ", "source") == "rtstruct")))
       scene.fail("export", "copy_other_rois",
-                 "copies from the organ's structure set: needs organ.source rtstruct");
+                 "copies from the organ's structure set: needs organ.source rtstruct (or a "
+                 "planning model whose organ came from one)");
+    if (scene.flag("export", "copy_other_rois") && scene.text("export", "rtstruct").empty())
+      scene.fail("export", "copy_other_rois",
+                 "copies ROIs into export.rtstruct, which is not given");
     for (const char* key : {"rtstruct", "labels", "mesh", "model"}) {
       const std::string& name = scene.text("export", key);
       if (name.find('/') != std::string::npos || name == "." || name == "..")

@@ -55,6 +55,11 @@ class PendingExport {
   std::vector<std::function<void(nlohmann::json& summary)>> writes_;
 };
 
+/// The structure set whose ROIs an export copies beside the fitted one (the fitted ROI's
+/// source is not among them: the fitted ROI replaces it), each ROI checked to be of this
+/// CT (patient, study, Frame of Reference). Throws InputError naming `file`.
+dicom::StructureSet read_rois_to_copy(const std::filesystem::path& file, const dicom::CtSeries& ct);
+
 /// Computes the exports of the organ a model carries (pipeline::organ_body), whose
 /// particles have radius `rho_mm` (the mesh's voxel). `ct` is needed for the RT
 /// Structure Set and the label map (InputError otherwise).

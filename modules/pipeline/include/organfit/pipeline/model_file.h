@@ -25,6 +25,9 @@ namespace organfit::pipeline {
 struct CtReference {
   std::string folder;  ///< absolute path when saved
   std::string series_instance_uid, frame_of_reference_uid;
+  /// The RT Structure Set the organ was imported from (absolute path; empty: grown from a
+  /// seed): a session copies its other ROIs from it (export.copy_other_rois).
+  std::string structure_set;
 };
 
 /// The organ as a structure set shows it: the exported ROI keeps the source ROI's colour
