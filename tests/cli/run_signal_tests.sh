@@ -94,6 +94,19 @@ else
 fi
 signal_after bench_us.sigint 1.0 INT "$tmp/none" -- --quiet bench us
 signal_after bench_skeleton.sigterm 1.0 TERM "$tmp/none" -- --quiet bench skeleton
+# The benchmarks that make an output folder: stopped mid-run, the folder is gone, and
+# bench scale's child run (its own process group) stops with it.
+signal_after bench_fit.sigterm 2.0 TERM "$tmp/bench_fit" -- --quiet bench fit --quick --cases 4,17 --out "$tmp/bench_fit"
+signal_after bench_stability.sigint 2.0 INT "$tmp/bench_stability" -- --quiet bench stability --out "$tmp/bench_stability"
+signal_after bench_scale.sigterm 1.5 TERM "$tmp/bench_scale" -- --quiet bench scale --cases prostate --out "$tmp/bench_scale"
+sleep 0.5
+if ! pgrep -f "$tmp/bench_scale/" > /dev/null; then
+  echo "ok   bench_scale.child_stopped"
+  passed=$((passed + 1))
+else
+  echo "FAIL bench_scale.child_stopped: $(pgrep -fa "$tmp/bench_scale/" | head -c 200)"
+  failed=$((failed + 1))
+fi
 
 # The whole run's wall budget (scene.max_wall_s) ends it like a signal, exit 3.
 sed 's/^scene:$/scene:\n  max_wall_s: 1.5/' "$scene" > "$tmp/budget.yaml"

@@ -305,10 +305,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
       selected[static_cast<size_t>(ids[static_cast<size_t>(i)])] = 1;
   }
   // The folder only once the options are known to be good: a refused run leaves nothing.
-  std::error_code ec;
   check_output_location(o.out, {}, "--out");
-  fs::create_directories(o.out, ec);
-  if (ec) throw InputError(o.out.string() + ": cannot create the folder: " + ec.message());
+  MadeFolder folder(o.out);
   std::vector<Row> rows;
   std::vector<EffortPoint> effort;
   std::string curves = "case,method,step,wall_s,residual_mean_mm,volume_change_pct\n";
@@ -678,6 +676,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                         {"hd95_le_2_5mm", meet_hd},
                         {"volume_le_1pct", meet_vol}};
   summary["wall_s"] = total.elapsed_s();
+  folder.keep();
   return summary;
 }
 

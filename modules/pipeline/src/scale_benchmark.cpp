@@ -185,16 +185,10 @@ nlohmann::json run_scale_benchmark(const ScaleBenchOptions& o) {
                        "' (prostate, gtv, lung, million)");
   check_output_location(o.out, {}, "--out");
   if (fs::exists(o.out)) throw InputError(o.out.string() + ": exists (bench scale makes it new)");
-  fs::create_directories(o.out);
-  // The folder is whole or not there: removed on a stop (the watchdog) or a failed run.
-  const PartialPath partial(o.out);
-  try {
-    return run_cases(chosen, o);
-  } catch (...) {
-    std::error_code ec;
-    fs::remove_all(o.out, ec);
-    throw;
-  }
+  MadeFolder folder(o.out);  // whole or not there: a stopped or failed bench removes it
+  nlohmann::json summary = run_cases(chosen, o);
+  folder.keep();
+  return summary;
 }
 
 }  // namespace organfit::pipeline

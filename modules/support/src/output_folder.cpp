@@ -95,6 +95,25 @@ CreatedFolders::~CreatedFolders() {
     if (fs::is_empty(*it, ec)) fs::remove(*it, ec);
 }
 
+MadeFolder::MadeFolder(const fs::path& dir) {
+  std::error_code ec;
+  if (fs::exists(dir, ec)) return;
+  fs::create_directories(dir, ec);
+  if (ec) throw InputError(dir.string() + ": cannot create the folder: " + ec.message());
+  made_ = dir;
+  partial_ = std::make_unique<PartialPath>(dir);
+}
+
+MadeFolder::~MadeFolder() {
+  std::error_code ec;
+  if (!made_.empty()) fs::remove_all(made_, ec);
+}
+
+void MadeFolder::keep() {
+  made_.clear();
+  partial_.reset();
+}
+
 void CreatedFolders::keep() {
   created_.clear();
   partial_.clear();

@@ -47,6 +47,23 @@ class CreatedFolders {
   std::vector<std::unique_ptr<PartialPath>> partial_;
 };
 
+/// A benchmark's output folder: made here when it does not exist, and then removed with
+/// all it holds unless keep() is called, so that a command stopped or failed midway
+/// leaves no partial folder (the watchdog removes it too). An existing folder is left
+/// as it is. InputError naming `dir` when it cannot be made.
+class MadeFolder {
+ public:
+  explicit MadeFolder(const std::filesystem::path& dir);
+  ~MadeFolder();
+  MadeFolder(const MadeFolder&) = delete;
+  MadeFolder& operator=(const MadeFolder&) = delete;
+  void keep();
+
+ private:
+  std::filesystem::path made_;  // empty: it existed
+  std::unique_ptr<PartialPath> partial_;
+};
+
 /// One run's output folder. The run writes under staging(); commit() moves each entry of
 /// it into the output folder. An entry may replace one already there only when an
 /// earlier organfit run wrote it: it is listed in that run's run.json "outputs" (with a
