@@ -57,14 +57,10 @@ std::string error_of(const StructureSet& s, const std::string& roi, const CtSeri
 
 TEST(RasteriseRoi, EvenOddRuleMakesHolesAndIslands) {
   const CtSeries ct = small_ct();
-  StructureSet s;
-  Roi roi;
-  roi.name = "Organ";
-  roi.frame_of_reference_uid = "1.2.3.4";
   // On slice 1 (z = 2): a 30 mm square, a 20 mm hole in it, a 10 mm island in the hole.
-  roi.contours = {square(4.5, 4.5, 30, 2, "1.2.3.4.5.1"), square(9.5, 9.5, 20, 2, "1.2.3.4.5.1"),
-                  square(14.5, 14.5, 10, 2)};  // the island references no slice: matched by z
-  s.rois.push_back(roi);
+  const StructureSet s =
+      organ_of({square(4.5, 4.5, 30, 2, "1.2.3.4.5.1"), square(9.5, 9.5, 20, 2, "1.2.3.4.5.1"),
+                square(14.5, 14.5, 10, 2)});  // the island references no slice: matched by z
   const RasterisedRoi r = rasterise_roi(s, "Organ", ct, "rt.dcm");
   EXPECT_EQ(r.mask.count(1), 30 * 30 - 20 * 20 + 10 * 10);
   EXPECT_EQ(r.mask.at(7, 7, 1), 1);    // in the square
@@ -108,14 +104,9 @@ TEST(RasteriseRoi, RefusesAStructureSetOfAnotherPatientStudyOrFrameNamingNoValue
   ct.folder = "ctdir";
   ct.patient.patient_id = "PAT-001";
   ct.patient.study_instance_uid = "1.2.3.9";
-  StructureSet s;
+  StructureSet s = organ_of({square(4.5, 4.5, 10, 2)});
   s.patient_id = "PAT-001";
   s.study_instance_uid = "1.2.3.9";
-  Roi roi;
-  roi.name = "Organ";
-  roi.frame_of_reference_uid = "1.2.3.4";
-  roi.contours = {square(4.5, 4.5, 10, 2)};
-  s.rois.push_back(roi);
   EXPECT_EQ(error_of(s, "Organ", ct), "no error");
   s.patient_id = "PAT-002";
   EXPECT_EQ(error_of(s, "Organ", ct),
@@ -173,12 +164,8 @@ TEST(RasteriseRoi, DegenerateContoursAreSkippedNamingTheirSlice) {
 
 TEST(RasteriseRoi, AReferenceItsPositionContradictsIsPlacedByPosition) {
   const CtSeries ct = small_ct();
-  StructureSet s;
-  Roi roi;
-  roi.name = "Organ";
-  roi.frame_of_reference_uid = "1.2.3.4";
-  roi.contours = {square(4.5, 4.5, 10, 4, "1.2.3.4.5.0")};  // references slice 0, lies on 2
-  s.rois.push_back(roi);
+  // References slice 0, lies on slice 2.
+  StructureSet s = organ_of({square(4.5, 4.5, 10, 4, "1.2.3.4.5.0")});
   const RasterisedRoi r = rasterise_roi(s, "Organ", ct, "rt.dcm");
   EXPECT_EQ(r.mask.at(7, 7, 2), 1);
   EXPECT_EQ(r.mask.at(7, 7, 0), 0);

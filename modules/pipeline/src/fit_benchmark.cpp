@@ -306,7 +306,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   }
   // The folder only once the options are known to be good: a refused run leaves nothing.
   check_output_location(o.out, {}, "--out");
-  MadeFolder folder(o.out);
+  CreatedFolders folder(o.out, /*with_contents=*/true);
   std::vector<Row> rows;
   std::vector<EffortPoint> effort;
   std::string curves = "case,method,step,wall_s,residual_mean_mm,volume_change_pct\n";

@@ -226,7 +226,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
                       {"volume_cm3", r.mask.volume_mm3(1) / 1000.0}};
       spdlog::info("organ: ROI '{}', {} contours, {:.2f} cm3", roi, r.contours,
                    r.mask.volume_mm3(1) / 1000.0);
-      organ_look = {r.colour, r.interpreted_type.empty() ? "ORGAN" : r.interpreted_type};
+      organ_look = {r.colour, r.interpreted_type};  // an empty type is written as ORGAN
       mask = std::move(r.mask);
     }
     if (mask.count(1) == 0)
@@ -235,16 +235,13 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         evaluation::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(mask)));
     record_stage("organ", clock.elapsed_s());
   }
+  // Where the CT and the organ's structure set are (the phantom's: where they will be).
+  auto absolute = [](const fs::path& p) { return fs::absolute(p).lexically_normal().string(); };
   if (ct && !scene.has_section("planning"))
-    ct_reference = CtReference{
-        fs::absolute(phantom_rtstruct.empty() ? ct_folder : out_dir / "phantom" / "ct")
-            .lexically_normal()
-            .string(),
-        ct->series_instance_uid, ct->frame_of_reference_uid,
-        organ_structure_set.empty()
-            ? std::string()
-            : fs::absolute(organ_structure_set).lexically_normal().string()};  // where the
-                                                                               // phantom will be
+    ct_reference =
+        CtReference{absolute(phantom_rtstruct.empty() ? ct_folder : out_dir / "phantom" / "ct"),
+                    ct->series_instance_uid, ct->frame_of_reference_uid,
+                    organ_structure_set.empty() ? std::string() : absolute(organ_structure_set)};
   // The modelling this run did itself (phantom, CT, organ, model), for the comparison
   // of initial modelling against a session's update.
   auto modelling_s = [&run]() {

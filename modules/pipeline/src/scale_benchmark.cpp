@@ -185,7 +185,7 @@ nlohmann::json run_scale_benchmark(const ScaleBenchOptions& o) {
                        "' (prostate, gtv, lung, million)");
   check_output_location(o.out, {}, "--out");
   if (fs::exists(o.out)) throw InputError(o.out.string() + ": exists (bench scale makes it new)");
-  MadeFolder folder(o.out);  // whole or not there: a stopped or failed bench removes it
+  CreatedFolders folder(o.out, /*with_contents=*/true);  // a stopped or failed bench: gone
   nlohmann::json summary = run_cases(chosen, o);
   folder.keep();
   return summary;

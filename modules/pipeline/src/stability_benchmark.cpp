@@ -54,8 +54,7 @@ nlohmann::json run_stability_benchmark(const StabilityBenchOptions& o) {
   if (o.out.empty()) throw InputError("bench stability: --out DIR is required");
   check_output_location(o.out, {}, "--out");
   // What this command makes goes again if it is stopped or fails: the folder, or its runs/.
-  MadeFolder folder(o.out);
-  MadeFolder runs(o.out / "runs");
+  CreatedFolders folders(o.out / "runs", /*with_contents=*/true);
   if (o.threads > 0) omp_set_num_threads(o.threads);
   Stopwatch total;
   std::mt19937_64 rng(3);
@@ -173,8 +172,7 @@ nlohmann::json run_stability_benchmark(const StabilityBenchOptions& o) {
     }
   write_file_atomically(o.out / "stability.csv", csv);
   write_file_atomically(o.out / "STABILITY.md", md);
-  runs.keep();
-  folder.keep();
+  folders.keep();
   return {{"benchmark", "stability"},
           {"rows", rows},
           {"all_pass", all_pass},

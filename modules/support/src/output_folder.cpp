@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <nlohmann/json.hpp>
 
 #include "organfit/support/error.h"
@@ -68,7 +69,8 @@ void check_output_location(const fs::path& dir, const std::vector<fs::path>& inp
   }
 }
 
-CreatedFolders::CreatedFolders(const fs::path& dir) {
+CreatedFolders::CreatedFolders(const fs::path& dir, bool with_contents)
+    : with_contents_(with_contents) {
   std::vector<fs::path> missing;
   std::error_code ec;
   for (fs::path p = fs::absolute(dir).lexically_normal(); !p.empty() && !fs::exists(p, ec);
@@ -84,34 +86,20 @@ CreatedFolders::CreatedFolders(const fs::path& dir) {
       throw InputError(dir.string() + ": cannot create the output folder: " + why);
     }
     created_.push_back(*it);
-    partial_.push_back(std::make_unique<PartialPath>(*it, true));
+    const bool whole = with_contents && std::next(it) == missing.rend();  // `dir` itself
+    partial_.push_back(std::make_unique<PartialPath>(*it, !whole));
   }
   if (!fs::is_directory(dir, ec)) throw InputError(dir.string() + ": exists and is not a folder");
 }
 
 CreatedFolders::~CreatedFolders() {
   std::error_code ec;
-  for (auto it = created_.rbegin(); it != created_.rend(); ++it)
-    if (fs::is_empty(*it, ec)) fs::remove(*it, ec);
-}
-
-MadeFolder::MadeFolder(const fs::path& dir) {
-  std::error_code ec;
-  if (fs::exists(dir, ec)) return;
-  fs::create_directories(dir, ec);
-  if (ec) throw InputError(dir.string() + ": cannot create the folder: " + ec.message());
-  made_ = dir;
-  partial_ = std::make_unique<PartialPath>(dir);
-}
-
-MadeFolder::~MadeFolder() {
-  std::error_code ec;
-  if (!made_.empty()) fs::remove_all(made_, ec);
-}
-
-void MadeFolder::keep() {
-  made_.clear();
-  partial_.reset();
+  for (auto it = created_.rbegin(); it != created_.rend(); ++it) {
+    if (with_contents_ && it == created_.rbegin())  // the deepest made: `dir` itself
+      fs::remove_all(*it, ec);
+    else if (fs::is_empty(*it, ec))
+      fs::remove(*it, ec);
+  }
 }
 
 void CreatedFolders::keep() {

@@ -31,12 +31,15 @@ void check_output_location(const std::filesystem::path& dir,
                            const std::vector<std::filesystem::path>& inputs,
                            const std::string& option, OutputKind kind = OutputKind::kFolder);
 
-/// The missing folders of a path, created and removed again (when still empty) unless
-/// keep() is called: an output file's folders vanish with a failed command.
+/// The missing folders of a path, created and removed again unless keep() is called (also
+/// by the watchdog on a stop): an output file's folders vanish with a failed command.
+/// The folders are removed when still empty; with `with_contents`, `dir` itself goes with
+/// all it holds (a benchmark writing as it runs leaves no partial folder). Folders that
+/// existed are left as they are.
 class CreatedFolders {
  public:
   /// Creates `dir` and its missing parents; InputError naming it when it cannot.
-  explicit CreatedFolders(const std::filesystem::path& dir);
+  explicit CreatedFolders(const std::filesystem::path& dir, bool with_contents = false);
   ~CreatedFolders();
   CreatedFolders(const CreatedFolders&) = delete;
   CreatedFolders& operator=(const CreatedFolders&) = delete;
@@ -45,23 +48,7 @@ class CreatedFolders {
  private:
   std::vector<std::filesystem::path> created_;  // deepest last
   std::vector<std::unique_ptr<PartialPath>> partial_;
-};
-
-/// A benchmark's output folder: made here when it does not exist, and then removed with
-/// all it holds unless keep() is called, so that a command stopped or failed midway
-/// leaves no partial folder (the watchdog removes it too). An existing folder is left
-/// as it is. InputError naming `dir` when it cannot be made.
-class MadeFolder {
- public:
-  explicit MadeFolder(const std::filesystem::path& dir);
-  ~MadeFolder();
-  MadeFolder(const MadeFolder&) = delete;
-  MadeFolder& operator=(const MadeFolder&) = delete;
-  void keep();
-
- private:
-  std::filesystem::path made_;  // empty: it existed
-  std::unique_ptr<PartialPath> partial_;
+  bool with_contents_ = false;
 };
 
 /// One run's output folder. The run writes under staging(); commit() moves each entry of
