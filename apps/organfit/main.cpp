@@ -99,6 +99,13 @@ int run_main(int argc, char** argv) {
   export_cmd->add_option("--rtstruct", exp.rtstruct, "RT Structure Set to write (.dcm)");
   export_cmd->add_option("--labels", exp.labels, "Label map to write (.nrrd, .mha, .nii, .nii.gz)");
   export_cmd->add_option("--mesh", exp.mesh, "Surface mesh to write (.stl, .vtp, .ply, .obj)");
+  export_cmd->add_option("--displacement-field", exp.displacement_field,
+                         "Deformation field to write on the planning CT's grid (.mha, .nrrd): "
+                         "phi^-1(q) - q, as plastimatch warp --xf reads it");
+  export_cmd->add_option("--registration", exp.registration,
+                         "DICOM Deformable Spatial Registration (REG) to write: the same field");
+  export_cmd->add_option("--jacobian", exp.jacobian,
+                         "det(grad phi) to write on the planning CT's grid (.nrrd, .mha)");
   export_cmd->add_option("--roi-name", exp.roi_name,
                          "Name of the exported ROI (default: the organ's name + _fit)");
   export_cmd->add_option("--copy-rois-from", exp.copy_rois_from,

@@ -8,7 +8,7 @@
 
 namespace organfit::geometry {
 
-SignedDistance::SignedDistance(const LabelVolume& mask)
+SignedDistance::SignedDistance(const LabelVolume& mask, bool smooth_it)
     : geometry_(mask.geometry),
       to_index_(mask.geometry.spacing_mm.cwiseInverse().asDiagonal() *
                 mask.geometry.direction.inverse()) {
@@ -23,7 +23,7 @@ SignedDistance::SignedDistance(const LabelVolume& mask)
   // An empty mask (or a full one) has no boundary: the transform's infinity stays.
   for (size_t v = 0; v < total; ++v)
     values_[v] = in[v] ? -(std::sqrt(to_out[v]) - h) : std::sqrt(to_in[v]) - h;
-  smooth();
+  if (smooth_it) smooth();
 }
 
 void SignedDistance::smooth() {

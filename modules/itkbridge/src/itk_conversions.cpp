@@ -1,15 +1,18 @@
 // The ITK side of the bridge: no Eigen-based organfit header may be included here.
 #include "organfit/itkbridge/itk_conversions.h"
 
+#include <itkImage.h>
 #include <itkImageFileReader.h>
 #include <itkImageFileWriter.h>
 #include <itkMetaImageIOFactory.h>
 #include <itkNiftiImageIOFactory.h>
 #include <itkNrrdImageIOFactory.h>
+#include <itkVector.h>
 
 #include <algorithm>
 #include <cstring>
 #include <mutex>
+#include <stdexcept>
 
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
@@ -95,7 +98,10 @@ PlainMask to_plain(const MaskImage* image) {
   return out;
 }
 
-void write_mask(const fs::path& file, const PlainMask& mask) {
+namespace {
+/// Writes an ITK image under a temporary name, renamed when whole.
+template <class Image>
+void write_image(const fs::path& file, const Image* image) {
   const std::string name = file.filename().string();
   const char* known[] = {".nrrd", ".nhdr", ".mha", ".mhd", ".nii", ".nii.gz"};
   if (std::none_of(std::begin(known), std::end(known),
@@ -104,9 +110,9 @@ void write_mask(const fs::path& file, const PlainMask& mask) {
                      ": unknown image format (use .nrrd, .nhdr, .mha, .mhd, .nii or .nii.gz)");
   register_formats();
   TempPath temp(file);
-  auto writer = itk::ImageFileWriter<MaskImage>::New();
+  auto writer = itk::ImageFileWriter<Image>::New();
   writer->SetFileName(temp.path().string());
-  writer->SetInput(to_itk(mask));
+  writer->SetInput(image);
   writer->SetUseCompression(true);
   try {
     writer->Update();
@@ -114,6 +120,25 @@ void write_mask(const fs::path& file, const PlainMask& mask) {
     throw InputError(file.string() + ": cannot write the image");
   }
   temp.commit();
+}
+}  // namespace
+
+void write_mask(const fs::path& file, const PlainMask& mask) {
+  write_image(file, to_itk(mask).GetPointer());
+}
+
+void write_float_image(const fs::path& file, const PlainFloatImage& image) {
+  write_image(file, to_itk(image).GetPointer());
+}
+
+void write_vector_image(const fs::path& file, const PlainGeometry& geometry,
+                        const std::vector<float>& xyz) {
+  using VectorImage = itk::Image<itk::Vector<float, 3>, 3>;
+  if (xyz.size() != 3 * geometry.voxel_count())
+    throw std::invalid_argument("write_vector_image: 3 values per voxel needed");
+  auto image = allocate<VectorImage>(geometry);
+  std::copy(xyz.begin(), xyz.end(), reinterpret_cast<float*>(image->GetBufferPointer()));
+  write_image(file, image.GetPointer());
 }
 
 PlainFloatImage read_float_image(const fs::path& file) {

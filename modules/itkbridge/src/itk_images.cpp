@@ -45,6 +45,16 @@ geometry::LabelVolume read_label_volume(const std::filesystem::path& file) {
   return from_plain(read_mask(file));
 }
 
+void write_float_volume(const std::filesystem::path& file, const geometry::ImageGeometry& g,
+                        const std::vector<float>& values) {
+  write_float_image(file, {to_plain(g), values});
+}
+
+void write_vector_volume(const std::filesystem::path& file, const geometry::ImageGeometry& g,
+                         const std::vector<float>& xyz) {
+  write_vector_image(file, to_plain(g), xyz);
+}
+
 ScalarImage read_scalar_image(const std::filesystem::path& file) {
   PlainFloatImage plain = read_float_image(file);
   return {from_plain(plain.geometry), std::move(plain.values)};

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <memory>
 #include <optional>
 
@@ -16,26 +17,33 @@ namespace fs = std::filesystem;
 namespace organfit::pipeline {
 
 nlohmann::json run_export_command(const ExportCommand& c) {
-  if (c.rtstruct.empty() && c.labels.empty() && c.mesh.empty())
-    throw InputError("export: name at least one output (--rtstruct, --labels, --mesh)");
+  const std::vector<fs::path> outputs = {c.rtstruct,           c.labels,   c.mesh,
+                                         c.displacement_field, c.jacobian, c.registration};
+  if (std::all_of(outputs.begin(), outputs.end(), [](const fs::path& f) { return f.empty(); }))
+    throw InputError(
+        "export: name at least one output (--rtstruct, --labels, --mesh, "
+        "--displacement-field, --registration, --jacobian)");
   std::vector<fs::path> inputs = {c.model, c.ct, c.copy_rois_from};
-  for (const auto& f : {c.rtstruct, c.labels, c.mesh})
+  for (const auto& f : outputs)
     if (!f.empty())
       check_output_location(f.parent_path().empty() ? fs::path(".") : f.parent_path(), inputs,
                             "the output", OutputKind::kFile);
   const SavedModel saved = load_model(c.model);
   if (saved.ct)
-    for (const auto& f : {c.rtstruct, c.labels, c.mesh})
+    for (const auto& f : outputs)
       if (!f.empty())
         check_output_location(f.parent_path().empty() ? fs::path(".") : f.parent_path(),
                               {saved.ct->folder}, "the output", OutputKind::kFile);
   ExportRequest request;
   request.rtstruct = c.rtstruct, request.labels = c.labels, request.mesh = c.mesh;
+  request.displacement_field = c.displacement_field, request.jacobian = c.jacobian;
+  request.registration = c.registration;
   request.roi_name = c.roi_name.empty() ? saved.organ_name + "_fit" : c.roi_name;
   request.roi_colour = saved.organ_look.colour;
   request.roi_type = saved.organ_look.interpreted_type;
   std::optional<dicom::CtSeries> ct;
-  if (!c.rtstruct.empty() || !c.labels.empty()) {
+  if (!c.rtstruct.empty() || !c.labels.empty() || !c.displacement_field.empty() ||
+      !c.jacobian.empty() || !c.registration.empty()) {
     if (c.ct.empty() && !saved.ct)
       throw InputError(c.model.string() + ": the model names no planning CT; give --ct");
     const fs::path folder = c.ct.empty() ? fs::path(saved.ct->folder) : c.ct;
@@ -65,7 +73,7 @@ nlohmann::json run_export_command(const ExportCommand& c) {
   for (const auto& w : pending.warnings)
     spdlog::warn(w);
   std::vector<std::unique_ptr<CreatedFolders>> folders;
-  for (const auto& f : {c.rtstruct, c.labels, c.mesh})
+  for (const auto& f : outputs)
     if (!f.empty() && !f.parent_path().empty())
       folders.push_back(std::make_unique<CreatedFolders>(f.parent_path()));
   pending.commit();

@@ -3,10 +3,14 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
+#include <map>
 
+#include "organfit/dicom/registration_writer.h"
 #include "organfit/dicom/rtstruct_writer.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/slice_contours.h"
+#include "organfit/geometry/topology.h"
 #include "organfit/itkbridge/itk_images.h"
 #include "organfit/meshing/surface.h"
 #include "organfit/support/error.h"
@@ -40,24 +44,142 @@ dicom::StructureSet read_rois_to_copy(const std::filesystem::path& file,
   return set;
 }
 
+namespace {
+nlohmann::json to_json(const geometry::Topology& t) {
+  return {{"components", t.components},
+          {"cavities", t.cavities},
+          {"single_voxel_components", t.single_voxel_components},
+          {"single_voxel_cavities", t.single_voxel_cavities}};
+}
+
+/// Number of contours on each slice index.
+std::map<int, int> contours_per_slice(const std::vector<geometry::SliceContour>& contours) {
+  std::map<int, int> out;
+  for (const auto& c : contours)
+    ++out[c.k];
+  return out;
+}
+
+/// The checks of the exported organ against the planning organ on the same grid.
+void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume& exported,
+                 const geometry::LabelVolume& planning,
+                 const std::vector<geometry::SliceContour>& exported_contours, PendingExport& out) {
+  nlohmann::json checks;
+  const geometry::Topology before = geometry::topology_of(planning),
+                           after = geometry::topology_of(exported);
+  checks["topology_planning"] = to_json(before);
+  checks["topology_exported"] = to_json(after);
+  checks["topology_kept"] = before == after;
+  if (!(before == after))
+    out.warnings.push_back(fmt::format(
+        "export: the exported organ has {} component(s) ({} of one voxel) and {} cavity(ies) "
+        "({} of one voxel); the planning organ {} and {}",
+        after.components, after.single_voxel_components, after.cavities,
+        after.single_voxel_cavities, before.components, before.cavities));
+  // Volume: the planning organ's voxels times the deformation's volume change, against
+  // the exported voxels. Sampling a surface on a grid errs by about half a voxel at each
+  // boundary voxel, independently: sigma = voxel volume x sqrt(boundary voxels) / 2.
+  const double voxel_cm3 = exported.geometry.spacing_mm.prod() / 1000.0;
+  const double planning_cm3 = planning.volume_mm3(1) / 1000.0;
+  const double exported_cm3 = exported.volume_mm3(1) / 1000.0;
+  const double ratio = organ.volume_ratio(exported);
+  long long boundary = 0;
+  for (const auto b : geometry::surface_of(exported))
+    boundary += b;
+  const double expected_cm3 = planning_cm3 * ratio;
+  const double sampling_cm3 = 3 * 0.5 * voxel_cm3 * std::sqrt(static_cast<double>(boundary));
+  const double tolerance_cm3 = 0.005 * expected_cm3 + sampling_cm3;
+  checks["planning_volume_on_ct_grid_cm3"] = planning_cm3;
+  checks["deformation_volume_change_pct"] = 100 * (ratio - 1);
+  checks["expected_volume_on_ct_grid_cm3"] = expected_cm3;
+  checks["volume_difference_cm3"] = exported_cm3 - expected_cm3;
+  checks["volume_tolerance_cm3"] = tolerance_cm3;
+  checks["volume_kept"] = std::abs(exported_cm3 - expected_cm3) <= tolerance_cm3;
+  if (!checks["volume_kept"].get<bool>())
+    out.warnings.push_back(fmt::format(
+        "export: the exported organ is {:.3f} cm3 on the CT grid; the planning organ moved by "
+        "the fit would be {:.3f} cm3 (tolerance {:.3f} cm3)",
+        exported_cm3, expected_cm3, tolerance_cm3));
+  // Slices whose contour count differs from the planning organ's on the same slice.
+  const auto planned = contours_per_slice(geometry::slice_contours(planning, 1));
+  const auto now = contours_per_slice(exported_contours);
+  nlohmann::json differ = nlohmann::json::array();
+  for (const auto& [k, count] : now) {
+    const auto it = planned.find(k);
+    if (it != planned.end() && it->second != count) differ.push_back(k);
+  }
+  checks["slices_with_another_contour_count"] = differ;
+  // The deformation's volume ratio over the exported organ's voxels.
+  double lo = 1e300, hi = -1e300;
+  long long changed = 0, n = 0;
+  const geometry::ImageGeometry& g = exported.geometry;
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        if (exported.at(i, j, k) != 1) continue;
+        const double v =
+            organ.deformation().volume_ratio(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+        lo = std::min(lo, v), hi = std::max(hi, v), ++n;
+        changed += std::abs(v - 1) > 0.01;
+      }
+  checks["jacobian"] = {{"organ_min", lo},
+                        {"organ_max", hi},
+                        {"organ_share_changed_over_1pct", n > 0 ? 1.0 * changed / n : 0.0},
+                        {"lattice_min", organ.deformation().min_volume_ratio()},
+                        {"lattice_max", organ.deformation().max_volume_ratio()}};
+  out.summary["checks"] = checks;
+}
+
+/// The deformation on `grid`: v(q) = phi^-1(q) - q (3 floats per voxel), and, when
+/// asked, det(grad phi) (one float per voxel).
+void sample_deformation(const fitting::Deformation& phi, const geometry::ImageGeometry& grid,
+                        std::vector<float>* field, std::vector<float>* jacobian) {
+  const long long total = grid.voxel_count();
+  if (field) field->assign(static_cast<size_t>(3 * total), 0.0f);
+  if (jacobian) jacobian->assign(static_cast<size_t>(total), 1.0f);
+#pragma omp parallel for collapse(2) schedule(static)
+  for (int k = 0; k < grid.size[2]; ++k)
+    for (int j = 0; j < grid.size[1]; ++j)
+      for (int i = 0; i < grid.size[0]; ++i) {
+        const Eigen::Vector3d q = grid.index_to_physical(Eigen::Vector3d(i, j, k));
+        const size_t v = static_cast<size_t>(grid.linear_index(i, j, k));
+        if (field) {
+          const Eigen::Vector3d d = phi.pull_back(q) - q;
+          for (int a = 0; a < 3; ++a)
+            (*field)[3 * v + static_cast<size_t>(a)] = static_cast<float>(d[a]);
+        }
+        if (jacobian) (*jacobian)[v] = static_cast<float>(phi.volume_ratio(q));
+      }
+}
+}  // namespace
+
 PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
                              const dicom::CtSeries* ct, const ExportRequest& r) {
   PendingExport out;
   out.summary = nlohmann::json::object();
   const bool on_ct = !r.rtstruct.empty() || !r.labels.empty();
-  Progress progress("export", (on_ct ? 2 : 0) + (r.mesh.empty() ? 0 : 1));
+  const bool vectors = !r.displacement_field.empty() || !r.registration.empty();
+  const bool fields = vectors || !r.jacobian.empty();
+  Progress progress("export", (on_ct ? 3 : 0) + (fields ? 1 : 0) + (r.mesh.empty() ? 0 : 1));
+  int done = 0;
+  if ((on_ct || fields) && !ct)
+    throw InputError(
+        "export: an RT Structure Set, label map or deformation field needs the planning CT");
   if (on_ct) {
-    if (!ct) throw InputError("export: an RT Structure Set or label map needs the planning CT");
     auto mask = std::make_shared<geometry::LabelVolume>(organ.on_grid(ct->geometry));
-    progress.update(1, "the organ on the planning CT's grid");
+    progress.update(++done, "the organ on the planning CT's grid");
     out.organ_on_ct = mask;
     if (mask->count(1) == 0)
       throw InputError("export: the model lies outside the planning CT's grid");
     auto contours = geometry::slice_contours(*mask, 1);
-    progress.update(2, "its contours");
+    progress.update(++done, "its contours");
     out.summary["roi"] = r.roi_name;
     out.summary["contours"] = contours.size();
     out.summary["volume_on_ct_grid_cm3"] = mask->volume_mm3(1) / 1000.0;
+    const fitting::EmbeddedBody planning(organ.shared_reference(),
+                                         std::make_shared<const fitting::Deformation>());
+    check_organ(organ, *mask, planning.on_grid(ct->geometry), contours, out);
+    progress.update(++done, "its checks against the planning organ");
     if (!r.rtstruct.empty()) {
       auto rois = std::make_shared<std::vector<dicom::RtstructRoi>>();
       rois->push_back({r.roi_name, r.roi_colour, std::move(contours), type_or_organ(r.roi_type)});
@@ -97,12 +219,48 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
           [file, mask](nlohmann::json&) { itkbridge::write_label_volume(file, *mask); });
     }
   }
+  if (fields) {
+    auto field = std::make_shared<std::vector<float>>();
+    auto jacobian = std::make_shared<std::vector<float>>();
+    sample_deformation(organ.deformation(), ct->geometry, vectors ? field.get() : nullptr,
+                       r.jacobian.empty() ? nullptr : jacobian.get());
+    progress.update(++done, "the deformation on the planning CT's grid");
+    const geometry::ImageGeometry grid = ct->geometry;
+    if (!r.displacement_field.empty()) {
+      out.files.push_back(r.displacement_field.filename().string());
+      const std::filesystem::path file = r.displacement_field;
+      out.summary["displacement_field"] = {{"file", file.filename().string()},
+                                           {"maps", "today's point q to phi^-1(q) - q (mm)"}};
+      out.writes_.push_back([file, field, grid](nlohmann::json&) {
+        itkbridge::write_vector_volume(file, grid, *field);
+      });
+    }
+    if (!r.registration.empty()) {
+      out.files.push_back(r.registration.filename().string());
+      const std::filesystem::path file = r.registration;
+      out.summary["registration"] = {{"file", file.filename().string()},
+                                     {"grid", {grid.size[0], grid.size[1], grid.size[2]}}};
+      dicom::RegistrationWriteOptions options;
+      options.fixed_uids_and_dates = r.fixed_uids;
+      out.writes_.push_back([file, field, grid, ct, options](nlohmann::json&) {
+        dicom::write_deformable_registration(file, *ct, grid, *field, options);
+      });
+    }
+    if (!r.jacobian.empty()) {
+      out.files.push_back(r.jacobian.filename().string());
+      const std::filesystem::path file = r.jacobian;
+      out.summary["jacobian_file"] = file.filename().string();
+      out.writes_.push_back([file, jacobian, grid](nlohmann::json&) {
+        itkbridge::write_float_volume(file, grid, *jacobian);
+      });
+    }
+  }
   if (!r.mesh.empty()) {
     // The organ on a grid of rho, independent of the CT: windowed-sinc smoothing removes
     // the voxel steps.
     const geometry::ImageGeometry fine = geometry::grid_covering(organ.bounds(), rho, rho);
     auto body = std::make_shared<geometry::LabelVolume>(organ.on_grid(fine));
-    progress.update(on_ct ? 3 : 1, "the organ on the mesh's grid");
+    progress.update(++done, "the organ on the mesh's grid");
     out.organ_on_mesh_grid = body;
     out.summary["model_volume_mm3"] = body->volume_mm3(1);
     out.files.push_back(r.mesh.filename().string());

@@ -355,7 +355,15 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
       throw TargetNotMetError(std::string("fit: the model did not hold together: ") + e.what());
     }
   }();
-  const double organ_v1 = organ_after.volume_mm3(volume_voxel);
+  // The organ's volume change from the deformation's Jacobian over the fitted organ
+  // (EmbeddedBody::volume_ratio: the grid's sampling cancels); the two voxel counts are
+  // reported beside it.
+  const geometry::LabelVolume organ_after_grid = organ_after.on_grid(
+      geometry::grid_covering(organ_after.bounds(), volume_voxel, volume_voxel));
+  const double organ_v1 = organ_after_grid.volume_mm3(1);
+  const double volume_ratio = organ_after.volume_ratio(organ_after_grid);
+  const fitting::Deformation& phi = organ_after.deformation();
+  out.deformation_folds = phi.folds();
   int rejected = 0;
   for (const auto& st : *status)
     rejected += st.rejected;
@@ -375,7 +383,15 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
                      {"residual_p95_mm", out.fit.residual_p95_mm},
                      {"volume_before_mm3", organ_v0},
                      {"volume_after_mm3", organ_v1},
-                     {"volume_change_pct", 100.0 * (organ_v1 - organ_v0) / organ_v0},
+                     {"volume_change_pct", 100.0 * (volume_ratio - 1)},
+                     {"volume_change_counted_pct", 100.0 * (organ_v1 - organ_v0) / organ_v0},
+                     {"deformation",
+                      {{"min_volume_ratio", phi.min_volume_ratio()},
+                       {"max_volume_ratio", phi.max_volume_ratio()},
+                       {"lattice_mm", phi.support_mm() / 4},
+                       {"fitted_nodes", phi.fitted_nodes()},
+                       {"harmonic_nodes", phi.harmonic_nodes()},
+                       {"folds", phi.folds()}}},
                      {"particle_body_volume_change_pct", 100.0 * (v1 - v0) / v0},
                      {"components", particles::connected_components(state.x, 1.5 * law.r0())},
                      {"skin_particles", skin_of(state.x).size()},
@@ -455,6 +471,10 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
         out.fit.stop_reason, out.fit.residual_mean_mm, fo.residual_mean_tolerance_mm, far,
         points.size(), rho, list);
   }
+  if (out.deformation_folds)
+    out.not_converged_message =
+        (out.not_converged_message.empty() ? "" : out.not_converged_message + "; ") +
+        "the fitted deformation folds (det(grad phi) <= 0 near the organ): nothing is exported";
   return out;
 }
 

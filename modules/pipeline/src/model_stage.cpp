@@ -134,9 +134,12 @@ void build_model_terms(ModelStageResult& result, const particles::Skeleton* skel
 
 fitting::EmbeddedBody organ_body(const ModelStageResult& m) {
   const bool fitted = m.placed.cols() == m.state.x.cols() && m.placed.cols() > 0;
-  return fitting::EmbeddedBody(std::make_shared<const geometry::LabelVolume>(m.reference),
-                               m.global_map, fitted ? m.placed : m.state.x, m.state.x,
-                               fitting::embedding_support_mm(m.lattice_spacing_mm));
+  // The planning organ itself when it is a mask (on the CT's grid: phi = identity gives
+  // it voxel for voxel); an analytic body as its reference mask.
+  auto reference =
+      m.shape.mask ? m.shape.mask : std::make_shared<const geometry::LabelVolume>(m.reference);
+  return fitting::EmbeddedBody(std::move(reference), m.global_map, fitted ? m.placed : m.state.x,
+                               m.state.x, fitting::embedding_support_mm(m.lattice_spacing_mm));
 }
 
 void add_skeleton_term(ModelStageResult& result, const particles::Skeleton& skeleton) {

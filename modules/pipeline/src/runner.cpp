@@ -358,6 +358,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   }
   std::vector<std::pair<std::string, std::string>> files;  // name, content
   std::string not_converged;
+  bool deformation_folds = false;    // then nothing is exported
   std::vector<double> residuals_mm;  // per point, after the fit (for the report)
   if (scene.has_section("fit") && model && points) {
     Stopwatch clock;
@@ -412,6 +413,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
                        fit.fit_summary["rejected_points"].get<int>()));
     }
     not_converged = fit.not_converged_message;
+    deformation_folds = fit.deformation_folds;
     if (!not_converged.empty()) run["warnings"].push_back(not_converged);
   }
   // Export: the (fitted) model on the planning CT's grid (RTSTRUCT, labels), its surface
@@ -419,7 +421,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   std::optional<PendingExport> pending;
   std::vector<std::string> exported;
   std::string model_file;
-  if (scene.has_section("export") && model) {
+  if (scene.has_section("export") && model && !deformation_folds) {
     Stopwatch clock;
     ExportRequest request;
     auto in_out = [&](const char* key) {
@@ -429,6 +431,9 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     request.rtstruct = in_out("rtstruct");
     request.labels = in_out("labels");
     request.mesh = in_out("mesh");
+    request.displacement_field = in_out("displacement_field");
+    request.jacobian = in_out("jacobian");
+    request.registration = in_out("registration");
     request.roi_name = scene.text("export", "roi_name");
     request.fixed_uids = scene.flag("export", "fixed_uids");
     if (request.roi_name.empty()) request.roi_name = organ_name + "_fit";
@@ -441,7 +446,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     }
     double ct_read_s = 0;  // its own stage, not the export's
     if ((!request.rtstruct.empty() || !request.labels.empty() ||
-         (scene.has_section("report") && ct_reference)) &&
+         !request.displacement_field.empty() || !request.jacobian.empty() ||
+         !request.registration.empty() || (scene.has_section("report") && ct_reference)) &&
         !ct) {
       // A session: the planning CT named in the model file, checked to be the same series.
       if (!ct_reference)

@@ -265,6 +265,15 @@ config::Schema build_schema() {
       .text("rtstruct", "", "DICOM RT Structure Set file name inside --out (empty: none)")
       .text("labels", "", "label map file name inside --out: .nrrd, .mha, .nii(.gz) (empty: none)")
       .text("mesh", "", "surface mesh file name inside --out: .stl, .vtp, .ply, .obj (empty: none)")
+      .text("displacement_field", "",
+            "deformation field file name inside --out, .mha or .nrrd, on the planning CT's grid: "
+            "phi^-1(q) - q in mm, as plastimatch warp --xf reads it (empty: none)")
+      .text("registration", "",
+            "DICOM Deformable Spatial Registration file name inside --out: the same field, "
+            "on the planning CT's grid and Frame of Reference (empty: none)")
+      .text("jacobian", "",
+            "det(grad phi) file name inside --out, .nrrd or .mha, on the planning CT's grid "
+            "(empty: none)")
       .text("roi_name", "", "name of the exported ROI (default: the organ's ROI name + _fit)")
       .vec3("roi_color", Eigen::Vector3d(-1, -1, -1), "", -1.0,
             "display colour R, G, B (0-255) of the exported ROI; [-1, -1, -1]: the source ROI's")
@@ -362,15 +371,21 @@ void check_scene_rules(const config::Scene& scene) {
   if (scene.has_section("export")) {
     // A session finds its planning CT through the model file.
     if (!has_ct && !scene.has_section("planning") &&
-        !(scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty()))
+        !(scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty() &&
+          scene.text("export", "displacement_field").empty() &&
+          scene.text("export", "registration").empty() && scene.text("export", "jacobian").empty()))
       scene.fail("export", "rtstruct",
-                 "an RTSTRUCT or label map is written on the planning CT: add a 'ct' section");
+                 "an RTSTRUCT, label map or deformation field is written on the planning CT: "
+                 "add a 'ct' section");
     if (!has_model)
       scene.fail("export", "rtstruct", "export needs a 'model' (or 'planning') to export");
     if (scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty() &&
-        scene.text("export", "mesh").empty() && scene.text("export", "model").empty())
+        scene.text("export", "mesh").empty() && scene.text("export", "model").empty() &&
+        scene.text("export", "displacement_field").empty() &&
+        scene.text("export", "registration").empty() && scene.text("export", "jacobian").empty())
       scene.fail("export", "rtstruct",
-                 "the export section names nothing to write (rtstruct, labels, mesh or model)");
+                 "the export section names nothing to write (rtstruct, labels, mesh, "
+                 "displacement_field, registration, jacobian or model)");
     if (scene.flag("export", "copy_other_rois") &&
         !(scene.has_section("planning") ||
           (scene.has_section("organ") && scene.text("organ", "source") == "rtstruct")))
@@ -380,7 +395,8 @@ void check_scene_rules(const config::Scene& scene) {
     if (scene.flag("export", "copy_other_rois") && scene.text("export", "rtstruct").empty())
       scene.fail("export", "copy_other_rois",
                  "copies ROIs into export.rtstruct, which is not given");
-    for (const char* key : {"rtstruct", "labels", "mesh", "model"}) {
+    for (const char* key : {"rtstruct", "labels", "mesh", "model", "displacement_field",
+                            "registration", "jacobian"}) {
       const std::string& name = scene.text("export", key);
       if (name.find('/') != std::string::npos || name == "." || name == "..")
         scene.fail("export", key, "a file name inside --out, without folders");

@@ -7,24 +7,20 @@
 // The particles are the physics; the organ's surface should be the planning surface,
 // moved as they move. At rest it is the planning organ exactly.
 //
-// A point q of the fitted configuration is pulled back to the reference in two steps:
-//  1. the particles' local displacement, interpolated by moving least squares: an
-//     affine field fitted around q to the particles within `support_mm` of q, with
-//     weights w(r) = (1 - r^2/h^2)^3, sending each current position x_i to where the
-//     particle was placed, x_i^0 (after the global map, before the local stage):
-//         q0 = q + u(q),  u(x_i) ~ x_i^0 - x_i;
-//     an affine field is exact for affine motion and extrapolates past the outermost
-//     particles to the surface, which lies beyond them;
-//  2. the global map's exact inverse (identity for the paper's method): r = M^-1(q0).
-// q is inside when the reference mask is inside at r (the 0.5 level of its trilinear
-// interpolation, geometry::inside_interpolated). Points with fewer than 4 particles
-// within the support are outside.
+// A point q of the fitted configuration is inside when phi^-1(q), the fit's deformation
+// pulled back (deformation.h: defined at every point), is inside the reference mask: its
+// signed distance, unsmoothed and trilinear, is negative there (geometry/signed_distance.h).
+// At a voxel centre of the reference's grid that is the mask's own label; between slices
+// the surface is interpolated by shape, so that moving the organ by part of a slice
+// neither adds nor removes a slice's worth of volume.
 #include <Eigen/Core>
 #include <memory>
 #include <vector>
 
+#include "organfit/fitting/deformation.h"
 #include "organfit/fitting/global_fit.h"
 #include "organfit/geometry/image_geometry.h"
+#include "organfit/geometry/signed_distance.h"
 #include "organfit/particles/state.h"
 
 namespace organfit::fitting {
@@ -32,41 +28,44 @@ namespace organfit::fitting {
 class EmbeddedBody {
  public:
   /// `placed` and `current`: the same particles (3 x N, mm) where the global stage put
-  /// them and where they are now. Throws std::invalid_argument when the counts differ,
-  /// a position is not finite, or support_mm <= 0.
+  /// them and where they are now (see Deformation, which throws std::invalid_argument on
+  /// bad input).
   EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> reference, GlobalMap map,
                particles::Positions placed, particles::Positions current, double support_mm);
+  /// The reference moved by a deformation already made.
+  EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> reference,
+               std::shared_ptr<const Deformation> deformation);
 
-  /// The point of the reference that q came from (mm); NaN when no particle is near q.
-  Eigen::Vector3d pull_back(const Eigen::Vector3d& q_mm) const;
+  /// The point of the reference that q came from (mm): phi^-1(q).
+  Eigen::Vector3d pull_back(const Eigen::Vector3d& q_mm) const {
+    return deformation_->pull_back(q_mm);
+  }
   bool inside(const Eigen::Vector3d& q_mm) const;
-  /// A box holding the body: the current particles' box widened by the support (mm).
+  /// A box holding the body (Deformation::particle_box; the reference's box for a
+  /// deformation without particles).
   geometry::Aabb bounds() const;
   /// The body on a grid (label 1 inside); only the part of the grid within bounds() is
-  /// evaluated, the local displacement on a lattice of a quarter of the support and
-  /// interpolated trilinearly in between.
+  /// evaluated.
   geometry::LabelVolume on_grid(const geometry::ImageGeometry& grid) const;
   /// Volume (mm^3) by counting voxel centres on an axis-aligned grid of `voxel_mm`.
   double volume_mm3(double voxel_mm) const;
+  /// The organ's volume today over its planning volume, from the deformation's Jacobian
+  /// over `organ` (this body on some grid): N / sum of det(grad phi^-1) over its N
+  /// voxels. Both sums count the same voxels, so the grid's sampling of the surface,
+  /// which makes two voxel counts of one volume differ by up to a percent between thick
+  /// slices, cancels: 1 exactly where phi keeps volume.
+  double volume_ratio(const geometry::LabelVolume& organ) const;
 
-  double support_mm() const { return h_; }
+  double support_mm() const { return deformation_->support_mm(); }
+  const Deformation& deformation() const { return *deformation_; }
+  std::shared_ptr<const Deformation> shared_deformation() const { return deformation_; }
+  const geometry::LabelVolume& reference() const { return *reference_; }
+  std::shared_ptr<const geometry::LabelVolume> shared_reference() const { return reference_; }
 
  private:
   std::shared_ptr<const geometry::LabelVolume> reference_;
-  GlobalMap map_;
-  Eigen::Matrix3d map_inverse_a_;
-  particles::Positions placed_, current_;
-  double h_;
-  // The particles bucketed on a grid of cells of size h_ from lo_ (mm), dims_ cells a
-  // side: cell c holds cell_order_[cell_start_[c] .. cell_start_[c + 1]), ascending.
-  Eigen::Vector3d lo_;
-  Eigen::Vector3i dims_ = Eigen::Vector3i::Zero();
-  std::vector<int> cell_start_, cell_order_;
-  /// Step 1: q + u(q) (NaN when no particle is within the support of q); the support
-  /// widens where the neighbours spread too little, unless told not to.
-  Eigen::Vector3d unmove_locally(const Eigen::Vector3d& q_mm, bool widen_if_needed = true) const;
-  /// Step 2: the global map's inverse.
-  Eigen::Vector3d unmap_globally(const Eigen::Vector3d& q0_mm) const;
+  std::shared_ptr<const geometry::SignedDistance> distance_;
+  std::shared_ptr<const Deformation> deformation_;
 };
 
 /// Each particle's foot on a surface given by dense samples with outward normals: the

@@ -15,7 +15,11 @@ class SignedDistance {
   /// (the boundary lies half a voxel between them): negative inside, positive outside;
   /// then smoothed by a Gaussian of one voxel, which takes the voxels' steps out of a
   /// slanted boundary (its gradient there was up to 40 degrees off the normal).
-  explicit SignedDistance(const LabelVolume& mask);
+  /// Unsmoothed (`smooth` false), its sign at every voxel centre is the mask's, and its
+  /// zero level lies midway between centres across the boundary (shape-based
+  /// interpolation: unbiased between thick slices, where the 0.5 level of a trilinear
+  /// mask takes the union of two slices at their midplane).
+  explicit SignedDistance(const LabelVolume& mask, bool smooth = true);
 
   /// Value at `p_mm` (mm), trilinear between voxel centres; beyond the grid, the value
   /// at the nearest point of the grid plus the distance to it. `gradient` (unit-free,

@@ -18,6 +18,13 @@ geometry::LabelVolume from_plain(const PlainMask& mask);
 void write_label_volume(const std::filesystem::path& file, const geometry::LabelVolume& labels);
 geometry::LabelVolume read_label_volume(const std::filesystem::path& file);
 
+/// A scalar float image on a geometry (write_float_image).
+void write_float_volume(const std::filesystem::path& file, const geometry::ImageGeometry& g,
+                        const std::vector<float>& values);
+/// A vector field on a geometry, x y z per voxel in mm (write_vector_image).
+void write_vector_volume(const std::filesystem::path& file, const geometry::ImageGeometry& g,
+                         const std::vector<float>& xyz);
+
 /// A scalar image as float values with its geometry (any pixel type ITK reads).
 struct ScalarImage {
   geometry::ImageGeometry geometry;

@@ -7,6 +7,18 @@
 //             copied alongside
 //   labels    the same mask as a label map (NRRD, MHA, NIfTI) with the CT's geometry
 //   mesh      the body's surface (STL, VTP, PLY, OBJ), independent of the CT grid
+//   displacement_field  the deformation on the planning CT's grid, as plastimatch's
+//             `warp --xf` reads it: at each voxel q (today), v(q) = phi^-1(q) - q (mm,
+//             the CT's patient frame, LPS), the planning point it came from less q; so
+//             warping the planning CT (or its dose, or its label map) by it gives today's
+//   registration  the same vectors as a DICOM Deformable Spatial Registration on the
+//             planning CT's Frame of Reference (dicom/registration_writer.h)
+//   jacobian  det(grad phi) at each voxel of the planning CT's grid: the volume today of
+//             the tissue now there over its planning volume (1 where phi keeps volume)
+// Checks, in the summary and as warnings: the exported organ has the planning organ's
+// components and cavities (geometry/topology.h), and its volume on the CT grid is the
+// planning organ's times the deformation's volume change (within 0.5% and the grid's
+// sampling, 3 sigma).
 // Everything is computed first; files are written only by commit(), each atomically,
 // so a failure leaves no partial output.
 #include <array>
@@ -26,9 +38,11 @@
 namespace organfit::pipeline {
 
 struct ExportRequest {
-  std::filesystem::path rtstruct, labels, mesh;  ///< empty: not written
-  std::string roi_name;                          ///< the fitted organ's ROI
-  std::array<int, 3> roi_colour{0, 200, 255};    ///< its ROI Display Color (R, G, B)
+  std::filesystem::path rtstruct, labels, mesh;        ///< empty: not written
+  std::filesystem::path displacement_field, jacobian;  ///< empty: not written
+  std::filesystem::path registration;                  ///< DICOM REG; empty: not written
+  std::string roi_name;                                ///< the fitted organ's ROI
+  std::array<int, 3> roi_colour{0, 200, 255};          ///< its ROI Display Color (R, G, B)
   /// its RT ROI Interpreted Type; one that is not a DICOM code string (A-Z, 0-9, space,
   /// underscore; 16 characters) is written as ORGAN
   std::string roi_type = "ORGAN";

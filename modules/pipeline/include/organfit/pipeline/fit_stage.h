@@ -43,6 +43,9 @@ struct FitStageResult {
   nlohmann::json truth_summary;  ///< run.json "truth" (when the truth is known)
   std::string history_csv;
   std::string not_converged_message;  ///< which points are left and how far
+  /// The fitted deformation folds (det(grad phi) <= 0 somewhere): the run exits 3 and
+  /// exports nothing, since a folded map puts one point of tissue in two places.
+  bool deformation_folds = false;
   /// How the organ's reference body follows the particles (fitting/embedded_body.h):
   /// the global map (identity for the paper's method) and where the particles were
   /// placed before the local stage.

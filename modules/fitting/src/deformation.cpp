@@ -1,0 +1,347 @@
+#include "organfit/fitting/deformation.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <stdexcept>
+
+namespace organfit::fitting {
+namespace {
+constexpr double kMaxExtentMm = 2000;     // larger than any organ: grids over it are not made
+constexpr double kMaxCells = 1 << 26;     // the particle buckets (4 bytes a cell)
+constexpr double kMaxNodes = 6e7;         // the lattice (12 bytes a node)
+constexpr double kLatticePerSupport = 4;  // nodes per support: an interpolation error of
+                                          // ~ (h/4)^2 / 8 times u's curvature
+
+/// The particles bucketed on cells of size h: cell c holds order[start[c] .. start[c + 1]).
+struct Buckets {
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero();
+  Eigen::Vector3i dims = Eigen::Vector3i::Zero();
+  std::vector<int> start, order;
+  double cell_mm = 1;
+  Buckets(const particles::Positions& x, double h) : cell_mm(h) {
+    if (x.cols() == 0) return;
+    lo = x.rowwise().minCoeff();
+    const Eigen::Vector3d extent = x.rowwise().maxCoeff() - lo;
+    for (int d = 0; d < 3; ++d)
+      dims[d] = static_cast<int>(std::floor(extent[d] / h)) + 1;
+    if (1.0 * dims[0] * dims[1] * dims[2] > kMaxCells)
+      throw std::invalid_argument(
+          "deformation: the support is too small for the particles' extent (over 2^26 cells)");
+    start.assign(static_cast<size_t>(dims.prod()) + 1, 0);
+    std::vector<int> cell(static_cast<size_t>(x.cols()));
+    for (Eigen::Index i = 0; i < x.cols(); ++i) {
+      const Eigen::Vector3i c =
+          ((x.col(i) - lo) / h).array().floor().cast<int>().min(dims.array() - 1);
+      cell[static_cast<size_t>(i)] = c.x() + dims.x() * (c.y() + dims.y() * c.z());
+      ++start[static_cast<size_t>(cell[static_cast<size_t>(i)]) + 1];
+    }
+    for (size_t c = 1; c < start.size(); ++c)
+      start[c] += start[c - 1];
+    order.resize(static_cast<size_t>(x.cols()));
+    std::vector<int> fill(start.begin(), start.end() - 1);
+    for (Eigen::Index i = 0; i < x.cols(); ++i)
+      order[static_cast<size_t>(fill[static_cast<size_t>(cell[static_cast<size_t>(i)])]++)] =
+          static_cast<int>(i);
+  }
+};
+
+/// The moving least squares' answer at q: u(q), and whether it is kept (well posed, and
+/// the neighbours weigh at least one particle at q).
+struct LocalFit {
+  Eigen::Vector3d u = Eigen::Vector3d::Zero();
+  bool kept = false;
+};
+
+LocalFit moving_least_squares(const Eigen::Vector3d& q, const particles::Positions& placed,
+                              const particles::Positions& current, const Buckets& b, double h0) {
+  LocalFit out;
+  if (b.dims.prod() == 0) return out;
+  const Eigen::Vector3d c = ((q - b.lo) / h0).array().floor();
+  if ((c.array() < -3).any() || (c.array() > b.dims.cast<double>().array() + 2).any()) return out;
+  const Eigen::Vector3i cq = c.cast<int>();
+  // Weighted least squares for u(x) = c0 + B (x - q) / h over the neighbours within h.
+  // Where they spread too little in some direction to fix the gradient (a tip of the
+  // body, where they may all lie in one lattice plane), h grows: the field is
+  // extrapolated from a wider, well-spread neighbourhood instead of guessing a zero slope.
+  for (int widen = 0; widen < 3; ++widen) {
+    const double h = h0 * (widen == 0 ? 1.0 : widen == 1 ? 1.5 : 2.0);
+    const int reach = widen == 0 ? 1 : 2;
+    Eigen::Matrix4d m = Eigen::Matrix4d::Zero();
+    Eigen::Matrix<double, 4, 3> r = Eigen::Matrix<double, 4, 3>::Zero();
+    int count = 0;
+    const double h2 = h * h;
+    for (int dk = -reach; dk <= reach; ++dk)
+      for (int dj = -reach; dj <= reach; ++dj)
+        for (int di = -reach; di <= reach; ++di) {
+          const Eigen::Vector3i cc = cq + Eigen::Vector3i(di, dj, dk);
+          if ((cc.array() < 0).any() || (cc.array() >= b.dims.array()).any()) continue;
+          const size_t cell =
+              static_cast<size_t>(cc.x() + b.dims.x() * (cc.y() + b.dims.y() * cc.z()));
+          for (int k = b.start[cell]; k < b.start[cell + 1]; ++k) {
+            const int p = b.order[static_cast<size_t>(k)];
+            const Eigen::Vector3d d = current.col(p) - q;
+            const double s = d.squaredNorm() / h2;
+            if (s >= 1) continue;
+            const double w = (1 - s) * (1 - s) * (1 - s);
+            const Eigen::Vector4d phi(1, d.x() / h, d.y() / h, d.z() / h);
+            m.noalias() += w * phi * phi.transpose();
+            r.noalias() += w * phi * (placed.col(p) - current.col(p)).transpose();
+            ++count;
+          }
+        }
+    if (count < 4) {
+      if (widen == 0) return out;  // beyond the body: no particle within the support
+      continue;
+    }
+    // Spread of the neighbours (weighted covariance, in units of h^2): well-posed when its
+    // smallest eigenvalue is at least (h/10)^2.
+    const Eigen::Matrix3d cov = m.bottomRightCorner<3, 3>() / m(0, 0) -
+                                m.block<3, 1>(1, 0) * m.block<1, 3>(0, 1) / (m(0, 0) * m(0, 0));
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> spread;
+    spread.computeDirect(cov, Eigen::EigenvaluesOnly);
+    if (spread.eigenvalues()(0) < 1e-2) continue;  // a cap of particles: no slope to be had
+    if (m(0, 0) < 1) return out;  // too few near q to trust
+    m.bottomRightCorner<3, 3>() += 1e-9 * m(0, 0) * Eigen::Matrix3d::Identity();
+    const Eigen::Matrix<double, 4, 3> coef = m.ldlt().solve(r);
+    out.u = coef.row(0).transpose();
+    out.kept = out.u.allFinite();
+    return out;
+  }
+  return out;
+}
+
+/// Conjugate gradients for the discrete Laplace equation on the free nodes (7-point
+/// stencil, diagonal 6): `neighbours` holds each free node's 6 neighbours (free index, or
+/// -1 for a fixed one, whose value is in `rhs`). Solves one component in place.
+void solve_laplace(const std::vector<std::array<int, 6>>& neighbours,
+                   const std::vector<double>& rhs, std::vector<double>& x) {
+  const long long n = static_cast<long long>(rhs.size());
+  auto apply = [&](const std::vector<double>& v, std::vector<double>& out) {
+#pragma omp parallel for schedule(static)
+    for (long long i = 0; i < n; ++i) {
+      double s = 6 * v[static_cast<size_t>(i)];
+      for (int nb : neighbours[static_cast<size_t>(i)])
+        if (nb >= 0) s -= v[static_cast<size_t>(nb)];
+      out[static_cast<size_t>(i)] = s;
+    }
+  };
+  auto dot = [&](const std::vector<double>& a, const std::vector<double>& b) {
+    double s = 0;
+#pragma omp parallel for reduction(+ : s) schedule(static)
+    for (long long i = 0; i < n; ++i)
+      s += a[static_cast<size_t>(i)] * b[static_cast<size_t>(i)];
+    return s;
+  };
+  std::vector<double> r(rhs.size()), p, ap(rhs.size());
+  apply(x, ap);
+  for (long long i = 0; i < n; ++i)
+    r[static_cast<size_t>(i)] = rhs[static_cast<size_t>(i)] - ap[static_cast<size_t>(i)];
+  p = r;
+  double rr = dot(r, r);
+  const double stop = 1e-14 * std::max(dot(rhs, rhs), 1e-30);
+  for (int it = 0; it < 5000 && rr > stop; ++it) {
+    apply(p, ap);
+    const double alpha = rr / dot(p, ap);
+    for (long long i = 0; i < n; ++i) {
+      x[static_cast<size_t>(i)] += alpha * p[static_cast<size_t>(i)];
+      r[static_cast<size_t>(i)] -= alpha * ap[static_cast<size_t>(i)];
+    }
+    const double rr_next = dot(r, r);
+    const double beta = rr_next / rr;
+    rr = rr_next;
+    for (long long i = 0; i < n; ++i)
+      p[static_cast<size_t>(i)] = r[static_cast<size_t>(i)] + beta * p[static_cast<size_t>(i)];
+  }
+}
+
+}  // namespace
+
+Deformation::Deformation() = default;
+
+Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::Positions current,
+                         double support_mm)
+    : map_(std::move(map)), h_(support_mm) {
+  if (placed.cols() != current.cols())
+    throw std::invalid_argument("deformation: placed and current particle counts differ");
+  if (!placed.allFinite() || !current.allFinite())
+    throw std::invalid_argument("deformation: a particle position is not finite");
+  if (!(support_mm > 0) || !std::isfinite(support_mm))
+    throw std::invalid_argument("deformation: support must be > 0 mm");
+  map_inverse_a_ = map_.affine.a.inverse();
+  if (current.cols() == 0) return;
+  const Eigen::Vector3d lo = current.rowwise().minCoeff().cwiseMin(placed.rowwise().minCoeff());
+  const Eigen::Vector3d hi = current.rowwise().maxCoeff().cwiseMax(placed.rowwise().maxCoeff());
+  if ((hi - lo).maxCoeff() > kMaxExtentMm)
+    throw std::invalid_argument(
+        "deformation: the particles span more than 2 m (the model has come apart)");
+  // Today's organ lies within h of the placed or current particles, moved by at most the
+  // largest |u| (the harmonic part has no interior extremum: it stays within the fitted
+  // part, which stays within the particles' moves up to the affine extrapolation).
+  const double largest_move = (placed - current).colwise().norm().maxCoeff();
+  particle_box_ = {lo.array() - h_ - largest_move, hi.array() + h_ + largest_move};
+  if (largest_move == 0) return;  // at rest: u is zero everywhere
+  const double margin = std::max(2 * h_, 2 * largest_move);
+  spacing_ = h_ / kLatticePerSupport;
+  origin_ = lo.array() - margin;
+  for (int d = 0; d < 3; ++d)
+    n_[d] = static_cast<int>(std::ceil((hi[d] - lo[d] + 2 * margin) / spacing_)) + 1;
+  if (1.0 * n_[0] * n_[1] * n_[2] > kMaxNodes)
+    throw std::invalid_argument(
+        "deformation: the lattice of the displacement would exceed 6e7 nodes");
+  const long long nodes = 1LL * n_[0] * n_[1] * n_[2];
+  values_.assign(static_cast<size_t>(nodes), Eigen::Vector3f::Zero());
+  fitted_.assign(static_cast<size_t>(nodes), 0);
+  {
+    const Buckets buckets(current, h_);
+#pragma omp parallel for schedule(dynamic, 64)
+    for (long long v = 0; v < nodes; ++v) {
+      const LocalFit f =
+          moving_least_squares(node(v), placed, current, buckets, h_);
+      if (!f.kept) continue;
+      values_[static_cast<size_t>(v)] = f.u.cast<float>();
+      fitted_[static_cast<size_t>(v)] = 1;
+    }
+  }
+  for (const auto f : fitted_)
+    fitted_nodes_ += f;
+  // u where the moving least squares did not answer: harmonic, zero at the lattice's faces.
+  harmonic_nodes_ = harmonic_fill(fitted_, [&](long long v) {
+    return Eigen::Vector3d(values_[static_cast<size_t>(v)].cast<double>());
+  });
+  // det(grad phi^-1) over the cells, at their centres.
+  double lo_det = 1, hi_det = 1;
+#pragma omp parallel for collapse(2) reduction(min : lo_det) reduction(max : hi_det)
+  for (int k = 0; k < n_[2] - 1; ++k)
+    for (int j = 0; j < n_[1] - 1; ++j)
+      for (int i = 0; i < n_[0] - 1; ++i) {
+        const Eigen::Vector3d q = origin_ + spacing_ * Eigen::Vector3d(i + 0.5, j + 0.5, k + 0.5);
+        double det = 1;
+        evaluate(q, &det);
+        lo_det = std::min(lo_det, det), hi_det = std::max(hi_det, det);
+      }
+  min_ratio_ = hi_det > 0 ? 1.0 / hi_det : -std::numeric_limits<double>::infinity();
+  max_ratio_ = lo_det > 0 ? 1.0 / lo_det : std::numeric_limits<double>::infinity();
+  min_det_ = lo_det;
+}
+
+long long Deformation::harmonic_fill(const std::vector<std::uint8_t>& fixed,
+                                     const std::function<Eigen::Vector3d(long long)>& value) {
+  auto index = [&](int i, int j, int k) { return i + 1LL * n_[0] * (j + 1LL * n_[1] * k); };
+  const long long nodes = 1LL * n_[0] * n_[1] * n_[2];
+  std::vector<int> free_index(static_cast<size_t>(nodes), -1);
+  std::vector<long long> free_nodes;
+  for (int k = 1; k + 1 < n_[2]; ++k)
+    for (int j = 1; j + 1 < n_[1]; ++j)
+      for (int i = 1; i + 1 < n_[0]; ++i) {
+        const long long v = index(i, j, k);
+        if (fixed[static_cast<size_t>(v)]) continue;
+        free_index[static_cast<size_t>(v)] = static_cast<int>(free_nodes.size());
+        free_nodes.push_back(v);
+      }
+  // The lattice's faces, when not fixed, hold zero.
+  for (long long v = 0; v < nodes; ++v)
+    if (!fixed[static_cast<size_t>(v)] && free_index[static_cast<size_t>(v)] < 0)
+      values_[static_cast<size_t>(v)].setZero();
+  const size_t nf = free_nodes.size();
+  if (nf == 0) return 0;
+  std::vector<std::array<int, 6>> neighbours(nf);
+  std::vector<Eigen::Vector3d> rhs(nf, Eigen::Vector3d::Zero());
+  const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
+  for (size_t f = 0; f < nf; ++f) {
+    const long long v = free_nodes[f];
+    for (int d = 0; d < 3; ++d)
+      for (int side = 0; side < 2; ++side) {
+        const long long w = v + (side ? step[d] : -step[d]);
+        const int fi = free_index[static_cast<size_t>(w)];
+        neighbours[f][static_cast<size_t>(2 * d + side)] = fi;
+        if (fi < 0 && fixed[static_cast<size_t>(w)]) rhs[f] += value(w);
+      }
+  }
+  std::vector<double> b(nf), x(nf);
+  for (int a = 0; a < 3; ++a) {
+    for (size_t f = 0; f < nf; ++f)
+      b[f] = rhs[f][a], x[f] = 0;
+    solve_laplace(neighbours, b, x);
+    for (size_t f = 0; f < nf; ++f)
+      values_[static_cast<size_t>(free_nodes[f])][a] = static_cast<float>(x[f]);
+  }
+  return static_cast<long long>(nf);
+}
+
+Eigen::Vector3d Deformation::node(long long v) const {
+  const int i = static_cast<int>(v % n_[0]), j = static_cast<int>((v / n_[0]) % n_[1]),
+            k = static_cast<int>(v / (1LL * n_[0] * n_[1]));
+  return origin_ + spacing_ * Eigen::Vector3d(i, j, k);
+}
+
+geometry::Aabb Deformation::local_box() const {
+  if (values_.empty()) return {};
+  return {origin_, origin_ + spacing_ * (n_.cast<double>().array() - 1).matrix()};
+}
+
+Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det) const {
+  if (det) *det = 1;
+  if (!q.allFinite()) return q;
+  const Eigen::Vector3d t = (q - origin_) / spacing_;
+  const Eigen::Vector3d base = t.array().floor();
+  if (values_.empty() || (base.array() < 0).any() || base.x() >= n_[0] - 1 ||
+      base.y() >= n_[1] - 1 || base.z() >= n_[2] - 1)
+    return map_.inverse(q, map_inverse_a_);
+  const long long v0 = static_cast<long long>(base.x()) +
+                       1LL * n_[0] * (static_cast<long long>(base.y()) +
+                                      1LL * n_[1] * static_cast<long long>(base.z()));
+  const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
+  const Eigen::Vector3d f = t - base;
+  Eigen::Vector3d u = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d g = Eigen::Matrix3d::Zero();
+  for (int c = 0; c < 8; ++c) {
+    const int di = c & 1, dj = (c >> 1) & 1, dk = (c >> 2) & 1;
+    const Eigen::Vector3d value =
+        values_[static_cast<size_t>(v0 + di * step[0] + dj * step[1] + dk * step[2])]
+            .cast<double>();
+    const double wx = di ? f.x() : 1 - f.x(), wy = dj ? f.y() : 1 - f.y(),
+                 wz = dk ? f.z() : 1 - f.z();
+    u += wx * wy * wz * value;
+    if (det) {
+      g.col(0) += (di ? 1.0 : -1.0) * wy * wz / spacing_ * value;
+      g.col(1) += (dj ? 1.0 : -1.0) * wx * wz / spacing_ * value;
+      g.col(2) += (dk ? 1.0 : -1.0) * wx * wy / spacing_ * value;
+    }
+  }
+  // The global map keeps volume: det(grad phi^-1) = det(I + grad u).
+  if (det) *det = (Eigen::Matrix3d::Identity() + g).determinant();
+  return map_.inverse(q + u, map_inverse_a_);
+}
+
+Eigen::Vector3d Deformation::pull_back(const Eigen::Vector3d& q) const {
+  return evaluate(q, nullptr);
+}
+
+Eigen::Vector3d Deformation::push_forward(const Eigen::Vector3d& r) const {
+  // Newton on phi^-1(q) = r, the Jacobian by central differences, from M(r).
+  Eigen::Vector3d q = map_.apply(r);
+  for (int it = 0; it < 50; ++it) {
+    const Eigen::Vector3d e = pull_back(q) - r;
+    if (e.norm() < 1e-10) break;
+    Eigen::Matrix3d j;
+    for (int d = 0; d < 3; ++d) {
+      const Eigen::Vector3d step = 1e-4 * Eigen::Vector3d::Unit(d);
+      j.col(d) = (pull_back(q + step) - pull_back(q - step)) / 2e-4;
+    }
+    q -= j.fullPivLu().solve(e);
+  }
+  return q;
+}
+
+double Deformation::volume_ratio(const Eigen::Vector3d& q) const {
+  double det = 1;
+  evaluate(q, &det);
+  return det > 0 ? 1.0 / det : std::numeric_limits<double>::infinity();
+}
+
+}  // namespace organfit::fitting

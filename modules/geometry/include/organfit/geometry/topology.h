@@ -1,0 +1,26 @@
+#pragma once
+// A mask's topology as a planning system sees it: its pieces and the cavities they close.
+//   components  connected pieces of label 1 (26-connected: voxels touching at a corner
+//               are one piece)
+//   cavities    connected pieces of the rest (6-connected, the complement's pairing)
+//               that do not reach the grid's border: holes sealed inside the organ
+// A one-voxel component is an island; a one-voxel cavity, a pinhole. The pair (26, 6)
+// is the one for which a digital surface separates inside from outside.
+#include "organfit/geometry/image_geometry.h"
+
+namespace organfit::geometry {
+
+struct Topology {
+  int components = 0, cavities = 0;
+  int single_voxel_components = 0, single_voxel_cavities = 0;
+  bool operator==(const Topology& o) const {
+    return components == o.components && cavities == o.cavities &&
+           single_voxel_components == o.single_voxel_components &&
+           single_voxel_cavities == o.single_voxel_cavities;
+  }
+};
+
+/// The topology of label 1 of `mask` (only the box of its voxels plus one is visited).
+Topology topology_of(const LabelVolume& mask);
+
+}  // namespace organfit::geometry
