@@ -71,6 +71,22 @@ else
   echo "FAIL plastimatch is not installed (scripts/setup.sh installs it)"; failed=$((failed + 1))
 fi
 
+# Warping the planning CT by the field: over our exported organ's interior (its voxels
+# whose 6 neighbours are inside too: the boundary voxels mix in the fat round it) the mean
+# HU of the warped CT is the planning organ's interior mean HU in the planning CT.
+if command -v plastimatch >/dev/null; then
+  check prostate.warped_ct_keeps_the_organs_hu bash -c "
+plastimatch convert --input '$tmp/plan/phantom/ct' --output-img '$tmp/ct.mha' --output-type float >/dev/null &&
+plastimatch convert --input '$tmp/ct.mha' --xf '$tmp/session/vf.mha' --output-img '$tmp/ct_today.mha' >/dev/null &&
+$py '$src/tests/cli/interior_mean.py' '$tmp/ct.mha' '$tmp/plan/planning.nrrd' '$tmp/ct_today.mha' '$tmp/session/fit.nrrd' 2.0"
+fi
+# organfit export --model writes the same field from the saved fitted model.
+check prostate.export_command_writes_the_same_field bash -c "
+'$bin' --quiet run '$src/pipelines/prostate-session.yaml' --out '$tmp/session2' \
+  --set 'planning.model=$tmp/plan/prostate_model.json' --set points.bend_mm=10 --set export.model=fitted.json &&
+'$bin' --quiet export --model '$tmp/session2/fitted.json' --displacement-field '$tmp/exported_vf.mha' &&
+cmp '$tmp/exported_vf.mha' '$tmp/session/vf.mha'"
+
 # The REG object: dciodvfy finds no error; pydicom reads its grid (the CT's) and its
 # vectors, which are the displacement field's to the float.
 if command -v dciodvfy >/dev/null; then

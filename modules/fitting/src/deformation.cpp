@@ -105,7 +105,7 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const particles::Positio
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> spread;
     spread.computeDirect(cov, Eigen::EigenvaluesOnly);
     if (spread.eigenvalues()(0) < 1e-2) continue;  // a cap of particles: no slope to be had
-    if (m(0, 0) < 1) return out;  // too few near q to trust
+    if (m(0, 0) < 1) return out;                   // too few near q to trust
     m.bottomRightCorner<3, 3>() += 1e-9 * m(0, 0) * Eigen::Matrix3d::Identity();
     const Eigen::Matrix<double, 4, 3> coef = m.ldlt().solve(r);
     out.u = coef.row(0).transpose();
@@ -200,8 +200,7 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
     const Buckets buckets(current, h_);
 #pragma omp parallel for schedule(dynamic, 64)
     for (long long v = 0; v < nodes; ++v) {
-      const LocalFit f =
-          moving_least_squares(node(v), placed, current, buckets, h_);
+      const LocalFit f = moving_least_squares(node(v), placed, current, buckets, h_);
       if (!f.kept) continue;
       values_[static_cast<size_t>(v)] = f.u.cast<float>();
       fitted_[static_cast<size_t>(v)] = 1;
@@ -292,9 +291,10 @@ Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det) con
   if (values_.empty() || (base.array() < 0).any() || base.x() >= n_[0] - 1 ||
       base.y() >= n_[1] - 1 || base.z() >= n_[2] - 1)
     return map_.inverse(q, map_inverse_a_);
-  const long long v0 = static_cast<long long>(base.x()) +
-                       1LL * n_[0] * (static_cast<long long>(base.y()) +
-                                      1LL * n_[1] * static_cast<long long>(base.z()));
+  const long long v0 =
+      static_cast<long long>(base.x()) +
+      1LL * n_[0] *
+          (static_cast<long long>(base.y()) + 1LL * n_[1] * static_cast<long long>(base.z()));
   const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
   const Eigen::Vector3d f = t - base;
   Eigen::Vector3d u = Eigen::Vector3d::Zero();

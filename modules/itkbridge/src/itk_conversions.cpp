@@ -100,8 +100,10 @@ PlainMask to_plain(const MaskImage* image) {
 
 namespace {
 /// Writes an ITK image under a temporary name, renamed when whole.
+/// `compress`: zlib, as ITK writes it (small and quick for masks; for float fields of tens
+/// of MB it costs seconds and gains little: their mantissas are noise to zlib).
 template <class Image>
-void write_image(const fs::path& file, const Image* image) {
+void write_image(const fs::path& file, const Image* image, bool compress) {
   const std::string name = file.filename().string();
   const char* known[] = {".nrrd", ".nhdr", ".mha", ".mhd", ".nii", ".nii.gz"};
   if (std::none_of(std::begin(known), std::end(known),
@@ -113,7 +115,7 @@ void write_image(const fs::path& file, const Image* image) {
   auto writer = itk::ImageFileWriter<Image>::New();
   writer->SetFileName(temp.path().string());
   writer->SetInput(image);
-  writer->SetUseCompression(true);
+  writer->SetUseCompression(compress);
   try {
     writer->Update();
   } catch (const itk::ExceptionObject& e) {
@@ -124,11 +126,11 @@ void write_image(const fs::path& file, const Image* image) {
 }  // namespace
 
 void write_mask(const fs::path& file, const PlainMask& mask) {
-  write_image(file, to_itk(mask).GetPointer());
+  write_image(file, to_itk(mask).GetPointer(), true);
 }
 
 void write_float_image(const fs::path& file, const PlainFloatImage& image) {
-  write_image(file, to_itk(image).GetPointer());
+  write_image(file, to_itk(image).GetPointer(), false);
 }
 
 void write_vector_image(const fs::path& file, const PlainGeometry& geometry,
@@ -138,7 +140,7 @@ void write_vector_image(const fs::path& file, const PlainGeometry& geometry,
     throw std::invalid_argument("write_vector_image: 3 values per voxel needed");
   auto image = allocate<VectorImage>(geometry);
   std::copy(xyz.begin(), xyz.end(), reinterpret_cast<float*>(image->GetBufferPointer()));
-  write_image(file, image.GetPointer());
+  write_image(file, image.GetPointer(), false);
 }
 
 PlainFloatImage read_float_image(const fs::path& file) {

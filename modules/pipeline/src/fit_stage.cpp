@@ -364,6 +364,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
   const double volume_ratio = organ_after.volume_ratio(organ_after_grid);
   const fitting::Deformation& phi = organ_after.deformation();
   out.deformation_folds = phi.folds();
+  out.deformation = organ_after.shared_deformation();
   int rejected = 0;
   for (const auto& st : *status)
     rejected += st.rejected;

@@ -132,14 +132,23 @@ void build_model_terms(ModelStageResult& result, const particles::Skeleton* skel
   if (skeleton && skeleton->node_count() > 0) add_skeleton_term(result, *skeleton);
 }
 
+namespace {
+/// The planning organ itself when it is a mask (on the CT's grid: phi = identity gives it
+/// voxel for voxel); an analytic body as its reference mask.
+std::shared_ptr<const geometry::LabelVolume> planning_organ(const ModelStageResult& m) {
+  return m.shape.mask ? m.shape.mask : std::make_shared<const geometry::LabelVolume>(m.reference);
+}
+}  // namespace
+
 fitting::EmbeddedBody organ_body(const ModelStageResult& m) {
   const bool fitted = m.placed.cols() == m.state.x.cols() && m.placed.cols() > 0;
-  // The planning organ itself when it is a mask (on the CT's grid: phi = identity gives
-  // it voxel for voxel); an analytic body as its reference mask.
-  auto reference =
-      m.shape.mask ? m.shape.mask : std::make_shared<const geometry::LabelVolume>(m.reference);
-  return fitting::EmbeddedBody(std::move(reference), m.global_map, fitted ? m.placed : m.state.x,
+  return fitting::EmbeddedBody(planning_organ(m), m.global_map, fitted ? m.placed : m.state.x,
                                m.state.x, fitting::embedding_support_mm(m.lattice_spacing_mm));
+}
+
+fitting::EmbeddedBody organ_body(const ModelStageResult& m,
+                                 std::shared_ptr<const fitting::Deformation> deformation) {
+  return fitting::EmbeddedBody(planning_organ(m), std::move(deformation));
 }
 
 void add_skeleton_term(ModelStageResult& result, const particles::Skeleton& skeleton) {

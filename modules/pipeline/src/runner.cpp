@@ -358,7 +358,12 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   }
   std::vector<std::pair<std::string, std::string>> files;  // name, content
   std::string not_converged;
-  bool deformation_folds = false;    // then nothing is exported
+  bool deformation_folds = false;                           // then nothing is exported
+  std::shared_ptr<const fitting::Deformation> deformation;  // the fit's, when it ran
+  // The organ the model carries: through the fit's deformation, made once.
+  auto organ_of_model = [&] {
+    return deformation ? organ_body(*model, deformation) : organ_body(*model);
+  };
   std::vector<double> residuals_mm;  // per point, after the fit (for the report)
   if (scene.has_section("fit") && model && points) {
     Stopwatch clock;
@@ -414,6 +419,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     }
     not_converged = fit.not_converged_message;
     deformation_folds = fit.deformation_folds;
+    deformation = fit.deformation;
     if (!not_converged.empty()) run["warnings"].push_back(not_converged);
   }
   // Export: the (fitted) model on the planning CT's grid (RTSTRUCT, labels), its surface
@@ -482,7 +488,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
       request.skip_roi = organ_name;  // the fitted ROI replaces its source
     }
     pending =
-        prepare_export(organ_body(*model), model->model->radius_mm(), ct ? &*ct : nullptr, request);
+        prepare_export(organ_of_model(), model->model->radius_mm(), ct ? &*ct : nullptr, request);
     for (const auto& w : pending->warnings)
       warn(w);
     for (const auto& f : pending->files)
@@ -555,7 +561,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     context.ct = ct ? &*ct : nullptr;
     context.planning = model ? &model->shape : nullptr;
     std::optional<fitting::EmbeddedBody> fitted_organ;
-    if (model) fitted_organ.emplace(organ_body(*model));
+    if (model) fitted_organ.emplace(organ_of_model());
     context.fitted = fitted_organ ? &*fitted_organ : nullptr;
     context.rho_mm = model ? model->model->radius_mm() : 0;
     if (pending) {  // the organ the export made, not made a second time

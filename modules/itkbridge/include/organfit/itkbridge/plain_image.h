@@ -33,11 +33,12 @@ struct PlainFloatImage {
 /// .nii.gz). Written under a temporary name and renamed: whole or not at all. Throws
 /// InputError naming the file on an unknown extension or a failed write.
 void write_mask(const std::filesystem::path& file, const PlainMask& mask);
-/// A scalar float image (e.g. a Jacobian determinant), written as write_mask writes.
+/// A scalar float image (e.g. a Jacobian determinant), written as write_mask writes but
+/// uncompressed.
 void write_float_image(const std::filesystem::path& file, const PlainFloatImage& image);
 /// A field of 3-vectors (x, y, z per voxel, i fastest; mm in the image's physical frame),
 /// written as an ITK vector image of float (.mha, .nrrd, .nii): the form plastimatch
-/// reads as a vector field (`--xf`). Written as write_mask writes.
+/// reads as a vector field (`--xf`). Written as write_mask writes but uncompressed.
 void write_vector_image(const std::filesystem::path& file, const PlainGeometry& geometry,
                         const std::vector<float>& xyz);
 /// Reads a mask (any image ITK reads, cast to 8 bits). Throws InputError naming the file.

@@ -46,6 +46,8 @@ struct FitStageResult {
   /// The fitted deformation folds (det(grad phi) <= 0 somewhere): the run exits 3 and
   /// exports nothing, since a folded map puts one point of tissue in two places.
   bool deformation_folds = false;
+  /// The fitted deformation (what the export and the report show the organ through).
+  std::shared_ptr<const fitting::Deformation> deformation;
   /// How the organ's reference body follows the particles (fitting/embedded_body.h):
   /// the global map (identity for the paper's method) and where the particles were
   /// placed before the local stage.

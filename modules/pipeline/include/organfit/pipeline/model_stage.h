@@ -63,6 +63,9 @@ struct ModelStageResult {
 /// The organ as the model carries it now: the reference body moved with the particles
 /// (at rest, the reference itself). What is exported, reported and measured.
 fitting::EmbeddedBody organ_body(const ModelStageResult& model);
+/// The same through a deformation already made (the fit's), not made again.
+fitting::EmbeddedBody organ_body(const ModelStageResult& model,
+                                 std::shared_ptr<const fitting::Deformation> deformation);
 
 /// Fills the organ (when given, e.g. imported from CT) or the scene's analytic body with
 /// particles at the relaxed fcc spacing and relaxes them.
