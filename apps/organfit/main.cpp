@@ -104,6 +104,10 @@ int run_main(int argc, char** argv) {
                          "phi^-1(q) - q, as plastimatch warp --xf reads it");
   export_cmd->add_option("--registration", exp.registration,
                          "DICOM Deformable Spatial Registration (REG) to write: the same field");
+  export_cmd
+      ->add_option("--field-spacing", exp.field_spacing_mm,
+                   "Grid of the field, REG and Jacobian (mm; 0: the CT's grid)")
+      ->check(CLI::Range(0.0, 50.0));
   export_cmd->add_option("--jacobian", exp.jacobian,
                          "det(grad phi) to write on the planning CT's grid (.nrrd, .mha)");
   export_cmd->add_option("--roi-name", exp.roi_name,

@@ -87,6 +87,28 @@ check prostate.export_command_writes_the_same_field bash -c "
 '$bin' --quiet export --model '$tmp/session2/fitted.json' --displacement-field '$tmp/exported_vf.mha' &&
 cmp '$tmp/exported_vf.mha' '$tmp/session/vf.mha'"
 
+# A stated grid: 2.5 mm over the CT's box (the phantom CT's 320 x 320 x 56 at 1.25 x 1.25 x
+# 2.5 mm gives 160 x 160 x 56); plastimatch warps onto the CT with --fixed. Refused where
+# no field is written.
+check prostate.field_on_a_stated_grid bash -c "
+'$bin' --quiet run '$src/pipelines/prostate-session.yaml' --out '$tmp/coarse' \
+  --set 'planning.model=$tmp/plan/prostate_model.json' --set points.bend_mm=10 \
+  --set export.labels=fit.nrrd --set export.displacement_field=vf.mha --set export.registration=reg.dcm \
+  --set export.field_spacing_mm=2.5 &&
+$py -c \"
+import json, pydicom; d = json.load(open('$tmp/coarse/run.json'))
+assert d['export']['field_grid'] == {'size': [160, 160, 56], 'spacing_mm': [2.5, 2.5, 2.5]}, d['export']
+g = pydicom.dcmread('$tmp/coarse/reg.dcm').DeformableRegistrationSequence[0].DeformableRegistrationGridSequence[0]
+assert [int(x) for x in g.GridDimensions] == [160, 160, 56] and [float(x) for x in g.GridResolution] == [2.5] * 3\" &&
+plastimatch convert --input '$tmp/plan/planning.nrrd' --output-img '$tmp/coarse/pf.mha' --output-type float >/dev/null &&
+plastimatch convert --input '$tmp/coarse/pf.mha' --xf '$tmp/coarse/vf.mha' --fixed '$tmp/coarse/pf.mha' --output-img '$tmp/coarse/w.mha' >/dev/null &&
+plastimatch threshold --input '$tmp/coarse/w.mha' --output '$tmp/coarse/w.nrrd' --above 0.5 >/dev/null &&
+plastimatch dice --all '$tmp/coarse/w.nrrd' '$tmp/coarse/fit.nrrd' | $py -c \"
+import sys; d = float([l.split()[1] for l in sys.stdin if l.startswith('DICE')][0]); assert d >= 0.98, d\""
+check prostate.field_spacing_without_a_field_is_refused bash -c "
+! '$bin' validate '$src/pipelines/default.yaml' --set export.field_spacing_mm=2 2>'$tmp/err.txt' &&
+grep -q 'export.field_spacing_mm=2: sets the grid of export.displacement_field' '$tmp/err.txt'"
+
 # The REG object: dciodvfy finds no error; pydicom reads its grid (the CT's) and its
 # vectors, which are the displacement field's to the float.
 if command -v dciodvfy >/dev/null; then

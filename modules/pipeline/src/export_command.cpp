@@ -38,6 +38,7 @@ nlohmann::json run_export_command(const ExportCommand& c) {
   request.rtstruct = c.rtstruct, request.labels = c.labels, request.mesh = c.mesh;
   request.displacement_field = c.displacement_field, request.jacobian = c.jacobian;
   request.registration = c.registration;
+  request.field_spacing_mm = c.field_spacing_mm;
   request.roi_name = c.roi_name.empty() ? saved.organ_name + "_fit" : c.roi_name;
   request.roi_colour = saved.organ_look.colour;
   request.roi_type = saved.organ_look.interpreted_type;

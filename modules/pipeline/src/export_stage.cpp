@@ -130,6 +130,18 @@ void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume
   out.summary["checks"] = checks;
 }
 
+/// The CT's grid, or one of `spacing_mm` over its box (same origin and axes).
+geometry::ImageGeometry field_grid(const geometry::ImageGeometry& ct, double spacing_mm) {
+  if (!(spacing_mm > 0)) return ct;
+  geometry::ImageGeometry g = ct;
+  for (int d = 0; d < 3; ++d) {
+    const double extent = (ct.size[static_cast<size_t>(d)] - 1) * ct.spacing_mm[d];
+    g.size[static_cast<size_t>(d)] = static_cast<int>(std::floor(extent / spacing_mm + 1e-9)) + 1;
+    g.spacing_mm[d] = spacing_mm;
+  }
+  return g;
+}
+
 /// The deformation on `grid`: v(q) = phi^-1(q) - q (3 floats per voxel), and, when
 /// asked, det(grad phi) (one float per voxel).
 void sample_deformation(const fitting::Deformation& phi, const geometry::ImageGeometry& grid,
@@ -220,12 +232,15 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     }
   }
   if (fields) {
+    const geometry::ImageGeometry grid = field_grid(ct->geometry, r.field_spacing_mm);
     auto field = std::make_shared<std::vector<float>>();
     auto jacobian = std::make_shared<std::vector<float>>();
-    sample_deformation(organ.deformation(), ct->geometry, vectors ? field.get() : nullptr,
+    sample_deformation(organ.deformation(), grid, vectors ? field.get() : nullptr,
                        r.jacobian.empty() ? nullptr : jacobian.get());
-    progress.update(++done, "the deformation on the planning CT's grid");
-    const geometry::ImageGeometry grid = ct->geometry;
+    progress.update(++done, "the deformation on its grid");
+    out.summary["field_grid"] = {
+        {"size", {grid.size[0], grid.size[1], grid.size[2]}},
+        {"spacing_mm", {grid.spacing_mm.x(), grid.spacing_mm.y(), grid.spacing_mm.z()}}};
     if (!r.displacement_field.empty()) {
       out.files.push_back(r.displacement_field.filename().string());
       const std::filesystem::path file = r.displacement_field;

@@ -440,6 +440,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     request.displacement_field = in_out("displacement_field");
     request.jacobian = in_out("jacobian");
     request.registration = in_out("registration");
+    request.field_spacing_mm = scene.number("export", "field_spacing_mm");
     request.roi_name = scene.text("export", "roi_name");
     request.fixed_uids = scene.flag("export", "fixed_uids");
     if (request.roi_name.empty()) request.roi_name = organ_name + "_fit";

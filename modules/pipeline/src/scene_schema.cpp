@@ -271,6 +271,10 @@ config::Schema build_schema() {
       .text("registration", "",
             "DICOM Deformable Spatial Registration file name inside --out: the same field, "
             "on the planning CT's grid and Frame of Reference (empty: none)")
+      .number(
+          "field_spacing_mm", 0.0, "mm", 0.0, 50.0,
+          "grid of the displacement field, registration and Jacobian: 0, the planning CT's; "
+          "else this spacing on every axis over the CT's box (warp with plastimatch --fixed CT)")
       .text("jacobian", "",
             "det(grad phi) file name inside --out, .nrrd or .mha, on the planning CT's grid "
             "(empty: none)")
@@ -395,6 +399,12 @@ void check_scene_rules(const config::Scene& scene) {
     if (scene.flag("export", "copy_other_rois") && scene.text("export", "rtstruct").empty())
       scene.fail("export", "copy_other_rois",
                  "copies ROIs into export.rtstruct, which is not given");
+    if (scene.is_given("export", "field_spacing_mm") &&
+        scene.text("export", "displacement_field").empty() &&
+        scene.text("export", "registration").empty() && scene.text("export", "jacobian").empty())
+      scene.fail("export", "field_spacing_mm",
+                 "sets the grid of export.displacement_field, registration and jacobian, none "
+                 "of which is written");
     for (const char* key : {"rtstruct", "labels", "mesh", "model", "displacement_field",
                             "registration", "jacobian"}) {
       const std::string& name = scene.text("export", key);

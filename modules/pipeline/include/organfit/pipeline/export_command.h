@@ -12,6 +12,7 @@ struct ExportCommand {
   std::filesystem::path ct;     ///< planning CT folder; default: the one the model names
   std::filesystem::path rtstruct, labels, mesh;
   std::filesystem::path displacement_field, jacobian, registration;  ///< on the CT's grid
+  double field_spacing_mm = 0;           ///< their grid: 0, the CT's (ExportRequest)
   std::string roi_name;                  ///< default: the model's organ + "_fit"
   std::filesystem::path copy_rois_from;  ///< an RT Structure Set whose ROIs are copied alongside
 };

@@ -15,6 +15,8 @@
 //             planning CT's Frame of Reference (dicom/registration_writer.h)
 //   jacobian  det(grad phi) at each voxel of the planning CT's grid: the volume today of
 //             the tissue now there over its planning volume (1 where phi keeps volume)
+// The field, REG and Jacobian are on the CT's grid, or a coarser one over its box
+// (field_spacing_mm); plastimatch then warps onto the CT's grid with `--fixed CT`.
 // Checks, in the summary and as warnings: the exported organ has the planning organ's
 // components and cavities (geometry/topology.h), and its volume on the CT grid is the
 // planning organ's times the deformation's volume change (within 0.5% and the grid's
@@ -41,8 +43,11 @@ struct ExportRequest {
   std::filesystem::path rtstruct, labels, mesh;        ///< empty: not written
   std::filesystem::path displacement_field, jacobian;  ///< empty: not written
   std::filesystem::path registration;                  ///< DICOM REG; empty: not written
-  std::string roi_name;                                ///< the fitted organ's ROI
-  std::array<int, 3> roi_colour{0, 200, 255};          ///< its ROI Display Color (R, G, B)
+  /// The grid of the displacement field, REG and Jacobian: 0, the planning CT's; else one
+  /// of this spacing (mm) on every axis over the CT's box (its origin and axes).
+  double field_spacing_mm = 0;
+  std::string roi_name;                        ///< the fitted organ's ROI
+  std::array<int, 3> roi_colour{0, 200, 255};  ///< its ROI Display Color (R, G, B)
   /// its RT ROI Interpreted Type; one that is not a DICOM code string (A-Z, 0-9, space,
   /// underscore; 16 characters) is written as ORGAN
   std::string roi_type = "ORGAN";
