@@ -265,6 +265,9 @@ int run_main(int argc, char** argv) {
                    "Output folder: results.csv, curves.csv, work_precision.svg, RESULTS.md")
       ->required();
   bench_fit->add_flag("--quick", fb.quick, "The quick grid (20 cases, a few minutes on 2 cores)");
+  bench_fit->add_flag("--sessions", fb.sessions,
+                      "The regime of treatment sessions: rigid shifts and rotations and every "
+                      "family at 0 to 5 mm (70 cases), with do-no-harm counts");
   bench_fit->add_option("--threads", fb.threads, "OpenMP threads (0: all)")
       ->check(CLI::Range(0, 256));
   bench_fit

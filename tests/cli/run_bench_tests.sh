@@ -113,6 +113,23 @@ for r in part:
 j = json.load(open('$tmp/sample.json'))
 assert j['cases'] == 2 and j['grid_cases'] == 20
 assert 'a seeded uniform sample' in open('$tmp/sample/RESULTS.md').read()"
+# --sessions: the regime of treatment sessions. The prostate unmoved (case 1: noise
+# alone) and shifted 5 mm (case 5), the cube rotated 2 mm (case 44): ours within 0.1 mm of
+# the undeformed organ where nothing moved, and far better where it moved rigidly.
+"$bin" --quiet bench fit --sessions --defaults-only --cases 1,5,44 --methods spread,tps --out "$tmp/sessions" > "$tmp/sessions.json" 2> /dev/null
+check bench.fit_sessions_do_no_harm /usr/bin/python3 -c "
+import csv, json
+rows = {(r['method'], r['case']): r for r in csv.DictReader(open('$tmp/sessions/results.csv'))}
+ours = lambda c: float(rows[('spread', c)]['msd_mm']); unmoved = lambda c: float(rows[('spread', c)]['msd_undeformed_mm'])
+assert rows[('spread', '1')]['family'] == 'shift' and float(rows[('spread', '1')]['magnitude_mm']) == 0
+assert rows[('spread', '44')]['family'] == 'rotate' and rows[('spread', '44')]['shape'] == 'cube'
+assert ours('1') <= unmoved('1') + 0.1, (ours('1'), unmoved('1'))
+assert unmoved('5') > 2 and ours('5') < 0.5 * unmoved('5'), (ours('5'), unmoved('5'))
+assert ours('44') < unmoved('44'), (ours('44'), unmoved('44'))
+j = json.load(open('$tmp/sessions.json'))
+assert j['grid_cases'] == 70 and j['do_no_harm']['spread']['worse_than_undeformed_plus_0_1mm'] == 0, j['do_no_harm']
+assert j['do_no_harm']['spread_worse_than_tps'] == 0
+assert '## Do no harm' in open('$tmp/sessions/RESULTS.md').read()"
 # An unknown method or a case beyond the grid: a one-line usage error (exit 2) that
 # names the option and makes no folder.
 "$bin" bench fit --quick --methods spread,tsp --out "$tmp/none" > /dev/null 2> "$tmp/none.err"

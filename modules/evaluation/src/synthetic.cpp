@@ -1,5 +1,6 @@
 #include "organfit/evaluation/synthetic.h"
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <stdexcept>
 
@@ -86,12 +87,21 @@ Eigen::Vector3d Deformation::apply(const Eigen::Vector3d& p) const {
   if (push_mm != 0)
     q.z() +=
         push_mm * std::exp(-(std::pow(q.x() - c.x(), 2) + std::pow(q.y() - c.y(), 2)) / two_s2);
+  if (!rotation_rad.isZero(0) || !shift_mm.isZero(0)) q = c + rotation() * (q - c) + shift_mm;
   return q;
+}
+
+Eigen::Matrix3d Deformation::rotation() const {
+  const double angle = rotation_rad.norm();
+  if (angle == 0) return Eigen::Matrix3d::Identity();
+  return Eigen::AngleAxisd(angle, rotation_rad / angle).toRotationMatrix();
 }
 
 Eigen::Vector3d Deformation::inverse(const Eigen::Vector3d& p) const {
   const Eigen::Vector3d& c = centre_mm;
   Eigen::Vector3d q = p;
+  if (!rotation_rad.isZero(0) || !shift_mm.isZero(0))
+    q = c + rotation().transpose() * (q - shift_mm - c);
   const double two_s2 = 2 * bump_sigma_mm * bump_sigma_mm;
   if (push_mm != 0)
     q.z() -=

@@ -43,9 +43,15 @@ TEST(Deformation, EveryFamilyIsVolumePreservingAndExactlyInvertible) {
   const Family families[] = {{"twist", [](Deformation& d) { d.twist_rad = 0.4; }},
                              {"indent", [](Deformation& d) { d.indent_mm = -8; }},
                              {"push", [](Deformation& d) { d.push_mm = -6; }},
+                             {"rigid",
+                              [](Deformation& d) {
+                                d.rotation_rad = Eigen::Vector3d(0.05, -0.02, 0.08);
+                                d.shift_mm = Eigen::Vector3d(3, -1, 2);
+                              }},
                              {"all", [](Deformation& d) {
                                 d.stretch = 1.1, d.bend_mm = 2, d.twist_rad = 0.2, d.indent_mm = -5,
-                                d.push_mm = 4;
+                                d.push_mm = 4, d.rotation_rad = Eigen::Vector3d(0, 0.1, 0),
+                                d.shift_mm = Eigen::Vector3d(-2, 0, 1);
                               }}};
   for (const auto& f : families) {
     Deformation d;

@@ -67,7 +67,8 @@ struct Row {
   bool converged = true;
   int case_id = 0;
   double msd_global_mm = std::numeric_limits<double>::quiet_NaN();  ///< after the global stage
-  std::string global_fit = "";  ///< which global fit was kept (GlobalMap::found_by)
+  double msd_undeformed_mm = 0;  ///< the organ left as it was, against the same truth
+  std::string global_fit = "";   ///< which global fit was kept (GlobalMap::found_by)
 };
 
 /// One method at one setting of its effort on one case: a point of the work-precision plot.
@@ -116,6 +117,9 @@ evaluation::Deformation family_deformation(const std::string& family, double m,
   if (family == "twist") d.twist_rad = m / radius;
   if (family == "indent") d.indent_mm = -m, d.bump_sigma_mm = 0.35 * s.size_mm.minCoeff();
   if (family == "push") d.push_mm = -m, d.bump_sigma_mm = 0.35 * s.size_mm.minCoeff();
+  if (family == "shift") d.shift_mm = m * Eigen::Vector3d(1, -2, 2) / 3;
+  if (family == "rotate")
+    d.rotation_rad = m / (0.5 * s.size_mm.maxCoeff()) * Eigen::Vector3d(2, 1, -2) / 3;
   d.half_length_mm = half_x * d.stretch;
   return d;
 }
@@ -262,7 +266,11 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   std::vector<double> magnitudes = {5, 10};
   std::vector<int> counts = {87};
   std::vector<double> noises = {0.5}, outliers = {0.0};
-  if (!o.quick) {
+  if (o.sessions && o.quick) throw InputError("bench fit: --sessions excludes --quick");
+  if (o.sessions) {
+    families = {"shift", "rotate", "stretch", "bend", "twist", "indent", "push"};
+    magnitudes = {0, 0.5, 1, 2, 5};
+  } else if (!o.quick) {
     shapes.push_back({"egg",
                       "body:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\n",
                       std::nullopt});
@@ -353,12 +361,20 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
               pts.points = evaluation::sample_deformed_surface(model.shape, d, so);
               const auto inside = evaluation::deformed_inside(model.shape, d);
               const geometry::Aabb bounds = deformed_bounds(model.shape, d);
+              // The organ left as it was: what do-no-harm compares with.
+              const double msd_undeformed =
+                  evaluation::compare_with_body(
+                      fitting::EmbeddedBody(reference, fitting::GlobalMap{}, model.state.x,
+                                            model.state.x, support),
+                      inside, bounds, voxel)
+                      .msd_mm;
               Eigen::Matrix3Xd xs(3, static_cast<Eigen::Index>(pts.points.size()));
               for (size_t i = 0; i < pts.points.size(); ++i)
                 xs.col(static_cast<Eigen::Index>(i)) = pts.points[i].p_mm;
               for (const auto& method : methods) {
                 Row row{method, shape.name, family, magnitude, count, noise, outlier};
                 row.case_id = case_id;
+                row.msd_undeformed_mm = msd_undeformed;
                 std::string default_effort =
                     method == "spread" ? "global and local stages" : "default";
                 double global_wall_s = std::numeric_limits<double>::quiet_NaN();
@@ -524,15 +540,17 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   std::string csv =
       "method,shape,family,magnitude_mm,points,noise_mm,outliers,wall_s,msd_mm,hd95_mm,dice,volume_"
       "change_pct,residual_mm,"
-      "converged,msd_balls_mm,volume_change_balls_pct,msd_global_mm,case,global_fit\n";
+      "converged,msd_balls_mm,volume_change_balls_pct,msd_global_mm,case,global_fit,msd_"
+      "undeformed_mm\n";
   for (const auto& r : rows)
     csv += fmt::format(
         "{},{},{},{},{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{:.4f},{:.4f},{:.4f},{},"
-        "{}"
+        "{},{:.4f}"
         "\n",
         r.method, r.shape, r.family, r.magnitude_mm, r.points, r.noise_mm, r.outliers, r.wall_s,
         r.msd_mm, r.hd95_mm, r.dice, r.volume_change_pct, r.residual_mm, r.converged ? 1 : 0,
-        r.msd_balls_mm, r.volume_change_balls_pct, r.msd_global_mm, r.case_id, r.global_fit);
+        r.msd_balls_mm, r.volume_change_balls_pct, r.msd_global_mm, r.case_id, r.global_fit,
+        r.msd_undeformed_mm);
   write_file_atomically(o.out / "results.csv", csv);
   write_file_atomically(o.out / "curves.csv", curves);
   std::string effort_csv = "method,effort,case,wall_s,msd_mm\n";
@@ -555,7 +573,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
       "# organfit bench fit{}{}\n\n{} cases{} x {} methods; points on the posterior half of the "
       "deformed surface. Metrics: fit_benchmark.h. The particle fits use the scene defaults "
       "but fit.max_global_stretch: 2 (the grid stretches the cube up to 2x).\n\n",
-      std::string(o.quick ? " --quick" : "") + (o.defaults_only ? " --defaults-only" : ""),
+      std::string(o.quick ? " --quick" : "") + (o.sessions ? " --sessions" : "") +
+          (o.defaults_only ? " --defaults-only" : ""),
       o.sample > 0 ? fmt::format(" --sample {}", o.sample) : "", cases_run,
       cases_run < grid_cases
           ? fmt::format(" (a seeded uniform sample of the grid's {})", grid_cases)
@@ -670,6 +689,37 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
       "work_precision.csv (one row per case, method and setting of its effort), curves.csv (the "
       "particle fits' residual and volume against wall time), work_precision.svg (one curve per "
       "method through the medians of its settings).\n";
+  // Do no harm: per method, the cases whose MSD exceeds the undeformed organ's + 0.1 mm;
+  // ours against TPS on the same case.
+  {
+    nlohmann::json harm = nlohmann::json::object();
+    md +=
+        "\n## Do no harm (MSD above the undeformed organ's + 0.1 mm)\n\n| method | cases | "
+        "worse than undeformed + 0.1 mm | median MSD - undeformed (mm) |\n|---|---|---|---|\n";
+    for (const auto& m : methods) {
+      int worse = 0, total_m = 0;
+      std::vector<double> excess;
+      for (const auto& r : rows)
+        if (r.method == m)
+          ++total_m, worse += r.msd_mm > r.msd_undeformed_mm + 0.1,
+              excess.push_back(r.msd_mm - r.msd_undeformed_mm);
+      md += fmt::format("| {} | {} | {} | {:+.3f} |\n", m, total_m, worse, median(excess));
+      harm[m] = {{"cases", total_m},
+                 {"worse_than_undeformed_plus_0_1mm", worse},
+                 {"median_msd_minus_undeformed_mm", median(excess)}};
+    }
+    int worse_than_tps = 0, pairs = 0;
+    for (const auto& r : rows)
+      if (r.method == "spread")
+        for (const auto& b : rows)
+          if (b.method == "tps" && b.case_id == r.case_id)
+            ++pairs, worse_than_tps += r.msd_mm > b.msd_mm;
+    if (pairs > 0) {
+      harm["spread_worse_than_tps"] = worse_than_tps;
+      md += fmt::format("\nOurs above TPS's MSD: {} of {} cases.\n", worse_than_tps, pairs);
+    }
+    summary["do_no_harm"] = harm;
+  }
   write_file_atomically(o.out / "RESULTS.md", md);
   summary["targets"] = {{"cases", n},
                         {"msd_le_1mm", meet_msd},

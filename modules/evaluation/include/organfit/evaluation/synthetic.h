@@ -51,6 +51,8 @@ double shape_volume_mm3(const Shape& shape, double voxel_mm);
 ///   indent:  y' = y + a exp(-((x - c_x)^2 + (z - c_z)^2) / (2 sigma^2))   (rectal filling:
 ///            a column of tissue moved anteriorly for a < 0, dent behind, bulge in front)
 ///   push:    z' = z + p exp(-((x - c_x)^2 + (y - c_y)^2) / (2 sigma^2))   (bladder push)
+///   rigid:   x' = c + R (x - c) + t, R the rotation by the vector `rotation_rad` (axis
+///            times angle), t `shift_mm` (the organ's motion between sessions)
 /// Each of bend, indent and push moves a coordinate by a function of the others (a shear);
 /// the twist is a rotation whose angle depends on the untouched coordinate.
 struct Deformation {
@@ -60,13 +62,16 @@ struct Deformation {
   double indent_mm = 0.0;  ///< a
   double push_mm = 0.0;    ///< p
   double bump_sigma_mm = 8.0;
+  Eigen::Vector3d rotation_rad = Eigen::Vector3d::Zero();
+  Eigen::Vector3d shift_mm = Eigen::Vector3d::Zero();
   Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();
   double half_length_mm = 1.0;
   Eigen::Vector3d apply(const Eigen::Vector3d& p) const;
   Eigen::Vector3d inverse(const Eigen::Vector3d& p) const;
+  Eigen::Matrix3d rotation() const;  ///< R of the rigid part
   bool is_identity() const {
     return stretch == 1.0 && bend_mm == 0.0 && twist_rad == 0.0 && indent_mm == 0.0 &&
-           push_mm == 0.0;
+           push_mm == 0.0 && rotation_rad.isZero(0) && shift_mm.isZero(0);
   }
 };
 

@@ -24,7 +24,12 @@
 //   msd_global_mm  (ours only) msd_mm of the organ after the global stage alone (the
 //              reference moved by the global map), before the local stage;
 //   case       the case's number in the grid (--cases N reruns it alone);
-//   global_fit (ours only) which global fit was kept (fitting::GlobalMap::found_by).
+//   global_fit (ours only) which global fit was kept (fitting::GlobalMap::found_by);
+//   msd_undeformed_mm  the organ left as it was (the model at rest) against the same truth.
+// Families: stretch, bend, twist, indent, push (evaluation::Deformation) and, in the
+// session regime, shift (rigid, along (1, -2, 2)/3) and rotate (rigid, about (2, 1, -2)/3
+// through the centre, by magnitude / half the largest extent: 0 to 5.2 degrees on the
+// prostate up to 2 mm).
 // The particle fits run with the scene defaults except fit.max_global_stretch: 2 (the
 // grid stretches a 30 mm cube by up to 2x; the default 1.5 would refuse it) and
 // fit.max_wall_s: 20.
@@ -50,6 +55,11 @@ struct FitBenchOptions {
   /// the real GTV of ct-sts-004; 2, 5, 10, 15 mm; 20, 50, 87, 200 points; 0, 0.5, 1 mm
   /// noise; 0 and 5% outliers.
   bool quick = false;
+  /// the regime of treatment sessions instead: the phantom's prostate and the 30 mm cube x
+  /// a rigid shift, a rigid rotation and the 5 families x 0, 0.5, 1, 2, 5 mm, 87 points,
+  /// 0.5 mm noise (70 cases); the summary counts the cases that break do-no-harm (an MSD
+  /// above the undeformed organ's + 0.1 mm, or above TPS's)
+  bool sessions = false;
   long long sample = 0;  ///< run this many cases, a seeded uniform sample of the grid (0: all)
   /// run only these cases, by their number in the grid (results.csv's `case`: the same
   /// case, points and seed as in a whole run); numbers beyond the grid are an InputError,
