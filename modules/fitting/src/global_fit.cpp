@@ -938,25 +938,37 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   if (candidates.empty()) return refused();
   // Points on part of the surface leave the rest free: fits from different starts and
   // stiffnesses often explain them equally well and differ by a millimetre elsewhere.
-  // Of those within `equally_good_dof` / m of the best mean square, the one changing the shape
-  // least is kept (the closest to rest, as the pull towards the identity would choose).
+  // Of those within `equally_good_dof` / m of the noise's mean square of the best (the best's
+  // own, at most noise_mm^2), the one changing the shape least is kept (the closest to
+  // rest, as the pull towards the identity would choose).
   std::vector<double> rms;
   for (size_t c = 0; c < candidates.size(); ++c)
     rms.push_back(
         distance ? truncated_rms(*candidates[c], *distance, points, o.distance_scale_mm)
                  : point_to_plane_rms(*candidates[c], mapped[c], surface, points, o.outlier_mads));
+  // Every candidate with every point beyond the cap: the capped measure cannot rank them,
+  // the uncapped one does.
+  const bool saturated =
+      distance && *std::min_element(rms.begin(), rms.end()) >= o.distance_scale_mm * (1 - 1e-9);
+  const double cap_mm = saturated ? std::numeric_limits<double>::infinity() : o.distance_scale_mm;
+  if (saturated)
+    for (size_t c = 0; c < candidates.size(); ++c)
+      rms[c] = truncated_rms(*candidates[c], *distance, points, cap_mm);
   std::vector<double> change;
   for (size_t c = 0; c < candidates.size(); ++c)
     change.push_back(shape_change_of(mapped[c].full, surface.points));
   // The one changing the shape least within `window` of the best of `fit` (mean squares).
   const double window = o.equally_good_dof / static_cast<double>(points.size());
-  auto least_change_of_equally_good = [window](const std::vector<double>& fit,
-                                               const std::vector<double>& shape_change) {
+  const double noise2 =
+      o.noise_mm > 0 ? o.noise_mm * o.noise_mm : std::numeric_limits<double>::infinity();
+  auto least_change_of_equally_good = [window, noise2](const std::vector<double>& fit,
+                                                       const std::vector<double>& shape_change) {
     const double best = *std::min_element(fit.begin(), fit.end());
     size_t chosen = 0;
     double least = std::numeric_limits<double>::infinity();
     for (size_t c = 0; c < fit.size(); ++c)
-      if (fit[c] * fit[c] <= (1 + window) * best * best && shape_change[c] < least)
+      if (fit[c] * fit[c] <= best * best + window * std::min(best * best, noise2) &&
+          shape_change[c] < least)
         least = shape_change[c], chosen = c;
     return chosen;
   };
@@ -986,7 +998,7 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     f.rms_after_mm = f.affine.rms_after_mm = nearest_sample_rms(m, points, o.outlier_mads);
     const double inflation = static_cast<double>(points.size()) /
                              std::max(1.0, static_cast<double>(points.size()) - dof);
-    rms.push_back(truncated_rms(f, *distance, points, o.distance_scale_mm) * std::sqrt(inflation));
+    rms.push_back(truncated_rms(f, *distance, points, cap_mm) * std::sqrt(inflation));
     change.push_back(shape_change_of(m.full, surface.points));
     refined.push_back(std::move(f));
   }

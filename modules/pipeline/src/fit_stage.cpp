@@ -224,6 +224,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
     fitting::AffineFitOptions global_options;
     global_options.max_stretch = scene.number("fit", "max_global_stretch");
     global_options.field_sigma_mm = scene.number("fit", "global_shear_field_mm");
+    global_options.noise_mm = tolerance;
     const fitting::GlobalMap map =
         fitting::fit_global_map(samples, points, global_options, &reference_distance);
     if (map.refused) {

@@ -40,6 +40,12 @@ struct AffineFitOptions {
   /// with 20 points 32 better by over 0.05 mm, 2 worse (9: 18 and 0; at 50 and 87 points
   /// a wash; 35: 200 and 189 within the targets).
   double equally_good_dof = 20.0;
+  /// the points' expected residual (mm; fit.residual_tolerance_mm): the noise scale of
+  /// that window. Fits within dof / m of the noise's mean square of the best are equally
+  /// good, the noise's mean square taken as the best's own, but never above this squared:
+  /// a best fit far worse than the noise does not make every fit equally good (two points
+  /// 8 mm off a cube: every candidate was). 0: the best's own, unbounded.
+  double noise_mm = 0.0;
   /// robust scale of the fit on the signed distance (mm): point k weighs
   /// (c^2 / (c^2 + r_k^2))^2 (Geman-McClure), c from 8x this down to it
   double distance_scale_mm = 2.0;
