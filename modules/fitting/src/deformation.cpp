@@ -143,7 +143,7 @@ void solve_laplace(const std::vector<std::array<int, 6>>& neighbours,
     r[static_cast<size_t>(i)] = rhs[static_cast<size_t>(i)] - ap[static_cast<size_t>(i)];
   p = r;
   double rr = dot(r, r);
-  const double stop = 1e-14 * std::max(dot(rhs, rhs), 1e-30);
+  const double stop = 1e-10 * std::max(dot(rhs, rhs), 1e-30);  // |r| <= 1e-5 |b|
   for (int it = 0; it < 5000 && rr > stop; ++it) {
     apply(p, ap);
     const double alpha = rr / dot(p, ap);
@@ -220,7 +220,7 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
       for (int i = 0; i < n_[0] - 1; ++i) {
         const Eigen::Vector3d q = origin_ + spacing_ * Eigen::Vector3d(i + 0.5, j + 0.5, k + 0.5);
         double det = 1;
-        evaluate(q, &det);
+        evaluate(q, &det, false);
         lo_det = std::min(lo_det, det), hi_det = std::max(hi_det, det);
       }
   min_ratio_ = hi_det > 0 ? 1.0 / hi_det : -std::numeric_limits<double>::infinity();
@@ -283,14 +283,14 @@ geometry::Aabb Deformation::local_box() const {
   return {origin_, origin_ + spacing_ * (n_.cast<double>().array() - 1).matrix()};
 }
 
-Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det) const {
+Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det, bool point) const {
   if (det) *det = 1;
   if (!q.allFinite()) return q;
   const Eigen::Vector3d t = (q - origin_) / spacing_;
   const Eigen::Vector3d base = t.array().floor();
   if (values_.empty() || (base.array() < 0).any() || base.x() >= n_[0] - 1 ||
       base.y() >= n_[1] - 1 || base.z() >= n_[2] - 1)
-    return map_.inverse(q, map_inverse_a_);
+    return point ? map_.inverse(q, map_inverse_a_) : q;
   const long long v0 =
       static_cast<long long>(base.x()) +
       1LL * n_[0] *
@@ -315,7 +315,7 @@ Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det) con
   }
   // The global map keeps volume: det(grad phi^-1) = det(I + grad u).
   if (det) *det = (Eigen::Matrix3d::Identity() + g).determinant();
-  return map_.inverse(q + u, map_inverse_a_);
+  return point ? map_.inverse(q + u, map_inverse_a_) : q + u;
 }
 
 Eigen::Vector3d Deformation::pull_back(const Eigen::Vector3d& q) const {
@@ -340,7 +340,7 @@ Eigen::Vector3d Deformation::push_forward(const Eigen::Vector3d& r) const {
 
 double Deformation::volume_ratio(const Eigen::Vector3d& q) const {
   double det = 1;
-  evaluate(q, &det);
+  evaluate(q, &det, false);
   return det > 0 ? 1.0 / det : std::numeric_limits<double>::infinity();
 }
 

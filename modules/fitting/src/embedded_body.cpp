@@ -19,10 +19,19 @@ EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> referenc
 
 EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> reference,
                            std::shared_ptr<const Deformation> deformation)
-    : reference_(std::move(reference)), deformation_(std::move(deformation)) {
-  if (!reference_) throw std::invalid_argument("embedded body: no reference body");
+    : EmbeddedBody(
+          reference,
+          reference ? std::make_shared<const geometry::SignedDistance>(*reference, false) : nullptr,
+          std::move(deformation)) {}
+
+EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> reference,
+                           std::shared_ptr<const geometry::SignedDistance> distance,
+                           std::shared_ptr<const Deformation> deformation)
+    : reference_(std::move(reference)),
+      distance_(std::move(distance)),
+      deformation_(std::move(deformation)) {
+  if (!reference_ || !distance_) throw std::invalid_argument("embedded body: no reference body");
   if (!deformation_) throw std::invalid_argument("embedded body: no deformation");
-  distance_ = std::make_shared<const geometry::SignedDistance>(*reference_, false);
 }
 
 bool EmbeddedBody::inside(const Eigen::Vector3d& q) const {

@@ -188,7 +188,7 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     out.summary["roi"] = r.roi_name;
     out.summary["contours"] = contours.size();
     out.summary["volume_on_ct_grid_cm3"] = mask->volume_mm3(1) / 1000.0;
-    const fitting::EmbeddedBody planning(organ.shared_reference(),
+    const fitting::EmbeddedBody planning(organ.shared_reference(), organ.shared_distance(),
                                          std::make_shared<const fitting::Deformation>());
     check_organ(organ, *mask, planning.on_grid(ct->geometry), contours, out);
     progress.update(++done, "its checks against the planning organ");

@@ -134,21 +134,28 @@ void build_model_terms(ModelStageResult& result, const particles::Skeleton* skel
 
 namespace {
 /// The planning organ itself when it is a mask (on the CT's grid: phi = identity gives it
-/// voxel for voxel); an analytic body as its reference mask.
-std::shared_ptr<const geometry::LabelVolume> planning_organ(const ModelStageResult& m) {
-  return m.shape.mask ? m.shape.mask : std::make_shared<const geometry::LabelVolume>(m.reference);
+/// voxel for voxel); an analytic body as its reference mask. Made once per model.
+void make_planning_organ(const ModelStageResult& m) {
+  if (m.planning_mask) return;
+  m.planning_mask =
+      m.shape.mask ? m.shape.mask : std::make_shared<const geometry::LabelVolume>(m.reference);
+  m.planning_distance = std::make_shared<const geometry::SignedDistance>(*m.planning_mask, false);
 }
 }  // namespace
 
 fitting::EmbeddedBody organ_body(const ModelStageResult& m) {
   const bool fitted = m.placed.cols() == m.state.x.cols() && m.placed.cols() > 0;
-  return fitting::EmbeddedBody(planning_organ(m), m.global_map, fitted ? m.placed : m.state.x,
-                               m.state.x, fitting::embedding_support_mm(m.lattice_spacing_mm));
+  make_planning_organ(m);
+  return fitting::EmbeddedBody(m.planning_mask, m.planning_distance,
+                               std::make_shared<const fitting::Deformation>(
+                                   m.global_map, fitted ? m.placed : m.state.x, m.state.x,
+                                   fitting::embedding_support_mm(m.lattice_spacing_mm)));
 }
 
 fitting::EmbeddedBody organ_body(const ModelStageResult& m,
                                  std::shared_ptr<const fitting::Deformation> deformation) {
-  return fitting::EmbeddedBody(planning_organ(m), std::move(deformation));
+  make_planning_organ(m);
+  return fitting::EmbeddedBody(m.planning_mask, m.planning_distance, std::move(deformation));
 }
 
 void add_skeleton_term(ModelStageResult& result, const particles::Skeleton& skeleton) {

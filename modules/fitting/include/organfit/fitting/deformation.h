@@ -96,8 +96,9 @@ class Deformation {
                           const std::function<Eigen::Vector3d(long long)>& value);
 
   Eigen::Vector3d node(long long v) const;  ///< node v's position (mm)
-  /// phi^-1(q), and det(grad phi^-1) at q when asked.
-  Eigen::Vector3d evaluate(const Eigen::Vector3d& q, double* det) const;
+  /// phi^-1(q), and det(grad phi^-1) at q when asked; without `point` the global map is
+  /// not inverted (its exponentials dominate on a large organ) and q + u(q) is returned.
+  Eigen::Vector3d evaluate(const Eigen::Vector3d& q, double* det, bool point = true) const;
 };
 
 }  // namespace organfit::fitting

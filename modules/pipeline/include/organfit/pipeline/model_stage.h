@@ -58,6 +58,11 @@ struct ModelStageResult {
   /// map and where it placed the particles (empty: they are where the model put them).
   fitting::GlobalMap global_map;
   particles::Positions placed;
+  /// The planning organ as organ_body tests it (the shape's mask, or `reference` for an
+  /// analytic body) and its unsmoothed signed distance: made on first use, then shared by
+  /// every organ_body of this model (a cache, hence mutable; copies share it).
+  mutable std::shared_ptr<const geometry::LabelVolume> planning_mask;
+  mutable std::shared_ptr<const geometry::SignedDistance> planning_distance;
 };
 
 /// The organ as the model carries it now: the reference body moved with the particles
