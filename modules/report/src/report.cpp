@@ -301,6 +301,20 @@ std::string report_html(const ReportInput& in) {
                                   "attractive_points", "rejected_points", "residual_mean_mm",
                                   "residual_max_mm", "volume_change_pct"}) +
             "</div>";
+  // The structure the planning system receives, and the export's checks of it against the
+  // planning organ (pipeline/export_stage.h).
+  if (run.contains("export") && run["export"].contains("roi")) {
+    const nlohmann::json& e = run["export"];
+    html += "<div><h3>Exported structure</h3>" +
+            table_of(e, {"roi", "roi_interpreted_type", "volume_on_ct_grid_cm3", "contours"}) +
+            (e.contains("checks")
+                 ? table_of(e["checks"],
+                            {"topology_kept", "volume_kept", "planning_volume_on_ct_grid_cm3",
+                             "expected_volume_on_ct_grid_cm3", "volume_difference_cm3",
+                             "volume_tolerance_cm3"})
+                 : "") +
+            "</div>";
+  }
   if (run.contains("truth"))
     html += "<div><h3>Against the known truth</h3>" +
             table_of(run["truth"],

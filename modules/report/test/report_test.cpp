@@ -105,6 +105,11 @@ TEST(ReportHtml, HasTheSectionsEscapesTextAndShowsNoPatientUnlessGiven) {
             {"warnings", {"fit: 2 points rejected"}},
             {"fit", {{"volume_change_pct", 1.7}, {"method", "spread"}}},
             {"model", {{"radius_mm", 1.0}}},
+            {"export",
+             {{"roi", "Prostate_fit"},
+              {"volume_on_ct_grid_cm3", 34.7},
+              {"contours", 13},
+              {"checks", {{"topology_kept", false}, {"volume_difference_cm3", -0.22}}}}},
             {"stages", {{{"name", "fit"}, {"wall_s", 0.1}, {"peak_memory_mib", 50.0}}}},
             {"outputs", {"run.json"}}};
   in.history_csv =
@@ -114,6 +119,9 @@ TEST(ReportHtml, HasTheSectionsEscapesTextAndShowsNoPatientUnlessGiven) {
   const std::string html = report_html(in);
   EXPECT_NE(html.find("organfit report: a&lt;b"), std::string::npos);
   EXPECT_NE(html.find("fit: 2 points rejected"), std::string::npos);
+  EXPECT_NE(html.find("<h3>Exported structure</h3>"), std::string::npos);
+  EXPECT_NE(html.find("<th>roi</th><td>Prostate_fit</td>"), std::string::npos);
+  EXPECT_NE(html.find("<th>topology_kept</th><td>false</td>"), std::string::npos);
   EXPECT_NE(html.find("volume changed by +1.70%"), std::string::npos);
   EXPECT_NE(html.find("1 of 2 points were never reached"), std::string::npos);
   EXPECT_NE(html.find("aria-label=\"error against run time\""), std::string::npos);
