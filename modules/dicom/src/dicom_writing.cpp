@@ -1,11 +1,16 @@
 #include "dicom_writing.h"
 
 #include <fmt/format.h>
+#include <gdcmFileExplicitFilter.h>
+#include <gdcmFileMetaInformation.h>
 #include <gdcmSequenceOfItems.h>
 #include <gdcmUIDGenerator.h>
 
 #include <ctime>
 #include <functional>
+
+#include "organfit/support/atomic_file.h"
+#include "organfit/support/error.h"
 
 namespace organfit::dicom::detail {
 
@@ -74,6 +79,30 @@ void put_sequence(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element,
   de.SetValue(*sq);
   de.SetVLToUndefined();
   ds.Replace(de);
+}
+
+gdcm::Item slice_reference(const CtSlice& slice) {
+  gdcm::Item item = new_item();
+  put(item.GetNestedDataSet(), 0x0008, 0x1150, gdcm::VR::UI,
+      slice.sop_class_uid.empty() ? "1.2.840.10008.5.1.4.1.1.2" : slice.sop_class_uid);
+  put(item.GetNestedDataSet(), 0x0008, 0x1155, gdcm::VR::UI, slice.sop_instance_uid);
+  return item;
+}
+
+void write_explicit_vr(gdcm::Writer& writer, const std::filesystem::path& file,
+                       const std::string& what) {
+  const std::string failed = file.string() + ": cannot write the " + what;
+  gdcm::FileMetaInformation& meta = writer.GetFile().GetHeader();
+  meta.SetDataSetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
+  meta.SetSourceApplicationEntityTitle("ORGANFIT");
+  gdcm::FileExplicitFilter explicit_vr;
+  explicit_vr.SetFile(writer.GetFile());
+  explicit_vr.SetChangePrivateTags(false);
+  if (!explicit_vr.Change()) throw InputError(failed);
+  TempPath temp(file);
+  writer.SetFileName(temp.path().string().c_str());
+  if (!writer.Write()) throw InputError(failed);
+  temp.commit();
 }
 
 std::string ds_number(double v) {

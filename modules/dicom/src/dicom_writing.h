@@ -3,8 +3,10 @@
 #include <gdcmDataSet.h>
 #include <gdcmItem.h>
 #include <gdcmVR.h>
+#include <gdcmWriter.h>
 
 #include <cstdint>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -40,6 +42,17 @@ gdcm::Item new_item();
 /// Inserts a sequence (undefined length) of `items`.
 void put_sequence(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element,
                   const std::vector<gdcm::Item>& items);
+
+/// An Image SOP Instance Reference item (Referenced SOP Class and Instance UIDs) of a CT
+/// slice; a slice read without a SOP Class UID is referenced as a CT Image.
+gdcm::Item slice_reference(const CtSlice& slice);
+
+/// Writes the data set as Explicit VR Little Endian (source AE ORGANFIT) under a temporary
+/// name, renamed when whole. Attributes copied from an implicit-VR CT (a sequence's nested
+/// elements) get their VRs from the dictionary, as explicit VR needs. Throws InputError
+/// "FILE: cannot write the WHAT".
+void write_explicit_vr(gdcm::Writer& writer, const std::filesystem::path& file,
+                       const std::string& what);
 
 /// A Decimal String value: at most 16 characters.
 std::string ds_number(double v);

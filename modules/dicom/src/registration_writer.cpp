@@ -2,15 +2,12 @@
 
 #include <fmt/format.h>
 #include <gdcmAttribute.h>
-#include <gdcmFileExplicitFilter.h>
-#include <gdcmFileMetaInformation.h>
 #include <gdcmWriter.h>
 
 #include <Eigen/Geometry>
 #include <stdexcept>
 
 #include "dicom_writing.h"
-#include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 
 namespace fs = std::filesystem;
@@ -18,7 +15,6 @@ namespace fs = std::filesystem;
 namespace organfit::dicom {
 namespace {
 constexpr const char* kDeformableRegistrationClass = "1.2.840.10008.5.1.4.1.1.66.3";
-constexpr const char* kCtImageClass = "1.2.840.10008.5.1.4.1.1.2";
 using detail::ds_number;
 using detail::new_item;
 using detail::put;
@@ -99,13 +95,8 @@ void write_deformable_registration(const fs::path& file, const CtSeries& ct,
   // The planning CT's slices: registered in the item, and listed by the Common Instance
   // Reference.
   std::vector<gdcm::Item> instances;
-  for (const auto& slice : ct.slices) {
-    gdcm::Item item = new_item();
-    put(item.GetNestedDataSet(), 0x0008, 0x1150, V::UI,
-        slice.sop_class_uid.empty() ? kCtImageClass : slice.sop_class_uid);
-    put(item.GetNestedDataSet(), 0x0008, 0x1155, V::UI, slice.sop_instance_uid);
-    instances.push_back(item);
-  }
+  for (const auto& slice : ct.slices)
+    instances.push_back(detail::slice_reference(slice));
   gdcm::Item registration = new_item();
   gdcm::DataSet& rds = registration.GetNestedDataSet();
   put(rds, 0x0064, 0x0003, V::UI, ct.frame_of_reference_uid);  // the Source RCS
@@ -119,17 +110,7 @@ void write_deformable_registration(const fs::path& file, const CtSeries& ct,
   put_sequence(series.GetNestedDataSet(), 0x0008, 0x114a, instances);
   put_sequence(ds, 0x0008, 0x1115, {series});
 
-  gdcm::FileMetaInformation& meta = writer.GetFile().GetHeader();
-  meta.SetDataSetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
-  meta.SetSourceApplicationEntityTitle("ORGANFIT");
-  gdcm::FileExplicitFilter explicit_vr;
-  explicit_vr.SetFile(writer.GetFile());
-  explicit_vr.SetChangePrivateTags(false);
-  if (!explicit_vr.Change()) throw InputError(where + ": cannot write the registration");
-  TempPath temp(file);
-  writer.SetFileName(temp.path().string().c_str());
-  if (!writer.Write()) throw InputError(where + ": cannot write the registration");
-  temp.commit();
+  detail::write_explicit_vr(writer, file, "registration");
 }
 
 }  // namespace organfit::dicom

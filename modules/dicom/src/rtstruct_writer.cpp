@@ -1,12 +1,9 @@
 #include "organfit/dicom/rtstruct_writer.h"
 
 #include <fmt/format.h>
-#include <gdcmFileExplicitFilter.h>
-#include <gdcmFileMetaInformation.h>
 #include <gdcmWriter.h>
 
 #include "dicom_writing.h"
-#include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 
 namespace fs = std::filesystem;
@@ -15,7 +12,6 @@ namespace organfit::dicom {
 namespace {
 
 constexpr const char* kRtstructClass = "1.2.840.10008.5.1.4.1.1.481.3";
-constexpr const char* kCtImageClass = "1.2.840.10008.5.1.4.1.1.2";
 constexpr const char* kStudyComponentClass =
     "1.2.840.10008.3.1.2.3.1";  // Detached Study Management (retired, as used by TPS)
 
@@ -63,13 +59,8 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
   put(ds, 0x3006, 0x0009, V::TM, time);
 
   std::vector<gdcm::Item> contour_images;
-  for (const auto& slice : ct.slices) {
-    gdcm::Item item = new_item();
-    put(item.GetNestedDataSet(), 0x0008, 0x1150, V::UI,
-        slice.sop_class_uid.empty() ? kCtImageClass : slice.sop_class_uid);
-    put(item.GetNestedDataSet(), 0x0008, 0x1155, V::UI, slice.sop_instance_uid);
-    contour_images.push_back(item);
-  }
+  for (const auto& slice : ct.slices)
+    contour_images.push_back(detail::slice_reference(slice));
   gdcm::Item series_item = new_item();
   put(series_item.GetNestedDataSet(), 0x0020, 0x000e, V::UI, ct.series_instance_uid);
   put_sequence(series_item.GetNestedDataSet(), 0x3006, 0x0016, contour_images);
@@ -102,12 +93,8 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
                                      c + 1, roi.name));
       gdcm::Item item = new_item();
       gdcm::DataSet& cds = item.GetNestedDataSet();
-      gdcm::Item image = new_item();
-      const CtSlice& slice = ct.slices[static_cast<size_t>(contour.k)];
-      put(image.GetNestedDataSet(), 0x0008, 0x1150, V::UI,
-          slice.sop_class_uid.empty() ? kCtImageClass : slice.sop_class_uid);
-      put(image.GetNestedDataSet(), 0x0008, 0x1155, V::UI, slice.sop_instance_uid);
-      put_sequence(cds, 0x3006, 0x0016, {image});
+      put_sequence(cds, 0x3006, 0x0016,
+                   {detail::slice_reference(ct.slices[static_cast<size_t>(contour.k)])});
       put(cds, 0x3006, 0x0042, V::CS, "CLOSED_PLANAR");
       put(cds, 0x3006, 0x0046, V::IS, std::to_string(contour.points_mm.size()));
       put(cds, 0x3006, 0x0048, V::IS, std::to_string(c + 1));
@@ -144,19 +131,7 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
   // RT Series / Approval.
   put(ds, 0x300e, 0x0002, V::CS, "UNAPPROVED");
 
-  gdcm::FileMetaInformation& meta = writer.GetFile().GetHeader();
-  meta.SetDataSetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
-  meta.SetSourceApplicationEntityTitle("ORGANFIT");
-  // Attributes copied from an implicit-VR CT (a sequence's nested elements) get their
-  // VRs from the dictionary, as explicit VR needs.
-  gdcm::FileExplicitFilter explicit_vr;
-  explicit_vr.SetFile(writer.GetFile());
-  explicit_vr.SetChangePrivateTags(false);
-  if (!explicit_vr.Change()) throw InputError(where + ": cannot write the structure set");
-  TempPath temp(file);
-  writer.SetFileName(temp.path().string().c_str());
-  if (!writer.Write()) throw InputError(where + ": cannot write the structure set");
-  temp.commit();
+  detail::write_explicit_vr(writer, file, "structure set");
 }
 
 }  // namespace organfit::dicom

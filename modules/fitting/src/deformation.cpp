@@ -5,7 +5,6 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
-#include <functional>
 #include <limits>
 #include <stdexcept>
 
@@ -195,7 +194,7 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
         "deformation: the lattice of the displacement would exceed 6e7 nodes");
   const long long nodes = 1LL * n_[0] * n_[1] * n_[2];
   values_.assign(static_cast<size_t>(nodes), Eigen::Vector3f::Zero());
-  fitted_.assign(static_cast<size_t>(nodes), 0);
+  std::vector<std::uint8_t> fitted(static_cast<size_t>(nodes), 0);  // the MLS's answer kept
   {
     const Buckets buckets(current, h_);
 #pragma omp parallel for schedule(dynamic, 64)
@@ -203,15 +202,13 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
       const LocalFit f = moving_least_squares(node(v), placed, current, buckets, h_);
       if (!f.kept) continue;
       values_[static_cast<size_t>(v)] = f.u.cast<float>();
-      fitted_[static_cast<size_t>(v)] = 1;
+      fitted[static_cast<size_t>(v)] = 1;
     }
   }
-  for (const auto f : fitted_)
+  for (const auto f : fitted)
     fitted_nodes_ += f;
   // u where the moving least squares did not answer: harmonic, zero at the lattice's faces.
-  harmonic_nodes_ = harmonic_fill(fitted_, [&](long long v) {
-    return Eigen::Vector3d(values_[static_cast<size_t>(v)].cast<double>());
-  });
+  harmonic_nodes_ = solve_harmonic_part(fitted);
   // det(grad phi^-1) over the cells, at their centres.
   double lo_det = 1, hi_det = 1;
 #pragma omp parallel for collapse(2) reduction(min : lo_det) reduction(max : hi_det)
@@ -223,13 +220,18 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
         evaluate(q, &det, false);
         lo_det = std::min(lo_det, det), hi_det = std::max(hi_det, det);
       }
-  min_ratio_ = hi_det > 0 ? 1.0 / hi_det : -std::numeric_limits<double>::infinity();
-  max_ratio_ = lo_det > 0 ? 1.0 / lo_det : std::numeric_limits<double>::infinity();
-  min_det_ = lo_det;
+  min_det_ = lo_det, max_det_ = hi_det;
 }
 
-long long Deformation::harmonic_fill(const std::vector<std::uint8_t>& fixed,
-                                     const std::function<Eigen::Vector3d(long long)>& value) {
+double Deformation::min_volume_ratio() const {
+  return max_det_ > 0 ? 1.0 / max_det_ : -std::numeric_limits<double>::infinity();
+}
+
+double Deformation::max_volume_ratio() const {
+  return min_det_ > 0 ? 1.0 / min_det_ : std::numeric_limits<double>::infinity();
+}
+
+long long Deformation::solve_harmonic_part(const std::vector<std::uint8_t>& fitted) {
   auto index = [&](int i, int j, int k) { return i + 1LL * n_[0] * (j + 1LL * n_[1] * k); };
   const long long nodes = 1LL * n_[0] * n_[1] * n_[2];
   std::vector<int> free_index(static_cast<size_t>(nodes), -1);
@@ -238,14 +240,10 @@ long long Deformation::harmonic_fill(const std::vector<std::uint8_t>& fixed,
     for (int j = 1; j + 1 < n_[1]; ++j)
       for (int i = 1; i + 1 < n_[0]; ++i) {
         const long long v = index(i, j, k);
-        if (fixed[static_cast<size_t>(v)]) continue;
+        if (fitted[static_cast<size_t>(v)]) continue;
         free_index[static_cast<size_t>(v)] = static_cast<int>(free_nodes.size());
         free_nodes.push_back(v);
       }
-  // The lattice's faces, when not fixed, hold zero.
-  for (long long v = 0; v < nodes; ++v)
-    if (!fixed[static_cast<size_t>(v)] && free_index[static_cast<size_t>(v)] < 0)
-      values_[static_cast<size_t>(v)].setZero();
   const size_t nf = free_nodes.size();
   if (nf == 0) return 0;
   std::vector<std::array<int, 6>> neighbours(nf);
@@ -258,7 +256,7 @@ long long Deformation::harmonic_fill(const std::vector<std::uint8_t>& fixed,
         const long long w = v + (side ? step[d] : -step[d]);
         const int fi = free_index[static_cast<size_t>(w)];
         neighbours[f][static_cast<size_t>(2 * d + side)] = fi;
-        if (fi < 0 && fixed[static_cast<size_t>(w)]) rhs[f] += value(w);
+        if (fi < 0) rhs[f] += values_[static_cast<size_t>(w)].cast<double>();  // 0 on a face
       }
   }
   std::vector<double> b(nf), x(nf);

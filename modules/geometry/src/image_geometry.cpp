@@ -41,6 +41,21 @@ long long LabelVolume::count(std::uint8_t label) const {
   return std::count(labels.begin(), labels.end(), label);
 }
 
+IndexRange LabelVolume::range(std::uint8_t label) const {
+  const ImageGeometry& g = geometry;
+  IndexRange r;
+  r.lo = g.size;
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        if (at(i, j, k) == label) {
+          const int idx[3] = {i, j, k};
+          for (size_t d = 0; d < 3; ++d)
+            r.lo[d] = std::min(r.lo[d], idx[d]), r.hi[d] = std::max(r.hi[d], idx[d]);
+        }
+  return r;
+}
+
 IndexRange index_range(const ImageGeometry& grid, const Aabb& box, int pad) {
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = Eigen::Vector3d::Constant(-1e300);
   for (int c = 0; c < 8; ++c) {

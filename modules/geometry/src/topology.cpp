@@ -7,18 +7,10 @@
 namespace organfit::geometry {
 
 Topology topology_of(const LabelVolume& mask) {
-  const ImageGeometry& g = mask.geometry;
-  int lo[3] = {g.size[0], g.size[1], g.size[2]}, hi[3] = {-1, -1, -1};
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        if (mask.at(i, j, k) == 1) {
-          const int idx[3] = {i, j, k};
-          for (int d = 0; d < 3; ++d)
-            lo[d] = std::min(lo[d], idx[d]), hi[d] = std::max(hi[d], idx[d]);
-        }
+  const IndexRange box = mask.range(1);
+  const std::array<int, 3>&lo = box.lo, &hi = box.hi;
   Topology t;
-  if (hi[0] < 0) return t;
+  if (box.empty()) return t;
   // The box plus a layer of background all round (outside the grid counts as
   // background), so that the outside is one 6-connected piece touching the box's border.
   int n[3];

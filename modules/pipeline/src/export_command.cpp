@@ -43,8 +43,7 @@ nlohmann::json run_export_command(const ExportCommand& c) {
   request.roi_colour = saved.organ_look.colour;
   request.roi_type = saved.organ_look.interpreted_type;
   std::optional<dicom::CtSeries> ct;
-  if (!c.rtstruct.empty() || !c.labels.empty() || !c.displacement_field.empty() ||
-      !c.jacobian.empty() || !c.registration.empty()) {
+  if (request.needs_ct()) {
     if (c.ct.empty() && !saved.ct)
       throw InputError(c.model.string() + ": the model names no planning CT; give --ct");
     const fs::path folder = c.ct.empty() ? fs::path(saved.ct->folder) : c.ct;

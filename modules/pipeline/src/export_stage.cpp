@@ -169,12 +169,11 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
                              const dicom::CtSeries* ct, const ExportRequest& r) {
   PendingExport out;
   out.summary = nlohmann::json::object();
-  const bool on_ct = !r.rtstruct.empty() || !r.labels.empty();
+  const bool on_ct = r.on_ct_grid(), fields = r.deformation_files();
   const bool vectors = !r.displacement_field.empty() || !r.registration.empty();
-  const bool fields = vectors || !r.jacobian.empty();
   Progress progress("export", (on_ct ? 3 : 0) + (fields ? 1 : 0) + (r.mesh.empty() ? 0 : 1));
   int done = 0;
-  if ((on_ct || fields) && !ct)
+  if (r.needs_ct() && !ct)
     throw InputError(
         "export: an RT Structure Set, label map or deformation field needs the planning CT");
   if (on_ct) {

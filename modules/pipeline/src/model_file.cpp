@@ -30,15 +30,8 @@ nlohmann::json flat(const Eigen::Matrix3Xd& m) {
 /// alternating runs of 0 and 1, starting with 0, i fastest.
 nlohmann::json mask_to_json(const geometry::LabelVolume& mask) {
   const auto& g = mask.geometry;
-  int lo[3] = {g.size[0], g.size[1], g.size[2]}, hi[3] = {-1, -1, -1};
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        if (mask.at(i, j, k) == 1) {
-          const int idx[3] = {i, j, k};
-          for (int d = 0; d < 3; ++d)
-            lo[d] = std::min(lo[d], idx[d]), hi[d] = std::max(hi[d], idx[d]);
-        }
+  const geometry::IndexRange box = mask.range(1);
+  std::array<int, 3> lo = box.lo, hi = box.hi;
   geometry::ImageGeometry crop = g;
   for (int d = 0; d < 3; ++d) {
     lo[d] = std::max(0, lo[d] - 1), hi[d] = std::min(g.size[d] - 1, hi[d] + 1);

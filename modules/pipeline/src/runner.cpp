@@ -452,10 +452,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         request.roi_colour[static_cast<size_t>(i)] = static_cast<int>(std::lround(c[i]));
     }
     double ct_read_s = 0;  // its own stage, not the export's
-    if ((!request.rtstruct.empty() || !request.labels.empty() ||
-         !request.displacement_field.empty() || !request.jacobian.empty() ||
-         !request.registration.empty() || (scene.has_section("report") && ct_reference)) &&
-        !ct) {
+    if ((request.needs_ct() || (scene.has_section("report") && ct_reference)) && !ct) {
       // A session: the planning CT named in the model file, checked to be the same series.
       if (!ct_reference)
         throw InputError(scene.path("planning", "model").string() +

@@ -3,6 +3,8 @@
 #include <fmt/format.h>
 
 #include <Eigen/LU>
+#include <algorithm>
+#include <initializer_list>
 
 #include "organfit/pipeline/fit_stage.h"
 
@@ -373,20 +375,20 @@ void check_scene_rules(const config::Scene& scene) {
     }
   }
   if (scene.has_section("export")) {
+    auto writes = [&](std::initializer_list<const char*> keys) {
+      return std::any_of(keys.begin(), keys.end(),
+                         [&](const char* key) { return !scene.text("export", key).empty(); });
+    };
+    const bool deformation_files = writes({"displacement_field", "registration", "jacobian"});
     // A session finds its planning CT through the model file.
     if (!has_ct && !scene.has_section("planning") &&
-        !(scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty() &&
-          scene.text("export", "displacement_field").empty() &&
-          scene.text("export", "registration").empty() && scene.text("export", "jacobian").empty()))
+        (writes({"rtstruct", "labels"}) || deformation_files))
       scene.fail("export", "rtstruct",
                  "an RTSTRUCT, label map or deformation field is written on the planning CT: "
                  "add a 'ct' section");
     if (!has_model)
       scene.fail("export", "rtstruct", "export needs a 'model' (or 'planning') to export");
-    if (scene.text("export", "rtstruct").empty() && scene.text("export", "labels").empty() &&
-        scene.text("export", "mesh").empty() && scene.text("export", "model").empty() &&
-        scene.text("export", "displacement_field").empty() &&
-        scene.text("export", "registration").empty() && scene.text("export", "jacobian").empty())
+    if (!writes({"rtstruct", "labels", "mesh", "model"}) && !deformation_files)
       scene.fail("export", "rtstruct",
                  "the export section names nothing to write (rtstruct, labels, mesh, "
                  "displacement_field, registration, jacobian or model)");
@@ -399,9 +401,7 @@ void check_scene_rules(const config::Scene& scene) {
     if (scene.flag("export", "copy_other_rois") && scene.text("export", "rtstruct").empty())
       scene.fail("export", "copy_other_rois",
                  "copies ROIs into export.rtstruct, which is not given");
-    if (scene.is_given("export", "field_spacing_mm") &&
-        scene.text("export", "displacement_field").empty() &&
-        scene.text("export", "registration").empty() && scene.text("export", "jacobian").empty())
+    if (scene.is_given("export", "field_spacing_mm") && !deformation_files)
       scene.fail("export", "field_spacing_mm",
                  "sets the grid of export.displacement_field, registration and jacobian, none "
                  "of which is written");

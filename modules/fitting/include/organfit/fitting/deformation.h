@@ -32,7 +32,6 @@
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
-#include <functional>
 #include <vector>
 
 #include "organfit/fitting/global_fit.h"
@@ -63,8 +62,8 @@ class Deformation {
 
   /// Over the lattice's cells (trilinear gradient at each cell's centre): the smallest
   /// and largest det(grad phi); a value <= 0 means phi folds (not invertible) there.
-  double min_volume_ratio() const { return min_ratio_; }
-  double max_volume_ratio() const { return max_ratio_; }
+  double min_volume_ratio() const;
+  double max_volume_ratio() const;
   bool folds() const { return min_det_ <= 0; }
   /// Where u may be nonzero (mm): the lattice's box; empty at rest.
   geometry::Aabb local_box() const;
@@ -87,13 +86,11 @@ class Deformation {
   double spacing_ = 1;
   Eigen::Vector3i n_ = Eigen::Vector3i::Zero();
   std::vector<Eigen::Vector3f> values_;  // u (mm)
-  std::vector<std::uint8_t> fitted_;     // 1 where u is the moving least squares' answer
-  double min_ratio_ = 1, max_ratio_ = 1, min_det_ = 1;
+  double min_det_ = 1, max_det_ = 1;     // of det(grad phi^-1) over the lattice's cells
   long long fitted_nodes_ = 0, harmonic_nodes_ = 0;
-  /// Solves the Laplace equation for the nodes not `fixed` (values_ there), the fixed
-  /// ones' values given by `value`, zero on the lattice's faces; returns how many.
-  long long harmonic_fill(const std::vector<std::uint8_t>& fixed,
-                          const std::function<Eigen::Vector3d(long long)>& value);
+  /// Solves the Laplace equation for u at the nodes not `fitted` (values_ there), matching
+  /// the fitted ones and zero on the lattice's faces; returns how many nodes it solved.
+  long long solve_harmonic_part(const std::vector<std::uint8_t>& fitted);
 
   Eigen::Vector3d node(long long v) const;  ///< node v's position (mm)
   /// phi^-1(q), and det(grad phi^-1) at q when asked; without `point` the global map is

@@ -68,6 +68,8 @@ struct LabelVolume {
   /// Label at a physical point, nearest voxel; 0 outside the grid.
   std::uint8_t at_physical(const Eigen::Vector3d& p_mm) const;
   long long count(std::uint8_t label) const;
+  /// The index box of the voxels of `label` (empty(), lo = size and hi = -1, when none).
+  IndexRange range(std::uint8_t label) const;
   double volume_mm3(std::uint8_t label) const {
     return static_cast<double>(count(label)) * geometry.voxel_volume_mm3();
   }

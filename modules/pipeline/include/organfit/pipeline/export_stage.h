@@ -55,6 +55,14 @@ struct ExportRequest {
   const dicom::StructureSet* copy_rois_from = nullptr;
   std::string skip_roi;     ///< not copied (the organ the fit replaces is kept under its own name)
   bool fixed_uids = false;  ///< deterministic UIDs and dates (tests)
+
+  /// Files written on the planning CT's grid (an RT Structure Set, a label map) and files
+  /// of the deformation on it or over its box: each needs the planning CT.
+  bool on_ct_grid() const { return !rtstruct.empty() || !labels.empty(); }
+  bool deformation_files() const {
+    return !displacement_field.empty() || !registration.empty() || !jacobian.empty();
+  }
+  bool needs_ct() const { return on_ct_grid() || deformation_files(); }
 };
 
 class PendingExport {
