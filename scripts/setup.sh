@@ -17,9 +17,12 @@ packages=(
   build-essential cmake ninja-build ccache pkg-config
   libeigen3-dev libyaml-cpp-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev zlib1g-dev
   libgtest-dev libbenchmark-dev libomp-dev
-  libinsighttoolkit5-dev libgdcm-dev libgdcm-tools libvtk9-dev
+  libinsighttoolkit5-dev libgdcm-dev libgdcm-tools libvtk9-dev libdcmtk-dev
 )
-test_tools=(lammps python3 plastimatch dicom3tools python3-pydicom chromium clang-format)
+# orthanc: a real DICOM node for the network tests (run in a network namespace of their
+# own: iproute2 brings its loopback up); dcmtk: storescu loads it independently of us.
+test_tools=(lammps python3 plastimatch dicom3tools python3-pydicom chromium clang-format
+  orthanc dcmtk iproute2 curl)
 
 missing=()
 for p in "${packages[@]}" "${test_tools[@]}"; do

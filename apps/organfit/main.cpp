@@ -1,7 +1,8 @@
 // organfit: prepare a radiotherapy session by fitting a particle-system organ model to
 // sparse ultrasound points. Subcommands in the style of git / plastimatch.
 //
-// Exit codes: 0 success, 1 internal error, 2 bad input (usage, scene, data),
+// Exit codes: 0 success, 1 internal error, 2 bad input (usage, scene, data, a DICOM node
+// that cannot be reached, refuses or fails),
 // 3 ran but did not meet its target. Errors are one line on stderr.
 #include <CLI/CLI.hpp>
 #include <iostream>
@@ -9,6 +10,7 @@
 #include "organfit/evaluation/cohesion_benchmark.h"
 #include "organfit/evaluation/skeleton_benchmark.h"
 #include "organfit/pipeline/ct_benchmark.h"
+#include "organfit/pipeline/dicom_command.h"
 #include "organfit/pipeline/export_command.h"
 #include "organfit/pipeline/fit_benchmark.h"
 #include "organfit/pipeline/runner.h"
@@ -311,6 +313,40 @@ int run_main(int argc, char** argv) {
   bench_stability->add_option("--threads", stb.threads, "OpenMP threads (0: all)")
       ->check(CLI::Range(0, 256));
 
+  organfit::pipeline::DicomCommand dcm;
+  auto* dicom = app.add_subcommand(
+      "dicom",
+      "A DICOM node by hand (echo, find, pull, push), as ct.node and export.send_to use it");
+  dicom->require_subcommand(1);
+  auto add_node = [&dcm](CLI::App* command) {
+    command->add_option("node", dcm.node, "The node: AET@host:port")->required();
+    command->add_option("--aet", dcm.network.calling_aet, "Our own AE title");
+    command->add_option("--timeout", dcm.network.timeout_s, "Seconds before a silent node fails")
+        ->check(CLI::Range(0.1, 600.0));
+  };
+  auto add_query = [&dcm](CLI::App* command) {
+    command->add_option("--patient-id", dcm.query.patient_id, "Patient ID (never printed)");
+    command->add_option("--study", dcm.query.study_uid, "Study Instance UID");
+    command->add_option("--series", dcm.query.series_uid, "Series Instance UID");
+    command->add_option("--modality", dcm.query.modality,
+                        "Only series of this modality (CT, RTSTRUCT, ...)");
+  };
+  auto* dicom_echo = dicom->add_subcommand("echo", "C-ECHO: does the node answer");
+  add_node(dicom_echo);
+  auto* dicom_find =
+      dicom->add_subcommand("find", "C-FIND: the series of a patient or a study (no names)");
+  add_node(dicom_find);
+  add_query(dicom_find);
+  dicom_find->add_flag("--json", dcm.json, "As JSON");
+  auto* dicom_pull = dicom->add_subcommand(
+      "pull", "C-FIND, then C-GET of each matching series into OUT/<series UID>/");
+  add_node(dicom_pull);
+  add_query(dicom_pull);
+  dicom_pull->add_option("-o,--out", dcm.out, "Output folder (created)")->required();
+  auto* dicom_push = dicom->add_subcommand("push", "C-STORE of DICOM files (or folders of them)");
+  add_node(dicom_push);
+  dicom_push->add_option("files", dcm.files, "Files or folders")->required();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -328,7 +364,15 @@ int run_main(int argc, char** argv) {
                                     : organfit::Verbosity::kNormal);
   organfit::Progress::set_enabled(!quiet);
 
-  if (*version) {
+  if (*dicom_echo) {
+    organfit::pipeline::run_dicom_echo(dcm);
+  } else if (*dicom_find) {
+    organfit::pipeline::run_dicom_find(dcm);
+  } else if (*dicom_pull) {
+    organfit::pipeline::run_dicom_pull(dcm);
+  } else if (*dicom_push) {
+    organfit::pipeline::run_dicom_push(dcm);
+  } else if (*version) {
     std::cout << "organfit " << organfit::pipeline::version() << "\n";
   } else if (*schema) {
     const auto& s = organfit::pipeline::scene_schema();

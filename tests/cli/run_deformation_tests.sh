@@ -9,17 +9,7 @@ src="$1"
 bin="${ORGANFIT:?set ORGANFIT to the organfit binary}"
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
-passed=0
-failed=0
-check() {  # check NAME COMMAND...
-  local name="$1"
-  shift
-  if "$@" >"$tmp/check.log" 2>&1; then
-    echo "ok   $name"; passed=$((passed + 1))
-  else
-    echo "FAIL $name: $(tail -c 600 "$tmp/check.log")"; failed=$((failed + 1))
-  fi
-}
+source "$(dirname "$0")/check.sh"
 py=/usr/bin/python3
 
 # The checks every export makes, as run.json reports them.
@@ -142,5 +132,4 @@ for case in ct-sts-002:GTV_Mass_CT ct-sts-004:GTV_Mass_CT; do
   check "real.$folder.checks_hold" checks_hold "$tmp/$folder/run.json"
 done
 
-echo "$passed passed, $failed failed"
-[[ $failed -eq 0 ]]
+finish

@@ -47,7 +47,7 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
   put(ds, 0x0008, 0x0060, V::CS, "RTSTRUCT");
   put(ds, 0x0008, 0x0070, V::LO, "organfit");
   put(ds, 0x0008, 0x1070, V::PN, "");  // Operators' Name (RT Series, Type 2)
-  put(ds, 0x0008, 0x103e, V::LO, "organfit fitted structures");
+  put(ds, 0x0008, 0x103e, V::LO, options.series_description);
   put(ds, 0x0018, 0x1020, V::LO, "organfit");
   put(ds, 0x0020, 0x000e, V::UI, series_uid);
   put(ds, 0x0020, 0x0011, V::IS, "1");

@@ -18,6 +18,7 @@
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_file.h"
 #include "organfit/pipeline/model_stage.h"
+#include "organfit/pipeline/node_stage.h"
 #include "organfit/pipeline/report_stage.h"
 #include "organfit/pipeline/synth_command.h"
 #include "organfit/pipeline/ultrasound_stage.h"
@@ -59,6 +60,9 @@ std::vector<fs::path> scene_inputs(const config::Scene& scene) {
 std::set<std::string> names_written(const config::Scene& scene) {
   std::set<std::string> names = {"run.json", "resolved.yaml"};
   if (scene.has_section("phantom")) names.insert("phantom/");
+  if ((scene.has_section("ct") && scene.is_given("ct", "node")) ||
+      (scene.has_section("organ") && scene.is_given("organ", "node")))
+    names.insert("cache/");
   if (scene.has_section("fit")) names.insert("history.csv");
   if (scene.has_section("export"))
     for (const char* key : {"rtstruct", "labels", "mesh", "model"})
@@ -137,8 +141,10 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         "planning model: {} particles of {} from {} (built in {:.2f} s by its planning run)",
         model->state.size(), organ_name, file.filename().string(), planning_modelling_s);
   }
-  // A phantom is written as DICOM and read back like any planning CT.
-  fs::path ct_folder, phantom_rtstruct;
+  // A phantom is written as DICOM and read back like any planning CT; a CT on a DICOM
+  // node is pulled into OUT/cache/ and read likewise. `ct_home`: where the CT's folder is
+  // once the run is committed.
+  fs::path ct_folder, ct_home, phantom_rtstruct;
   if (scene.has_section("phantom")) {
     Stopwatch clock;
     phantom::PelvisOptions p;
@@ -152,6 +158,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     const fs::path folder = stage / "phantom";
     const SynthResult made = run_synth_pelvis(folder, p);
     ct_folder = folder / "ct";
+    ct_home = out_dir / "phantom" / "ct";
     phantom_rtstruct = folder / "rtstruct.dcm";
     run["phantom"] = {{"kind", scene.text("phantom", "kind")},
                       {"folder", "phantom"},
@@ -167,7 +174,21 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     if (scene.has_section("ct")) {
       o.series_instance_uid = scene.text("ct", "series_uid");
       o.series_description = scene.text("ct", "series_description");
-      ct_folder = scene.path("ct", "folder");
+      if (scene.is_given("ct", "node")) {
+        ct_folder = stage / "cache" / "ct";
+        ct_home = out_dir / "cache" / "ct";
+        const PulledSeries pulled = pull_ct(scene, ct_folder);
+        o.series_instance_uid = pulled.series_uid;
+        run["ct_pulled"] = pulled.summary();
+        record_stage("ct_pull", clock.elapsed_s());
+        spdlog::info("ct: {} objects pulled from {} in {:.2f} s (C-FIND {:.2f} s, C-GET {:.2f} s)",
+                     pulled.files.size(), scene.text("ct", "node"), clock.elapsed_s(),
+                     pulled.find_s, pulled.get_s);
+        clock = Stopwatch();
+      } else {
+        ct_folder = scene.path("ct", "folder");
+        ct_home = ct_folder;
+      }
     }
     ct = dicom::read_ct_series(ct_folder, o);
     // A session's CT, when the scene names one, must be the one the model was built on.
@@ -176,8 +197,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
          ct->frame_of_reference_uid != planning_ct->frame_of_reference_uid))
       throw InputError(fmt::format(
           "{}: the planning model was built on another CT series (or Frame of Reference) than "
-          "the scene's ct.folder {}",
-          scene.path("planning", "model").string(), ct_folder.string()));
+          "the scene's CT {}",
+          scene.path("planning", "model").string(), ct_home.string()));
     record_stage("ct", clock.elapsed_s());
     for (const auto& w : ct->warnings)
       warn(w);
@@ -189,7 +210,15 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
                  g.size[2], g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z());
   }
   std::optional<evaluation::Shape> organ;
-  fs::path organ_structure_set;  // where the organ came from (the phantom's: where it will be)
+  // The organ's structure set: where it is read from, and where it is once the run is
+  // committed (the phantom's and a pulled one are in --out).
+  fs::path rtstruct_file, organ_structure_set;
+  if (scene.has_section("organ") && scene.text("organ", "source") == "rtstruct") {
+    rtstruct_file =
+        scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct") : phantom_rtstruct;
+    organ_structure_set =
+        scene.is_given("organ", "rtstruct") ? rtstruct_file : out_dir / "phantom" / "rtstruct.dcm";
+  }
   if (scene.has_section("organ") && ct) {
     Stopwatch clock;
     const std::string roi = scene.text("organ", "roi");
@@ -210,10 +239,18 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
           {"roi", roi}, {"source", "seed"}, {"volume_cm3", mask.volume_mm3(1) / 1000.0}};
       spdlog::info("organ: '{}' grown from the seed, {:.2f} cm3", roi, mask.volume_mm3(1) / 1000.0);
     } else {
-      const fs::path file =
-          scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct") : phantom_rtstruct;
-      organ_structure_set =
-          scene.is_given("organ", "rtstruct") ? file : out_dir / "phantom" / "rtstruct.dcm";
+      if (scene.is_given("organ", "node")) {
+        const PulledSeries pulled =
+            pull_structure_set(scene, ct->patient.study_instance_uid, stage / "cache" / "rtstruct");
+        rtstruct_file = pulled.files.front();
+        organ_structure_set = out_dir / fs::relative(rtstruct_file, stage);
+        run["organ_pulled"] = pulled.summary();
+        record_stage("organ_pull", clock.elapsed_s());
+        spdlog::info("organ: the structure set pulled from {} in {:.2f} s",
+                     scene.text("organ", "node"), clock.elapsed_s());
+        clock = Stopwatch();
+      }
+      const fs::path& file = rtstruct_file;
       dicom::RasterisedRoi r =
           dicom::rasterise_roi(dicom::read_rtstruct(file), roi, *ct, file.string(),
                                static_cast<int>(scene.integer("organ", "roi_number")));
@@ -239,8 +276,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   auto absolute = [](const fs::path& p) { return fs::absolute(p).lexically_normal().string(); };
   if (ct && !scene.has_section("planning"))
     ct_reference =
-        CtReference{absolute(phantom_rtstruct.empty() ? ct_folder : out_dir / "phantom" / "ct"),
-                    ct->series_instance_uid, ct->frame_of_reference_uid,
+        CtReference{absolute(ct_home), ct->series_instance_uid, ct->frame_of_reference_uid,
                     organ_structure_set.empty() ? std::string() : absolute(organ_structure_set)};
   // The modelling this run did itself (phantom, CT, organ, model), for the comparison
   // of initial modelling against a session's update.
@@ -478,8 +514,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
                      "from one)");
         file = ct_reference->structure_set;
       } else {
-        file = scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct")
-                                                   : phantom_rtstruct;
+        file = rtstruct_file;
       }
       input_rtss = read_rois_to_copy(file, *ct);
       request.copy_rois_from = &*input_rtss;
@@ -525,6 +560,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   run["peak_memory_mib"] = peak_memory_mib();
   run["outputs"] = {"resolved.yaml", "run.json"};
   if (!phantom_rtstruct.empty()) run["outputs"].push_back("phantom/");
+  if (names_written(scene).count("cache/")) run["outputs"].push_back("cache/");
   for (const auto& f : files)
     run["outputs"].push_back(f.first);
   for (const auto& f : exported)
@@ -541,6 +577,31 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   if (pending) {
     pending->commit();  // each file atomic; the mesh adds its report
     run["export"] = pending->summary;
+  }
+  // The planning system gets the objects only from a run that met its target; a failed
+  // send leaves them in --out (committed below) and the run exits 2 saying so.
+  std::string send_failure;
+  if (pending && scene.is_given("export", "send_to")) {
+    if (!not_converged.empty()) {
+      warn("export: nothing sent to export.send_to: the fit did not converge");
+    } else {
+      Stopwatch clock;
+      std::vector<fs::path> dicom_files;
+      for (const char* key : {"rtstruct", "registration"})
+        if (!scene.text("export", key).empty())
+          dicom_files.push_back(stage / scene.text("export", key));
+      try {
+        run["export"]["sent"] = send_exported(scene, dicom_files);
+        spdlog::info("export: {} object(s) sent to {} in {:.2f} s", dicom_files.size(),
+                     scene.text("export", "send_to"), clock.elapsed_s());
+      } catch (const Error& e) {
+        send_failure = e.what();
+        run["export"]["send_failed"] = send_failure;
+        run["warnings"].push_back(send_failure);
+        run["status"] = "send_failed";
+      }
+      record_stage("send", clock.elapsed_s());
+    }
   }
   if (!model_file.empty()) {
     const nlohmann::json provenance = {
@@ -590,6 +651,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   write_file_atomically(stage / "resolved.yaml", scene.resolved_yaml());
   write_file_atomically(stage / "run.json", run.dump(2) + "\n");
   output.commit();
+  if (!send_failure.empty())
+    throw dicomnet::NodeError(send_failure + "; the written files are in " + out_dir.string());
   if (!not_converged.empty()) throw TargetNotMetError(not_converged);
   return run;
 }

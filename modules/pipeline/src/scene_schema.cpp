@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <initializer_list>
 
+#include "organfit/dicomnet/node.h"
 #include "organfit/pipeline/fit_stage.h"
 
 namespace organfit::pipeline {
@@ -40,10 +41,20 @@ config::Schema build_schema() {
       .number("slice_mm", 2.5, "mm", 0.1, 20.0, "slice spacing and thickness")
       .number("noise_hu", 12.0, "HU", 0.0, 500.0, "standard deviation of the CT noise");
 
-  s.section("ct", "the planning CT: a DICOM folder (other objects in it are ignored)")
-      .input_path("folder", "folder holding the CT series")
-      .text("series_uid", "", "Series Instance UID to use when the folder holds several CT series")
-      .text("series_description", "", "or the Series Description to use");
+  s.section("ct",
+            "the planning CT: a DICOM folder (other objects in it are ignored), or a series "
+            "pulled from a DICOM node")
+      .input_path("folder", "folder holding the CT series (or ct.node)", false)
+      .text("node", "",
+            "DICOM node to pull the CT from instead: AET@host:port (C-FIND, then C-GET into "
+            "OUT/cache/ct/)")
+      .text("study_uid", "", "Study Instance UID of the CT on ct.node")
+      .text("patient_id", "",
+            "or the Patient ID on ct.node: its CT series are listed by C-FIND (never logged)")
+      .text("series_uid", "",
+            "Series Instance UID to use when the folder, the study or the patient holds several "
+            "CT series")
+      .text("series_description", "", "or the Series Description to use (ct.folder)");
 
   s.section("organ",
             "the organ on the planning CT: imported from an RT Structure Set, or grown from a seed")
@@ -57,6 +68,14 @@ config::Schema build_schema() {
             "the organ's ROI name: the one imported, or the name given to the segmented organ")
       .integer("roi_number", 0, 0, none,
                "ROI Number to import when several ROIs share the name (0: by name alone)")
+      .used_when({{"organ.source", {"rtstruct"}}})
+      .text("node", "",
+            "DICOM node to pull the RT Structure Set from instead of organ.rtstruct: "
+            "AET@host:port (the CT's study is searched; C-GET into OUT/cache/rtstruct/)")
+      .used_when({{"organ.source", {"rtstruct"}}})
+      .text("series_uid", "",
+            "Series Instance UID of the structure set on organ.node (default: the study's only "
+            "RTSTRUCT series)")
       .used_when({{"organ.source", {"rtstruct"}}})
       .vec3("seed_mm", Vector3d(0, 0, 0), "mm", none,
             "seed inside the organ, patient coordinates (source: seed)")
@@ -263,6 +282,11 @@ config::Schema build_schema() {
       .number("global_shear_field_mm", 10.0, "mm", 0.0, 100.0,
               "spread: width of the smooth shears the global map may add (0 = none)")
       .used_when({{"fit.method", {"spread"}}});
+  s.section("network", "organfit on the DICOM network: for ct.node, organ.node, export.send_to")
+      .text("aet", dicomnet::NetworkOptions{}.calling_aet,
+            "our own AE title, as the nodes know us (1-16 characters)")
+      .number("timeout_s", dicomnet::NetworkOptions{}.timeout_s, "s", 0.0, 600.0,
+              "connecting, negotiating and each message: a node slower than this has failed", true);
   s.section("export", "what to write for the planning system, on the planning CT's grid")
       .text("rtstruct", "", "DICOM RT Structure Set file name inside --out (empty: none)")
       .text("labels", "", "label map file name inside --out: .nrrd, .mha, .nii(.gz) (empty: none)")
@@ -290,12 +314,82 @@ config::Schema build_schema() {
             "derive the RT Structure Set's UIDs from the CT's and fix its dates (tests)")
       .text("model", "",
             "model file name inside --out (empty: none): the model as built, or as fitted, "
-            "for session scenes (planning.model) and organfit export");
+            "for session scenes (planning.model) and organfit export")
+      .text("send_to", "",
+            "DICOM node the written RT Structure Set and registration are sent to by C-STORE "
+            "once the run has succeeded: AET@host:port (empty: none)");
   s.section("report", "report.html: one self-contained page a physicist reads at a glance")
       .text("file", "report.html", "report file name inside --out")
       .flag("show_patient", false,
             "show the CT's patient name and ID in the report (also needs --show-phi)");
   return s;
+}
+
+/// A node's address, checked as the scene is (the node itself is only asked at run time).
+void check_node(const config::Scene& scene, const char* section, const char* key) {
+  try {
+    dicomnet::parse_node(scene.text(section, key), std::string(section) + "." + key);
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    scene.fail(section, key, m.substr(m.find(": ") + 2));
+  }
+}
+
+/// The DICOM node keys: a node replaces a folder or file (never both), names what to pull,
+/// and the network section is there only when a node is used.
+void check_network_rules(const config::Scene& scene) {
+  auto node_given = [&scene](const char* section, const char* key) {
+    return scene.has_section(section) && scene.is_given(section, key);
+  };
+  const bool ct_node = node_given("ct", "node");
+  if (scene.has_section("ct")) {
+    if (ct_node == scene.is_given("ct", "folder"))
+      scene.fail("ct", ct_node ? "node" : "folder",
+                 ct_node ? "the CT comes from ct.folder or from ct.node, not both"
+                         : "name the CT's folder (ct.folder) or a DICOM node (ct.node)");
+    if (ct_node) {
+      check_node(scene, "ct", "node");
+      if (!scene.is_given("ct", "study_uid") && !scene.is_given("ct", "patient_id"))
+        scene.fail("ct", "node", "name the CT's study (ct.study_uid) or patient (ct.patient_id)");
+      if (scene.is_given("ct", "series_description"))
+        scene.fail("ct", "series_description",
+                   "chooses among a folder's series; on a node, name ct.series_uid");
+    } else {
+      for (const char* key : {"study_uid", "patient_id"})
+        if (scene.is_given("ct", key)) scene.fail("ct", key, "used only with ct.node");
+    }
+  }
+  const bool organ_node = node_given("organ", "node");
+  if (organ_node) {
+    check_node(scene, "organ", "node");
+    if (scene.is_given("organ", "rtstruct"))
+      scene.fail("organ", "node",
+                 "the structure set comes from organ.rtstruct or organ.node, not both");
+    if (!scene.has_section("ct"))
+      scene.fail("organ", "node",
+                 "the structure set is looked for in the study of the ct section's CT");
+  } else if (node_given("organ", "series_uid")) {
+    scene.fail("organ", "series_uid", "used only with organ.node");
+  }
+  const bool send = node_given("export", "send_to");
+  if (send) {
+    check_node(scene, "export", "send_to");
+    if (scene.text("export", "rtstruct").empty() && scene.text("export", "registration").empty())
+      scene.fail("export", "send_to",
+                 "sends export.rtstruct and export.registration, neither of which is written");
+  }
+  if (scene.has_section("network")) {
+    if (!ct_node && !organ_node && !send)
+      scene.fail("network", "",
+                 "no DICOM node is used (ct.node, organ.node, export.send_to): remove the "
+                 "section");
+    try {
+      dicomnet::check_ae_title(scene.text("network", "aet"), "network.aet");
+    } catch (const InputError& e) {
+      const std::string m = e.what();
+      scene.fail("network", "aet", m.substr(m.find(": ") + 2));
+    }
+  }
 }
 
 }  // namespace
@@ -351,8 +445,10 @@ void check_scene_rules(const config::Scene& scene) {
   if (scene.has_section("organ")) {
     if (!has_ct) scene.fail("organ", "roi", "an organ needs the 'ct' (or 'phantom') it is on");
     const bool seeded = scene.text("organ", "source") == "seed";
-    if (!seeded && !scene.is_given("organ", "rtstruct") && !scene.has_section("phantom"))
-      scene.fail("organ", "rtstruct", "source is 'rtstruct' but organ.rtstruct is not given");
+    if (!seeded && !scene.is_given("organ", "rtstruct") && !scene.is_given("organ", "node") &&
+        !scene.has_section("phantom"))
+      scene.fail("organ", "rtstruct",
+                 "source is 'rtstruct' but neither organ.rtstruct nor organ.node is given");
     if (seeded && !scene.is_given("organ", "seed_mm"))
       scene.fail("organ", "seed_mm", "source is 'seed' but organ.seed_mm is not given");
     if (seeded && scene.number("organ", "hu_low") >= scene.number("organ", "hu_high"))
@@ -444,6 +540,7 @@ void check_scene_rules(const config::Scene& scene) {
     if (!has_model) scene.fail("fit", "method", "a fit needs a 'model' (or 'planning') section");
     if (!scene.has_section("points")) scene.fail("fit", "method", "a fit needs a 'points' section");
   }
+  check_network_rules(scene);
 }
 
 config::Scene load_and_check_scene(const std::filesystem::path& file,

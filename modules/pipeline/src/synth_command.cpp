@@ -55,6 +55,7 @@ SynthResult run_synth_pelvis(const fs::path& out, const phantom::PelvisOptions& 
   }
   dicom::RtstructWriteOptions rt;
   rt.label = "TRUTH";
+  rt.series_description = "organfit phantom: true structures";
   rt.fixed_uids_and_dates = true;
   dicom::write_rtstruct(dir / "rtstruct.dcm", ct, rois, rt);
   itkbridge::write_label_volume(dir / "labels.nrrd", ph.labels);

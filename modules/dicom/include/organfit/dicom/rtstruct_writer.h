@@ -20,7 +20,8 @@ struct RtstructRoi {
 };
 
 struct RtstructWriteOptions {
-  std::string label = "organfit";  ///< Structure Set Label
+  std::string label = "organfit";                                 ///< Structure Set Label
+  std::string series_description = "organfit fitted structures";  ///< (0008,103E)
   /// Deterministic UIDs and dates (for tests): UIDs derived from the CT's and the ROI
   /// names, dates fixed. Otherwise new UIDs under one root per run and today's date.
   bool fixed_uids_and_dates = false;

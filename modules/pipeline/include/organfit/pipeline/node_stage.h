@@ -1,0 +1,44 @@
+#pragma once
+// A scene's DICOM nodes: the planning CT and its structure set pulled from a node
+// (ct.node, organ.node) into the output folder's cache, and the exported objects sent
+// to one (export.send_to). The network itself is dicomnet's; this turns scene keys into
+// its calls and its failures into errors naming the scene's key.
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "organfit/config/scene.h"
+#include "organfit/dicomnet/node.h"
+
+namespace organfit::pipeline {
+
+/// The scene's network section, or the defaults when the scene has none.
+dicomnet::NetworkOptions network_options(const config::Scene& scene);
+
+/// What a pull fetched, for run.json.
+struct PulledSeries {
+  std::string study_uid, series_uid;
+  std::vector<std::filesystem::path> files;
+  double find_s = 0, get_s = 0;  ///< C-FIND and C-GET wall times
+  nlohmann::json summary() const;
+};
+
+/// The CT series ct.node, ct.study_uid / ct.patient_id and ct.series_uid name, retrieved
+/// into `folder`. Errors (exit 2) name the scene's key: the node's failure, no CT
+/// series there, or several to choose from (listed).
+PulledSeries pull_ct(const config::Scene& scene, const std::filesystem::path& folder);
+
+/// The RT Structure Set organ.node holds in study `study_uid` (the CT's), retrieved into
+/// `folder`/<series UID>/: organ.series_uid's, or the study's only RTSTRUCT series, or
+/// the only one of several that holds ROI organ.roi (several: an error listing them).
+/// A structure set series must hold one object.
+PulledSeries pull_structure_set(const config::Scene& scene, const std::string& study_uid,
+                                const std::filesystem::path& folder);
+
+/// Sends `files` to export.send_to. Returns run.json's record of the send; a failure
+/// throws NodeError naming export.send_to.
+nlohmann::json send_exported(const config::Scene& scene,
+                             const std::vector<std::filesystem::path>& files);
+
+}  // namespace organfit::pipeline

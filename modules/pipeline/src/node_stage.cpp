@@ -1,0 +1,159 @@
+#include "organfit/pipeline/node_stage.h"
+
+#include <fmt/format.h>
+
+#include <chrono>
+#include <functional>
+
+#include "organfit/dicomnet/find_series.h"
+#include "organfit/dicomnet/retrieve_series.h"
+#include "organfit/dicomnet/store_files.h"
+#include "organfit/dicom/structure_set.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::pipeline {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+/// Runs a network call; a node's failure becomes an error naming the scene's key.
+template <typename F>
+auto naming_key(const config::Scene& scene, const char* section, const char* key, F&& call) {
+  try {
+    return call();
+  } catch (const Error& e) {  // a node's failure, or its answer not usable
+    scene.fail(section, key, e.what());
+  }
+}
+
+}  // namespace
+
+dicomnet::NetworkOptions network_options(const config::Scene& scene) {
+  dicomnet::NetworkOptions o;  // the schema's defaults are these
+  if (scene.has_section("network")) {
+    o.calling_aet = scene.text("network", "aet");
+    o.timeout_s = scene.number("network", "timeout_s");
+  }
+  return o;
+}
+
+nlohmann::json PulledSeries::summary() const {
+  return {{"study_uid", study_uid},
+          {"series_uid", series_uid},
+          {"objects", files.size()},
+          {"find_s", find_s},
+          {"get_s", get_s}};
+}
+
+PulledSeries pull_ct(const config::Scene& scene, const fs::path& folder) {
+  const dicomnet::Node node = dicomnet::parse_node(scene.text("ct", "node"), "ct.node");
+  const dicomnet::NetworkOptions options = network_options(scene);
+  dicomnet::SeriesQuery query;
+  query.patient_id = scene.text("ct", "patient_id");
+  query.study_uid = scene.text("ct", "study_uid");
+  query.series_uid = scene.text("ct", "series_uid");
+  query.modality = "CT";
+  PulledSeries pulled;
+  auto start = std::chrono::steady_clock::now();
+  const char* key = scene.is_given("ct", "series_uid")  ? "series_uid"
+                    : scene.is_given("ct", "study_uid") ? "study_uid"
+                                                        : "patient_id";
+  const auto found =
+      naming_key(scene, "ct", "node", [&] { return dicomnet::find_series(node, options, query); });
+  const dicomnet::SeriesEntry series = naming_key(scene, "ct", key, [&] {
+    return dicomnet::choose_series(found, query, node.text() + " holds", "ct.series_uid");
+  });
+  pulled.find_s = seconds_since(start);
+  start = std::chrono::steady_clock::now();
+  pulled.study_uid = series.study_uid;
+  pulled.series_uid = series.series_uid;
+  pulled.files = naming_key(scene, "ct", "node", [&] {
+    return dicomnet::retrieve_series(node, options, series.study_uid, series.series_uid, folder)
+        .files;
+  });
+  pulled.get_s = seconds_since(start);
+  return pulled;
+}
+
+PulledSeries pull_structure_set(const config::Scene& scene, const std::string& study_uid,
+                                const fs::path& folder) {
+  const dicomnet::Node node = dicomnet::parse_node(scene.text("organ", "node"), "organ.node");
+  const dicomnet::NetworkOptions options = network_options(scene);
+  const std::string roi = scene.text("organ", "roi");
+  dicomnet::SeriesQuery query;
+  query.study_uid = study_uid;
+  query.series_uid = scene.text("organ", "series_uid");
+  query.modality = "RTSTRUCT";
+  PulledSeries pulled;
+  auto start = std::chrono::steady_clock::now();
+  std::vector<dicomnet::SeriesEntry> found = naming_key(
+      scene, "organ", "node", [&] { return dicomnet::find_series(node, options, query); });
+  pulled.find_s = seconds_since(start);
+  start = std::chrono::steady_clock::now();
+  // Each candidate series, retrieved: a structure set is one small object.
+  auto retrieve = [&](const dicomnet::SeriesEntry& s) {
+    auto files = naming_key(scene, "organ", "node", [&] {
+      return dicomnet::retrieve_series(node, options, s.study_uid, s.series_uid,
+                                       folder / s.series_uid)
+          .files;
+    });
+    if (files.size() != 1)
+      scene.fail("organ", "node",
+                 fmt::format("{}: the structure set series {} holds {} objects, not one",
+                             node.text(), s.series_uid, files.size()));
+    return files.front();
+  };
+  // Several structure sets in the study (an earlier fit sent back, a colleague's): the
+  // ones holding the organ's ROI are the candidates.
+  if (found.size() > 1 && query.series_uid.empty()) {
+    std::vector<dicomnet::SeriesEntry> holding;
+    std::vector<fs::path> files;
+    for (const auto& s : found) {
+      fs::path file = retrieve(s);
+      if (!dicom::read_rtstruct(file).rois_named(roi).empty()) {
+        holding.push_back(s);
+        files.push_back(std::move(file));
+      }
+    }
+    if (holding.size() == 1) {
+      pulled.study_uid = holding.front().study_uid;
+      pulled.series_uid = holding.front().series_uid;
+      pulled.files = {files.front()};
+      pulled.get_s = seconds_since(start);
+      return pulled;
+    }
+    if (!holding.empty()) found = holding;
+    query.modality = holding.empty() ? "RTSTRUCT" : "RTSTRUCT (with ROI '" + echo(roi) + "')";
+  }
+  const char* key = scene.is_given("organ", "series_uid") ? "series_uid" : "node";
+  const dicomnet::SeriesEntry series = naming_key(scene, "organ", key, [&] {
+    return dicomnet::choose_series(found, query, node.text() + " holds (in the CT's study)",
+                                   "organ.series_uid");
+  });
+  pulled.study_uid = series.study_uid;
+  pulled.series_uid = series.series_uid;
+  pulled.files = {retrieve(series)};
+  pulled.get_s = seconds_since(start);
+  return pulled;
+}
+
+nlohmann::json send_exported(const config::Scene& scene, const std::vector<fs::path>& files) {
+  const dicomnet::Node node =
+      dicomnet::parse_node(scene.text("export", "send_to"), "export.send_to");
+  const dicomnet::StoredFiles stored = naming_key(scene, "export", "send_to", [&] {
+    return dicomnet::store_files(node, network_options(scene), files);
+  });
+  nlohmann::json names = nlohmann::json::array();
+  for (const auto& f : files)
+    names.push_back(f.filename().string());
+  return {{"node", node.text()},
+          {"files", names},
+          {"sent", stored.sent},
+          {"with_warning_status", stored.warnings},
+          {"wall_s", stored.wall_s}};
+}
+
+}  // namespace organfit::pipeline

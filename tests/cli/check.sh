@@ -1,0 +1,18 @@
+# Sourced by the whole-program test scripts (after they set $tmp). `check NAME COMMAND...`
+# runs COMMAND with its output in $tmp/check.log and prints "ok   NAME", or "FAIL NAME:"
+# with the log's last lines; `finish` prints "N passed, N failed" and fails on any failure.
+passed=0
+failed=0
+check() {
+  local name="$1"
+  shift
+  if "$@" >"$tmp/check.log" 2>&1; then
+    echo "ok   $name"; passed=$((passed + 1))
+  else
+    echo "FAIL $name: $(tail -c 800 "$tmp/check.log")"; failed=$((failed + 1))
+  fi
+}
+finish() {
+  echo "$passed passed, $failed failed"
+  [[ $failed -eq 0 ]]
+}
