@@ -226,17 +226,7 @@ check default.report_written_without_patient_identifiers /usr/bin/python3 -c "
 html = open('$tmp/default/report.html').read()
 assert 'Phantom^Pelvis' not in html and 'PELVIS-1' not in html
 assert html.count('<svg') >= 4 and 'id=\"surface\"' in html and 'data:image/png;base64,' in html"
-if command -v chromium > /dev/null; then
-  # Headless Chromium: the page loads with no console message, its script ran, and a
-  # screenshot is far from blank (a white page of this size compresses to a few KB).
-  chromium --headless --no-sandbox --disable-gpu --enable-logging=stderr --v=0 --dump-dom "file://$tmp/default/report.html" > "$tmp/dom.html" 2> "$tmp/chromium.log"
-  chromium --headless --no-sandbox --disable-gpu --window-size=1400,2600 --screenshot="$tmp/report.png" "file://$tmp/default/report.html" > /dev/null 2>&1
-  check report.chromium_no_console_messages bash -c "! grep -q 'CONSOLE' '$tmp/chromium.log'"
-  check report.chromium_ran_the_3d_view grep -q 'data-rendered="yes"' "$tmp/dom.html"
-  check report.chromium_screenshot_not_blank test "$(stat -c %s "$tmp/report.png" 2>/dev/null || echo 0)" -gt 60000
-else
-  echo "skip report.chromium: chromium not installed (scripts/setup.sh installs it)"
-fi
+# In headless Chromium: tests/cli/run_report_tests.sh (cli.report).
 expect default.fitted_rtstruct_reads_back 0 "" -- --quiet segment --ct "$tmp/default/phantom/ct" --rtstruct "$tmp/default/prostate_fit_rtstruct.dcm" --roi Prostate_fit --out "$tmp/default_back.nrrd"
 expect phantom.organ_from_a_seed 0 "" -- --quiet run "$src/tests/scenes/phantom-seed.yaml" --out "$tmp/pseed"
 check phantom.seeded_organ_volume_near_truth /usr/bin/python3 -c "

@@ -31,7 +31,8 @@ void quiet_dcmtk() {
 std::string reason_of(const OFCondition& cond) {
   std::string text = cond.text();
   // "TCP Initialization Error: Connection refused" -> "Connection refused"
-  if (const auto colon = text.rfind(": "); colon != std::string::npos && cond.module() == OFM_dcmnet)
+  if (const auto colon = text.rfind(": ");
+      colon != std::string::npos && cond.module() == OFM_dcmnet)
     text = text.substr(colon + 2);
   return text;
 }
@@ -76,9 +77,10 @@ void Association::open() {
   const OFCondition cond = scu_->negotiateAssociation();
   if (cond.good()) return;
   if (cond == DUL_ASSOCIATIONREJECTED)
-    fail(fmt::format("refused the association: check the node's AE title ('{}') and that the "
-                     "node knows ours ('{}')",
-                     organfit::echo(node_.aet), organfit::echo(options_.calling_aet)));
+    fail(
+        fmt::format("refused the association: check the node's AE title ('{}') and that the "
+                    "node knows ours ('{}')",
+                    organfit::echo(node_.aet), organfit::echo(options_.calling_aet)));
   if (cond == NET_EC_NoAcceptablePresentationContexts)
     fail("accepted the association but none of the services asked for");
   if (cond == DUL_READTIMEOUT || cond == DIMSE_NODATAAVAILABLE)
@@ -104,13 +106,13 @@ T_ASC_PresentationContextID Association::context(const std::string& sop_class,
 void Association::check(const OFCondition& cond, const std::string& doing) const {
   if (cond.good()) return;
   if (cond == DUL_READTIMEOUT || cond == DIMSE_NODATAAVAILABLE)
-    fail(fmt::format("{}: no answer within {:g} s (network.timeout_s)", doing,
-                     options_.timeout_s));
+    fail(fmt::format("{}: no answer within {:g} s (network.timeout_s)", doing, options_.timeout_s));
   if (cond == DUL_PEERABORTEDASSOCIATION || cond == DUL_PEERREQUESTEDRELEASE ||
       cond == DUL_NETWORKCLOSED)
-    fail(fmt::format("{}: the node closed the association (does it let our AE title '{}' do "
-                     "this?)",
-                     doing, organfit::echo(options_.calling_aet)));
+    fail(
+        fmt::format("{}: the node closed the association (does it let our AE title '{}' do "
+                    "this?)",
+                    doing, organfit::echo(options_.calling_aet)));
   fail(doing + ": " + reason_of(cond));
 }
 

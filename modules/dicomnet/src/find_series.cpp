@@ -3,7 +3,6 @@
 #include <dcmtk/config/osconfig.h>
 #include <dcmtk/dcmdata/dcdeftag.h>
 #include <dcmtk/dcmdata/dcuid.h>
-
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -124,7 +123,7 @@ std::vector<SeriesEntry> find_series(const Node& node, const NetworkOptions& opt
 SeriesEntry choose_series(const std::vector<SeriesEntry>& found, const SeriesQuery& query,
                           const std::string& what, const std::string& series_key) {
   const std::string kind = query.modality.empty() ? "" : query.modality + " ";
-  const std::string scope = !query.series_uid.empty() ? "series " + query.series_uid
+  const std::string scope = !query.series_uid.empty()  ? "series " + query.series_uid
                             : !query.study_uid.empty() ? "study " + query.study_uid
                                                        : "this patient ID";
   if (found.empty()) throw InputError(fmt::format("{}: no {}series for {}", what, kind, scope));

@@ -4,7 +4,6 @@
 #include <dcmtk/dcmdata/dcdeftag.h>
 #include <dcmtk/dcmdata/dcfilefo.h>
 #include <dcmtk/dcmdata/dcuid.h>
-
 #include <fmt/format.h>
 
 #include <chrono>
@@ -42,9 +41,8 @@ class RetrievingScu : public DcmSCU {
  public:
   explicit RetrievingScu(fs::path folder) : folder_(std::move(folder)) {}
 
-  OFCondition handleSTORERequest(const T_ASC_PresentationContextID /*presID*/,
-                                 DcmDataset* incoming, OFBool& continue_session,
-                                 Uint16& status) override {
+  OFCondition handleSTORERequest(const T_ASC_PresentationContextID /*presID*/, DcmDataset* incoming,
+                                 OFBool& continue_session, Uint16& status) override {
     std::unique_ptr<DcmDataset> dataset(incoming);
     continue_session = OFTrue;
     OFString uid;

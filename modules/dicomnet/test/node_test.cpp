@@ -1,6 +1,8 @@
 // The node's address, and the failures a node can cause that need no DICOM server: a
 // port nobody listens on, and a listener that never answers (the timeout). A real node
 // (Orthanc) is in tests/cli/run_dicom_node_tests.sh.
+#include "organfit/dicomnet/node.h"
+
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
 #include <netinet/in.h>
@@ -11,7 +13,6 @@
 
 #include "organfit/dicomnet/echo.h"
 #include "organfit/dicomnet/find_series.h"
-#include "organfit/dicomnet/node.h"
 #include "organfit/dicomnet/store_files.h"
 
 namespace organfit::dicomnet {
@@ -36,10 +37,10 @@ TEST(Node, ParsesAetHostPort) {
 }
 
 TEST(Node, RefusesMalformedAddressesNamingTheKey) {
-  for (const char* bad : {"ORTHANC", "127.0.0.1:4242", "@host:104", "ORTHANC@:104",
-                          "ORTHANC@host:", "ORTHANC@host:0", "ORTHANC@host:65536",
-                          "ORTHANC@host:12a", "ORTHANC@ho/st:104", "A_TITLE_OF_17_CHAR@h:1",
-                          "BACK\\SLASH@h:1", "   @h:1"}) {
+  for (const char* bad :
+       {"ORTHANC", "127.0.0.1:4242", "@host:104", "ORTHANC@:104", "ORTHANC@host:", "ORTHANC@host:0",
+        "ORTHANC@host:65536", "ORTHANC@host:12a", "ORTHANC@ho/st:104", "A_TITLE_OF_17_CHAR@h:1",
+        "BACK\\SLASH@h:1", "   @h:1"}) {
     const std::string m = message_of([&] { parse_node(bad, "export.send_to"); });
     EXPECT_EQ(m.rfind("export.send_to: ", 0), 0u) << bad << " -> " << m;
     EXPECT_THROW(parse_node(bad, "k"), InputError) << bad;

@@ -56,17 +56,16 @@ void run_dicom_find(const DicomCommand& c) {
   std::cout << fmt::format("{:<8} {:<8} {:>6} {:>7}  {:<24} {}\n", "date", "modality", "number",
                            "objects", "description", "study UID / series UID");
   for (const auto& s : found)
-    std::cout << fmt::format("{:<8} {:<8} {:>6} {:>7}  {:<24} {} / {}\n", s.study_date,
-                             s.modality, s.series_number, s.instances,
-                             echo(s.series_description, 24), s.study_uid, s.series_uid);
+    std::cout << fmt::format("{:<8} {:<8} {:>6} {:>7}  {:<24} {} / {}\n", s.study_date, s.modality,
+                             s.series_number, s.instances, echo(s.series_description, 24),
+                             s.study_uid, s.series_uid);
   std::cout << fmt::format("{} series\n", found.size());
 }
 
 void run_dicom_pull(const DicomCommand& c) {
   const dicomnet::Node node = node_of(c);
   const auto found = dicomnet::find_series(node, c.network, c.query);
-  if (found.empty())
-    throw InputError(fmt::format("{}: no series matches the query", node.text()));
+  if (found.empty()) throw InputError(fmt::format("{}: no series matches the query", node.text()));
   check_output_location(c.out, {}, "--out");
   std::set<std::string> names;
   for (const auto& s : found)
@@ -103,11 +102,9 @@ void run_dicom_push(const DicomCommand& c) {
     }
   }
   const auto stored = dicomnet::store_files(node, c.network, files);
-  std::cout << fmt::format("{}: {} object(s) sent in {:.2f} s{}\n", node.text(), stored.sent,
-                           stored.wall_s,
-                           stored.warnings ? fmt::format(" ({} with a warning status)",
-                                                         stored.warnings)
-                                           : "");
+  std::cout << fmt::format(
+      "{}: {} object(s) sent in {:.2f} s{}\n", node.text(), stored.sent, stored.wall_s,
+      stored.warnings ? fmt::format(" ({} with a warning status)", stored.warnings) : "");
 }
 
 }  // namespace organfit::pipeline

@@ -5,10 +5,10 @@
 #include <chrono>
 #include <functional>
 
+#include "organfit/dicom/structure_set.h"
 #include "organfit/dicomnet/find_series.h"
 #include "organfit/dicomnet/retrieve_series.h"
 #include "organfit/dicomnet/store_files.h"
-#include "organfit/dicom/structure_set.h"
 
 namespace fs = std::filesystem;
 

@@ -68,15 +68,21 @@ std::string build_report(const ReportContext& c) {
         }
     if (n > 0) {
       centroid /= static_cast<double>(n);
+      const std::array<int, 3> organ_lo = lo, organ_hi = hi;
       for (int d = 0; d < 3; ++d) {
         const int margin = static_cast<int>(std::ceil(25.0 / g.spacing_mm[d]));
         lo[d] = std::max(0, lo[d] - margin), hi[d] = std::min(g.size[d] - 1, hi[d] + margin);
       }
       const geometry::LabelVolume* plan = c.planning ? &planning : nullptr;
+      in.window = report::choose_window(g, c.ct->hu, c.planning ? planning : fitted);
       const double slab = 0.5 * g.spacing_mm.maxCoeff() + 1.0;
+      // Every axial slice through the organ (planning or fitted), browsable.
+      for (int k = organ_lo[2]; k <= organ_hi[2]; ++k)
+        in.axial.push_back(report::slice_view(g, c.ct->hu, report::Plane::kAxial, k, lo, hi, plan,
+                                              &fitted, c.points_mm, c.residuals_mm, slab));
+      in.axial_shown = static_cast<int>(std::lround(centroid[2])) - organ_lo[2];
       for (auto [plane, axis] :
-           {std::pair{report::Plane::kAxial, 2}, std::pair{report::Plane::kCoronal, 1},
-            std::pair{report::Plane::kSagittal, 0}})
+           {std::pair{report::Plane::kCoronal, 1}, std::pair{report::Plane::kSagittal, 0}})
         in.views.push_back(report::slice_view(g, c.ct->hu, plane,
                                               static_cast<int>(std::lround(centroid[axis])), lo, hi,
                                               plan, &fitted, c.points_mm, c.residuals_mm, slab));

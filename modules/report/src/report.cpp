@@ -32,23 +32,69 @@ std::string esc(const std::string& s) {
   return out;
 }
 
-std::string text_of(const nlohmann::json& v) {
-  if (v.is_string()) return v.get<std::string>();
-  if (v.is_number_float()) return fmt::format("{:.4g}", v.get<double>());
-  return v.dump();
-}
-
 const char* residual_colour(double r) {
   return r < 1.0 ? "#2ca02c" : r < 2.0 ? "#ff9f1c" : "#d62728";
 }
 
-/// A table of the scalar entries of a JSON object.
-std::string table_of(const nlohmann::json& object, const std::vector<std::string>& keys) {
+/// One value of run.json as the page shows it: a label in words, the unit, the decimals.
+struct Field {
+  const char* label;
+  const char* key;  ///< dotted path into run.json, e.g. "fit.residual_mean_mm"
+  const char* unit = "";
+  int decimals = 0;
+};
+
+const nlohmann::json* lookup(const nlohmann::json& run, const std::string& key) {
+  const nlohmann::json* at = &run;
+  size_t from = 0;
+  while (true) {
+    const size_t dot = key.find('.', from);
+    const std::string part = key.substr(from, dot == std::string::npos ? dot : dot - from);
+    if (!at->is_object() || !at->contains(part)) return nullptr;
+    at = &(*at)[part];
+    if (dot == std::string::npos) return at;
+    from = dot + 1;
+  }
+}
+
+/// "0.31 mm", "yes", "Prostate_fit": the value in words, rounded to the field's decimals.
+std::string shown(const nlohmann::json& v, const Field& f) {
+  std::string text;
+  if (v.is_boolean())
+    text = v.get<bool>() ? "yes" : "no";
+  else if (v.is_number_float())
+    text = fmt::format("{:.{}f}", v.get<double>(), f.decimals);
+  else if (v.is_number())
+    text = v.dump();
+  else if (v.is_string())
+    text = v.get<std::string>();
+  else
+    return esc(v.dump());
+  return esc(text) + (f.unit[0] && v.is_number() ? std::string("&nbsp;") + f.unit : "");
+}
+
+/// A table of the fields run.json has (the others are left out), each cell carrying its
+/// key and raw value.
+std::string fields_table(const nlohmann::json& run, const std::vector<Field>& fields) {
   std::string rows;
-  for (const auto& k : keys)
-    if (object.contains(k) && !object[k].is_object())
-      rows += fmt::format("<tr><th>{}</th><td>{}</td></tr>", esc(k), esc(text_of(object[k])));
+  for (const Field& f : fields) {
+    const nlohmann::json* v = lookup(run, f.key);
+    if (!v || v->is_null() || v->is_object() || v->is_array()) continue;
+    const char* cls = v->is_boolean() ? (v->get<bool>() ? " class=\"ok\"" : " class=\"bad\"") : "";
+    rows += fmt::format(R"x(<tr><th>{}</th><td data-key="{}" data-value="{}"{}>{}</td></tr>)x",
+                        esc(f.label), f.key,
+                        esc(v->is_string() ? v->get<std::string>() : v->dump()), cls, shown(*v, f));
+  }
   return rows.empty() ? "" : "<table>" + rows + "</table>";
+}
+
+/// "320 x 320 x 56" from [320, 320, 56] (decimals for sizes in mm).
+std::string triple(const nlohmann::json& v, int decimals) {
+  if (!v.is_array() || v.size() != 3) return "";
+  std::string t;
+  for (const auto& x : v)
+    t += (t.empty() ? "" : " &times; ") + fmt::format("{:.{}f}", x.get<double>(), decimals);
+  return t;
 }
 
 struct HistoryRow {
@@ -127,15 +173,19 @@ std::string history_svg(const std::vector<HistoryRow>& rows) {
   return svg + "</svg>";
 }
 
-std::string view_svg(const SliceView& v) {
+/// A plane as SVG: one image per window (the page's CSS shows the chosen one), the
+/// contours and points on top, the patient's directions at the edges.
+std::string view_svg(const SliceView& v, const std::string& attributes = "") {
   const double w = v.width * v.pixel_w_mm, h = v.height * v.pixel_h_mm;
   const double scale = 420.0 / std::max(w, h);  // screen pixels per mm
   std::string svg = fmt::format(
-      R"x(<figure><svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {:.2f} {:.2f}" width="{:.0f}" height="{:.0f}" role="img" aria-label="{}">)x",
-      w, h, w * scale, h * scale, esc(v.title));
-  svg += fmt::format(
-      R"x(<image x="0" y="0" width="{:.2f}" height="{:.2f}" preserveAspectRatio="none" href="data:image/png;base64,{}"/>)x",
-      w, h, base64(png_gray(v.width, v.height, v.gray.data())));
+      R"x(<figure {}><svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {:.2f} {:.2f}" width="{:.0f}" height="{:.0f}" role="img" aria-label="{}">)x",
+      attributes, w, h, w * scale, h * scale, esc(v.title));
+  const auto& windows = ct_windows();
+  for (size_t i = 0; i < v.gray.size() && i < windows.size(); ++i)
+    svg += fmt::format(
+        R"x(<image class="w-{}" x="0" y="0" width="{:.2f}" height="{:.2f}" preserveAspectRatio="none" href="data:image/png;base64,{}"/>)x",
+        windows[i].id, w, h, base64(png_gray(v.width, v.height, v.gray[i].data())));
   auto outline = [&](const std::vector<Eigen::Vector2d>& line, const char* colour,
                      const char* dash) {
     std::string pts;
@@ -227,30 +277,79 @@ constexpr const char* kViewerScript = R"JS(
 
 }  // namespace
 
+/// The window buttons and the axial slice browser (#window=lung picks a window).
+constexpr const char* kPageScript = R"JS(
+(function () {
+  const body = document.body;
+  function pick(id) {
+    if (!document.querySelector('button[data-window="' + id + '"]')) return;
+    body.dataset.window = id;
+    for (const b of document.querySelectorAll('button[data-window]')) b.classList.toggle('on', b.dataset.window === id);
+  }
+  for (const b of document.querySelectorAll('button[data-window]')) b.addEventListener('click', () => pick(b.dataset.window));
+  const m = /window=(\w+)/.exec(location.hash);
+  if (m) pick(m[1]);
+  const slices = Array.from(document.querySelectorAll('figure.axial'));
+  const range = document.getElementById('slice');
+  const label = document.getElementById('slice-label');
+  function show(i) {
+    i = Math.max(0, Math.min(slices.length - 1, i));
+    slices.forEach((f, k) => f.classList.toggle('current', k === i));
+    if (range) range.value = i;
+    if (label) label.textContent = (i + 1) + ' of ' + slices.length;
+  }
+  if (range) {
+    range.addEventListener('input', () => show(Number(range.value)));
+    document.getElementById('prev').addEventListener('click', () => show(Number(range.value) - 1));
+    document.getElementById('next').addEventListener('click', () => show(Number(range.value) + 1));
+    document.addEventListener('keydown', e => {
+      if (e.key === 'ArrowUp' || e.key === 'PageUp') show(Number(range.value) + 1);
+      if (e.key === 'ArrowDown' || e.key === 'PageDown') show(Number(range.value) - 1);
+    });
+    show(Number(range.value));
+  }
+})();
+)JS";
+
 std::string report_html(const ReportInput& in) {
   const nlohmann::json& run = in.run;
   const std::string name = run.contains("scene") ? run["scene"].value("name", "") : "";
   const std::string status = run.value("status", "");
+  const auto& windows = ct_windows();
+  const int chosen = std::clamp(in.window.window, 0, static_cast<int>(windows.size()) - 1);
+  std::string window_css;
+  for (const auto& w : windows)
+    window_css += fmt::format("body[data-window={0}] image:not(.w-{0}){{display:none}}", w.id);
   std::string html;
   html += "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">";
-  html += "<title>organfit report: " + esc(name) +
-          "</title><style>"
-          "body{font-family:sans-serif;margin:24px;max-width:1400px;color:#222}"
-          "table{border-collapse:collapse;margin:6px 0 14px}th,td{border:1px solid "
-          "#ccc;padding:3px 8px;text-align:left}"
-          "th{background:#f2f2f2;font-weight:normal}.warn{background:#fff4e5;border-left:5px solid "
-          "#ff9f1c;padding:8px 14px}"
-          ".ok{color:#2ca02c}.bad{color:#d62728}figure{display:inline-block;margin:6px}figcaption{"
-          "text-align:center}"
-          ".grid{display:flex;flex-wrap:wrap;gap:18px}pre{background:#f7f7f7;padding:10px;overflow:"
-          "auto}"
-          "canvas{border:1px solid #888;touch-action:none}.legend "
-          "span{margin-right:16px}</style></head><body>\n";
+  html +=
+      "<title>organfit report: " + esc(name) +
+      "</title><style>"
+      "body{font-family:sans-serif;margin:24px;max-width:1400px;color:#222}"
+      "table{border-collapse:collapse;margin:6px 0 14px}th,td{border:1px solid "
+      "#ccc;padding:3px 8px;text-align:left}td[data-key]{text-align:right}"
+      "th{background:#f2f2f2;font-weight:normal}.warn{background:#fff4e5;border-left:5px solid "
+      "#ff9f1c;padding:8px 14px}.box{border:2px solid #0096c8;padding:0 12px}"
+      ".ok{color:#2ca02c}.bad{color:#d62728}figure{display:inline-block;margin:6px}figcaption{"
+      "text-align:center}"
+      ".grid{display:flex;flex-wrap:wrap;gap:18px;align-items:flex-start}pre{background:#f7f7f7;"
+      "padding:10px;overflow:auto}"
+      "canvas{border:1px solid #888;touch-action:none}.legend span{margin-right:16px}"
+      "button{margin-right:6px}button.on{font-weight:bold;background:#cde}"
+      "figure.axial{display:none}figure.axial.current{display:inline-block}" +
+      window_css +
+      "@page{size:A4;margin:12mm}"
+      "@media print{body{margin:0;max-width:none;font-size:9pt}.noprint{display:none}"
+      "h2{break-after:avoid}table,figure,.box{break-inside:avoid}canvas{max-width:100%}"
+      "svg{max-width:85mm;height:auto}}"
+      "</style></head>";
+  html += fmt::format("<body data-window=\"{}\">\n", windows[static_cast<size_t>(chosen)].id);
   html += fmt::format(
-      "<h1>organfit report: {}</h1><p>organfit {} &middot; status <b class=\"{}\">{}</b> &middot; "
-      "wall time {:.2f} s &middot; peak memory {:.0f} MiB</p>\n",
+      "<h1>organfit report: {}</h1><p>organfit {} &middot; status <b class=\"{}\" "
+      "data-key=\"status\" data-value=\"{}\">{}</b> &middot; wall time before this page "
+      "{:.2f}&nbsp;s &middot; peak memory {:.0f} MiB</p>\n",
       esc(name), esc(run.value("organfit_version", "")), status == "ok" ? "ok" : "bad", esc(status),
-      run.value("wall_s", 0.0), run.value("peak_memory_mib", 0.0));
+      esc(status), run.value("wall_s", 0.0), run.value("peak_memory_mib", 0.0));
   if (!in.patient.empty()) html += "<p>Patient: " + esc(in.patient) + "</p>\n";
 
   // Warnings first: what a physicist must see before trusting the contour.
@@ -280,67 +379,132 @@ std::string report_html(const ReportInput& in) {
   }
 
   html += "<h2>Summary</h2><div class=\"grid\">";
-  if (run.contains("organ"))
-    html +=
-        "<div><h3>Organ</h3>" +
-        table_of(run["organ"], {"roi", "source", "volume_cm3", "contours", "matched_by_position"}) +
-        "</div>";
-  if (run.contains("ct"))
-    html += "<div><h3>CT</h3>" + table_of(run["ct"], {"slices"}) + "<p>" +
-            esc(run["ct"].value("size", nlohmann::json()).dump()) + " voxels of " +
-            esc(run["ct"].value("spacing_mm", nlohmann::json()).dump()) + " mm</p></div>";
-  if (run.contains("model"))
-    html += "<div><h3>Model</h3>" +
-            table_of(run["model"], {"particles", "radius_mm", "skeleton_nodes", "skeleton_from",
-                                    "body_volume_mm3", "volume_vs_reference_pct",
-                                    "from_planning_model", "planning_scene"}) +
-            "</div>";
-  if (run.contains("fit"))
-    html += "<div><h3>Fit</h3>" +
-            table_of(run["fit"], {"method", "converged", "stop_reason", "iterations", "wall_s",
-                                  "attractive_points", "rejected_points", "residual_mean_mm",
-                                  "residual_max_mm", "volume_change_pct"}) +
-            "</div>";
   // The structure the planning system receives, and the export's checks of it against the
   // planning organ (pipeline/export_stage.h).
-  if (run.contains("export") && run["export"].contains("roi")) {
-    const nlohmann::json& e = run["export"];
-    html += "<div><h3>Exported structure</h3>" +
-            table_of(e, {"roi", "roi_interpreted_type", "volume_on_ct_grid_cm3", "contours"}) +
-            (e.contains("checks")
-                 ? table_of(e["checks"],
-                            {"topology_kept", "volume_kept", "planning_volume_on_ct_grid_cm3",
-                             "expected_volume_on_ct_grid_cm3", "volume_difference_cm3",
-                             "volume_tolerance_cm3"})
-                 : "") +
+  if (run.contains("export") && run["export"].contains("roi"))
+    html +=
+        "<div class=\"box\"><h3>Structure for the planning system</h3>" +
+        fields_table(run, {{"Name", "export.roi"},
+                           {"Type", "export.roi_interpreted_type"},
+                           {"Volume on the CT grid", "export.volume_on_ct_grid_cm3", "cm3", 2},
+                           {"Contours (axial slices)", "export.contours"},
+                           {"Topology kept (components, cavities)", "export.checks.topology_kept"},
+                           {"Volume kept", "export.checks.volume_kept"},
+                           {"Planning organ on the CT grid",
+                            "export.checks.planning_volume_on_ct_grid_cm3", "cm3", 2},
+                           {"Expected from the deformation",
+                            "export.checks.expected_volume_on_ct_grid_cm3", "cm3", 2},
+                           {"Difference", "export.checks.volume_difference_cm3", "cm3", 2},
+                           {"Tolerance", "export.checks.volume_tolerance_cm3", "cm3", 2},
+                           {"Sent to", "export.sent.node"},
+                           {"Send failed", "export.send_failed"}}) +
+        "</div>";
+  if (run.contains("fit"))
+    html += "<div><h3>Fit</h3>" +
+            fields_table(
+                run, {{"Method", "fit.method"},
+                      {"Converged", "fit.converged"},
+                      {"Stopped because", "fit.stop_reason"},
+                      {"Attractive points", "fit.attractive_points"},
+                      {"Rejected as outliers", "fit.rejected_points"},
+                      {"Mean distance to the points", "fit.residual_mean_mm", "mm", 2},
+                      {"95th percentile", "fit.residual_p95_mm", "mm", 2},
+                      {"Largest", "fit.residual_max_mm", "mm", 2},
+                      {"Volume change (deformation)", "fit.volume_change_pct", "%", 2},
+                      {"Volume change (voxels counted)", "fit.volume_change_counted_pct", "%", 2},
+                      {"Fit time", "fit.wall_s", "s", 2}}) +
             "</div>";
-  }
   if (run.contains("truth"))
     html += "<div><h3>Against the known truth</h3>" +
-            table_of(run["truth"],
-                     {"msd_mm", "hd95_mm", "msd_undeformed_mm", "msd_floor_mm", "recovery"}) +
+            fields_table(
+                run, {{"Mean surface distance", "truth.msd_mm", "mm", 2},
+                      {"95% Hausdorff distance", "truth.hd95_mm", "mm", 2},
+                      {"Dice", "truth.dice", "", 3},
+                      {"Left as it was: mean surface distance", "truth.msd_undeformed_mm", "mm", 2},
+                      {"Left as it was: 95% Hausdorff", "truth.hd95_undeformed_mm", "mm", 2},
+                      {"The grid's own floor", "truth.msd_floor_mm", "mm", 2},
+                      {"Share of the change recovered", "truth.recovery", "", 2}}) +
             "</div>";
+  if (run.contains("organ"))
+    html += "<div><h3>Planning organ</h3>" +
+            fields_table(run, {{"ROI", "organ.roi"},
+                               {"From", "organ.source"},
+                               {"Volume", "organ.volume_cm3", "cm3", 2},
+                               {"Contours", "organ.contours"},
+                               {"Contours matched by position", "organ.matched_by_position"}}) +
+            "</div>";
+  if (run.contains("model"))
+    html += "<div><h3>Model</h3>" +
+            fields_table(run, {{"Particles", "model.particles"},
+                               {"Particle radius", "model.radius_mm", "mm", 2},
+                               {"Skeleton nodes", "model.skeleton_nodes"},
+                               {"Skeleton from", "model.skeleton_from"},
+                               {"Particles' volume against the organ's",
+                                "model.volume_vs_reference_pct", "%", 2},
+                               {"Planning model", "model.from_planning_model"},
+                               {"Planning scene", "model.planning_scene"}}) +
+            "</div>";
+  if (run.contains("ct")) {
+    html += "<div><h3>CT</h3>" + fields_table(run, {{"Slices", "ct.slices"}});
+    html += fmt::format(
+        "<table><tr><th>Voxels</th><td>{}</td></tr><tr><th>Voxel size</th><td>{}&nbsp;mm</td>"
+        "</tr>",
+        triple(run["ct"].value("size", nlohmann::json()), 0),
+        triple(run["ct"].value("spacing_mm", nlohmann::json()), 2));
+    if (in.window.surroundings_voxels > 0)
+      html += fmt::format(
+          "<tr><th>Window</th><td>{} (median {:.0f} HU within 10 mm of the organ)</td></tr>",
+          windows[static_cast<size_t>(chosen)].name, in.window.surroundings_median_hu);
+    html += "</table></div>";
+  }
   if (run.contains("timing"))
     html += "<div><h3>Modelling and update</h3>" +
-            table_of(run["timing"], {"modelling_s", "planning_modelling_s", "update_s"}) + "</div>";
+            fields_table(
+                run, {{"Initial modelling (this run)", "timing.modelling_s", "s", 2},
+                      {"Initial modelling (planning run)", "timing.planning_modelling_s", "s", 2},
+                      {"Session update", "timing.update_s", "s", 2}}) +
+            "</div>";
   html +=
-      "</div>\n<h2>Stages</h2><table><tr><th>stage</th><th>wall time (s)</th><th>peak memory "
-      "(MiB)</th></tr>";
+      "</div>\n<h2>Stages</h2><table><tr><th>stage</th><th>wall time</th><th>peak memory</th>"
+      "</tr>";
+  // The page cannot hold its own time: run.json has it once the page is written.
   if (run.contains("stages"))
     for (const auto& st : run["stages"])
-      html += fmt::format("<tr><td>{}</td><td>{:.3f}</td><td>{:.0f}</td></tr>",
-                          esc(st.value("name", "")), st.value("wall_s", 0.0),
-                          st.value("peak_memory_mib", 0.0));
+      html +=
+          st.value("name", "") == "report"
+              ? "<tr><td>report</td><td>this page (in run.json)</td><td></td></tr>"
+              : fmt::format(
+                    "<tr><td>{}</td><td data-key=\"stages.{}.wall_s\" data-value=\"{}\">"
+                    "{:.2f}&nbsp;s</td><td>{:.0f}&nbsp;MiB</td></tr>",
+                    esc(st.value("name", "")), esc(st.value("name", "")), st.value("wall_s", 0.0),
+                    st.value("wall_s", 0.0), st.value("peak_memory_mib", 0.0));
   html += "</table>\n";
 
   html += "<h2>Error against run time</h2>" + history_svg(parse_history(in.history_csv)) + "\n";
-  if (!in.views.empty()) {
+  if (!in.axial.empty() || !in.views.empty()) {
+    html += "<h2>CT through the organ</h2><p class=\"noprint\">Window: ";
+    for (const auto& w : windows)
+      html += fmt::format("<button data-window=\"{}\" class=\"{}\">{}</button>", w.id,
+                          &w == &windows[static_cast<size_t>(chosen)] ? "on" : "", w.name);
     html +=
-        "<h2>CT through the organ</h2><p class=\"legend\"><span style=\"color:#b59600\">- - "
+        "</p><p class=\"legend\"><span style=\"color:#b59600\">- - "
         "planning contour</span><span style=\"color:#0096c8\">&mdash; fitted contour</span>"
         "<span>points by residual: <b style=\"color:#2ca02c\">&lt; 1 mm</b>, <b "
         "style=\"color:#ff9f1c\">&lt; 2 mm</b>, <b style=\"color:#d62728\">&ge; 2 "
         "mm</b></span></p><div class=\"grid\">";
+    if (!in.axial.empty()) {
+      const int shown_first = std::clamp(in.axial_shown, 0, static_cast<int>(in.axial.size()) - 1);
+      html += fmt::format(
+          "<div><p class=\"noprint\"><button id=\"prev\">&darr; inferior</button><input "
+          "id=\"slice\" type=\"range\" min=\"0\" max=\"{}\" value=\"{}\"><button "
+          "id=\"next\">superior &uarr;</button> axial slice <span id=\"slice-label\"></span></p>",
+          in.axial.size() - 1, shown_first);
+      for (size_t i = 0; i < in.axial.size(); ++i)
+        html += view_svg(
+            in.axial[i],
+            fmt::format("class=\"axial{}\"", static_cast<int>(i) == shown_first ? " current" : ""));
+      html += "</div>";
+    }
     for (const auto& v : in.views)
       html += view_svg(v);
     html += "</div>\n";
@@ -368,12 +532,13 @@ std::string report_html(const ReportInput& in) {
   } else {
     html += "<script>document.body.dataset.rendered = 'yes';</script>\n";
   }
+  html += std::string("<script>") + kPageScript + "</script>\n";
   html += "<h2>Outputs</h2><ul>";
   if (run.contains("outputs"))
     for (const auto& o : run["outputs"])
       html += "<li>" + esc(o.get<std::string>()) + "</li>";
-  html += "</ul><details><summary>Scene (resolved)</summary><pre>" + esc(in.scene_yaml) +
-          "</pre></details>\n";
+  html += "</ul><details class=\"noprint\"><summary>Scene (resolved)</summary><pre>" +
+          esc(in.scene_yaml) + "</pre></details>\n";
   html += "</body></html>\n";
   return html;
 }

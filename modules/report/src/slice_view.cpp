@@ -4,6 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/slice_contours.h"
 #include "organfit/report/report.h"
 
@@ -20,6 +21,62 @@ std::string side(const Eigen::Vector3d& axis) {
 }
 
 }  // namespace
+
+const std::vector<CtWindow>& ct_windows() {
+  static const std::vector<CtWindow> windows = {
+      {"soft tissue", "soft", 40, 400}, {"lung", "lung", -600, 1500}, {"bone", "bone", 400, 1800}};
+  return windows;
+}
+
+WindowChoice choose_window(const geometry::ImageGeometry& g, const std::vector<float>& hu,
+                           const geometry::LabelVolume& organ, double shell_mm) {
+  WindowChoice choice;
+  // The organ's box grown by the shell: the distance transform runs on it alone.
+  std::array<int, 3> lo{g.size[0], g.size[1], g.size[2]}, hi{-1, -1, -1};
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        if (organ.at(i, j, k) == 1) {
+          const int idx[3] = {i, j, k};
+          for (int d = 0; d < 3; ++d)
+            lo[d] = std::min(lo[d], idx[d]), hi[d] = std::max(hi[d], idx[d]);
+        }
+  if (hi[0] < 0) return choice;
+  geometry::ImageGeometry box = g;
+  for (int d = 0; d < 3; ++d) {
+    const int margin = static_cast<int>(std::ceil(shell_mm / g.spacing_mm[d]));
+    lo[d] = std::max(0, lo[d] - margin), hi[d] = std::min(g.size[d] - 1, hi[d] + margin);
+    box.size[d] = hi[d] - lo[d] + 1;
+  }
+  std::vector<std::uint8_t> feature(static_cast<size_t>(box.size[0]) * box.size[1] * box.size[2]);
+  auto local = [&](int i, int j, int k) {
+    return (static_cast<size_t>(k - lo[2]) * box.size[1] + (j - lo[1])) * box.size[0] + (i - lo[0]);
+  };
+  for (int k = lo[2]; k <= hi[2]; ++k)
+    for (int j = lo[1]; j <= hi[1]; ++j)
+      for (int i = lo[0]; i <= hi[0]; ++i)
+        feature[local(i, j, k)] = organ.at(i, j, k) == 1;
+  const std::vector<double> d2 = geometry::squared_distance_transform(feature, box);
+  std::vector<float> shell;
+  for (int k = lo[2]; k <= hi[2]; ++k)
+    for (int j = lo[1]; j <= hi[1]; ++j)
+      for (int i = lo[0]; i <= hi[0]; ++i) {
+        const double d = d2[local(i, j, k)];
+        if (d > 0 && d <= shell_mm * shell_mm)
+          shell.push_back(hu[static_cast<size_t>(g.linear_index(i, j, k))]);
+      }
+  if (shell.empty()) return choice;
+  std::nth_element(shell.begin(), shell.begin() + static_cast<long>(shell.size() / 2), shell.end());
+  choice.surroundings_median_hu = shell[shell.size() / 2];
+  choice.surroundings_voxels = static_cast<long long>(shell.size());
+  const auto& windows = ct_windows();
+  for (size_t w = 1; w < windows.size(); ++w)
+    if (std::abs(windows[w].level_hu - choice.surroundings_median_hu) <
+        std::abs(windows[static_cast<size_t>(choice.window)].level_hu -
+                 choice.surroundings_median_hu))
+      choice.window = static_cast<int>(w);
+  return choice;
+}
 
 SliceView slice_view(const geometry::ImageGeometry& g, const std::vector<float>& hu, Plane plane,
                      int index, const std::array<int, 3>& lo, const std::array<int, 3>& hi,
@@ -59,7 +116,8 @@ SliceView slice_view(const geometry::ImageGeometry& g, const std::vector<float>&
     ijk[ra] = rows_down ? lo[ra] + r : hi[ra] - r;
     return ijk;
   };
-  v.gray.resize(static_cast<size_t>(v.width) * v.height);
+  const auto& windows = ct_windows();
+  v.gray.assign(windows.size(), std::vector<std::uint8_t>(static_cast<size_t>(v.width) * v.height));
   geometry::ImageGeometry flat;  // the view as a one-slice grid, in mm from its top-left corner
   flat.size = {v.width, v.height, 1};
   flat.spacing_mm = Eigen::Vector3d(v.pixel_w_mm, v.pixel_h_mm, 1);
@@ -69,9 +127,10 @@ SliceView slice_view(const geometry::ImageGeometry& g, const std::vector<float>&
     for (int c = 0; c < v.width; ++c) {
       const auto ijk = voxel(c, r);
       const double value = hu[static_cast<size_t>(g.linear_index(ijk[0], ijk[1], ijk[2]))];
-      const double level = 40, width = 400;  // soft tissue
-      v.gray[static_cast<size_t>(r) * v.width + c] = static_cast<std::uint8_t>(
-          std::clamp((value - (level - width / 2)) / width * 255.0, 0.0, 255.0));
+      for (size_t w = 0; w < windows.size(); ++w)
+        v.gray[w][static_cast<size_t>(r) * v.width + c] = static_cast<std::uint8_t>(std::clamp(
+            (value - (windows[w].level_hu - windows[w].width_hu / 2)) / windows[w].width_hu * 255.0,
+            0.0, 255.0));
       if (planning) plan2d.at(c, r, 0) = planning->at(ijk[0], ijk[1], ijk[2]) == 1;
       if (fitted) fit2d.at(c, r, 0) = fitted->at(ijk[0], ijk[1], ijk[2]) == 1;
     }

@@ -75,8 +75,8 @@ TEST_F(Views, AxialViewIsTheSliceWithAnteriorUpAndPatientRightOnTheLeft) {
   EXPECT_EQ(v.width, 20);
   EXPECT_EQ(v.height, 16);
   EXPECT_EQ(v.left + v.right + v.top + v.bottom, "RLAP");
-  EXPECT_EQ(v.gray[5 * 20 + 4], 255);  // 240 HU is the window's top (40 + 200)
-  EXPECT_EQ(v.gray[0], 0);
+  EXPECT_EQ(v.gray[0][5 * 20 + 4], 255);  // 240 HU is the soft-tissue window's top (40 + 200)
+  EXPECT_EQ(v.gray[0][0], 0);
   ASSERT_EQ(v.planning.size(), 1u);  // one outline around the block
   ASSERT_EQ(v.points.size(), 1u);    // z = 8.4 is within 1 mm of the plane z = 8; z = 14 is not
   EXPECT_NEAR(v.points[0].x_mm, 6.5, 1e-9);
@@ -89,13 +89,54 @@ TEST_F(Views, CoronalViewPutsSuperiorAtTheTop) {
   EXPECT_EQ(v.height, 10);
   EXPECT_EQ(v.top + v.bottom, "SI");
   // Row 0 is k = 9 (dark), row 9 - 6 = 3 is k = 6 (bright).
-  EXPECT_EQ(v.gray[0 * 20 + 5], 0);
-  EXPECT_EQ(v.gray[3 * 20 + 5], 255);
+  EXPECT_EQ(v.gray[0][0 * 20 + 5], 0);
+  EXPECT_EQ(v.gray[0][3 * 20 + 5], 255);
   EXPECT_DOUBLE_EQ(v.pixel_h_mm, 2.0);
   EXPECT_EQ(
       slice_view(g, hu, Plane::kSagittal, 5, {0, 0, 0}, {19, 15, 9}, nullptr, nullptr, {}, {}, 1.0)
           .left,
       "A");
+}
+
+/// An organ (a 10 mm cube at 40 HU) in a 40 mm CT whose rest is `around` HU.
+WindowChoice window_for(float around) {
+  geometry::ImageGeometry g;
+  g.size = {40, 40, 40};
+  g.spacing_mm = Eigen::Vector3d(1, 1, 1);
+  std::vector<float> hu(static_cast<size_t>(g.voxel_count()), around);
+  geometry::LabelVolume organ(g);
+  for (int k = 15; k < 25; ++k)
+    for (int j = 15; j < 25; ++j)
+      for (int i = 15; i < 25; ++i) {
+        organ.at(i, j, k) = 1;
+        hu[static_cast<size_t>(g.linear_index(i, j, k))] = 40.f;
+      }
+  return choose_window(g, hu, organ);
+}
+
+TEST(CtWindows, TheOneWhoseLevelIsNearestTheSurroundingsMedian) {
+  ASSERT_EQ(ct_windows().size(), 3u);
+  EXPECT_STREQ(ct_windows()[window_for(-800).window].id, "lung");  // a lung tumour
+  EXPECT_STREQ(ct_windows()[window_for(20).window].id, "soft");    // a prostate
+  EXPECT_STREQ(ct_windows()[window_for(900).window].id, "bone");   // inside a bone
+  const WindowChoice c = window_for(-800);
+  EXPECT_DOUBLE_EQ(c.surroundings_median_hu, -800);
+  // The 10 mm shell around a 10 mm cube: 30^3 - 10^3 voxels less the box's rounded corners.
+  EXPECT_GT(c.surroundings_voxels, 10000);
+  EXPECT_LT(c.surroundings_voxels, 30 * 30 * 30 - 1000);
+}
+
+TEST_F(Views, EveryWindowIsRendered) {
+  const SliceView v =
+      slice_view(g, hu, Plane::kAxial, 4, {0, 0, 0}, {19, 15, 9}, &mask, nullptr, {}, {}, 1.0);
+  ASSERT_EQ(v.gray.size(), 3u);
+  // 240 HU: the top of soft tissue's window and above lung's (150 HU): white in both;
+  // (240 + 500) / 1800 of bone's. The background, -1000 HU: (350 / 1500) of lung's.
+  EXPECT_EQ(v.gray[0][5 * 20 + 4], 255);
+  EXPECT_EQ(v.gray[1][5 * 20 + 4], 255);
+  EXPECT_EQ(v.gray[2][5 * 20 + 4], static_cast<int>(740.0 / 1800 * 255));
+  EXPECT_EQ(v.gray[0][0], 0);
+  EXPECT_EQ(v.gray[1][0], static_cast<int>(350.0 / 1500 * 255));
 }
 
 TEST(ReportHtml, HasTheSectionsEscapesTextAndShowsNoPatientUnlessGiven) {
@@ -119,9 +160,24 @@ TEST(ReportHtml, HasTheSectionsEscapesTextAndShowsNoPatientUnlessGiven) {
   const std::string html = report_html(in);
   EXPECT_NE(html.find("organfit report: a&lt;b"), std::string::npos);
   EXPECT_NE(html.find("fit: 2 points rejected"), std::string::npos);
-  EXPECT_NE(html.find("<h3>Exported structure</h3>"), std::string::npos);
-  EXPECT_NE(html.find("<th>roi</th><td>Prostate_fit</td>"), std::string::npos);
-  EXPECT_NE(html.find("<th>topology_kept</th><td>false</td>"), std::string::npos);
+  EXPECT_NE(html.find("<h3>Structure for the planning system</h3>"), std::string::npos);
+  // Labelled in words, with units and rounding; the key and raw value kept for checking.
+  EXPECT_NE(html.find("<th>Name</th><td data-key=\"export.roi\" data-value=\"Prostate_fit\">"
+                      "Prostate_fit</td>"),
+            std::string::npos);
+  EXPECT_NE(html.find("<th>Volume on the CT grid</th><td data-key=\"export.volume_on_ct_grid_cm3\" "
+                      "data-value=\"34.7\">34.70&nbsp;cm3</td>"),
+            std::string::npos);
+  EXPECT_NE(html.find("data-key=\"export.checks.topology_kept\" data-value=\"false\" "
+                      "class=\"bad\">no</td>"),
+            std::string::npos);
+  EXPECT_NE(html.find("data-key=\"export.checks.volume_difference_cm3\" data-value=\"-0.22\">"
+                      "-0.22&nbsp;cm3</td>"),
+            std::string::npos);
+  EXPECT_NE(html.find("data-key=\"stages.fit.wall_s\" data-value=\"0.1\">0.10&nbsp;s</td>"),
+            std::string::npos);
+  EXPECT_NE(html.find("@page{size:A4"), std::string::npos);
+  EXPECT_EQ(html.find("volume_on_ct_grid_cm3</th>"), std::string::npos);  // no raw key shown
   EXPECT_NE(html.find("volume changed by +1.70%"), std::string::npos);
   EXPECT_NE(html.find("1 of 2 points were never reached"), std::string::npos);
   EXPECT_NE(html.find("aria-label=\"error against run time\""), std::string::npos);
