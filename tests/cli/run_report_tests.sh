@@ -13,7 +13,8 @@ py=/usr/bin/python3
 chrome=(chromium --headless --no-sandbox --disable-gpu --no-pdf-header-footer)
 command -v chromium >/dev/null || { echo "FAIL chromium is not installed (scripts/setup.sh)"; exit 1; }
 
-"$bin" -q run "$src/pipelines/default.yaml" --out "$tmp/run" || { echo "FAIL the default scene"; exit 1; }
+"$bin" -q run "$src/pipelines/default.yaml" --out "$tmp/run" --set export.uncertainty=sigma.nrrd \
+  --set export.mesh=prostate_fit.vtp || { echo "FAIL the default scene"; exit 1; }
 page="file://$tmp/run/report.html"
 start=$(date +%s%N)
 "${chrome[@]}" --enable-logging=stderr --v=0 --dump-dom "$page" >"$tmp/dom.html" 2>"$tmp/chromium.log"
@@ -114,4 +115,34 @@ boxes = re.findall(rb'/MediaBox \[0 0 ([0-9.]+) ([0-9.]+)\]', pdf)
 assert boxes and all(abs(float(w) - 595.3) < 1 and abs(float(h) - 841.9) < 1 for w, h in boxes), boxes
 assert len(boxes) <= 6, len(boxes)
 print(len(boxes), 'A4 pages')"
+# The uncertainty (fitting/surface_uncertainty.h) as run.json, the CT-grid map, the mesh
+# and the 3D view carry it.
+check "the uncertainty: calibrated on this case, larger where unseen, bounded by its prior" $py -c "
+import json; d = json.load(open('$tmp/run/run.json')); u = d['fit']['uncertainty']
+assert u['seen']['median_mm'] < u['unseen']['median_mm'] <= u['prior_sd_mm'], u
+assert u['all']['p95_mm'] <= u['prior_sd_mm'] + 1e-9 and u['surface_samples'] == 4000, u
+assert d['truth']['uncertainty']['within_2sd_share'] >= 0.9, d['truth']['uncertainty']
+assert d['export']['uncertainty']['file'] == 'sigma.nrrd', d['export']"
+check "sigma.nrrd: the prior far from the points, less near them, on the CT's grid" $py -c "
+import json, struct
+d = json.load(open('$tmp/run/run.json')); u = d['fit']['uncertainty']
+raw = open('$tmp/run/sigma.nrrd', 'rb').read()
+head, body = raw.split(b'\n\n', 1)
+assert b'sizes: 320 320 56' in head and b'type: float' in head, head
+v = struct.unpack('<%df' % (len(body) // 4), body)
+assert len(v) == 320 * 320 * 56
+assert abs(v[0] - u['prior_sd_mm']) < 1e-5 and abs(v[-1] - u['prior_sd_mm']) < 1e-5, (v[0], v[-1])
+assert min(v) >= 0 and max(v) <= u['prior_sd_mm'] + 1e-5 and min(v) < 0.6 * u['prior_sd_mm'], min(v)"
+check "the VTP mesh carries sigma_mm at each point" $py - "$tmp/run/prostate_fit.vtp" <<'EOF'
+import re, sys
+x = open(sys.argv[1]).read()
+a = re.search(r'<DataArray type="Float32" Name="sigma_mm"[^>]*RangeMin="([0-9.e+-]+)" *RangeMax="([0-9.e+-]+)"', x)
+assert a and 0 < float(a.group(1)) < float(a.group(2)) < 5, a
+EOF
+check "the 3D view is coloured by sigma" bash -c "
+  grep -q 'coloured by its uncertainty sigma' '$tmp/dom.html' && grep -q '\"s\":\\[' '$tmp/run/report.html'"
+check "export.uncertainty without a fit is refused naming the key" bash -c "
+  printf 'phantom: {kind: pelvis}\norgan: {roi: Prostate}\nmodel: {radius_mm: 2.0}\nexport: {uncertainty: s.nrrd}\n' >'$tmp/nofit.yaml'
+  '$bin' validate '$tmp/nofit.yaml' 2>'$tmp/nofit.err'; test \$? -eq 2 &&
+  grep -q 'nofit.yaml:4: export.uncertainty: the uncertainty is the fit.s' '$tmp/nofit.err'"
 finish

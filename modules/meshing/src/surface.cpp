@@ -39,6 +39,14 @@ SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesy
   return report_of(vtk_write_surface(plain(mask), file.string()));
 }
 
+SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesystem::path& file,
+                            const std::string& name,
+                            const std::function<double(const Eigen::Vector3d&)>& value) {
+  const PointScalar scalar{
+      name, [&value](const double* x) { return value(Eigen::Vector3d(x[0], x[1], x[2])); }};
+  return report_of(vtk_write_surface(plain(mask), file.string(), false, &scalar));
+}
+
 SurfaceMesh surface_mesh(const geometry::LabelVolume& mask) {
   PlainSurfaceReport p = vtk_write_surface(plain(mask), "", true);
   SurfaceMesh out;

@@ -1,8 +1,10 @@
 // VTK translation unit: plain inputs only.
 #include <vtkCellArray.h>
 #include <vtkFeatureEdges.h>
+#include <vtkFloatArray.h>
 #include <vtkFlyingEdges3D.h>
 #include <vtkImageData.h>
+#include <vtkLookupTable.h>
 #include <vtkMassProperties.h>
 #include <vtkMatrix3x3.h>
 #include <vtkNew.h>
@@ -17,8 +19,10 @@
 #include <vtkWindowedSincPolyDataFilter.h>
 #include <vtkXMLPolyDataWriter.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <string>
 
 #include "organfit/meshing/plain_mesh.h"
 #include "organfit/support/atomic_file.h"
@@ -55,7 +59,8 @@ double signed_volume(vtkPolyData* poly) {
 
 }  // namespace
 
-PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file, bool keep_mesh) {
+PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file, bool keep_mesh,
+                                     const PointScalar* scalar) {
   const bool stl = ends_with(file, ".stl"), vtp = ends_with(file, ".vtp"),
              ply = ends_with(file, ".ply"), obj = ends_with(file, ".obj");
   if (!file.empty() && !stl && !vtp && !ply && !obj)
@@ -155,6 +160,19 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
           report.triangle_ids.push_back(static_cast<int>(ids[c]));
   }
   if (file.empty()) return report;
+  double scalar_range[2] = {0, 0};
+  if (scalar) {
+    vtkNew<vtkFloatArray> values;
+    values->SetName(scalar->name.c_str());
+    values->SetNumberOfTuples(surface->GetNumberOfPoints());
+    for (vtkIdType p = 0; p < surface->GetNumberOfPoints(); ++p) {
+      double x[3];
+      surface->GetPoint(p, x);
+      values->SetValue(p, static_cast<float>(scalar->at_mm(x)));
+    }
+    values->GetRange(scalar_range);
+    surface->GetPointData()->AddArray(values);
+  }
 
   TempPath temp(file);
   const std::string name = temp.path().string();
@@ -173,6 +191,17 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
   } else if (ply) {
     vtkNew<vtkPLYWriter> w;
     w->SetInputData(surface);
+    vtkNew<vtkLookupTable> colours;
+    if (scalar) {
+      colours->SetHueRange(0.667, 0.0);  // blue to red
+      colours->SetTableRange(0, std::max(scalar_range[1], 1e-6));
+      colours->Build();
+      w->SetArrayName(scalar->name.c_str());
+      w->SetLookupTable(colours);
+      w->SetColorModeToDefault();
+      w->AddComment(scalar->name + ": vertex colour from blue (0) to red (" +
+                    std::to_string(scalar_range[1]) + ")");
+    }
     w->SetFileName(name.c_str());
     ok = w->Write();
   } else {

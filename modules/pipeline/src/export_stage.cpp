@@ -165,6 +165,50 @@ void sample_deformation(const fitting::Deformation& phi, const geometry::ImageGe
 }
 }  // namespace
 
+/// sigma(x) at every voxel centre: computed on a grid of l/4 over the points' box grown
+/// by 5 l (sigma varies over l) and interpolated trilinearly; beyond that box, where no
+/// point informs it (exp(-12.5) of the prior), the prior s itself.
+std::vector<float> sigma_on_grid(const fitting::SurfaceUncertainty& u,
+                                 const geometry::ImageGeometry& g) {
+  const double s = u.options().prior_sd_mm, l = u.options().length_mm;
+  geometry::Aabb box = u.points_box();
+  box.min_mm.array() -= 5 * l, box.max_mm.array() += 5 * l;
+  const geometry::ImageGeometry coarse = geometry::grid_covering(box, l / 4, 0);
+  std::vector<double> values(static_cast<size_t>(coarse.voxel_count()));
+#pragma omp parallel for schedule(dynamic)
+  for (int k = 0; k < coarse.size[2]; ++k)
+    for (int j = 0; j < coarse.size[1]; ++j)
+      for (int i = 0; i < coarse.size[0]; ++i)
+        values[static_cast<size_t>(coarse.linear_index(i, j, k))] =
+            u.sd_mm(coarse.index_to_physical(Eigen::Vector3d(i, j, k)));
+  std::vector<float> out(static_cast<size_t>(g.voxel_count()), static_cast<float>(s));
+  const geometry::IndexRange range = geometry::index_range(g, box, 0);
+#pragma omp parallel for schedule(dynamic)
+  for (int k = range.lo[2]; k <= range.hi[2]; ++k)
+    for (int j = range.lo[1]; j <= range.hi[1]; ++j)
+      for (int i = range.lo[0]; i <= range.hi[0]; ++i) {
+        const Eigen::Vector3d c =
+            coarse.physical_to_index(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+        double v = 0;
+        bool inside = true;
+        for (int corner = 0; corner < 8 && inside; ++corner) {
+          double w = 1;
+          std::array<int, 3> at{};
+          for (int d = 0; d < 3; ++d) {
+            const int lo = static_cast<int>(std::floor(c[d]));
+            const int hi = lo + ((corner >> d) & 1);
+            at[static_cast<size_t>(d)] = hi;
+            w *= ((corner >> d) & 1) ? c[d] - lo : 1 - (c[d] - lo);
+            inside = inside && hi >= 0 && hi < coarse.size[d];
+          }
+          if (inside)
+            v += w * values[static_cast<size_t>(coarse.linear_index(at[0], at[1], at[2]))];
+        }
+        if (inside) out[static_cast<size_t>(g.linear_index(i, j, k))] = static_cast<float>(v);
+      }
+  return out;
+}
+
 PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
                              const dicom::CtSeries* ct, const ExportRequest& r) {
   PendingExport out;
@@ -223,6 +267,18 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
         dicom::write_rtstruct(file, *ct, *rois, options);
       });
     }
+    if (!r.uncertainty.empty()) {
+      if (!r.sigma) throw InputError(r.uncertainty.string() + ": there is no fit to say it of");
+      auto sigma = std::make_shared<std::vector<float>>(sigma_on_grid(*r.sigma, ct->geometry));
+      out.files.push_back(r.uncertainty.filename().string());
+      const std::filesystem::path file = r.uncertainty;
+      out.summary["uncertainty"] = {{"file", file.filename().string()},
+                                    {"maps", "each voxel to sigma (mm) of the surface there"}};
+      const geometry::ImageGeometry grid = ct->geometry;
+      out.writes_.push_back([file, sigma, grid](nlohmann::json&) {
+        itkbridge::write_float_volume(file, grid, *sigma);
+      });
+    }
     if (!r.labels.empty()) {
       out.files.push_back(r.labels.filename().string());
       const std::filesystem::path file = r.labels;
@@ -279,8 +335,13 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     out.summary["model_volume_mm3"] = body->volume_mm3(1);
     out.files.push_back(r.mesh.filename().string());
     const std::filesystem::path file = r.mesh;
-    out.writes_.push_back([file, body](nlohmann::json& summary) {
-      const meshing::SurfaceReport m = meshing::write_surface(*body, file);
+    const auto sigma = r.sigma;
+    out.writes_.push_back([file, body, sigma](nlohmann::json& summary) {
+      const meshing::SurfaceReport m =
+          sigma ? meshing::write_surface(
+                      *body, file, "sigma_mm",
+                      [&sigma](const Eigen::Vector3d& x) { return sigma->sd_mm(x); })
+                : meshing::write_surface(*body, file);
       summary["mesh"] = {{"file", file.filename().string()},
                          {"triangles", m.triangles},
                          {"boundary_edges", m.boundary_edges},

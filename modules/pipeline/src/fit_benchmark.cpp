@@ -69,6 +69,13 @@ struct Row {
   double msd_global_mm = std::numeric_limits<double>::quiet_NaN();  ///< after the global stage
   double msd_undeformed_mm = 0;  ///< the organ left as it was, against the same truth
   std::string global_fit = "";   ///< which global fit was kept (GlobalMap::found_by)
+  /// Ours: the share of the fitted surface within 2 sigma of the truth (all, seen half,
+  /// unseen half) and the median sigma on each half (NaN for the others).
+  double within_2sd = std::numeric_limits<double>::quiet_NaN(),
+         within_2sd_seen = std::numeric_limits<double>::quiet_NaN(),
+         within_2sd_unseen = std::numeric_limits<double>::quiet_NaN(),
+         sigma_seen_mm = std::numeric_limits<double>::quiet_NaN(),
+         sigma_unseen_mm = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// One method at one setting of its effort on one case: a point of the work-precision plot.
@@ -415,6 +422,16 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                   moved = m.state.x;
                   if (fit.placed.cols() == moved.cols())
                     global_map = fit.global_map, placed = fit.placed;
+                  if (method == "spread" && fit.uncertainty && fit.deformation) {
+                    const UncertaintyOnSurface on =
+                        uncertainty_on_surface(model.shape, *fit.deformation, *fit.uncertainty);
+                    const nlohmann::json c = uncertainty_coverage(on, inside, bounds, voxel);
+                    row.within_2sd = c["within_2sd_share"].get<double>();
+                    row.within_2sd_seen = c["seen_within_2sd_share"].get<double>();
+                    row.within_2sd_unseen = c["unseen_within_2sd_share"].get<double>();
+                    row.sigma_seen_mm = on.summary["seen"]["median_mm"].get<double>();
+                    row.sigma_unseen_mm = on.summary["unseen"]["median_mm"].get<double>();
+                  }
                   for (const auto& h : fit.fit.history)
                     curves +=
                         fmt::format("{},{},{},{:.6f},{:.6f},{:.6f}\n", case_id, method, h.step,
@@ -553,16 +570,17 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
       "method,shape,family,magnitude_mm,points,noise_mm,outliers,wall_s,msd_mm,hd95_mm,dice,volume_"
       "change_pct,residual_mm,"
       "converged,msd_balls_mm,volume_change_balls_pct,msd_global_mm,case,global_fit,msd_"
-      "undeformed_mm\n";
+      "undeformed_mm,within_2sd,within_2sd_seen,within_2sd_unseen,sigma_seen_mm,sigma_unseen_mm\n";
   for (const auto& r : rows)
     csv += fmt::format(
         "{},{},{},{},{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{:.4f},{:.4f},{:.4f},{},"
-        "{},{:.4f}"
+        "{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f}"
         "\n",
         r.method, r.shape, r.family, r.magnitude_mm, r.points, r.noise_mm, r.outliers, r.wall_s,
         r.msd_mm, r.hd95_mm, r.dice, r.volume_change_pct, r.residual_mm, r.converged ? 1 : 0,
         r.msd_balls_mm, r.volume_change_balls_pct, r.msd_global_mm, r.case_id, r.global_fit,
-        r.msd_undeformed_mm);
+        r.msd_undeformed_mm, r.within_2sd, r.within_2sd_seen, r.within_2sd_unseen, r.sigma_seen_mm,
+        r.sigma_unseen_mm);
   write_file_atomically(o.out / "results.csv", csv);
   write_file_atomically(o.out / "curves.csv", curves);
   std::string effort_csv = "method,effort,case,wall_s,msd_mm\n";
@@ -731,6 +749,40 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
       md += fmt::format("\nOurs above TPS's MSD: {} of {} cases.\n", worse_than_tps, pairs);
     }
     summary["do_no_harm"] = harm;
+  }
+  // The uncertainty's calibration (ours): the true surface within 2 sigma on at least 90%
+  // of the surface, per case; sigma larger where the points did not see.
+  {
+    std::vector<double> all, seen, unseen, ratio;
+    int calibrated = 0, larger_unseen = 0;
+    for (const auto& r : rows)
+      if (r.method == "spread" && std::isfinite(r.within_2sd)) {
+        all.push_back(r.within_2sd), seen.push_back(r.within_2sd_seen),
+            unseen.push_back(r.within_2sd_unseen);
+        calibrated += r.within_2sd >= 0.9;
+        larger_unseen += r.sigma_unseen_mm > r.sigma_seen_mm;
+        ratio.push_back(r.sigma_unseen_mm / r.sigma_seen_mm);
+      }
+    if (!all.empty()) {
+      summary["uncertainty"] = {
+          {"cases", all.size()},
+          {"within_2sd_at_least_90pct", calibrated},
+          {"sigma_larger_where_unseen", larger_unseen},
+          {"median_within_2sd", median(all)},
+          {"min_within_2sd", *std::min_element(all.begin(), all.end())},
+          {"median_seen_within_2sd", median(seen)},
+          {"median_unseen_within_2sd", median(unseen)},
+          {"min_unseen_within_2sd", *std::min_element(unseen.begin(), unseen.end())},
+          {"median_sigma_unseen_over_seen", median(ratio)}};
+      md += fmt::format(
+          "\n## Uncertainty (ours): the true surface within 2 sigma\n\n{} cases: within 2 sigma "
+          "on at least 90% of the surface in {}; share within 2 sigma median {:.3f} (least "
+          "{:.3f}), seen half {:.3f}, unseen half {:.3f} (least {:.3f}); sigma larger on the "
+          "unseen half in {} (median ratio {:.2f}).\n",
+          all.size(), calibrated, median(all), *std::min_element(all.begin(), all.end()),
+          median(seen), median(unseen), *std::min_element(unseen.begin(), unseen.end()),
+          larger_unseen, median(ratio));
+    }
   }
   write_file_atomically(o.out / "RESULTS.md", md);
   summary["targets"] = {{"cases", n},

@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <Eigen/SVD>
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <sstream>
@@ -132,6 +133,69 @@ geometry::Aabb deformed_bounds(const evaluation::Shape& s, const evaluation::Def
   out.min_mm.array() -= margin;
   out.max_mm.array() += margin;
   return out;
+}
+
+UncertaintyOnSurface uncertainty_on_surface(const evaluation::Shape& planning,
+                                            const fitting::Deformation& phi,
+                                            const fitting::SurfaceUncertainty& u) {
+  UncertaintyOnSurface r;
+  evaluation::SamplingOptions so;
+  so.count = 4000;
+  so.noise_mm = 0;
+  for (const auto& p : evaluation::sample_deformed_surface(planning, evaluation::Deformation{}, so))
+    r.surface.push_back(phi.push_forward(p.p_mm));
+  for (const auto& y : r.surface) {
+    r.sigma.push_back(u.sd_mm(y));
+    r.nearest.push_back(u.nearest_point_mm(y));
+  }
+  std::vector<double> by_distance = r.nearest;
+  std::nth_element(by_distance.begin(), by_distance.begin() + by_distance.size() / 2,
+                   by_distance.end());
+  r.split_mm = by_distance.empty() ? 0.0 : by_distance[by_distance.size() / 2];
+  auto quantiles = [&](int half) {  // -1: all, 0: seen, 1: unseen
+    std::vector<double> v;
+    for (size_t i = 0; i < r.sigma.size(); ++i)
+      if (half < 0 || r.unseen(i) == (half == 1)) v.push_back(r.sigma[i]);
+    std::sort(v.begin(), v.end());
+    auto q = [&v](double f) {
+      return v.empty() ? 0.0 : v[static_cast<size_t>(f * (v.size() - 1))];
+    };
+    return nlohmann::json{{"median_mm", q(0.5)}, {"p95_mm", q(0.95)}};
+  };
+  const auto& o = u.options();
+  r.summary = {{"method", "Gaussian-process posterior of the surface's normal error"},
+               {"prior_sd_mm", o.prior_sd_mm},
+               {"length_mm", o.length_mm},
+               {"noise_sd_mm", o.noise_sd_mm},
+               {"surface_samples", r.sigma.size()},
+               {"seen_half_within_mm", r.split_mm},
+               {"all", quantiles(-1)},
+               {"seen", quantiles(0)},
+               {"unseen", quantiles(1)}};
+  return r;
+}
+
+nlohmann::json uncertainty_coverage(const UncertaintyOnSurface& s,
+                                    const std::function<bool(const Eigen::Vector3d&)>& truth_inside,
+                                    const geometry::Aabb& truth_bounds, double voxel_mm) {
+  geometry::LabelVolume truth(geometry::grid_covering(truth_bounds, voxel_mm, 4 * voxel_mm));
+  const auto& g = truth.geometry;
+#pragma omp parallel for schedule(dynamic)
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        truth.at(i, j, k) = truth_inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  const geometry::SignedDistance to_truth(truth, false);
+  int within[3] = {0, 0, 0}, count[3] = {0, 0, 0};
+  for (size_t i = 0; i < s.surface.size(); ++i) {
+    const bool ok = std::abs(to_truth.at(s.surface[i])) <= 2 * s.sigma[i];
+    const int half = s.unseen(i) ? 2 : 1;
+    within[0] += ok, ++count[0], within[half] += ok, ++count[half];
+  }
+  auto share = [&](int h) { return count[h] ? double(within[h]) / count[h] : 0.0; };
+  return {{"within_2sd_share", share(0)},
+          {"seen_within_2sd_share", share(1)},
+          {"unseen_within_2sd_share", share(2)}};
 }
 
 FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model,
@@ -399,6 +463,25 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
                      {"skin_particles", skin_of(state.x).size()},
                      {"finite", state.x.allFinite()}};
   if (!global.is_null()) out.fit_summary["global"] = global;
+  // The uncertainty (fitting/surface_uncertainty.h): n the noise the fit accepts, l the
+  // deformation's own support (one point informs the field that far), s^2 the stated
+  // prior of unseen local change plus the mean square of the local change the points
+  // did show (the part beyond the global map).
+  std::vector<Eigen::Vector3d> point_positions;
+  double local_sq = 0;
+  for (const auto& p : points) {
+    point_positions.push_back(p.p_mm);
+    local_sq += (phi.global_map().apply(phi.pull_back(p.p_mm)) - p.p_mm).squaredNorm();
+  }
+  fitting::SurfaceUncertaintyOptions uo;
+  const double s0 = scene.number("fit", "unseen_change_sd_mm");
+  uo.prior_sd_mm = std::sqrt(s0 * s0 + (points.empty() ? 0.0 : local_sq / points.size()));
+  uo.length_mm = phi.support_mm();
+  uo.noise_sd_mm = fo.residual_mean_tolerance_mm;
+  out.uncertainty = std::make_shared<const fitting::SurfaceUncertainty>(point_positions, uo);
+  const UncertaintyOnSurface on_surface =
+      uncertainty_on_surface(model.shape, phi, *out.uncertainty);
+  out.fit_summary["uncertainty"] = on_surface.summary;
   if (pts.truth && scene.flag("fit", "measure_truth")) {
     spdlog::info("fit: done in {} steps; measuring it against the known deformation ({} mm grid)",
                  out.fit.steps, truth_voxel);
@@ -441,6 +524,9 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
          {{"msd_mm", fitted_balls.msd_mm},
           {"hd95_mm", fitted_balls.hd95_mm},
           {"dice", fitted_balls.dice}}}};
+    out.truth_summary["uncertainty"] =
+        uncertainty_coverage(on_surface, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
+                             deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
     out.truth_wall_s = truth_clock.elapsed_s();
     out.truth_summary["wall_s"] = out.truth_wall_s;
   }

@@ -37,6 +37,11 @@ std::string build_report(const ReportContext& c) {
   if (c.show_patient && c.ct)
     in.patient = c.ct->patient.patient_name + " (ID " + c.ct->patient.patient_id + ")";
   Progress progress("report", 2);
+  std::function<double(const Eigen::Vector3d&)> sigma;
+  if (c.uncertainty) {
+    in.sigma_scale_mm = c.uncertainty->options().prior_sd_mm;
+    sigma = [u = c.uncertainty](const Eigen::Vector3d& x) { return u->sd_mm(x); };
+  }
   if (c.fitted) {
     // The fitted surface as the mesh export makes it (the organ on a grid of rho).
     const geometry::LabelVolume body =
@@ -46,6 +51,10 @@ std::string build_report(const ReportContext& c) {
     meshing::SurfaceMesh mesh = meshing::surface_mesh(body);
     progress.update(1, "the 3D view");
     in.surface_vertex_mm = std::move(mesh.vertex_mm);
+    if (c.uncertainty)
+      for (size_t v = 0; v + 2 < in.surface_vertex_mm.size(); v += 3)
+        in.surface_sigma_mm.push_back(static_cast<float>(c.uncertainty->sd_mm(Eigen::Vector3d(
+            in.surface_vertex_mm[v], in.surface_vertex_mm[v + 1], in.surface_vertex_mm[v + 2]))));
     in.surface_triangles = std::move(mesh.triangle_ids);
   }
   if (c.ct && c.fitted) {
@@ -79,13 +88,13 @@ std::string build_report(const ReportContext& c) {
       // Every axial slice through the organ (planning or fitted), browsable.
       for (int k = organ_lo[2]; k <= organ_hi[2]; ++k)
         in.axial.push_back(report::slice_view(g, c.ct->hu, report::Plane::kAxial, k, lo, hi, plan,
-                                              &fitted, c.points_mm, c.residuals_mm, slab));
+                                              &fitted, c.points_mm, c.residuals_mm, slab, sigma));
       in.axial_shown = static_cast<int>(std::lround(centroid[2])) - organ_lo[2];
       for (auto [plane, axis] :
            {std::pair{report::Plane::kCoronal, 1}, std::pair{report::Plane::kSagittal, 0}})
-        in.views.push_back(report::slice_view(g, c.ct->hu, plane,
-                                              static_cast<int>(std::lround(centroid[axis])), lo, hi,
-                                              plan, &fitted, c.points_mm, c.residuals_mm, slab));
+        in.views.push_back(
+            report::slice_view(g, c.ct->hu, plane, static_cast<int>(std::lround(centroid[axis])),
+                               lo, hi, plan, &fitted, c.points_mm, c.residuals_mm, slab, sigma));
     }
   }
   progress.update(2, "the CT views");

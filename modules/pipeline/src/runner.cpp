@@ -65,7 +65,8 @@ std::set<std::string> names_written(const config::Scene& scene) {
     names.insert("cache/");
   if (scene.has_section("fit")) names.insert("history.csv");
   if (scene.has_section("export"))
-    for (const char* key : {"rtstruct", "labels", "mesh", "model"})
+    for (const char* key : {"rtstruct", "labels", "mesh", "model", "displacement_field",
+                            "registration", "jacobian", "uncertainty"})
       if (!scene.text("export", key).empty()) names.insert(scene.text("export", key));
   if (scene.has_section("ultrasound") && !scene.text("ultrasound", "save_volume").empty())
     names.insert(scene.text("ultrasound", "save_volume"));
@@ -394,8 +395,9 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   }
   std::vector<std::pair<std::string, std::string>> files;  // name, content
   std::string not_converged;
-  bool deformation_folds = false;                           // then nothing is exported
-  std::shared_ptr<const fitting::Deformation> deformation;  // the fit's, when it ran
+  bool deformation_folds = false;                                  // then nothing is exported
+  std::shared_ptr<const fitting::Deformation> deformation;         // the fit's, when it ran
+  std::shared_ptr<const fitting::SurfaceUncertainty> uncertainty;  // idem
   // The organ the model carries: through the fit's deformation, made once.
   auto organ_of_model = [&] {
     return deformation ? organ_body(*model, deformation) : organ_body(*model);
@@ -456,6 +458,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     not_converged = fit.not_converged_message;
     deformation_folds = fit.deformation_folds;
     deformation = fit.deformation;
+    uncertainty = fit.uncertainty;
     if (!not_converged.empty()) run["warnings"].push_back(not_converged);
   }
   // Export: the (fitted) model on the planning CT's grid (RTSTRUCT, labels), its surface
@@ -475,6 +478,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     request.mesh = in_out("mesh");
     request.displacement_field = in_out("displacement_field");
     request.jacobian = in_out("jacobian");
+    request.uncertainty = in_out("uncertainty");
+    request.sigma = uncertainty;
     request.registration = in_out("registration");
     request.field_spacing_mm = scene.number("export", "field_spacing_mm");
     request.roi_name = scene.text("export", "roi_name");
@@ -631,6 +636,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
       for (const auto& p : points->points)
         context.points_mm.push_back(p.p_mm);
     context.residuals_mm = residuals_mm;
+    context.uncertainty = uncertainty.get();
     context.show_patient = scene.flag("report", "show_patient") && run_options.show_phi;
     if (scene.flag("report", "show_patient") && !run_options.show_phi)
       warn(

@@ -279,6 +279,10 @@ config::Schema build_schema() {
       .number("max_global_stretch", 1.5, "", 1.0, 10.0,
               "spread: refuse points that ask the whole organ to stretch more than this")
       .used_when({{"fit.method", {"spread"}}})
+      .number("unseen_change_sd_mm", 1.7, "mm", 0.0, 50.0,
+              "the uncertainty's prior: how far the surface may change locally where no point "
+              "is (1.7 mm: the prostate between fractions, Nakazawa et al. 2015)",
+              true)
       .number("global_shear_field_mm", 10.0, "mm", 0.0, 100.0,
               "spread: width of the smooth shears the global map may add (0 = none)")
       .used_when({{"fit.method", {"spread"}}});
@@ -304,6 +308,10 @@ config::Schema build_schema() {
       .text("jacobian", "",
             "det(grad phi) file name inside --out, .nrrd or .mha, on the planning CT's grid "
             "(empty: none)")
+      .text("uncertainty", "",
+            "sigma file name inside --out, .nrrd or .mha, on the planning CT's grid: the "
+            "standard deviation (mm) of where the true surface may lie (run.json "
+            "fit.uncertainty; needs a fit; empty: none)")
       .text("roi_name", "", "name of the exported ROI (default: the organ's ROI name + _fit)")
       .vec3("roi_color", Eigen::Vector3d(-1, -1, -1), "", -1.0,
             "display colour R, G, B (0-255) of the exported ROI; [-1, -1, -1]: the source ROI's")
@@ -484,10 +492,10 @@ void check_scene_rules(const config::Scene& scene) {
                  "add a 'ct' section");
     if (!has_model)
       scene.fail("export", "rtstruct", "export needs a 'model' (or 'planning') to export");
-    if (!writes({"rtstruct", "labels", "mesh", "model"}) && !deformation_files)
+    if (!writes({"rtstruct", "labels", "mesh", "model", "uncertainty"}) && !deformation_files)
       scene.fail("export", "rtstruct",
                  "the export section names nothing to write (rtstruct, labels, mesh, "
-                 "displacement_field, registration, jacobian or model)");
+                 "displacement_field, registration, jacobian, uncertainty or model)");
     if (scene.flag("export", "copy_other_rois") &&
         !(scene.has_section("planning") ||
           (scene.has_section("organ") && scene.text("organ", "source") == "rtstruct")))
@@ -501,8 +509,12 @@ void check_scene_rules(const config::Scene& scene) {
       scene.fail("export", "field_spacing_mm",
                  "sets the grid of export.displacement_field, registration and jacobian, none "
                  "of which is written");
+    if (writes({"uncertainty"}) && !scene.has_section("fit"))
+      scene.fail("export", "uncertainty", "the uncertainty is the fit's: add a 'fit' section");
+    if (writes({"uncertainty"}) && !has_ct && !scene.has_section("planning"))
+      scene.fail("export", "uncertainty", "written on the planning CT's grid: add a 'ct' section");
     for (const char* key : {"rtstruct", "labels", "mesh", "model", "displacement_field",
-                            "registration", "jacobian"}) {
+                            "registration", "jacobian", "uncertainty"}) {
       const std::string& name = scene.text("export", key);
       if (name.find('/') != std::string::npos || name == "." || name == "..")
         scene.fail("export", key, "a file name inside --out, without folders");

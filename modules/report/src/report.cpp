@@ -175,7 +175,14 @@ std::string history_svg(const std::vector<HistoryRow>& rows) {
 
 /// A plane as SVG: one image per window (the page's CSS shows the chosen one), the
 /// contours and points on top, the patient's directions at the edges.
-std::string view_svg(const SliceView& v, const std::string& attributes = "") {
+/// The uncertainty's colour: blue (0) to red (`scale_mm` and above).
+std::string sigma_colour(double sigma_mm, double scale_mm) {
+  const double f = std::clamp(sigma_mm / std::max(scale_mm, 1e-6), 0.0, 1.0);
+  return fmt::format("hsl({:.0f},85%,50%)", 240 * (1 - f));
+}
+
+std::string view_svg(const SliceView& v, double sigma_scale_mm,
+                     const std::string& attributes = "") {
   const double w = v.width * v.pixel_w_mm, h = v.height * v.pixel_h_mm;
   const double scale = 420.0 / std::max(w, h);  // screen pixels per mm
   std::string svg = fmt::format(
@@ -198,8 +205,22 @@ std::string view_svg(const SliceView& v, const std::string& attributes = "") {
   for (const auto& line : v.planning)
     svg += outline(line, "#ffd400",
                    fmt::format("stroke-dasharray=\"{:.2f},{:.2f}\"", 4 / scale, 3 / scale).c_str());
-  for (const auto& line : v.fitted)
-    svg += outline(line, "#00c8ff", "");
+  for (size_t l = 0; l < v.fitted.size(); ++l) {
+    const auto& line = v.fitted[l];
+    if (l < v.fitted_sigma_mm.size() && line.size() > 1) {
+      // Coloured by sigma, segment by segment (each the mean of its two ends).
+      const auto& s = v.fitted_sigma_mm[l];
+      for (size_t i = 0; i < line.size(); ++i) {
+        const size_t j = (i + 1) % line.size();
+        svg += fmt::format(
+            R"x(<line x1="{:.2f}" y1="{:.2f}" x2="{:.2f}" y2="{:.2f}" stroke="{}" stroke-width="{:.2f}"/>)x",
+            line[i].x(), line[i].y(), line[j].x(), line[j].y(),
+            sigma_colour(0.5 * (s[i] + s[j]), sigma_scale_mm), 2.2 / scale);
+      }
+    } else {
+      svg += outline(line, "#00c8ff", "");
+    }
+  }
   for (const auto& p : v.points)
     svg += fmt::format(
         R"x(<circle cx="{:.2f}" cy="{:.2f}" r="{:.2f}" fill="{}" stroke="black" stroke-width="{:.2f}"><title>residual {:.2f} mm</title></circle>)x",
@@ -218,7 +239,8 @@ constexpr const char* kViewerScript = R"JS(
   const data = JSON.parse(document.getElementById('surface-data').textContent);
   const canvas = document.getElementById('surface');
   const ctx = canvas.getContext('2d');
-  const v = data.v, t = data.t, pts = data.p;
+  const v = data.v, t = data.t, pts = data.p, sig = data.s || null;
+  const sigMax = Math.max(data.smax || 0, 1e-6);
   const n = v.length / 3;
   let c = [0, 0, 0];
   for (let i = 0; i < n; i++) for (let d = 0; d < 3; d++) c[d] += v[3 * i + d] / n;
@@ -259,7 +281,13 @@ constexpr const char* kViewerScript = R"JS(
       const nx = uy * wz - uz * wy, ny = uz * wx - ux * wz, nz = ux * wy - uy * wx;
       const len = Math.hypot(nx, ny, nz) || 1;
       const shade = 0.25 + 0.75 * Math.abs(nz / len);
-      ctx.fillStyle = `rgb(${Math.round(60 * shade)},${Math.round(170 * shade)},${Math.round(230 * shade)})`;
+      if (sig) {
+        // sigma: blue (0) to red (its largest), the hue of the triangle's mean.
+        const f = Math.min(1, (sig[t[k]] + sig[t[k + 1]] + sig[t[k + 2]]) / (3 * sigMax));
+        ctx.fillStyle = `hsl(${Math.round(240 * (1 - f))},80%,${Math.round(20 + 40 * shade)}%)`;
+      } else {
+        ctx.fillStyle = `rgb(${Math.round(60 * shade)},${Math.round(170 * shade)},${Math.round(230 * shade)})`;
+      }
       ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.lineTo(q[0], q[1]); ctx.closePath(); ctx.fill();
     }
   }
@@ -400,31 +428,41 @@ std::string report_html(const ReportInput& in) {
                            {"Send failed", "export.send_failed"}}) +
         "</div>";
   if (run.contains("fit"))
-    html += "<div><h3>Fit</h3>" +
-            fields_table(
-                run, {{"Method", "fit.method"},
-                      {"Converged", "fit.converged"},
-                      {"Stopped because", "fit.stop_reason"},
-                      {"Attractive points", "fit.attractive_points"},
-                      {"Rejected as outliers", "fit.rejected_points"},
-                      {"Mean distance to the points", "fit.residual_mean_mm", "mm", 2},
-                      {"95th percentile", "fit.residual_p95_mm", "mm", 2},
-                      {"Largest", "fit.residual_max_mm", "mm", 2},
-                      {"Volume change (deformation)", "fit.volume_change_pct", "%", 2},
-                      {"Volume change (voxels counted)", "fit.volume_change_counted_pct", "%", 2},
-                      {"Fit time", "fit.wall_s", "s", 2}}) +
-            "</div>";
+    html +=
+        "<div><h3>Fit</h3>" +
+        fields_table(
+            run,
+            {{"Method", "fit.method"},
+             {"Converged", "fit.converged"},
+             {"Stopped because", "fit.stop_reason"},
+             {"Attractive points", "fit.attractive_points"},
+             {"Rejected as outliers", "fit.rejected_points"},
+             {"Mean distance to the points", "fit.residual_mean_mm", "mm", 2},
+             {"95th percentile", "fit.residual_p95_mm", "mm", 2},
+             {"Largest", "fit.residual_max_mm", "mm", 2},
+             {"Volume change (deformation)", "fit.volume_change_pct", "%", 2},
+             {"Volume change (voxels counted)", "fit.volume_change_counted_pct", "%", 2},
+             {"Fit time", "fit.wall_s", "s", 2},
+             {"Uncertainty sigma, median where seen", "fit.uncertainty.seen.median_mm", "mm", 2},
+             {"Uncertainty sigma, median where unseen", "fit.uncertainty.unseen.median_mm", "mm",
+              2},
+             {"Uncertainty sigma, 95th percentile", "fit.uncertainty.all.p95_mm", "mm", 2}}) +
+        "</div>";
   if (run.contains("truth"))
-    html += "<div><h3>Against the known truth</h3>" +
-            fields_table(
-                run, {{"Mean surface distance", "truth.msd_mm", "mm", 2},
-                      {"95% Hausdorff distance", "truth.hd95_mm", "mm", 2},
-                      {"Dice", "truth.dice", "", 3},
-                      {"Left as it was: mean surface distance", "truth.msd_undeformed_mm", "mm", 2},
-                      {"Left as it was: 95% Hausdorff", "truth.hd95_undeformed_mm", "mm", 2},
-                      {"The grid's own floor", "truth.msd_floor_mm", "mm", 2},
-                      {"Share of the change recovered", "truth.recovery", "", 2}}) +
-            "</div>";
+    html +=
+        "<div><h3>Against the known truth</h3>" +
+        fields_table(
+            run,
+            {{"Mean surface distance", "truth.msd_mm", "mm", 2},
+             {"95% Hausdorff distance", "truth.hd95_mm", "mm", 2},
+             {"Dice", "truth.dice", "", 3},
+             {"Left as it was: mean surface distance", "truth.msd_undeformed_mm", "mm", 2},
+             {"Left as it was: 95% Hausdorff", "truth.hd95_undeformed_mm", "mm", 2},
+             {"The grid's own floor", "truth.msd_floor_mm", "mm", 2},
+             {"Share of the change recovered", "truth.recovery", "", 2},
+             {"True surface within 2 sigma (share)", "truth.uncertainty.within_2sd_share", "", 3},
+             {"... where unseen", "truth.uncertainty.unseen_within_2sd_share", "", 3}}) +
+        "</div>";
   if (run.contains("organ"))
     html += "<div><h3>Planning organ</h3>" +
             fields_table(run, {{"ROI", "organ.roi"},
@@ -488,7 +526,13 @@ std::string report_html(const ReportInput& in) {
                           &w == &windows[static_cast<size_t>(chosen)] ? "on" : "", w.name);
     html +=
         "</p><p class=\"legend\"><span style=\"color:#b59600\">- - "
-        "planning contour</span><span style=\"color:#0096c8\">&mdash; fitted contour</span>"
+        "planning contour</span><span style=\"color:#0096c8\">&mdash; fitted contour" +
+        (in.sigma_scale_mm > 0
+             ? fmt::format(" (coloured by sigma: <b style=\"color:hsl(240,85%,50%)\">0</b> to "
+                           "<b style=\"color:hsl(0,85%,50%)\">{:.2f} mm</b>)",
+                           in.sigma_scale_mm)
+             : std::string()) +
+        "</span>"
         "<span>points by residual: <b style=\"color:#2ca02c\">&lt; 1 mm</b>, <b "
         "style=\"color:#ff9f1c\">&lt; 2 mm</b>, <b style=\"color:#d62728\">&ge; 2 "
         "mm</b></span></p><div class=\"grid\">";
@@ -501,12 +545,12 @@ std::string report_html(const ReportInput& in) {
           in.axial.size() - 1, shown_first);
       for (size_t i = 0; i < in.axial.size(); ++i)
         html += view_svg(
-            in.axial[i],
+            in.axial[i], in.sigma_scale_mm,
             fmt::format("class=\"axial{}\"", static_cast<int>(i) == shown_first ? " current" : ""));
       html += "</div>";
     }
     for (const auto& v : in.views)
-      html += view_svg(v);
+      html += view_svg(v, in.sigma_scale_mm);
     html += "</div>\n";
   }
   if (!in.surface_triangles.empty()) {
@@ -517,6 +561,13 @@ std::string report_html(const ReportInput& in) {
       v.push_back(std::round(x * 100.0) / 100.0);
     data["v"] = v;
     data["t"] = in.surface_triangles;
+    if (!in.surface_sigma_mm.empty()) {
+      std::vector<double> s;
+      for (float x : in.surface_sigma_mm)
+        s.push_back(std::round(x * 100.0) / 100.0);
+      data["s"] = s;
+      data["smax"] = in.sigma_scale_mm;
+    }
     nlohmann::json pts = nlohmann::json::array();
     for (size_t p = 0; p < in.points_mm.size(); ++p)
       pts.push_back({in.points_mm[p].x(), in.points_mm[p].y(), in.points_mm[p].z(),
@@ -524,9 +575,15 @@ std::string report_html(const ReportInput& in) {
     data["p"] = pts;
     std::string json = data.dump();
     // Inside <script>, "</" must not appear: JSON numbers and arrays never produce it.
-    html +=
-        "<h2>Fitted surface</h2><p>Drag to turn. Points coloured by residual.</p><canvas "
-        "id=\"surface\" width=\"640\" height=\"480\"></canvas>\n";
+    html += "<h2>Fitted surface</h2><p>Drag to turn. Points coloured by residual." +
+            (in.surface_sigma_mm.empty()
+                 ? std::string()
+                 : fmt::format(" The surface coloured by its uncertainty sigma, the standard "
+                               "deviation of where the true surface may lie: blue 0 mm to red "
+                               "{:.2f}&nbsp;mm (the prior: no point near).",
+                               in.sigma_scale_mm)) +
+            "</p><canvas "
+            "id=\"surface\" width=\"640\" height=\"480\"></canvas>\n";
     html += "<script type=\"application/json\" id=\"surface-data\">" + json +
             "</script>\n<script>" + kViewerScript + "</script>\n";
   } else {

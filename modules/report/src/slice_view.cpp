@@ -82,7 +82,8 @@ SliceView slice_view(const geometry::ImageGeometry& g, const std::vector<float>&
                      int index, const std::array<int, 3>& lo, const std::array<int, 3>& hi,
                      const geometry::LabelVolume* planning, const geometry::LabelVolume* fitted,
                      const std::vector<Eigen::Vector3d>& points_mm,
-                     const std::vector<double>& residuals_mm, double slab_mm) {
+                     const std::vector<double>& residuals_mm, double slab_mm,
+                     const std::function<double(const Eigen::Vector3d&)>& sigma_mm) {
   // The view's columns run along axis `ca` (increasing), its rows down along axis `ra`
   // (increasing for axial, decreasing k for the others: superior at the top).
   const int normal = plane == Plane::kAxial ? 2 : plane == Plane::kCoronal ? 1 : 0;
@@ -146,6 +147,20 @@ SliceView slice_view(const geometry::ImageGeometry& g, const std::vector<float>&
   };
   if (planning) v.planning = outlines(plan2d);
   if (fitted) v.fitted = outlines(fit2d);
+  if (sigma_mm)
+    for (const auto& line : v.fitted) {
+      // Back from the view's mm to the CT's voxel index, then to patient mm.
+      std::vector<double> values;
+      for (const auto& p : line) {
+        const double c = p.x() / v.pixel_w_mm - 0.5, r = p.y() / v.pixel_h_mm - 0.5;
+        Eigen::Vector3d ijk;
+        ijk[normal] = index;
+        ijk[ca] = lo[ca] + c;
+        ijk[ra] = rows_down ? lo[ra] + r : hi[ra] - r;
+        values.push_back(sigma_mm(g.index_to_physical(ijk)));
+      }
+      v.fitted_sigma_mm.push_back(std::move(values));
+    }
   for (size_t p = 0; p < points_mm.size(); ++p) {
     const Eigen::Vector3d idx = g.physical_to_index(points_mm[p]);
     if (std::abs(idx[normal] - index) * g.spacing_mm[normal] > slab_mm) continue;

@@ -2,6 +2,7 @@
 // Plain inputs for the VTK side (no Eigen, as for the ITK bridge).
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -21,10 +22,19 @@ struct PlainSurfaceReport {
   std::vector<int> triangle_ids;  ///< three point indices per triangle (idem)
 };
 
+/// A value at each point of the written surface (e.g. the uncertainty, sigma_mm).
+struct PointScalar {
+  std::string name;                            ///< the point array's name
+  std::function<double(const double*)> at_mm;  ///< its value at x, y, z (mm)
+};
+
 /// Surface of the mask written to `file` (none when empty); with `keep_mesh` the
-/// report carries the triangles. Throws InputError (VTK side).
+/// report carries the triangles; with `scalar` the points carry it: a point array in
+/// .vtp, vertex colours in .ply (blue 0 to red at its largest; the range in a header
+/// comment: VTK 9.1's PLY writer has no scalar properties), nothing in .stl and .obj.
+/// Throws InputError (VTK side).
 PlainSurfaceReport vtk_write_surface(const PlainMask& mask, const std::string& file,
-                                     bool keep_mesh = false);
+                                     bool keep_mesh = false, const PointScalar* scalar = nullptr);
 
 struct PlainPointSet {
   std::vector<double> xyz_mm;      ///< x, y, z per point

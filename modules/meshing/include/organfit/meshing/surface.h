@@ -9,6 +9,7 @@
 // The mask is padded by one empty voxel so the surface closes at the grid's border.
 #include <array>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -29,6 +30,11 @@ struct SurfaceReport {
 /// InputError naming the file on an unknown extension or a failed write, or when the
 /// mask is empty.
 SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesystem::path& file);
+/// The same with a value at each point (`name`, e.g. sigma_mm): a point array in .vtp,
+/// vertex colours in .ply (blue 0 to red at its largest), nothing in .stl and .obj.
+SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesystem::path& file,
+                            const std::string& name,
+                            const std::function<double(const Eigen::Vector3d&)>& value);
 
 /// The same surface as triangles, not written (for the report's 3D view).
 struct SurfaceMesh {

@@ -35,6 +35,7 @@
 #include "organfit/dicom/ct_series.h"
 #include "organfit/dicom/structure_set.h"
 #include "organfit/fitting/embedded_body.h"
+#include "organfit/fitting/surface_uncertainty.h"
 #include "organfit/particles/state.h"
 
 namespace organfit::pipeline {
@@ -43,6 +44,9 @@ struct ExportRequest {
   std::filesystem::path rtstruct, labels, mesh;        ///< empty: not written
   std::filesystem::path displacement_field, jacobian;  ///< empty: not written
   std::filesystem::path registration;                  ///< DICOM REG; empty: not written
+  std::filesystem::path uncertainty;  ///< sigma (mm) on the CT's grid; empty: not written
+  /// The fit's uncertainty: written as `uncertainty`, and as the mesh's sigma_mm points.
+  std::shared_ptr<const fitting::SurfaceUncertainty> sigma;
   /// The grid of the displacement field, REG and Jacobian: 0, the planning CT's; else one
   /// of this spacing (mm) on every axis over the CT's box (its origin and axes).
   double field_spacing_mm = 0;
@@ -58,7 +62,7 @@ struct ExportRequest {
 
   /// Files written on the planning CT's grid (an RT Structure Set, a label map) and files
   /// of the deformation on it or over its box: each needs the planning CT.
-  bool on_ct_grid() const { return !rtstruct.empty() || !labels.empty(); }
+  bool on_ct_grid() const { return !rtstruct.empty() || !labels.empty() || !uncertainty.empty(); }
   bool deformation_files() const {
     return !displacement_field.empty() || !registration.empty() || !jacobian.empty();
   }

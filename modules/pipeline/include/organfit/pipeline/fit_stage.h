@@ -1,6 +1,7 @@
 #pragma once
 // The points stage (generate on a known deformation, or read a file) and the fit stage.
 #include <filesystem>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
 
@@ -8,6 +9,7 @@
 #include "organfit/evaluation/synthetic.h"
 #include "organfit/fitting/fit.h"
 #include "organfit/fitting/global_fit.h"
+#include "organfit/fitting/surface_uncertainty.h"
 #include "organfit/pipeline/model_stage.h"
 #include "organfit/pipeline/points_file.h"
 
@@ -48,6 +50,8 @@ struct FitStageResult {
   bool deformation_folds = false;
   /// The fitted deformation (what the export and the report show the organ through).
   std::shared_ptr<const fitting::Deformation> deformation;
+  /// Where the true surface may lie given the points (run.json fit.uncertainty).
+  std::shared_ptr<const fitting::SurfaceUncertainty> uncertainty;
   /// How the organ's reference body follows the particles (fitting/embedded_body.h):
   /// the global map (identity for the paper's method) and where the particles were
   /// placed before the local stage.
@@ -55,6 +59,29 @@ struct FitStageResult {
   particles::Positions placed;
   double truth_wall_s = 0;  ///< measuring against the known truth (not part of the update)
 };
+
+/// The fit's uncertainty on the fitted surface: 4,000 samples of the planning surface
+/// carried by phi, sigma at each, split at the median distance to the nearest point into
+/// the half the points saw and the half they did not; `summary` is run.json's
+/// fit.uncertainty (prior, length, noise; median and 95th percentile of sigma, all, seen,
+/// unseen).
+struct UncertaintyOnSurface {
+  std::vector<Eigen::Vector3d> surface;
+  std::vector<double> sigma, nearest;
+  double split_mm = 0;
+  nlohmann::json summary;
+  bool unseen(size_t i) const { return nearest[i] > split_mm; }
+};
+UncertaintyOnSurface uncertainty_on_surface(const evaluation::Shape& planning,
+                                            const fitting::Deformation& phi,
+                                            const fitting::SurfaceUncertainty& u);
+
+/// Its calibration against a known truth: the share of the samples whose distance to the
+/// true surface (its inside rasterised at `voxel_mm` over `truth_bounds`) is at most 2
+/// sigma; all, seen half, unseen half.
+nlohmann::json uncertainty_coverage(const UncertaintyOnSurface& on_surface,
+                                    const std::function<bool(const Eigen::Vector3d&)>& truth_inside,
+                                    const geometry::Aabb& truth_bounds, double voxel_mm);
 
 FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model,
                              const PointsStageResult& points);

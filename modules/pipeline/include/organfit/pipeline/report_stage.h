@@ -8,6 +8,7 @@
 #include "organfit/dicom/ct_series.h"
 #include "organfit/evaluation/synthetic.h"
 #include "organfit/fitting/embedded_body.h"
+#include "organfit/fitting/surface_uncertainty.h"
 #include "organfit/particles/state.h"
 
 namespace organfit::pipeline {
@@ -26,6 +27,8 @@ struct ReportContext {
   const geometry::LabelVolume* fitted_on_mesh_grid = nullptr;
   std::vector<Eigen::Vector3d> points_mm;
   std::vector<double> residuals_mm;
+  /// The fit's uncertainty (null: none): the 3D view and the fitted contours coloured by it.
+  const fitting::SurfaceUncertainty* uncertainty = nullptr;
   bool show_patient = false;  ///< the scene asked for name and ID
 };
 

@@ -18,6 +18,7 @@
 // No patient name or ID appears unless `patient` is given (the scene asks for it).
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -61,6 +62,8 @@ struct SliceView {
   /// One image per window of ct_windows(): width x height, row-major, top row first.
   std::vector<std::vector<std::uint8_t>> gray;
   std::vector<std::vector<Eigen::Vector2d>> planning, fitted;  ///< closed polylines, mm
+  /// The uncertainty at each vertex of `fitted` (empty: not given).
+  std::vector<std::vector<double>> fitted_sigma_mm;
   std::vector<ViewPoint> points;
   std::string left, right, top, bottom;  ///< patient directions at the edges (L, R, A, P, S, I)
 };
@@ -76,7 +79,8 @@ SliceView slice_view(const geometry::ImageGeometry& ct, const std::vector<float>
                      const std::array<int, 3>& crop_hi, const geometry::LabelVolume* planning,
                      const geometry::LabelVolume* fitted,
                      const std::vector<Eigen::Vector3d>& points_mm,
-                     const std::vector<double>& residuals_mm, double slab_mm);
+                     const std::vector<double>& residuals_mm, double slab_mm,
+                     const std::function<double(const Eigen::Vector3d&)>& sigma_mm = {});
 
 struct ReportInput {
   nlohmann::json run;                    ///< run.json as written
@@ -88,6 +92,8 @@ struct ReportInput {
   WindowChoice window;                   ///< the window shown first
   std::vector<float> surface_vertex_mm;  ///< fitted surface, x y z per vertex
   std::vector<int> surface_triangles;    ///< three indices per triangle
+  std::vector<float> surface_sigma_mm;   ///< the uncertainty per vertex (empty: none)
+  double sigma_scale_mm = 0;             ///< the colour scale's top (red): the uncertainty's prior
   std::vector<Eigen::Vector3d> points_mm;
   std::vector<double> residuals_mm;
   std::string patient;  ///< empty: no patient name or ID in the page
