@@ -142,11 +142,17 @@ UncertaintyOnSurface uncertainty_on_surface(const evaluation::Shape& planning,
   evaluation::SamplingOptions so;
   so.count = 4000;
   so.noise_mm = 0;
-  for (const auto& p : evaluation::sample_deformed_surface(planning, evaluation::Deformation{}, so))
-    r.surface.push_back(phi.push_forward(p.p_mm));
-  for (const auto& y : r.surface) {
-    r.sigma.push_back(u.sd_mm(y));
-    r.nearest.push_back(u.nearest_point_mm(y));
+  const auto samples = evaluation::sample_deformed_surface(planning, evaluation::Deformation{}, so);
+  const auto n = static_cast<long>(samples.size());
+  r.surface.resize(samples.size());
+  r.sigma.resize(samples.size());
+  r.nearest.resize(samples.size());
+#pragma omp parallel for schedule(dynamic, 64)
+  for (long i = 0; i < n; ++i) {
+    const auto k = static_cast<size_t>(i);
+    r.surface[k] = phi.push_forward(samples[k].p_mm);
+    r.sigma[k] = u.sd_mm(r.surface[k]);
+    r.nearest[k] = u.nearest_point_mm(r.surface[k]);
   }
   std::vector<double> by_distance = r.nearest;
   std::nth_element(by_distance.begin(), by_distance.begin() + by_distance.size() / 2,
@@ -524,9 +530,12 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model
          {{"msd_mm", fitted_balls.msd_mm},
           {"hd95_mm", fitted_balls.hd95_mm},
           {"dice", fitted_balls.dice}}}};
+    // On the organ's own volume grid (rho/2, coarser for a large organ: at most about 8M
+    // voxels), not the truth's 0.5 mm: a 2.3 L lung's true organ at 0.5 mm took 1.4 GB.
     out.truth_summary["uncertainty"] =
         uncertainty_coverage(on_surface, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
-                             deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
+                             deformed_bounds(pts.truth_shape, *pts.truth), volume_voxel);
+    out.truth_summary["uncertainty"]["voxel_mm"] = volume_voxel;
     out.truth_wall_s = truth_clock.elapsed_s();
     out.truth_summary["wall_s"] = out.truth_wall_s;
   }
