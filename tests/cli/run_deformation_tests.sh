@@ -4,13 +4,7 @@
 # prostate and on the real GTVs; the displacement field warps the planning label map
 # through plastimatch onto our exported one; the Jacobian file is positive. Prints
 # "N passed, N failed" and exits non-zero on any failure.
-set -u
-src="$1"
-bin="${ORGANFIT:?set ORGANFIT to the organfit binary}"
-tmp="$(mktemp -d)"
-trap 'rm -rf "$tmp"' EXIT
 source "$(dirname "$0")/check.sh"
-py=/usr/bin/python3
 
 # The checks every export makes, as run.json reports them.
 checks_hold() {  # checks_hold RUN_JSON

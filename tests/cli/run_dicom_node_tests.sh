@@ -14,17 +14,13 @@ if [[ -z "${ORGANFIT_NETNS:-}" ]]; then
     { echo "FAIL cannot make a network namespace (unshare --net)"; exit 1; }
 fi
 ip link set lo up || { echo "FAIL cannot bring up the namespace's loopback"; exit 1; }
-src="$1"
-bin="${ORGANFIT:?set ORGANFIT to the organfit binary}"
-tmp="$(mktemp -d)"
+source "$(dirname "$0")/check.sh"
 orthanc_pid=""
 cleanup() {
   [[ -n "$orthanc_pid" ]] && kill "$orthanc_pid" 2>/dev/null && wait "$orthanc_pid" 2>/dev/null
   rm -rf "$tmp"
 }
 trap cleanup EXIT
-source "$(dirname "$0")/check.sh"
-py=/usr/bin/python3
 node="ORTHANC@127.0.0.1:4242"
 rest="http://127.0.0.1:8042"
 

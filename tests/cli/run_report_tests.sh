@@ -3,13 +3,7 @@
 # holds the values run.json has, labelled and rounded as shown; a screenshot for each CT
 # window (#window=soft, lung, bone), each different; every axial slice through the organ
 # browsable; printed on A4. Prints "N passed, N failed" and exits non-zero on any failure.
-set -u
-src="$1"
-bin="${ORGANFIT:?set ORGANFIT to the organfit binary}"
-tmp="$(mktemp -d)"
-trap 'rm -rf "$tmp"' EXIT
 source "$(dirname "$0")/check.sh"
-py=/usr/bin/python3
 chrome=(chromium --headless --no-sandbox --disable-gpu --no-pdf-header-footer)
 command -v chromium >/dev/null || { echo "FAIL chromium is not installed (scripts/setup.sh)"; exit 1; }
 

@@ -167,13 +167,6 @@ bool inflate_raw(const unsigned char* data, size_t size, std::vector<unsigned ch
 
 }  // namespace
 
-bool is_part10(const std::string& file) {
-  std::ifstream in(file, std::ios::binary);
-  char head[132] = {};
-  in.read(head, sizeof head);
-  return in.gcount() == 132 && std::memcmp(head + 128, "DICM", 4) == 0;
-}
-
 bool to_utf8(const std::string& value, const std::string& charset, std::string& utf8) {
   std::string term = charset;
   while (!term.empty() && (term.back() == ' ' || term.back() == '\0'))
@@ -311,3 +304,14 @@ bool native_pixel_data_complete(const std::string& file) {
 }
 
 }  // namespace organfit::dicom::detail
+
+namespace organfit::dicom {
+
+bool is_part10(const std::filesystem::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  char head[132] = {};
+  in.read(head, sizeof head);
+  return in.gcount() == 132 && std::memcmp(head + 128, "DICM", 4) == 0;
+}
+
+}  // namespace organfit::dicom

@@ -3,6 +3,8 @@
 #include <string>
 #include <vector>
 
+#include "organfit/dicom/part10.h"
+
 namespace organfit::dicom::detail {
 
 /// GDCM's own warnings and errors off: organfit reports every problem itself, in one line.
@@ -13,8 +15,7 @@ void quiet_gdcm();
 /// aborts on an assertion there instead of failing).
 bool safe_for_gdcm(const std::string& file);
 
-/// True when the file has the DICOM Part 10 marker ("DICM" after a 128-byte preamble).
-bool is_part10(const std::string& file);
+using dicom::is_part10;  // organfit/dicom/part10.h
 
 /// True when a file claims to be DICOM: the Part 10 marker, or a .dcm / .dicom name. Such
 /// a file that cannot be read is an error, never "not DICOM".

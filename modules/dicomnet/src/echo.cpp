@@ -3,19 +3,18 @@
 #include <dcmtk/config/osconfig.h>
 #include <dcmtk/dcmdata/dcuid.h>
 
-#include <chrono>
-
 #include "association.h"
+#include "organfit/support/resources.h"
 
 namespace organfit::dicomnet {
 
 double echo(const Node& node, const NetworkOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch clock;
   detail::Association a(node, options);
   a.propose(UID_VerificationSOPClass, detail::uncompressed_transfer_syntaxes());
   a.open();
   a.check(a.scu().sendECHORequest(a.context(UID_VerificationSOPClass, "C-ECHO")), "C-ECHO");
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return clock.elapsed_s();
 }
 
 }  // namespace organfit::dicomnet

@@ -6,10 +6,10 @@
 #include <dcmtk/dcmdata/dcuid.h>
 #include <fmt/format.h>
 
-#include <chrono>
 #include <system_error>
 
 #include "association.h"
+#include "organfit/support/resources.h"
 
 namespace fs = std::filesystem;
 
@@ -84,7 +84,7 @@ class RetrievingScu : public DcmSCU {
 RetrievedSeries retrieve_series(const Node& node, const NetworkOptions& options,
                                 const std::string& study_uid, const std::string& series_uid,
                                 const fs::path& folder) {
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch clock;
   std::error_code ec;
   fs::create_directories(folder, ec);
   if (ec || !fs::is_directory(folder))
@@ -135,7 +135,7 @@ RetrievedSeries retrieve_series(const Node& node, const NetworkOptions& options,
   if (scu.files.empty()) a.fail(fmt::format("C-GET of {}: the node sent no object", series));
   RetrievedSeries result;
   result.files = std::move(scu.files);
-  result.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.wall_s = clock.elapsed_s();
   return result;
 }
 

@@ -6,11 +6,11 @@
 #include <dcmtk/dcmdata/dcmetinf.h>
 #include <fmt/format.h>
 
-#include <chrono>
 #include <set>
 #include <utility>
 
 #include "association.h"
+#include "organfit/support/resources.h"
 
 namespace fs = std::filesystem;
 
@@ -18,7 +18,7 @@ namespace organfit::dicomnet {
 
 StoredFiles store_files(const Node& node, const NetworkOptions& options,
                         const std::vector<fs::path>& files) {
-  const auto start = std::chrono::steady_clock::now();
+  const Stopwatch clock;
   // Each file's SOP class and transfer syntax, from its meta header (large values are
   // left on disk: DcmSCU reads the file again to send it).
   struct Object {
@@ -66,7 +66,7 @@ StoredFiles store_files(const Node& node, const NetworkOptions& options,
     ++result.sent;
     if (status != 0) ++result.warnings;
   }
-  result.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.wall_s = clock.elapsed_s();
   return result;
 }
 

@@ -19,6 +19,7 @@ SurfaceUncertainty::SurfaceUncertainty(const std::vector<Eigen::Vector3d>& point
     throw std::invalid_argument("SurfaceUncertainty: max_points must be at least 1");
   for (size_t i = 0; i < points_mm.size(); ++i)
     all_points_.col(static_cast<Eigen::Index>(i)) = points_mm[i];
+  nearest_ = std::make_shared<const geometry::SampleGrid>(all_points_);
   // The observations: the points themselves, or their means over cells of a grid.
   std::vector<double> counts(points_mm.size(), 1.0);
   points_ = all_points_;
@@ -71,7 +72,7 @@ geometry::Aabb SurfaceUncertainty::points_box() const {
 
 double SurfaceUncertainty::nearest_point_mm(const Eigen::Vector3d& x) const {
   if (all_points_.cols() == 0) return std::numeric_limits<double>::infinity();
-  return std::sqrt((all_points_.colwise() - x).colwise().squaredNorm().minCoeff());
+  return std::sqrt(nearest_->nearest(x).second);
 }
 
 }  // namespace organfit::fitting

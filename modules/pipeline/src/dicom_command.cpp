@@ -3,10 +3,10 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
 
+#include "organfit/dicom/part10.h"
 #include "organfit/dicomnet/echo.h"
 #include "organfit/dicomnet/retrieve_series.h"
 #include "organfit/dicomnet/store_files.h"
@@ -20,13 +20,6 @@ namespace {
 dicomnet::Node node_of(const DicomCommand& c) {
   dicomnet::check_ae_title(c.network.calling_aet, "--aet");
   return dicomnet::parse_node(c.node, "NODE");
-}
-
-/// A DICOM Part 10 file: "DICM" after the 128-byte preamble.
-bool is_part10(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  char magic[132] = {};
-  return in.read(magic, sizeof magic) && std::string(magic + 128, 4) == "DICM";
 }
 
 }  // namespace
@@ -91,7 +84,7 @@ void run_dicom_push(const DicomCommand& c) {
     if (fs::is_directory(p, ec)) {
       std::vector<fs::path> inside;
       for (const auto& e : fs::recursive_directory_iterator(p, ec))
-        if (e.is_regular_file() && is_part10(e.path())) inside.push_back(e.path());
+        if (e.is_regular_file() && dicom::is_part10(e.path())) inside.push_back(e.path());
       if (inside.empty()) throw InputError(p.string() + ": the folder holds no DICOM file");
       std::sort(inside.begin(), inside.end());
       files.insert(files.end(), inside.begin(), inside.end());

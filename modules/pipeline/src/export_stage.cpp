@@ -189,22 +189,19 @@ std::vector<float> sigma_on_grid(const fitting::SurfaceUncertainty& u,
       for (int i = range.lo[0]; i <= range.hi[0]; ++i) {
         const Eigen::Vector3d c =
             coarse.physical_to_index(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+        const Eigen::Vector3d base = c.array().floor();
+        const bool inside =
+            (base.array() >= 0).all() &&
+            (base.array() + 1 < Eigen::Array3d(coarse.size[0], coarse.size[1], coarse.size[2]))
+                .all();
+        if (!inside) continue;  // the box's rim: the prior
         double v = 0;
-        bool inside = true;
-        for (int corner = 0; corner < 8 && inside; ++corner) {
-          double w = 1;
-          std::array<int, 3> at{};
-          for (int d = 0; d < 3; ++d) {
-            const int lo = static_cast<int>(std::floor(c[d]));
-            const int hi = lo + ((corner >> d) & 1);
-            at[static_cast<size_t>(d)] = hi;
-            w *= ((corner >> d) & 1) ? c[d] - lo : 1 - (c[d] - lo);
-            inside = inside && hi >= 0 && hi < coarse.size[d];
-          }
-          if (inside)
-            v += w * values[static_cast<size_t>(coarse.linear_index(at[0], at[1], at[2]))];
-        }
-        if (inside) out[static_cast<size_t>(g.linear_index(i, j, k))] = static_cast<float>(v);
+        geometry::for_each_trilinear_corner(c - base, [&](int di, int dj, int dk, double w) {
+          v += w * values[static_cast<size_t>(coarse.linear_index(
+                       static_cast<int>(base.x()) + di, static_cast<int>(base.y()) + dj,
+                       static_cast<int>(base.z()) + dk))];
+        });
+        out[static_cast<size_t>(g.linear_index(i, j, k))] = static_cast<float>(v);
       }
   return out;
 }
@@ -219,7 +216,8 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
   int done = 0;
   if (r.needs_ct() && !ct)
     throw InputError(
-        "export: an RT Structure Set, label map or deformation field needs the planning CT");
+        "export: an RT Structure Set, label map, deformation field or uncertainty map needs the "
+        "planning CT");
   if (on_ct) {
     auto mask = std::make_shared<geometry::LabelVolume>(organ.on_grid(ct->geometry));
     progress.update(++done, "the organ on the planning CT's grid");
@@ -267,24 +265,24 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
         dicom::write_rtstruct(file, *ct, *rois, options);
       });
     }
-    if (!r.uncertainty.empty()) {
-      if (!r.sigma) throw InputError(r.uncertainty.string() + ": there is no fit to say it of");
-      auto sigma = std::make_shared<std::vector<float>>(sigma_on_grid(*r.sigma, ct->geometry));
-      out.files.push_back(r.uncertainty.filename().string());
-      const std::filesystem::path file = r.uncertainty;
-      out.summary["uncertainty"] = {{"file", file.filename().string()},
-                                    {"maps", "each voxel to sigma (mm) of the surface there"}};
-      const geometry::ImageGeometry grid = ct->geometry;
-      out.writes_.push_back([file, sigma, grid](nlohmann::json&) {
-        itkbridge::write_float_volume(file, grid, *sigma);
-      });
-    }
     if (!r.labels.empty()) {
       out.files.push_back(r.labels.filename().string());
       const std::filesystem::path file = r.labels;
       out.writes_.push_back(
           [file, mask](nlohmann::json&) { itkbridge::write_label_volume(file, *mask); });
     }
+  }
+  if (!r.uncertainty.empty()) {
+    if (!r.sigma) throw InputError(r.uncertainty.string() + ": there is no fit to say it of");
+    auto sigma = std::make_shared<std::vector<float>>(sigma_on_grid(*r.sigma, ct->geometry));
+    out.files.push_back(r.uncertainty.filename().string());
+    const std::filesystem::path file = r.uncertainty;
+    out.summary["uncertainty"] = {{"file", file.filename().string()},
+                                  {"maps", "each voxel to sigma (mm) of the surface there"}};
+    const geometry::ImageGeometry grid = ct->geometry;
+    out.writes_.push_back([file, sigma, grid](nlohmann::json&) {
+      itkbridge::write_float_volume(file, grid, *sigma);
+    });
   }
   if (fields) {
     const geometry::ImageGeometry grid = field_grid(ct->geometry, r.field_spacing_mm);

@@ -753,7 +753,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   // The uncertainty's calibration (ours): the true surface within 2 sigma on at least 90%
   // of the surface, per case; sigma larger where the points did not see.
   {
-    std::vector<double> all, seen, unseen, ratio;
+    std::vector<double> all, seen, unseen, unseen_over_seen;
     int calibrated = 0, larger_unseen = 0;
     for (const auto& r : rows)
       if (r.method == "spread" && std::isfinite(r.within_2sd)) {
@@ -761,7 +761,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
             unseen.push_back(r.within_2sd_unseen);
         calibrated += r.within_2sd >= 0.9;
         larger_unseen += r.sigma_unseen_mm > r.sigma_seen_mm;
-        ratio.push_back(r.sigma_unseen_mm / r.sigma_seen_mm);
+        unseen_over_seen.push_back(r.sigma_unseen_mm / r.sigma_seen_mm);
       }
     if (!all.empty()) {
       summary["uncertainty"] = {
@@ -773,7 +773,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
           {"median_seen_within_2sd", median(seen)},
           {"median_unseen_within_2sd", median(unseen)},
           {"min_unseen_within_2sd", *std::min_element(unseen.begin(), unseen.end())},
-          {"median_sigma_unseen_over_seen", median(ratio)}};
+          {"median_sigma_unseen_over_seen", median(unseen_over_seen)}};
       md += fmt::format(
           "\n## Uncertainty (ours): the true surface within 2 sigma\n\n{} cases: within 2 sigma "
           "on at least 90% of the surface in {}; share within 2 sigma median {:.3f} (least "
@@ -781,7 +781,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
           "unseen half in {} (median ratio {:.2f}).\n",
           all.size(), calibrated, median(all), *std::min_element(all.begin(), all.end()),
           median(seen), median(unseen), *std::min_element(unseen.begin(), unseen.end()),
-          larger_unseen, median(ratio));
+          larger_unseen, median(unseen_over_seen));
     }
   }
   write_file_atomically(o.out / "RESULTS.md", md);

@@ -2,22 +2,18 @@
 
 #include <fmt/format.h>
 
-#include <chrono>
 #include <functional>
 
 #include "organfit/dicom/structure_set.h"
 #include "organfit/dicomnet/find_series.h"
 #include "organfit/dicomnet/retrieve_series.h"
 #include "organfit/dicomnet/store_files.h"
+#include "organfit/support/resources.h"
 
 namespace fs = std::filesystem;
 
 namespace organfit::pipeline {
 namespace {
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 /// Runs a network call; a node's failure becomes an error naming the scene's key.
 template <typename F>
@@ -57,7 +53,7 @@ PulledSeries pull_ct(const config::Scene& scene, const fs::path& folder) {
   query.series_uid = scene.text("ct", "series_uid");
   query.modality = "CT";
   PulledSeries pulled;
-  auto start = std::chrono::steady_clock::now();
+  Stopwatch clock;
   const char* key = scene.is_given("ct", "series_uid")  ? "series_uid"
                     : scene.is_given("ct", "study_uid") ? "study_uid"
                                                         : "patient_id";
@@ -66,15 +62,15 @@ PulledSeries pull_ct(const config::Scene& scene, const fs::path& folder) {
   const dicomnet::SeriesEntry series = naming_key(scene, "ct", key, [&] {
     return dicomnet::choose_series(found, query, node.text() + " holds", "ct.series_uid");
   });
-  pulled.find_s = seconds_since(start);
-  start = std::chrono::steady_clock::now();
+  pulled.find_s = clock.elapsed_s();
+  clock.restart();
   pulled.study_uid = series.study_uid;
   pulled.series_uid = series.series_uid;
   pulled.files = naming_key(scene, "ct", "node", [&] {
     return dicomnet::retrieve_series(node, options, series.study_uid, series.series_uid, folder)
         .files;
   });
-  pulled.get_s = seconds_since(start);
+  pulled.get_s = clock.elapsed_s();
   return pulled;
 }
 
@@ -88,11 +84,11 @@ PulledSeries pull_structure_set(const config::Scene& scene, const std::string& s
   query.series_uid = scene.text("organ", "series_uid");
   query.modality = "RTSTRUCT";
   PulledSeries pulled;
-  auto start = std::chrono::steady_clock::now();
+  Stopwatch clock;
   std::vector<dicomnet::SeriesEntry> found = naming_key(
       scene, "organ", "node", [&] { return dicomnet::find_series(node, options, query); });
-  pulled.find_s = seconds_since(start);
-  start = std::chrono::steady_clock::now();
+  pulled.find_s = clock.elapsed_s();
+  clock.restart();
   // Each candidate series, retrieved: a structure set is one small object.
   auto retrieve = [&](const dicomnet::SeriesEntry& s) {
     auto files = naming_key(scene, "organ", "node", [&] {
@@ -122,7 +118,7 @@ PulledSeries pull_structure_set(const config::Scene& scene, const std::string& s
       pulled.study_uid = holding.front().study_uid;
       pulled.series_uid = holding.front().series_uid;
       pulled.files = {files.front()};
-      pulled.get_s = seconds_since(start);
+      pulled.get_s = clock.elapsed_s();
       return pulled;
     }
     if (!holding.empty()) found = holding;
@@ -136,7 +132,7 @@ PulledSeries pull_structure_set(const config::Scene& scene, const std::string& s
   pulled.study_uid = series.study_uid;
   pulled.series_uid = series.series_uid;
   pulled.files = {retrieve(series)};
-  pulled.get_s = seconds_since(start);
+  pulled.get_s = clock.elapsed_s();
   return pulled;
 }
 

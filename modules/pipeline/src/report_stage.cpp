@@ -51,9 +51,9 @@ std::string build_report(const ReportContext& c) {
     meshing::SurfaceMesh mesh = meshing::surface_mesh(body);
     progress.update(1, "the 3D view");
     in.surface_vertex_mm = std::move(mesh.vertex_mm);
-    if (c.uncertainty)
+    if (sigma)
       for (size_t v = 0; v + 2 < in.surface_vertex_mm.size(); v += 3)
-        in.surface_sigma_mm.push_back(static_cast<float>(c.uncertainty->sd_mm(Eigen::Vector3d(
+        in.surface_sigma_mm.push_back(static_cast<float>(sigma(Eigen::Vector3d(
             in.surface_vertex_mm[v], in.surface_vertex_mm[v + 1], in.surface_vertex_mm[v + 2]))));
     in.surface_triangles = std::move(mesh.triangle_ids);
   }

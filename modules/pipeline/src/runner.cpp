@@ -83,7 +83,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     throw InputError(out_dir.string() + ": --out exists and is not a folder");
   check_output_location(out_dir, scene_inputs(scene), "--out");
   // Everything is written under the staging folder and moved into --out at the end.
-  OutputFolder output(out_dir, names_written(scene));
+  const std::set<std::string> names = names_written(scene);
+  OutputFolder output(out_dir, names);
   const fs::path& stage = output.staging();
   const long long threads = scene.integer("scene", "threads");
   if (threads > 0) omp_set_num_threads(static_cast<int>(threads));
@@ -185,7 +186,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         spdlog::info("ct: {} objects pulled from {} in {:.2f} s (C-FIND {:.2f} s, C-GET {:.2f} s)",
                      pulled.files.size(), scene.text("ct", "node"), clock.elapsed_s(),
                      pulled.find_s, pulled.get_s);
-        clock = Stopwatch();
+        clock.restart();
       } else {
         ct_folder = scene.path("ct", "folder");
         ct_home = ct_folder;
@@ -214,7 +215,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   // The organ's structure set: where it is read from, and where it is once the run is
   // committed (the phantom's and a pulled one are in --out).
   fs::path rtstruct_file, organ_structure_set;
-  if (scene.has_section("organ") && scene.text("organ", "source") == "rtstruct") {
+  if (scene.has_section("organ") && scene.text("organ", "source") == "rtstruct" &&
+      !scene.is_given("organ", "node")) {  // a pulled one: set when pulled
     rtstruct_file =
         scene.is_given("organ", "rtstruct") ? scene.path("organ", "rtstruct") : phantom_rtstruct;
     organ_structure_set =
@@ -249,7 +251,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         record_stage("organ_pull", clock.elapsed_s());
         spdlog::info("organ: the structure set pulled from {} in {:.2f} s",
                      scene.text("organ", "node"), clock.elapsed_s());
-        clock = Stopwatch();
+        clock.restart();
       }
       const fs::path& file = rtstruct_file;
       dicom::RasterisedRoi r =
@@ -565,7 +567,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   run["peak_memory_mib"] = peak_memory_mib();
   run["outputs"] = {"resolved.yaml", "run.json"};
   if (!phantom_rtstruct.empty()) run["outputs"].push_back("phantom/");
-  if (names_written(scene).count("cache/")) run["outputs"].push_back("cache/");
+  if (names.count("cache/")) run["outputs"].push_back("cache/");
   for (const auto& f : files)
     run["outputs"].push_back(f.first);
   for (const auto& f : exported)

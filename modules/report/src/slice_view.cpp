@@ -32,16 +32,9 @@ WindowChoice choose_window(const geometry::ImageGeometry& g, const std::vector<f
                            const geometry::LabelVolume& organ, double shell_mm) {
   WindowChoice choice;
   // The organ's box grown by the shell: the distance transform runs on it alone.
-  std::array<int, 3> lo{g.size[0], g.size[1], g.size[2]}, hi{-1, -1, -1};
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        if (organ.at(i, j, k) == 1) {
-          const int idx[3] = {i, j, k};
-          for (int d = 0; d < 3; ++d)
-            lo[d] = std::min(lo[d], idx[d]), hi[d] = std::max(hi[d], idx[d]);
-        }
-  if (hi[0] < 0) return choice;
+  const geometry::IndexRange r = organ.range(1);
+  if (r.empty()) return choice;
+  std::array<int, 3> lo = r.lo, hi = r.hi;
   geometry::ImageGeometry box = g;
   for (int d = 0; d < 3; ++d) {
     const int margin = static_cast<int>(std::ceil(shell_mm / g.spacing_mm[d]));

@@ -11,9 +11,11 @@
 // fit has no information there. The posterior mean is not used (the fit already passes
 // through the points); only where the points leave the surface free is said.
 #include <Eigen/Core>
+#include <memory>
 #include <vector>
 
 #include "organfit/geometry/image_geometry.h"
+#include "organfit/geometry/sample_grid.h"
 
 namespace organfit::fitting {
 
@@ -44,7 +46,8 @@ class SurfaceUncertainty {
   SurfaceUncertaintyOptions options_;
   Eigen::Matrix3Xd points_;      ///< the observations (binned when there are many)
   Eigen::Matrix3Xd all_points_;  ///< the points as given (nearest_point_mm, points_box)
-  Eigen::MatrixXd lower_;        ///< Cholesky factor of K + n^2 I
+  std::shared_ptr<const geometry::SampleGrid> nearest_;  ///< over all_points_
+  Eigen::MatrixXd lower_;                                ///< Cholesky factor of K + n^2 I
 };
 
 }  // namespace organfit::fitting

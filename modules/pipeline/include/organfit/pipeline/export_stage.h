@@ -60,13 +60,14 @@ struct ExportRequest {
   std::string skip_roi;     ///< not copied (the organ the fit replaces is kept under its own name)
   bool fixed_uids = false;  ///< deterministic UIDs and dates (tests)
 
-  /// Files written on the planning CT's grid (an RT Structure Set, a label map) and files
-  /// of the deformation on it or over its box: each needs the planning CT.
-  bool on_ct_grid() const { return !rtstruct.empty() || !labels.empty() || !uncertainty.empty(); }
+  /// Files written on the planning CT's grid (an RT Structure Set, a label map; the
+  /// uncertainty) and files of the deformation on it or over its box: each needs the
+  /// planning CT. The first two are made from the organ on its grid.
+  bool on_ct_grid() const { return !rtstruct.empty() || !labels.empty(); }
   bool deformation_files() const {
     return !displacement_field.empty() || !registration.empty() || !jacobian.empty();
   }
-  bool needs_ct() const { return on_ct_grid() || deformation_files(); }
+  bool needs_ct() const { return on_ct_grid() || deformation_files() || !uncertainty.empty(); }
 };
 
 class PendingExport {
