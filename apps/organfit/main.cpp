@@ -267,6 +267,13 @@ int run_main(int argc, char** argv) {
                    "Output folder: results.csv, curves.csv, work_precision.svg, RESULTS.md")
       ->required();
   bench_fit->add_flag("--quick", fb.quick, "The quick grid (20 cases, a few minutes on 2 cores)");
+  bench_fit->add_flag("--fem", fb.fem,
+                      "The biomechanical ground truth: the prostate and real GTVs deformed by a "
+                      "FEM engine (GetFEM) under a probe and bladder filling, 2 to 12 mm (24 "
+                      "cases; solved once, then cached)");
+  bench_fit->add_option("--fem-cache", fb.fem_cache,
+                        "Folder of the FEM cases (default $ORGANFIT_FEM_CACHE, else "
+                        "~/.cache/organfit/fem)");
   bench_fit->add_flag("--sessions", fb.sessions,
                       "The regime of treatment sessions: rigid shifts and rotations and every "
                       "family at 0 to 5 mm (70 cases), with do-no-harm counts");

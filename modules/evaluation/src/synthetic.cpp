@@ -1,6 +1,9 @@
 #include "organfit/evaluation/synthetic.h"
 
 #include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <stdexcept>
 
@@ -69,8 +72,74 @@ double shape_volume_mm3(const Shape& shape, double voxel_mm) {
   return static_cast<double>(n) * voxel_mm * voxel_mm * voxel_mm;
 }
 
-Eigen::Vector3d Deformation::apply(const Eigen::Vector3d& p) const {
+SampledDisplacement make_sampled_displacement(const geometry::ImageGeometry& grid,
+                                              std::vector<float> u_mm) {
+  if (!grid.direction.isIdentity(1e-9))
+    throw std::invalid_argument("sampled displacement: the grid must be axis-aligned");
+  if (grid.voxel_count() < 8 || grid.size[0] < 2 || grid.size[1] < 2 || grid.size[2] < 2 ||
+      u_mm.size() != 3 * static_cast<size_t>(grid.voxel_count()))
+    throw std::invalid_argument(
+        "sampled displacement: 3 values per voxel on a grid of 2^3 or more");
+  SampledDisplacement d{grid, std::move(u_mm), 0.0};
+  for (size_t v = 0; v < d.u_mm.size(); v += 3) {
+    const Eigen::Vector3d u(d.u_mm[v], d.u_mm[v + 1], d.u_mm[v + 2]);
+    if (!u.allFinite()) throw std::invalid_argument("sampled displacement: a value is not finite");
+    d.largest_mm = std::max(d.largest_mm, u.norm());
+  }
+  return d;
+}
+
+Eigen::Vector3d SampledDisplacement::at(const Eigen::Vector3d& p_mm) const {
+  const Eigen::Vector3d index = grid.physical_to_index(p_mm);
+  std::array<int, 3> base{};
+  Eigen::Vector3d f;
+  for (int a = 0; a < 3; ++a) {
+    const double c = std::clamp(index[a], 0.0, static_cast<double>(grid.size[a] - 1));
+    base[a] = std::min(static_cast<int>(c), grid.size[a] - 2);
+    f[a] = c - base[a];
+  }
+  Eigen::Vector3d u = Eigen::Vector3d::Zero();
+  geometry::for_each_trilinear_corner(f, [&](int di, int dj, int dk, double w) {
+    const size_t v =
+        3 * static_cast<size_t>(grid.linear_index(base[0] + di, base[1] + dj, base[2] + dk));
+    u += w * Eigen::Vector3d(u_mm[v], u_mm[v + 1], u_mm[v + 2]);
+  });
+  return u;
+}
+
+Eigen::Matrix3d SampledDisplacement::gradient(const Eigen::Vector3d& p_mm) const {
+  Eigen::Matrix3d g;
+  for (int a = 0; a < 3; ++a) {
+    const double h = 0.5 * grid.spacing_mm[a];
+    const Eigen::Vector3d e = h * Eigen::Vector3d::Unit(a);
+    g.col(a) = (at(p_mm + e) - at(p_mm - e)) / (2 * h);
+  }
+  return g;
+}
+
+namespace {
+
+/// x with x + u(x) = q: Newton's method from x = q - u(q), each step at most the largest
+/// displacement (a step across a fold of the interpolant would jump).
+Eigen::Vector3d invert_field(const SampledDisplacement& field, const Eigen::Vector3d& q) {
+  Eigen::Vector3d x = q - field.at(q);
+  for (int it = 0; it < 30; ++it) {
+    const Eigen::Vector3d r = x + field.at(x) - q;
+    if (r.norm() < 1e-5) break;
+    Eigen::Vector3d dx = (Eigen::Matrix3d::Identity() + field.gradient(x)).lu().solve(r);
+    const double limit = std::max(field.largest_mm, 0.1);
+    if (!dx.allFinite()) dx = r;
+    if (dx.norm() > limit) dx *= limit / dx.norm();
+    x -= dx;
+  }
+  return x;
+}
+
+}  // namespace
+
+Eigen::Vector3d Deformation::apply(const Eigen::Vector3d& p_in) const {
   const Eigen::Vector3d& c = centre_mm;
+  const Eigen::Vector3d p = field ? Eigen::Vector3d(p_in + field->at(p_in)) : p_in;
   const double s = stretch, t = 1.0 / std::sqrt(stretch);
   Eigen::Vector3d q = c + Eigen::Vector3d(s, t, t).cwiseProduct(p - c);
   const double u = (q.x() - c.x()) / half_length_mm;
@@ -117,7 +186,8 @@ Eigen::Vector3d Deformation::inverse(const Eigen::Vector3d& p) const {
   }
   q.y() -= bend_mm * u * u;
   const double s = stretch, t = 1.0 / std::sqrt(stretch);
-  return c + Eigen::Vector3d(1 / s, 1 / t, 1 / t).cwiseProduct(q - c);
+  const Eigen::Vector3d x = c + Eigen::Vector3d(1 / s, 1 / t, 1 / t).cwiseProduct(q - c);
+  return field ? invert_field(*field, x) : x;
 }
 
 std::function<bool(const Eigen::Vector3d&)> deformed_inside(const Shape& shape,

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/LU>
+#include <cmath>
 
 namespace organfit::evaluation {
 namespace {
@@ -74,6 +75,58 @@ TEST(Deformation, EveryFamilyIsVolumePreservingAndExactlyInvertible) {
   Deformation d;
   d.indent_mm = -8;
   EXPECT_NEAR(d.apply({0, 15, 0}).y(), 7.0, 1e-12);
+}
+
+/// A grid of 1 mm over [-20, 20]^3 carrying u(x) = (0.1 x, -0.05 y, -0.05 z) + (1, 2, -1)
+/// plus a smooth bump: trilinear on the linear part exactly.
+SampledDisplacement test_field(double bump_mm) {
+  geometry::ImageGeometry g;
+  g.size = {41, 41, 41};
+  g.origin_mm = Eigen::Vector3d::Constant(-20);
+  std::vector<float> u;
+  for (int k = 0; k < 41; ++k)
+    for (int j = 0; j < 41; ++j)
+      for (int i = 0; i < 41; ++i) {
+        const Eigen::Vector3d x = g.index_to_physical(Eigen::Vector3d(i, j, k));
+        Eigen::Vector3d v =
+            Eigen::Vector3d(0.1 * x.x(), -0.05 * x.y(), -0.05 * x.z()) + Eigen::Vector3d(1, 2, -1);
+        v.y() += bump_mm * std::exp(-x.squaredNorm() / 50);
+        for (int a = 0; a < 3; ++a)
+          u.push_back(static_cast<float>(v[a]));
+      }
+  return make_sampled_displacement(g, u);
+}
+
+TEST(SampledDisplacement, InterpolatesALinearFieldExactlyAndIsInvertedByTheDeformation) {
+  const SampledDisplacement f = test_field(0);
+  const Eigen::Vector3d p(3.3, -7.25, 11.6);
+  EXPECT_LT((f.at(p) - Eigen::Vector3d(1.33, 2.3625, -1.58)).norm(), 1e-5);
+  EXPECT_NEAR(f.gradient(p)(0, 0), 0.1, 1e-5);
+  EXPECT_NEAR(f.gradient(p)(1, 1), -0.05, 1e-5);
+  EXPECT_NEAR(f.gradient(p)(0, 1), 0.0, 1e-5);
+  // Beyond the grid: the border's value.
+  EXPECT_LT((f.at({30, 0, 0}) - f.at({20, 0, 0})).norm(), 1e-6);
+
+  Deformation d;
+  d.field = std::make_shared<const SampledDisplacement>(test_field(4.0));
+  EXPECT_FALSE(d.is_identity());
+  EXPECT_GT(d.field->largest_mm, 4.0);
+  for (const Eigen::Vector3d& q : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(2, -3, 1),
+                                   Eigen::Vector3d(-9, 4, 6), Eigen::Vector3d(12, 12, -12)}) {
+    EXPECT_LT((d.apply(d.inverse(q)) - q).norm(), 1e-4) << q.transpose();
+    EXPECT_LT((d.inverse(d.apply(q)) - q).norm(), 1e-4) << q.transpose();
+  }
+}
+
+TEST(SampledDisplacement, RefusesAGridWithoutThreeValuesPerVoxelOrWithNaN) {
+  geometry::ImageGeometry g;
+  g.size = {2, 2, 2};
+  EXPECT_THROW(make_sampled_displacement(g, std::vector<float>(23, 0.f)), std::invalid_argument);
+  std::vector<float> u(24, 0.f);
+  u[5] = std::nanf("");
+  EXPECT_THROW(make_sampled_displacement(g, u), std::invalid_argument);
+  g.direction = Eigen::Vector3d(1, -1, 1).asDiagonal();
+  EXPECT_THROW(make_sampled_displacement(g, std::vector<float>(24, 0.f)), std::invalid_argument);
 }
 
 TEST(Sampling, PointsLieOnTheDeformedSurfaceWithinTheNoise) {

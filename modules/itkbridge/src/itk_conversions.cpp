@@ -4,6 +4,7 @@
 #include <itkImage.h>
 #include <itkImageFileReader.h>
 #include <itkImageFileWriter.h>
+#include <itkImageIOFactory.h>
 #include <itkMetaImageIOFactory.h>
 #include <itkNiftiImageIOFactory.h>
 #include <itkNrrdImageIOFactory.h>
@@ -141,6 +142,37 @@ void write_vector_image(const fs::path& file, const PlainGeometry& geometry,
   auto image = allocate<VectorImage>(geometry);
   std::copy(xyz.begin(), xyz.end(), reinterpret_cast<float*>(image->GetBufferPointer()));
   write_image(file, image.GetPointer(), false);
+}
+
+PlainGeometry read_vector_image(const fs::path& file, std::vector<float>& xyz) {
+  using VectorImage = itk::Image<itk::Vector<float, 3>, 3>;
+  register_formats();
+  std::error_code ec;
+  if (!fs::exists(file, ec)) throw InputError(file.string() + ": no such file");
+  auto io = itk::ImageIOFactory::CreateImageIO(file.string().c_str(),
+                                               itk::ImageIOFactory::IOFileModeEnum::ReadMode);
+  if (!io) throw InputError(file.string() + ": not an image format ITK reads");
+  io->SetFileName(file.string());
+  try {
+    io->ReadImageInformation();
+  } catch (const itk::ExceptionObject&) {
+    throw InputError(file.string() + ": cannot read as an image");
+  }
+  if (io->GetNumberOfComponents() != 3 || io->GetNumberOfDimensions() != 3)
+    throw InputError(file.string() + ": a 3D field of 3-component vectors expected");
+  auto reader = itk::ImageFileReader<VectorImage>::New();
+  reader->SetFileName(file.string());
+  try {
+    reader->Update();
+  } catch (const itk::ExceptionObject&) {
+    throw InputError(file.string() +
+                     ": cannot read as a vector image (or its data file is missing)");
+  }
+  const VectorImage* image = reader->GetOutput();
+  PlainGeometry g = geometry_of(image);
+  const float* p = reinterpret_cast<const float*>(image->GetBufferPointer());
+  xyz.assign(p, p + 3 * g.voxel_count());
+  return g;
 }
 
 PlainFloatImage read_float_image(const fs::path& file) {

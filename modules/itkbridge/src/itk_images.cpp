@@ -55,6 +55,12 @@ void write_vector_volume(const std::filesystem::path& file, const geometry::Imag
   write_vector_image(file, to_plain(g), xyz);
 }
 
+VectorVolume read_vector_volume(const std::filesystem::path& file) {
+  VectorVolume v;
+  v.geometry = from_plain(read_vector_image(file, v.xyz));
+  return v;
+}
+
 ScalarImage read_scalar_image(const std::filesystem::path& file) {
   PlainFloatImage plain = read_float_image(file);
   return {from_plain(plain.geometry), std::move(plain.values)};

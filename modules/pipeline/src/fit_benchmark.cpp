@@ -19,6 +19,7 @@
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/itkbridge/tps.h"
 #include "organfit/phantom/pelvis.h"
+#include "organfit/pipeline/fem_cases.h"
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/atomic_file.h"
@@ -46,13 +47,15 @@ evaluation::Shape phantom_prostate() {
   return evaluation::make_mask_shape(mask);
 }
 
-/// The real GTV of ../shared/data/ct-sts-004 (its contours matched by position).
-std::optional<evaluation::Shape> real_gtv(const fs::path& data) {
+/// The real GTV of ../shared/data/<folder> (ct-sts-004, ct-sts-002; its contours matched
+/// by position).
+std::optional<evaluation::Shape> real_gtv(const fs::path& data,
+                                          const std::string& folder = "ct-sts-004") {
   std::error_code ec;
-  if (!fs::exists(data / "ct-sts-004" / "rtstruct.dcm", ec)) return std::nullopt;
-  const dicom::CtSeries ct = dicom::read_ct_series(data / "ct-sts-004" / "ct");
-  auto roi = dicom::rasterise_roi(dicom::read_rtstruct(data / "ct-sts-004" / "rtstruct.dcm"),
-                                  "GTV_Mass_CT", ct, "ct-sts-004");
+  if (!fs::exists(data / folder / "rtstruct.dcm", ec)) return std::nullopt;
+  const dicom::CtSeries ct = dicom::read_ct_series(data / folder / "ct");
+  auto roi = dicom::rasterise_roi(dicom::read_rtstruct(data / folder / "rtstruct.dcm"),
+                                  "GTV_Mass_CT", ct, folder);
   return evaluation::make_mask_shape(std::make_shared<geometry::LabelVolume>(std::move(roi.mask)));
 }
 
@@ -68,7 +71,10 @@ struct Row {
   int case_id = 0;
   double msd_global_mm = std::numeric_limits<double>::quiet_NaN();  ///< after the global stage
   double msd_undeformed_mm = 0;  ///< the organ left as it was, against the same truth
-  std::string global_fit = "";   ///< which global fit was kept (GlobalMap::found_by)
+  /// the truth's own volume change (%): the FEM's (integral of det F); 0 for the analytic
+  /// families, which preserve volume exactly
+  double truth_volume_change_pct = 0;
+  std::string global_fit = "";  ///< which global fit was kept (GlobalMap::found_by)
   /// Ours: the share of the fitted surface within 2 sigma of the truth (all, seen half,
   /// unseen half) and the median sigma on each half (NaN for the others).
   double within_2sd = std::numeric_limits<double>::quiet_NaN(),
@@ -276,7 +282,17 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   std::vector<int> counts = {87};
   std::vector<double> noises = {0.5}, outliers = {0.0};
   if (o.sessions && o.quick) throw InputError("bench fit: --sessions excludes --quick");
-  if (o.sessions) {
+  if (o.fem && (o.quick || o.sessions))
+    throw InputError("bench fit: --fem excludes --quick and --sessions");
+  if (o.fem) {
+    shapes.erase(shapes.begin() + 1);  // the cube: no organ a probe presses
+    for (const std::string sts : {"004", "002"})
+      if (auto gtv = real_gtv(ORGANFIT_SHARED_DATA_DIR_STRING, "ct-sts-" + sts))
+        shapes.push_back(
+            {"real_gtv_sts" + sts, "body:\nmodel:\n  radius_mm: 3.0\n", std::move(gtv)});
+    families = {"fem_probe", "fem_bladder"};
+    magnitudes = {2, 5, 8, 12};
+  } else if (o.sessions) {
     families = {"shift", "rotate", "stretch", "bend", "twist", "indent", "push"};
     magnitudes = {0, 0.5, 1, 2, 5};
   } else if (!o.quick) {
@@ -328,6 +344,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   std::vector<EffortPoint> effort;
   std::string curves = "case,method,step,wall_s,residual_mean_mm,volume_change_pct\n";
   int case_id = 0, cases_run = 0;
+  nlohmann::json fem_meshes = nlohmann::json::array();  // the FEM solves (--fem)
   for (const auto& shape : shapes) {
     const config::Scene base = config::parse_scene("scene:\n  seed: 1\n" + shape.yaml,
                                                    o.out / "bench.yaml", scene_schema());
@@ -359,6 +376,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
     // another grid a box's face moves a whole layer of voxels in or out with the grid's
     // origin (the 30 mm cube: -1.2% to +3.4% on voxels of 0.5 and 0.875 mm).
     const double v0_embedded = model.reference.volume_mm3(1);
+    std::map<std::string, FemCases> fem;  // per load, made when a case first needs it
     for (const auto& family : families)
       for (double magnitude : magnitudes)
         for (int count : counts)
@@ -370,7 +388,33 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                   (o.targets && !target_case(count, noise, outlier, magnitude)))
                 continue;
               ++cases_run;
-              const evaluation::Deformation d = family_deformation(family, magnitude, model.shape);
+              evaluation::Deformation d = family_deformation(family, magnitude, model.shape);
+              double truth_volume_change_pct = 0;
+              if (family.rfind("fem_", 0) == 0) {
+                const std::string load = family.substr(4);
+                if (!fem.count(load)) {
+                  fem[load] = fem_cases(model.shape, shape.name, load, magnitudes,
+                                        o.fem_cache.empty() ? default_fem_cache() : o.fem_cache);
+                  fem_meshes.push_back({{"shape", shape.name},
+                                        {"load", load},
+                                        {"mesh", fem[load].mesh},
+                                        {"magnitudes_made", fem[load].cases.size()},
+                                        {"solve_wall_s", fem[load].solve_wall_s},
+                                        {"folder", fem[load].folder.string()}});
+                }
+                const auto& made = fem[load].cases;
+                const auto fc_at = std::find_if(made.begin(), made.end(), [&](const FemCase& c) {
+                  return c.magnitude_mm == magnitude;
+                });
+                if (fc_at == made.end()) {  // the FEM found no solution this far
+                  --cases_run;
+                  continue;
+                }
+                const FemCase& fc = *fc_at;
+                d = evaluation::Deformation{};
+                d.field = fc.field;
+                truth_volume_change_pct = fc.volume_change_pct;
+              }
               evaluation::SamplingOptions so;
               so.count = count, so.noise_mm = noise, so.outlier_fraction = outlier,
               so.half_coverage = true;
@@ -394,6 +438,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                 Row row{method, shape.name, family, magnitude, count, noise, outlier};
                 row.case_id = case_id;
                 row.msd_undeformed_mm = msd_undeformed;
+                row.truth_volume_change_pct = truth_volume_change_pct;
                 std::string default_effort =
                     method == "spread" ? "global and local stages" : "default";
                 double global_wall_s = std::numeric_limits<double>::quiet_NaN();
@@ -570,17 +615,18 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
       "method,shape,family,magnitude_mm,points,noise_mm,outliers,wall_s,msd_mm,hd95_mm,dice,volume_"
       "change_pct,residual_mm,"
       "converged,msd_balls_mm,volume_change_balls_pct,msd_global_mm,case,global_fit,msd_"
-      "undeformed_mm,within_2sd,within_2sd_seen,within_2sd_unseen,sigma_seen_mm,sigma_unseen_mm\n";
+      "undeformed_mm,within_2sd,within_2sd_seen,within_2sd_unseen,sigma_seen_mm,sigma_unseen_mm,"
+      "truth_volume_change_pct\n";
   for (const auto& r : rows)
     csv += fmt::format(
         "{},{},{},{},{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{},{:.4f},{:.4f},{:.4f},{},"
-        "{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f}"
+        "{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.3e}"
         "\n",
         r.method, r.shape, r.family, r.magnitude_mm, r.points, r.noise_mm, r.outliers, r.wall_s,
         r.msd_mm, r.hd95_mm, r.dice, r.volume_change_pct, r.residual_mm, r.converged ? 1 : 0,
         r.msd_balls_mm, r.volume_change_balls_pct, r.msd_global_mm, r.case_id, r.global_fit,
         r.msd_undeformed_mm, r.within_2sd, r.within_2sd_seen, r.within_2sd_unseen, r.sigma_seen_mm,
-        r.sigma_unseen_mm);
+        r.sigma_unseen_mm, r.truth_volume_change_pct);
   write_file_atomically(o.out / "results.csv", csv);
   write_file_atomically(o.out / "curves.csv", curves);
   std::string effort_csv = "method,effort,case,wall_s,msd_mm\n";
@@ -604,7 +650,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
       "deformed surface. Metrics: fit_benchmark.h. The particle fits use the scene defaults "
       "but fit.max_global_stretch: 2 (the grid stretches the cube up to 2x).\n\n",
       std::string(o.quick ? " --quick" : "") + (o.sessions ? " --sessions" : "") +
-          (o.defaults_only ? " --defaults-only" : ""),
+          (o.fem ? " --fem" : "") + (o.defaults_only ? " --defaults-only" : ""),
       o.sample > 0 ? fmt::format(" --sample {}", o.sample) : "", cases_run,
       cases_run < grid_cases
           ? fmt::format(" (a seeded uniform sample of the grid's {})", grid_cases)
@@ -783,6 +829,51 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
           median(seen), median(unseen), *std::min_element(unseen.begin(), unseen.end()),
           larger_unseen, median(unseen_over_seen));
     }
+  }
+  // The FEM cases: per load and magnitude, ours against the organ left as it was, TPS and
+  // the paper's method, beside the FEM's own volume change.
+  if (o.fem) {
+    nlohmann::json per = nlohmann::json::array();
+    md +=
+        "\n## FEM ground truth (GetFEM, incompressible neo-Hookean; testdata/fem/fem_cases.py)\n\n"
+        "| load | magnitude (mm) | cases | FEM volume change (%, largest) | median MSD (mm): "
+        "none / ours / TPS / paper | median HD95 (mm): ours / TPS | ours' median volume "
+        "change (%) | ours above none + 0.1 mm |\n|---|---|---|---|---|---|---|---|\n";
+    for (const auto& f : families)
+      for (double mag : magnitudes) {
+        std::map<std::string, std::vector<double>> msd, hd, vol;
+        std::vector<double> none;
+        double fem_change = 0;
+        int harm_cases = 0, n_cases = 0;
+        for (const auto& r : rows) {
+          if (r.family != f || r.magnitude_mm != mag) continue;
+          msd[r.method].push_back(r.msd_mm), hd[r.method].push_back(r.hd95_mm),
+              vol[r.method].push_back(r.volume_change_pct);
+          if (r.method == "spread")
+            ++n_cases, none.push_back(r.msd_undeformed_mm),
+                harm_cases += r.msd_mm > r.msd_undeformed_mm + 0.1;
+          fem_change = std::max(fem_change, std::abs(r.truth_volume_change_pct));
+        }
+        if (none.empty()) continue;
+        md += fmt::format(
+            "| {} | {:g} | {} | {:.1e} | {:.2f} / {:.2f} / {:.2f} / {:.2f} | {:.2f} / {:.2f} | "
+            "{:+.2f} | {} |\n",
+            f.substr(4), mag, n_cases, fem_change, median(none), median(msd["spread"]),
+            median(msd["tps"]), median(msd["paper"]), median(hd["spread"]), median(hd["tps"]),
+            median(vol["spread"]), harm_cases);
+        per.push_back({{"load", f.substr(4)},
+                       {"magnitude_mm", mag},
+                       {"cases", n_cases},
+                       {"fem_volume_change_pct_largest", fem_change},
+                       {"median_msd_undeformed_mm", median(none)},
+                       {"median_msd_mm",
+                        {{"spread", median(msd["spread"])},
+                         {"tps", median(msd["tps"])},
+                         {"paper", median(msd["paper"])}}},
+                       {"spread_worse_than_undeformed_plus_0_1mm", harm_cases}});
+      }
+    summary["fem"] = per;
+    summary["fem_solves"] = fem_meshes;
   }
   write_file_atomically(o.out / "RESULTS.md", md);
   summary["targets"] = {{"cases", n},

@@ -129,7 +129,8 @@ geometry::Aabb deformed_bounds(const evaluation::Shape& s, const evaluation::Def
   }
   // The non-affine parts move points off the corners' hull by at most their amplitudes.
   const double margin = std::abs(d.bend_mm) + std::abs(d.indent_mm) + std::abs(d.push_mm) +
-                        std::abs(d.twist_rad) * 0.5 * (b.max_mm - b.min_mm).maxCoeff();
+                        std::abs(d.twist_rad) * 0.5 * (b.max_mm - b.min_mm).maxCoeff() +
+                        (d.field ? d.field->largest_mm : 0.0);
   out.min_mm.array() -= margin;
   out.max_mm.array() += margin;
   return out;

@@ -43,8 +43,27 @@ Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
 /// Volume of a shape by counting voxel centres (mm^3).
 double shape_volume_mm3(const Shape& shape, double voxel_mm);
 
+/// A displacement sampled on a grid: a point x moves to x + u(x), u trilinear between the
+/// voxel centres and held at its border value beyond the grid (mm, patient frame). A FEM
+/// solution is one (testdata/fem/fem_cases.py, read by pipeline/fem_cases.h).
+struct SampledDisplacement {
+  geometry::ImageGeometry grid;  ///< axis-aligned (identity direction)
+  std::vector<float> u_mm;       ///< x, y, z per voxel, i fastest
+  double largest_mm = 0;         ///< max |u| over the grid
+  Eigen::Vector3d at(const Eigen::Vector3d& p_mm) const;
+  /// du/dx at p (central differences over half a voxel), 3 x 3, dimensionless.
+  Eigen::Matrix3d gradient(const Eigen::Vector3d& p_mm) const;
+};
+
+/// Checks the grid (axis-aligned, 3 values per voxel, finite) and sets largest_mm. Throws
+/// std::invalid_argument otherwise.
+SampledDisplacement make_sampled_displacement(const geometry::ImageGeometry& grid,
+                                              std::vector<float> u_mm);
+
 /// A volume-preserving deformation with a known inverse, about a centre c, applied in
 /// this order (each step has Jacobian determinant 1, so their composition has too):
+///   field:   x' = x + u(x), a sampled displacement (a FEM's; its inverse by Newton's
+///            method, to 1e-5 mm)
 ///   stretch: x' = c + S (x - c), S = diag(s, 1/sqrt(s), 1/sqrt(s))
 ///   bend:    y' = y + b ((x' - c_x) / L)^2, with L the half-length along x
 ///   twist:   (y, z) turned about the x axis through c by  w (x - c_x) / L  radians
@@ -66,12 +85,13 @@ struct Deformation {
   Eigen::Vector3d shift_mm = Eigen::Vector3d::Zero();
   Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();
   double half_length_mm = 1.0;
+  std::shared_ptr<const SampledDisplacement> field;  ///< none: no sampled part
   Eigen::Vector3d apply(const Eigen::Vector3d& p) const;
   Eigen::Vector3d inverse(const Eigen::Vector3d& p) const;
   Eigen::Matrix3d rotation() const;  ///< R of the rigid part
   bool is_identity() const {
     return stretch == 1.0 && bend_mm == 0.0 && twist_rad == 0.0 && indent_mm == 0.0 &&
-           push_mm == 0.0 && rotation_rad.isZero(0) && shift_mm.isZero(0);
+           push_mm == 0.0 && rotation_rad.isZero(0) && shift_mm.isZero(0) && !field;
   }
 };
 

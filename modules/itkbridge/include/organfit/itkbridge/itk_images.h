@@ -25,6 +25,13 @@ void write_float_volume(const std::filesystem::path& file, const geometry::Image
 void write_vector_volume(const std::filesystem::path& file, const geometry::ImageGeometry& g,
                          const std::vector<float>& xyz);
 
+/// A vector field read back (read_vector_image): x y z per voxel in mm.
+struct VectorVolume {
+  geometry::ImageGeometry geometry;
+  std::vector<float> xyz;  ///< i fastest
+};
+VectorVolume read_vector_volume(const std::filesystem::path& file);
+
 /// A scalar image as float values with its geometry (any pixel type ITK reads).
 struct ScalarImage {
   geometry::ImageGeometry geometry;

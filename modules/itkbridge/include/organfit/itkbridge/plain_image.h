@@ -41,6 +41,10 @@ void write_float_image(const std::filesystem::path& file, const PlainFloatImage&
 /// reads as a vector field (`--xf`). Written as write_mask writes but uncompressed.
 void write_vector_image(const std::filesystem::path& file, const PlainGeometry& geometry,
                         const std::vector<float>& xyz);
+/// A field of 3-vectors read back (any file ITK reads as a 3-component float vector image):
+/// its geometry and x, y, z per voxel, i fastest. Throws InputError naming the file when it
+/// is missing, unreadable or not 3 components.
+PlainGeometry read_vector_image(const std::filesystem::path& file, std::vector<float>& xyz);
 /// Reads a mask (any image ITK reads, cast to 8 bits). Throws InputError naming the file.
 PlainMask read_mask(const std::filesystem::path& file);
 /// Reads any scalar image ITK reads as float values (e.g. an ultrasound volume). Throws

@@ -29,7 +29,9 @@
 // Families: stretch, bend, twist, indent, push (evaluation::Deformation) and, in the
 // session regime, shift (rigid, along (1, -2, 2)/3) and rotate (rigid, about (2, 1, -2)/3
 // through the centre, by magnitude / half the largest extent: 0 to 5.2 degrees on the
-// prostate up to 2 mm).
+// prostate up to 2 mm); with --fem, fem_probe and fem_bladder: the organ deformed by a FEM
+// engine (pipeline/fem_cases.h), whose own volume change is the row's
+// truth_volume_change_pct.
 // The particle fits run with the scene defaults except fit.max_global_stretch: 2 (the
 // grid stretches a 30 mm cube by up to 2x; the default 1.5 would refuse it) and
 // fit.max_wall_s: 20.
@@ -60,6 +62,12 @@ struct FitBenchOptions {
   /// 0.5 mm noise (70 cases); the summary counts the cases that break do-no-harm (an MSD
   /// above the undeformed organ's + 0.1 mm, or above TPS's)
   bool sessions = false;
+  /// the biomechanical ground truth instead (pipeline/fem_cases.h): the phantom's prostate
+  /// and the real GTVs of ct-sts-004 and ct-sts-002 (when ../shared/data has them) x a
+  /// transrectal probe from posterior and bladder filling from superior x 2, 5, 8, 12 mm, 87
+  /// points, 0.5 mm noise (24 cases); the FEM runs once per organ and load and is cached
+  bool fem = false;
+  std::filesystem::path fem_cache;  ///< empty: default_fem_cache()
   long long sample = 0;  ///< run this many cases, a seeded uniform sample of the grid (0: all)
   /// run only these cases, by their number in the grid (results.csv's `case`: the same
   /// case, points and seed as in a whole run); numbers beyond the grid are an InputError,
