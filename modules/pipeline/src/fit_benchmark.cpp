@@ -387,7 +387,6 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
               if (!selected[static_cast<size_t>(case_id)] ||
                   (o.targets && !target_case(count, noise, outlier, magnitude)))
                 continue;
-              ++cases_run;
               evaluation::Deformation d = family_deformation(family, magnitude, model.shape);
               double truth_volume_change_pct = 0;
               if (family.rfind("fem_", 0) == 0) {
@@ -406,15 +405,13 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                 const auto fc_at = std::find_if(made.begin(), made.end(), [&](const FemCase& c) {
                   return c.magnitude_mm == magnitude;
                 });
-                if (fc_at == made.end()) {  // the FEM found no solution this far
-                  --cases_run;
-                  continue;
-                }
+                if (fc_at == made.end()) continue;  // the FEM found no solution this far
                 const FemCase& fc = *fc_at;
                 d = evaluation::Deformation{};
                 d.field = fc.field;
                 truth_volume_change_pct = fc.volume_change_pct;
               }
+              ++cases_run;
               evaluation::SamplingOptions so;
               so.count = count, so.noise_mm = noise, so.outlier_fraction = outlier,
               so.half_coverage = true;
