@@ -378,17 +378,30 @@ check points.ply_read_four grep -q '"count": 4' "$tmp/ply/run.json"
 expect points.from_vtk 0 "" -- --quiet run "$scenes/points-from-vtk.yaml" --out "$tmp/vtk"
 check points.vtk_read_three grep -q '"count": 3' "$tmp/vtk/run.json"
 
-# every shipped scene runs from a fresh build (exit 0, or 3 where the scene's own fit is
-# known not to converge: run.json says so); the session scene runs above from its
-# planning run's model
+# every shipped scene runs from a fresh build and meets its target (exit 0); the paper's
+# literal method may stop short (exit 3, run.json says so), ours may not. Fig. 10 with
+# ours (paper-cube-to-lung) is not reached yet (issue 27): its fit folds and nothing is
+# exported, which is checked as such, so that a change either way is seen. The session
+# scene runs above from its planning run's model.
 for scene_file in "$src"/pipelines/*.yaml; do
   name=$(basename "$scene_file" .yaml)
   [[ $name == prostate-session ]] && continue
   [[ $name == real-sts-002 && ! -d "$src/../shared/data/ct-sts-002" ]] && continue
   "$bin" --quiet run "$scene_file" --out "$tmp/shipped/$name" > /dev/null 2> "$tmp/shipped_$name.err"
   code=$?
-  check "shipped.$name" bash -c "[[ $code -eq 0 || ( $code -eq 3 && -s '$tmp/shipped/$name/run.json' ) ]]"
+  if [[ $name == *-literal ]]; then
+    check "shipped.$name" bash -c "[[ $code -eq 0 || ( $code -eq 3 && -s '$tmp/shipped/$name/run.json' ) ]]"
+  elif [[ $name == paper-cube-to-lung ]]; then
+    check "shipped.$name.known_not_reached" bash -c "[[ $code -eq 3 ]] && grep -q 'folds' '$tmp/shipped_$name.err'"
+  else
+    check "shipped.$name" test "$code" -eq 0
+  fi
 done
+check shipped.fig8_volume_kept /usr/bin/python3 -c "
+import json; f = json.load(open('$tmp/shipped/paper-cube-elongation/run.json'))['fit']
+assert f['converged'] and abs(f['volume_change_pct']) < 1.0 and f['residual_max_mm'] < 0.5, f['residual_max_mm']
+s = sorted(f['global']['principal_stretches'])
+assert s[2] > 1.45 and abs(s[0] * s[1] * s[2] - 1) < 1e-6, s"
 
 # determinism: the same scene, seed and threads give bit-identical meshes and label maps,
 # and (with export.fixed_uids) identical RT Structure Sets; without it only UIDs and

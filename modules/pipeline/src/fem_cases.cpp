@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdlib>
@@ -81,33 +82,50 @@ FemCases fem_cases(const evaluation::Shape& organ, const std::string& name, cons
   std::string magnitudes;
   for (double m : magnitudes_mm)
     magnitudes += (magnitudes.empty() ? "" : ",") + fmt::format("{:g}", m);
-  const fs::path surface = cache / (name + ".surface.stl");
+  // Everything a run writes before its cases are complete carries its process id, so
+  // that two runs sharing a cache (two benches at once) never write into each other's
+  // files; the finished folder is renamed into place, and the first to finish wins.
+  const std::string mine = fmt::format(".{}", static_cast<long>(::getpid()));
+  const fs::path surface = cache / ("." + name + mine + ".surface.stl");
   meshing::write_surface(coarse_mask(organ), surface);
   const std::uint64_t key =
       fnv1a(load + "|" + magnitudes, fnv1a(read_bytes(script), fnv1a(read_bytes(surface))));
   FemCases out;
   out.load = load;
   out.folder = cache / fmt::format("{}-{}-{:016x}", name, load, key);
-  if (!fs::exists(out.folder / "cases.json", ec)) {
+  if (fs::exists(out.folder / "cases.json", ec)) {
+    fs::remove(surface, ec);
+  } else {
     spdlog::info(
         "bench fit: FEM ground truth for {} under the {} ({} mm): solving with GetFEM "
         "into {}",
         name, load, magnitudes, out.folder.string());
-    const fs::path part = out.folder.string() + ".part";
+    const fs::path part = out.folder.string() + ".part" + mine;
     fs::remove_all(part, ec);
-    const std::string command =
-        fmt::format("{} {} --surface {} --load {} --magnitudes {} --out {}",
-                    shell_quoted(ORGANFIT_SYSTEM_PYTHON), shell_quoted(script.string()),
-                    shell_quoted(surface.string()), load, magnitudes, shell_quoted(part.string()));
+    fs::create_directories(part, ec);
+    if (ec) throw InputError(part.string() + ": cannot make the FEM work folder: " + ec.message());
+    const fs::path kept_surface = part / "surface.stl";  // kept with the cases it made
+    fs::rename(surface, kept_surface, ec);
+    if (ec) throw InputError(kept_surface.string() + ": cannot move the surface: " + ec.message());
+    const std::string command = fmt::format(
+        "{} {} --surface {} --load {} --magnitudes {} --out {}",
+        shell_quoted(ORGANFIT_SYSTEM_PYTHON), shell_quoted(script.string()),
+        shell_quoted(kept_surface.string()), load, magnitudes, shell_quoted(part.string()));
     Stopwatch clock;
     const int rc = std::system(command.c_str());
-    if (rc != 0)
+    if (rc != 0) {
+      fs::remove_all(part, ec);
       throw InputError(
           fmt::format("bench fit --fem: {} failed for {} under the {} (exit {}; its "
                       "message is above)",
                       script.filename().string(), name, load, rc));
+    }
     fs::rename(part, out.folder, ec);
-    if (ec) throw InputError(out.folder.string() + ": cannot keep the FEM cases: " + ec.message());
+    if (ec) {  // another run finished the same cases first: theirs are kept
+      fs::remove_all(part, ec);
+      if (!fs::exists(out.folder / "cases.json", ec))
+        throw InputError(out.folder.string() + ": cannot keep the FEM cases");
+    }
     out.solve_wall_s = clock.elapsed_s();
   }
   nlohmann::json report;
