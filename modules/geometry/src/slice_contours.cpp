@@ -93,11 +93,14 @@ std::vector<SliceContour> slice_contours(const LabelVolume& mask, std::uint8_t l
           case 9:
             seg(bottom, top);
             break;
+          // Saddles: the two inside corners joined (the organ 8-connected in the slice,
+          // as topology_of's pieces are 26-connected): a voxel touching the organ only
+          // diagonally is part of its contour, not a contour of its own.
           case 5:
-            seg(left, bottom), seg(right, top);
-            break;  // saddles: inside corners kept apart
-          case 10:
             seg(bottom, right), seg(top, left);
+            break;
+          case 10:
+            seg(left, bottom), seg(right, top);
             break;
         }
       }
@@ -151,6 +154,20 @@ std::vector<SliceContour> slice_contours(const LabelVolume& mask, std::uint8_t l
       if (contour.points_mm.size() >= 3) out.push_back(std::move(contour));
     }
   }
+  return out;
+}
+
+std::vector<ContourCountChange> contour_count_changes(const std::vector<SliceContour>& before,
+                                                      const std::vector<SliceContour>& after) {
+  std::map<int, int> b, a;
+  for (const SliceContour& c : before)
+    ++b[c.k];
+  for (const SliceContour& c : after)
+    ++a[c.k];
+  std::vector<ContourCountChange> out;
+  for (const auto& [k, count] : a)
+    if (const auto it = b.find(k); it != b.end() && it->second != count)
+      out.push_back({k, it->second, count});
   return out;
 }
 

@@ -70,4 +70,31 @@ Topology topology_of(const LabelVolume& mask) {
   return t;
 }
 
+std::vector<SliceSpecks> slice_specks(const LabelVolume& mask) {
+  const ImageGeometry& g = mask.geometry;
+  auto in = [&](int i, int j, int k) {
+    return i >= 0 && j >= 0 && i < g.size[0] && j < g.size[1] && mask.at(i, j, k) == 1;
+  };
+  std::vector<SliceSpecks> out;
+  const IndexRange r = mask.range(1);  // a speck lies within the organ's box
+  if (r.empty()) return out;
+  for (int k = r.lo[2]; k <= r.hi[2]; ++k) {
+    SliceSpecks s{k, 0, 0};
+    for (int j = r.lo[1]; j <= r.hi[1]; ++j)
+      for (int i = r.lo[0]; i <= r.hi[0]; ++i) {
+        if (in(i, j, k)) {
+          bool alone = true;
+          for (int dj = -1; dj <= 1 && alone; ++dj)
+            for (int di = -1; di <= 1 && alone; ++di)
+              if ((di || dj) && in(i + di, j + dj, k)) alone = false;
+          s.islands += alone;
+        } else {
+          s.holes += in(i - 1, j, k) && in(i + 1, j, k) && in(i, j - 1, k) && in(i, j + 1, k);
+        }
+      }
+    if (s.islands || s.holes) out.push_back(s);
+  }
+  return out;
+}
+
 }  // namespace organfit::geometry

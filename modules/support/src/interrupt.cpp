@@ -26,6 +26,9 @@ std::atomic<int> g_stop{kRunning};
 std::atomic<bool> g_finishing{false};
 std::atomic<int> g_committing{0};
 std::atomic<double> g_deadline_s{0};  // on the steady clock; 0: none
+// Set while the watchdog removes partial outputs before it ends the process: a library
+// writing into them may then fail an assertion, which is not the run's error.
+std::atomic<bool> g_ending{false};
 const char* g_budget_name = "the wall budget";
 double g_budget_s = 0;
 
@@ -86,6 +89,7 @@ void watchdog(sigset_t signals) {
     // The run did not stop in time: remove what is partial, innermost first, and end.
     {
       std::lock_guard<std::mutex> lock(g_partial_mutex);
+      g_ending = true;
       for (auto it = g_partial.rbegin(); it != g_partial.rend(); ++it) {
         std::error_code ec;
         if (it->second.only_if_empty) {
@@ -211,6 +215,11 @@ volatile sig_atomic_t g_is_reading = 0;
 int g_saved_stderr = -1;  // stderr while a library reads: /dev/null (its assertion texts)
 
 void on_abort(int) {
+  // The watchdog is removing what this thread was writing (GDCM asserts that the file it
+  // opens is open): it ends the process itself in a moment, with the interrupt's message.
+  if (g_ending.load())
+    for (;;)
+      ::pause();
   if (g_is_reading) {
     if (g_saved_stderr >= 0) ::dup2(g_saved_stderr, 2);
     const char* parts[] = {"organfit: error: ", g_reading, ": malformed input: the ", g_library,

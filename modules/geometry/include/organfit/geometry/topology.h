@@ -6,6 +6,8 @@
 //               that do not reach the grid's border: holes sealed inside the organ
 // A one-voxel component is an island; a one-voxel cavity, a pinhole. The pair (26, 6)
 // is the one for which a digital surface separates inside from outside.
+#include <vector>
+
 #include "organfit/geometry/image_geometry.h"
 
 namespace organfit::geometry {
@@ -22,5 +24,17 @@ struct Topology {
 
 /// The topology of label 1 of `mask` (only the box of its voxels plus one is visited).
 Topology topology_of(const LabelVolume& mask);
+
+/// One-pixel pieces of one slice k of label 1, as its contours show them: an island (a
+/// voxel of the organ none of whose 8 in-slice neighbours is) and a hole (a voxel outside
+/// whose 4 in-slice neighbours are all inside; the pair (8, 4) of slice_contours). Below
+/// what the grid resolves, so never a change of shape a planning system should draw.
+struct SliceSpecks {
+  int k = 0;
+  int islands = 0, holes = 0;
+};
+
+/// The slices of label 1 of `mask` with at least one island or hole, by slice index.
+std::vector<SliceSpecks> slice_specks(const LabelVolume& mask);
 
 }  // namespace organfit::geometry
