@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -12,6 +13,7 @@
 #include "organfit/itkbridge/itk_images.h"
 #include "organfit/meshing/surface.h"
 #include "organfit/support/error.h"
+#include "organfit/support/interrupt.h"
 #include "organfit/support/resources.h"
 
 namespace fs = std::filesystem;
@@ -112,13 +114,19 @@ FemCases fem_cases(const evaluation::Shape& organ, const std::string& name, cons
         shell_quoted(ORGANFIT_SYSTEM_PYTHON), shell_quoted(script.string()),
         shell_quoted(kept_surface.string()), load, magnitudes, shell_quoted(part.string()));
     Stopwatch clock;
-    const int rc = std::system(command.c_str());
-    if (rc != 0) {
+    int status = 0;
+    try {
+      status = run_command(command);  // stopped with organfit on SIGINT or SIGTERM
+    } catch (...) {
       fs::remove_all(part, ec);
-      throw InputError(
-          fmt::format("bench fit --fem: {} failed for {} under the {} (exit {}; its "
-                      "message is above)",
-                      script.filename().string(), name, load, rc));
+      throw;
+    }
+    if (status != 0) {
+      fs::remove_all(part, ec);
+      throw InputError(fmt::format(
+          "bench fit --fem: {} failed for {} under the {} (exit {}; its message is above)",
+          script.filename().string(), name, load,
+          WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status)));
     }
     fs::rename(part, out.folder, ec);
     if (ec) {  // another run finished the same cases first: theirs are kept
