@@ -24,21 +24,15 @@ struct AffineFitOptions {
   /// pull of A towards I, relative to the points' spread
   double regularisation = 3e-3;
   /// a second pull also tried (0: none); fit_global_map keeps the better fit of the
-  /// points. On a seeded sample of 240 cases of `organfit bench fit`, points on half the
-  /// surface, 3e-3 alone kept bends from being taken for stretches (median surface
-  /// distance 0.97 -> 0.91 mm against 1e-3 alone) but fell short on stretches (prostate
-  /// stretched 1.4x: 0.51 -> 0.86 mm); each fits the points better where it is right.
+  /// points: the stiffer pull keeps bends from being taken for stretches, the softer one
+  /// follows large stretches (numbers: docs/decisions.md, "The global fit's settings").
   double regularisation_alternative = 1e-3;
   double shear_regularisation = 1e-3;  ///< pull of the shears towards none, likewise
   /// fits whose mean square residual is within equally_good_dof / m of the best's (m
   /// points) explain the points equally well; fit_global_map keeps the one changing the
   /// shape least. Why over m: a fit with k more free parameters lowers the sum of squares
   /// by about k noise variances by chance alone, the mean square by k/m of itself; with
-  /// 20 points a fit of the whole map "better" by 30% is still noise. On the 225 target
-  /// cases of `organfit bench fit --targets` (a fixed 10% before): median MSD 0.503 ->
-  /// 0.471 mm, MSD <= 1 mm in 196 -> 202, HD95 <= 2.5 mm in 184 -> 192; of the 75 cases
-  /// with 20 points 32 better by over 0.05 mm, 2 worse (9: 18 and 0; at 50 and 87 points
-  /// a wash; 35: 200 and 189 within the targets).
+  /// 20 points a fit of the whole map "better" by 30% is still noise.
   double equally_good_dof = 20.0;
   /// the points' expected residual (mm; fit.residual_tolerance_mm): the noise scale of
   /// that window. Fits within dof / m of the noise's mean square of the best are equally
@@ -51,19 +45,14 @@ struct AffineFitOptions {
   double distance_scale_mm = 2.0;
   /// with fewer points than the whole map's 21 unknowns (three shears), the fit on the signed
   /// distance also fits the shears twice: their pull as stated, and this many times it (0: only as
-  /// stated). On the 75 target cases with 20 points of `organfit bench fit --targets`,
-  /// stiffer alone against none: median ratio of MSD to TPS's 0.56 -> 0.50 (3x: 11 cases
-  /// better, 8 worse; 30x: 5 and 2); both against stiffer alone: median MSD 0.61 -> 0.54
-  /// mm, MSD <= 1 mm in 56 -> 59 (as stated alone: 0.64 and 55).
+  /// stated): stiffer, a bend seen by few points is not taken for an affine change.
   double few_points_shear_stiffness = 10.0;
   /// ShearFields' width and spacing (mm; 0: no fields): the scale of the changes the
   /// global map follows beyond its quadratic shears, about the spacing of 20 to 50 points
   /// on half a prostate's surface; finer detail is the local stage's.
   double field_sigma_mm = 10.0;
   /// pull of the fields' heights towards none, sum_k w_k r_k^2 + this x |heights|^2 (mm^2
-  /// per mm^2): a Gaussian prior on each height of 0.5 mm noise / sqrt(this). On the 225
-  /// target cases (see fit_global_map), 0.3 against 0.1: median MSD 0.46 -> 0.44 mm, MSD
-  /// <= 1 mm in 218 -> 215, HD95 <= 2.5 mm in 210 -> 209, at most half TPS's 161 -> 166.
+  /// per mm^2): a Gaussian prior on each height of 0.5 mm noise / sqrt(this).
   double field_stiffness = 0.3;
   double max_stretch = 1.5;  ///< a map stretching by more (or by less than 1/this) is refused
   /// ... and one whose quadratic shears, or whose shear fields, move any sample by more
@@ -242,12 +231,8 @@ LargestMoves largest_moves(const GlobalMap& map, const SurfaceSamples& surface);
 ///    distance, their heights pulled by field_stiffness) join the candidates, their mean
 ///    square raised by m / (m - k) for their k effective parameters (the trace of the
 ///    linearised fit's hat matrix: what they lower it by chance), and the choice above is
-///    made again. On the 225 target cases of `organfit bench fit --targets` (with both
-///    shear stiffnesses for fewer than 21 points), against without: median MSD 0.471 ->
-///    0.437 mm, MSD <= 1 mm in 202 -> 214, HD95 <= 2.5 mm in 192 -> 209, volume within 1%
-///    in 213 -> 223; indentations went from 0.34 to 0.25 of TPS's MSD. Without the raise,
-///    fields fitted to the noise of 20 points put every other fit out of the window:
-///    median 0.512 mm, HD95 1.41 mm.
+///    made again. Without the raise, fields fitted to the noise of 20 points put every
+///    other fit out of the window.
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
                          const AffineFitOptions& options,
                          const geometry::SignedDistance* distance = nullptr);
