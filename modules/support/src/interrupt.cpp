@@ -47,10 +47,18 @@ int g_next_id = 0;
 std::mutex g_children_mutex;
 std::set<pid_t> g_children;  // run_command's children still running
 
-void stop_children() {
+void stop_children(int sig = SIGTERM) {
   std::lock_guard<std::mutex> lock(g_children_mutex);
   for (pid_t pid : g_children)
-    ::kill(-pid, SIGTERM);  // the child's whole process group: the shell and what it runs
+    ::kill(-pid, sig);  // the child's whole process group: the shell and what it runs
+}
+
+/// Whether any child's process group still has a process (a zombie not yet reaped too).
+bool children_left() {
+  std::lock_guard<std::mutex> lock(g_children_mutex);
+  for (pid_t pid : g_children)
+    if (::kill(-pid, 0) == 0) return true;
+  return false;
 }
 
 std::string stop_message() {
@@ -87,6 +95,11 @@ void watchdog(sigset_t signals) {
     }
     if (now_s() < stop_at || g_finishing.load() || g_committing.load() > 0) continue;
     // The run did not stop in time: remove what is partial, innermost first, and end.
+    // A child still stopping could write into it again (a slow machine: a work folder
+    // was left behind): it is killed first.
+    stop_children(SIGKILL);
+    for (int i = 0; i < 50 && children_left(); ++i)  // at most 0.5 s: they are reaped
+      ::usleep(10'000);
     {
       std::lock_guard<std::mutex> lock(g_partial_mutex);
       g_ending = true;
