@@ -124,10 +124,10 @@ Eigen::VectorXd unit_determinant_normal(const Eigen::Matrix3d& a, Eigen::Index n
 /// best volume-preserving fit: two points 8 mm beyond a 30 mm cube's faces asked for a
 /// stretch of 1.53, the unconstrained fit gave it along x with y and z unchanged, and
 /// the rescaling took it back to 1.53^(2/3) = 1.33, every time.
-template <class Matrix, class Vector>
-Vector solve_on_constraint(const Matrix& h, const Vector& b, const Vector& g, double c) {
-  const auto ldlt = h.ldlt();
-  const Vector x = ldlt.solve(b), hg = ldlt.solve(g);
+Eigen::VectorXd solve_on_constraint(const Eigen::MatrixXd& h, const Eigen::VectorXd& b,
+                                    const Eigen::VectorXd& g, double c) {
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt = h.ldlt();
+  const Eigen::VectorXd x = ldlt.solve(b), hg = ldlt.solve(g);
   const double ghg = g.dot(hg);
   if (!(ghg > 0)) return x;
   return x - ((g.dot(x) - c) / ghg) * hg;
@@ -730,8 +730,7 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
           const VecX gradient =
               jac.transpose() * w.cwiseProduct(r) + pull * (theta_of(g) - identity);
           if (!on_constraint) return VecX(h.ldlt().solve(-gradient));
-          return solve_on_constraint(h, VecX(-gradient), unit_determinant_normal(g.affine.a, n),
-                                     0.0);
+          return solve_on_constraint(h, -gradient, unit_determinant_normal(g.affine.a, n), 0.0);
         },
         [&](const GlobalMap& g, const VecX& step, double alpha) {
           return map_of(theta_of(g) + alpha * step);

@@ -60,9 +60,9 @@ TEST(ContourCountChanges, NameTheSlicesBothOrgansCutWhoseCountDiffers) {
   EXPECT_TRUE(contour_count_changes(slice_contours(before, 1), slice_contours(before, 1)).empty());
 }
 
-// One-pixel islands and holes of a slice: a voxel alone in its slice (even one touching
-// the organ on the slice above) and a voxel missing with its 4 neighbours in; a voxel
-// touching the organ only diagonally is no island (it is on the organ's contour).
+// One-pixel islands and holes of a slice: a voxel none of whose 8 in-slice neighbours is
+// in, and a voxel missing with its 4 neighbours in; a voxel touching the organ only
+// diagonally is no island (it is on the organ's contour).
 TEST(SliceSpecks, CountOnePixelIslandsAndHolesPerSlice) {
   LabelVolume m = box_mask(12);
   EXPECT_TRUE(slice_specks(m).empty());
