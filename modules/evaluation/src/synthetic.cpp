@@ -9,69 +9,6 @@
 
 namespace organfit::evaluation {
 
-bool Shape::inside(const Eigen::Vector3d& p) const {
-  if (mask) return geometry::inside_interpolated(*mask, p);
-  const Eigen::Vector3d semi = 0.5 * size_mm;
-  const Eigen::Vector3d q = p - centre_mm;
-  if (kind == "box") return (q.cwiseAbs().array() <= semi.array()).all();
-  if (kind == "egg") {
-    // Cross-section scale: 1 at +x end and at the middle, 0.7 at the -x tip.
-    const double t = std::clamp(q.x() / semi.x(), -1.0, 1.0);
-    const double taper = t < 0 ? 1.0 + 0.3 * t : 1.0;
-    const Eigen::Vector3d s(semi.x(), semi.y() * taper, semi.z() * taper);
-    return q.cwiseQuotient(s).squaredNorm() <= 1.0;
-  }
-  const bool in_ellipsoid = q.cwiseQuotient(semi).squaredNorm() <= 1.0;
-  if (kind == "lung") {
-    const Eigen::Vector3d notch(-semi.x() * 1.05, 0, -0.2 * semi.z());
-    return in_ellipsoid && (q - notch).norm() > 0.55 * semi.x();
-  }
-  return in_ellipsoid;
-}
-
-Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
-                 const Eigen::Vector3d& centre_mm) {
-  if (kind != "ellipsoid" && kind != "box" && kind != "egg" && kind != "lung") {
-    throw std::invalid_argument("unknown shape '" + kind + "' (ellipsoid, box, egg, lung)");
-  }
-  if (!(size_mm.array() > 0).all()) throw std::invalid_argument("shape size must be > 0 mm");
-  Shape shape;
-  shape.kind = kind, shape.size_mm = size_mm, shape.centre_mm = centre_mm;
-  return shape;
-}
-
-Shape make_mask_shape(std::shared_ptr<const geometry::LabelVolume> mask) {
-  const auto& g = mask->geometry;
-  Shape s;
-  s.kind = "mask";
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo, sum = Eigen::Vector3d::Zero();
-  long long n = 0;
-  const Eigen::Vector3d half = 0.5 * (g.direction * g.spacing_mm).cwiseAbs();
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i) {
-        if (mask->at(i, j, k) != 1) continue;
-        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
-        lo = lo.cwiseMin(p - half), hi = hi.cwiseMax(p + half), sum += p, ++n;
-      }
-  if (n == 0) throw std::invalid_argument("the organ mask is empty");
-  s.mask = std::move(mask);
-  s.box = {lo, hi};
-  s.centre_mm = sum / static_cast<double>(n);
-  s.size_mm = hi - lo;
-  return s;
-}
-
-double shape_volume_mm3(const Shape& shape, double voxel_mm) {
-  const geometry::Aabb b = shape.bounds();
-  long long n = 0;
-  for (double z = b.min_mm.z() + 0.5 * voxel_mm; z < b.max_mm.z(); z += voxel_mm)
-    for (double y = b.min_mm.y() + 0.5 * voxel_mm; y < b.max_mm.y(); y += voxel_mm)
-      for (double x = b.min_mm.x() + 0.5 * voxel_mm; x < b.max_mm.x(); x += voxel_mm)
-        n += shape.inside({x, y, z});
-  return static_cast<double>(n) * voxel_mm * voxel_mm * voxel_mm;
-}
-
 SampledDisplacement make_sampled_displacement(const geometry::ImageGeometry& grid,
                                               std::vector<float> u_mm) {
   if (!grid.direction.isIdentity(1e-9))
@@ -190,12 +127,12 @@ Eigen::Vector3d Deformation::inverse(const Eigen::Vector3d& p) const {
   return field ? invert_field(*field, x) : x;
 }
 
-std::function<bool(const Eigen::Vector3d&)> deformed_inside(const Shape& shape,
+std::function<bool(const Eigen::Vector3d&)> deformed_inside(const geometry::Shape& shape,
                                                             const Deformation& d) {
   return [shape, d](const Eigen::Vector3d& p) { return shape.inside(d.inverse(p)); };
 }
 
-std::vector<fitting::AttractivePoint> sample_deformed_surface(const Shape& shape,
+std::vector<fitting::AttractivePoint> sample_deformed_surface(const geometry::Shape& shape,
                                                               const Deformation& deformation,
                                                               const SamplingOptions& o) {
   std::mt19937_64 rng(o.seed);

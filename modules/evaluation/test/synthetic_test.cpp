@@ -8,6 +8,10 @@
 namespace organfit::evaluation {
 namespace {
 
+using geometry::make_shape;
+using geometry::Shape;
+using geometry::shape_volume_mm3;
+
 TEST(Deformation, IsVolumePreservingAndExactlyInvertible) {
   Deformation d;
   d.stretch = 1.2;
@@ -146,15 +150,6 @@ TEST(Sampling, PointsLieOnTheDeformedSurfaceWithinTheNoise) {
     EXPECT_GE(p.p_mm.y(), -1e-9);
   const auto a = sample_deformed_surface(s, d, o), b = sample_deformed_surface(s, d, o);
   EXPECT_EQ(a[17].p_mm, b[17].p_mm);  // deterministic for a seed
-}
-
-TEST(Shapes, LungHasItsNotchAndUnknownShapesAreRefused) {
-  const Shape lung = make_shape("lung", {40, 30, 60}, {0, 0, 0});
-  EXPECT_TRUE(lung.inside({10, 0, 0}));
-  EXPECT_FALSE(lung.inside({-18, 0, -6}));
-  EXPECT_LT(shape_volume_mm3(lung, 1.0),
-            shape_volume_mm3(make_shape("ellipsoid", {40, 30, 60}, {0, 0, 0}), 1.0));
-  EXPECT_THROW(make_shape("donut", {1, 1, 1}, {0, 0, 0}), std::invalid_argument);
 }
 
 }  // namespace

@@ -367,4 +367,32 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
   return out;
 }
 
+ExportRequest export_request_from(const config::Scene& scene, const std::filesystem::path& staging,
+                                  const std::string& organ_name, const OrganLook& look) {
+  ExportRequest request;
+  auto in_out = [&](const char* key) {
+    const std::string& file = scene.text("export", key);
+    return file.empty() ? std::filesystem::path() : staging / file;
+  };
+  request.rtstruct = in_out("rtstruct");
+  request.labels = in_out("labels");
+  request.mesh = in_out("mesh");
+  request.displacement_field = in_out("displacement_field");
+  request.jacobian = in_out("jacobian");
+  request.uncertainty = in_out("uncertainty");
+  request.registration = in_out("registration");
+  request.field_spacing_mm = scene.number("export", "field_spacing_mm");
+  request.roi_name = scene.text("export", "roi_name");
+  request.fixed_uids = scene.flag("export", "fixed_uids");
+  if (request.roi_name.empty()) request.roi_name = organ_name + "_fit";
+  request.roi_colour = look.colour;
+  request.roi_type = look.interpreted_type;
+  if (const Eigen::Vector3d c = scene.vec3("export", "roi_color");
+      c != Eigen::Vector3d(-1, -1, -1)) {
+    for (int i = 0; i < 3; ++i)
+      request.roi_colour[static_cast<size_t>(i)] = static_cast<int>(std::lround(c[i]));
+  }
+  return request;
+}
+
 }  // namespace organfit::pipeline

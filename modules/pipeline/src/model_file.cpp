@@ -176,14 +176,14 @@ SavedModel load_model(const fs::path& file) {
         value ^= 1;
       }
       if (v != mask->labels.size()) fail("shape.mask runs do not cover the grid");
-      m.shape = evaluation::make_mask_shape(std::move(mask));
+      m.shape = geometry::make_mask_shape(std::move(mask));
     } else {
       m.shape =
-          evaluation::make_shape(shape.at("kind").get<std::string>(), read_vec(shape.at("size_mm")),
-                                 read_vec(shape.at("centre_mm")));
+          geometry::make_shape(shape.at("kind").get<std::string>(), read_vec(shape.at("size_mm")),
+                               read_vec(shape.at("centre_mm")));
     }
     const particles::CohesionParams cp = cohesion_params_from(m.settings);
-    m.reference = reference_body(m.shape, cp.r0_mm);
+    m.reference = fitting::reference_body(m.shape, cp.r0_mm);
     std::optional<particles::Skeleton> skeleton;
     if (!j.at("skeleton").is_null()) {
       const auto nodes = j.at("skeleton").at("nodes_mm").get<std::vector<double>>();

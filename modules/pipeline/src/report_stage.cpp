@@ -14,7 +14,7 @@ namespace organfit::pipeline {
 namespace {
 
 /// A shape's inside test at the CT's voxel centres (only within the shape's bounds).
-geometry::LabelVolume shape_on_grid(const evaluation::Shape& shape,
+geometry::LabelVolume shape_on_grid(const geometry::Shape& shape,
                                     const geometry::ImageGeometry& g) {
   geometry::LabelVolume mask(g);
   const geometry::IndexRange r = geometry::index_range(g, shape.bounds(), 1);

@@ -8,21 +8,18 @@
 #include <optional>
 #include <set>
 
-#include "organfit/dicom/rtstruct_writer.h"
 #include "organfit/dicom/structure_set.h"
-#include "organfit/geometry/mask_ops.h"
-#include "organfit/geometry/slice_contours.h"
 #include "organfit/itkbridge/itk_images.h"
-#include "organfit/meshing/surface.h"
+#include "organfit/pipeline/ct_stage.h"
 #include "organfit/pipeline/export_stage.h"
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_file.h"
 #include "organfit/pipeline/model_stage.h"
 #include "organfit/pipeline/node_stage.h"
+#include "organfit/pipeline/organ_stage.h"
+#include "organfit/pipeline/phantom_stage.h"
 #include "organfit/pipeline/report_stage.h"
-#include "organfit/pipeline/synth_command.h"
 #include "organfit/pipeline/ultrasound_stage.h"
-#include "organfit/segmentation/segment.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 #include "organfit/support/output_folder.h"
@@ -85,7 +82,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   // Everything is written under the staging folder and moved into --out at the end.
   const std::set<std::string> names = names_written(scene);
   OutputFolder output(out_dir, names);
-  const fs::path& stage = output.staging();
+  const fs::path& staging = output.staging();
   const long long threads = scene.integer("scene", "threads");
   if (threads > 0) omp_set_num_threads(static_cast<int>(threads));
 
@@ -98,14 +95,15 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
                         {"warnings", nlohmann::json::array()},
                         {"outputs", nlohmann::json::array()}};
   Stopwatch total;
-  auto record_stage = [&](const char* stage, double wall_s) {
-    run["stages"].push_back(
-        {{"name", stage}, {"wall_s", wall_s}, {"peak_memory_mib", peak_memory_mib()}});
+  auto record_stage = [&run](const char* stage_name, double wall_s, double peak_mib = -1) {
+    run["stages"].push_back({{"name", stage_name},
+                             {"wall_s", wall_s},
+                             {"peak_memory_mib", peak_mib >= 0 ? peak_mib : peak_memory_mib()}});
   };
 
   std::vector<std::string> skipped;
-  for (const auto& stage : pipeline_stages()) {
-    if (!stage.available) skipped.push_back(stage.name);
+  for (const auto& s : pipeline_stages()) {
+    if (!s.available) skipped.push_back(s.name);
   }
 
   auto warn = [&](const std::string& w) {
@@ -149,16 +147,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   fs::path ct_folder, ct_home, phantom_rtstruct;
   if (scene.has_section("phantom")) {
     Stopwatch clock;
-    phantom::PelvisOptions p;
-    p.seed = static_cast<std::uint64_t>(scene.integer("phantom", "seed"));
-    p.columns = static_cast<int>(scene.integer("phantom", "columns"));
-    p.rows = static_cast<int>(scene.integer("phantom", "rows"));
-    p.slices = static_cast<int>(scene.integer("phantom", "slices"));
-    p.pixel_mm = scene.number("phantom", "pixel_mm");
-    p.slice_mm = scene.number("phantom", "slice_mm");
-    p.noise_hu = scene.number("phantom", "noise_hu");
-    const fs::path folder = stage / "phantom";
-    const SynthResult made = run_synth_pelvis(folder, p);
+    const fs::path folder = staging / "phantom";
+    const SynthResult made = write_pelvis_phantom(folder, phantom_options_from(scene));
     ct_folder = folder / "ct";
     ct_home = out_dir / "phantom" / "ct";
     phantom_rtstruct = folder / "rtstruct.dcm";
@@ -171,28 +161,14 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   }
   std::optional<dicom::CtSeries> ct;
   if (scene.has_section("ct") || !ct_folder.empty()) {
-    Stopwatch clock;
-    dicom::CtReadOptions o;
-    if (scene.has_section("ct")) {
-      o.series_instance_uid = scene.text("ct", "series_uid");
-      o.series_description = scene.text("ct", "series_description");
-      if (scene.is_given("ct", "node")) {
-        ct_folder = stage / "cache" / "ct";
-        ct_home = out_dir / "cache" / "ct";
-        const PulledSeries pulled = pull_ct(scene, ct_folder);
-        o.series_instance_uid = pulled.series_uid;
-        run["ct_pulled"] = pulled.summary();
-        record_stage("ct_pull", clock.elapsed_s());
-        spdlog::info("ct: {} objects pulled from {} in {:.2f} s (C-FIND {:.2f} s, C-GET {:.2f} s)",
-                     pulled.files.size(), scene.text("ct", "node"), clock.elapsed_s(),
-                     pulled.find_s, pulled.get_s);
-        clock.restart();
-      } else {
-        ct_folder = scene.path("ct", "folder");
-        ct_home = ct_folder;
-      }
+    CtStageResult read = run_ct_stage(scene, staging, out_dir, ct_folder, ct_home);
+    if (read.pulled) {
+      run["ct_pulled"] = read.pulled->summary();
+      record_stage("ct_pull", read.pull_wall_s, read.pull_peak_memory_mib);
     }
-    ct = dicom::read_ct_series(ct_folder, o);
+    ct = std::move(read.ct);
+    ct_folder = read.folder;
+    ct_home = read.home;
     // A session's CT, when the scene names one, must be the one the model was built on.
     if (scene.has_section("planning") &&
         (!planning_ct || ct->series_instance_uid != planning_ct->series_instance_uid ||
@@ -201,7 +177,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
           "{}: the planning model was built on another CT series (or Frame of Reference) than "
           "the scene's CT {}",
           scene.path("planning", "model").string(), ct_home.string()));
-    record_stage("ct", clock.elapsed_s());
+    record_stage("ct", read.read_wall_s);
     for (const auto& w : ct->warnings)
       warn(w);
     const auto& g = ct->geometry;
@@ -211,7 +187,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     spdlog::info("ct: {} x {} x {} voxels of {:.3f} x {:.3f} x {:.3f} mm", g.size[0], g.size[1],
                  g.size[2], g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z());
   }
-  std::optional<evaluation::Shape> organ;
+  std::optional<geometry::Shape> organ;
   // The organ's structure set: where it is read from, and where it is once the run is
   // committed (the phantom's and a pulled one are in --out).
   fs::path rtstruct_file, organ_structure_set;
@@ -224,56 +200,19 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   }
   if (scene.has_section("organ") && ct) {
     Stopwatch clock;
-    const std::string roi = scene.text("organ", "roi");
-    geometry::LabelVolume mask;
-    if (scene.text("organ", "source") == "seed") {
-      segmentation::SeedOptions s;
-      s.seed_mm = scene.vec3("organ", "seed_mm");
-      s.hu_low = scene.number("organ", "hu_low");
-      s.hu_high = scene.number("organ", "hu_high");
-      s.smoothing_iterations = static_cast<int>(scene.integer("organ", "smoothing_iterations"));
-      s.opening_radius_voxels = static_cast<int>(scene.integer("organ", "opening_radius_voxels"));
-      s.search_box_mm = scene.number("organ", "search_box_mm");
-      segmentation::SeededOrgan grown = segmentation::segment_from_seed(ct->geometry, ct->hu, s);
-      for (const auto& w : grown.warnings)
-        warn(w);
-      mask = std::move(grown.mask);
-      run["organ"] = {
-          {"roi", roi}, {"source", "seed"}, {"volume_cm3", mask.volume_mm3(1) / 1000.0}};
-      spdlog::info("organ: '{}' grown from the seed, {:.2f} cm3", roi, mask.volume_mm3(1) / 1000.0);
-    } else {
-      if (scene.is_given("organ", "node")) {
-        const PulledSeries pulled =
-            pull_structure_set(scene, ct->patient.study_instance_uid, stage / "cache" / "rtstruct");
-        rtstruct_file = pulled.files.front();
-        organ_structure_set = out_dir / fs::relative(rtstruct_file, stage);
-        run["organ_pulled"] = pulled.summary();
-        record_stage("organ_pull", clock.elapsed_s());
-        spdlog::info("organ: the structure set pulled from {} in {:.2f} s",
-                     scene.text("organ", "node"), clock.elapsed_s());
-        clock.restart();
-      }
-      const fs::path& file = rtstruct_file;
-      dicom::RasterisedRoi r =
-          dicom::rasterise_roi(dicom::read_rtstruct(file), roi, *ct, file.string(),
-                               static_cast<int>(scene.integer("organ", "roi_number")));
-      for (const auto& w : r.warnings)
-        warn(w);
-      run["organ"] = {{"roi", roi},
-                      {"source", "rtstruct"},
-                      {"contours", r.contours},
-                      {"matched_by_position", r.matched_by_position},
-                      {"volume_cm3", r.mask.volume_mm3(1) / 1000.0}};
-      spdlog::info("organ: ROI '{}', {} contours, {:.2f} cm3", roi, r.contours,
-                   r.mask.volume_mm3(1) / 1000.0);
-      organ_look = {r.colour, r.interpreted_type};  // an empty type is written as ORGAN
-      mask = std::move(r.mask);
+    OrganStageResult made = run_organ_stage(scene, *ct, rtstruct_file, staging, out_dir);
+    if (made.pulled) {
+      rtstruct_file = made.rtstruct_file;
+      organ_structure_set = made.structure_set_home;
+      run["organ_pulled"] = made.pulled->summary();
+      record_stage("organ_pull", made.pull_wall_s, made.pull_peak_memory_mib);
     }
-    if (mask.count(1) == 0)
-      scene.fail("organ", "roi", "the organ '" + echo(roi) + "' covers no voxel of the CT");
-    organ =
-        evaluation::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(mask)));
-    record_stage("organ", clock.elapsed_s());
+    for (const auto& w : made.warnings)
+      warn(w);
+    run["organ"] = made.summary;
+    if (scene.text("organ", "source") == "rtstruct") organ_look = made.look;
+    organ = std::move(made.shape);
+    record_stage("organ", clock.elapsed_s() - made.pull_wall_s);
   }
   // Where the CT and the organ's structure set are (the phantom's: where they will be).
   auto absolute = [](const fs::path& p) { return fs::absolute(p).lexically_normal().string(); };
@@ -286,8 +225,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   auto modelling_s = [&run]() {
     double sum = 0;
     for (const auto& st : run["stages"])
-      for (const char* stage : {"phantom", "ct", "organ", "model"})
-        if (st["name"] == stage) sum += st["wall_s"].get<double>();
+      for (const char* stage_name : {"phantom", "ct", "organ", "model"})
+        if (st["name"] == stage_name) sum += st["wall_s"].get<double>();
     return sum;
   };
   if (scene.has_section("model")) {
@@ -322,54 +261,12 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
           anatomy ? &*anatomy : nullptr);
       record_stage("ultrasound", clock.elapsed_s());
       points = std::move(us.points);
-      if (points->truth) {
-        // How far the extracted points lie from the true (deformed) surface: against a
-        // dense noise-free sampling of it (0.2 mm apart on a 35 cm3 organ).
-        evaluation::SamplingOptions dense;
-        dense.count = 40000;
-        dense.noise_mm = 0;
-        const auto surface =
-            evaluation::sample_deformed_surface(points->truth_shape, *points->truth, dense);
-        std::vector<double> d;
-        for (const auto& p : points->points) {
-          double best = 1e300;
-          for (const auto& q : surface)
-            best = std::min(best, (p.p_mm - q.p_mm).squaredNorm());
-          d.push_back(std::sqrt(best));
-          if (d.back() > 1.5)
-            spdlog::debug(
-                "ultrasound: point ({:.1f}, {:.1f}, {:.1f}) mm, confidence {:.2f}, is {:.2f} mm "
-                "off",
-                p.p_mm.x(), p.p_mm.y(), p.p_mm.z(), p.confidence, d.back());
-        }
-        std::sort(d.begin(), d.end());
-        const double within =
-            static_cast<double>(std::upper_bound(d.begin(), d.end(), 1.5) - d.begin()) / d.size();
-        points->summary["median_distance_to_true_surface_mm"] = d[d.size() / 2];
-        points->summary["fraction_within_1_5_mm"] = within;
-        points->summary["distance_to_true_surface_p90_mm"] = d[d.size() * 9 / 10];
-        points->summary["distance_to_true_surface_max_mm"] = d.back();
-        // ... and whether they lie on the part of it the probe sees (within 1.5 mm of
-        // where the simulator's rays crossed the organ's boundary before any shadow).
-        int on_visible = 0;
-        for (const auto& p : points->points) {
-          double best = 1e300;
-          for (const auto& q : us.true_boundary_mm)
-            best = std::min(best, (p.p_mm - q).squaredNorm());
-          on_visible += best <= 1.5 * 1.5;
-        }
-        points->summary["fraction_on_visible_surface"] =
-            static_cast<double>(on_visible) / points->points.size();
-        spdlog::info(
-            "ultrasound: points lie {:.2f} mm (median) from the true surface; {:.0f}% within 1.5 "
-            "mm",
-            d[d.size() / 2], 100 * within);
-      }
+      if (points->truth) measure_points_against_truth(*points, us.true_boundary_mm);
       const std::string save = scene.text("ultrasound", "save_volume");
       if (!save.empty() && us.bmode) {
         auto volume = std::make_shared<geometry::LabelVolume>(std::move(*us.bmode));
         deferred_writes.push_back(
-            [volume, file = stage / save] { itkbridge::write_label_volume(file, *volume); });
+            [volume, file = staging / save] { itkbridge::write_label_volume(file, *volume); });
         deferred_outputs.push_back(save);
       }
     } else {
@@ -409,11 +306,12 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     Stopwatch clock;
     FitStageResult fit;
     try {
-      fit = run_fit_stage(scene, *model, *points);
+      fit = run_fit_stage(scene, std::move(*model), *points);
     } catch (const particles::StabilityError& e) {
       throw TargetNotMetError(std::string("fit: the simulation could not continue stably: ") +
                               e.what());
     }
+    model = std::move(fit.model);
     record_stage("fit", clock.elapsed_s() - fit.truth_wall_s);
     if (fit.truth_wall_s > 0)
       record_stage("truth", fit.truth_wall_s);  // evaluation, not the update
@@ -421,12 +319,12 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     run["model"]["skin_particles"] = fit.fit_summary["skin_particles"];
     if (!fit.truth_summary.is_null()) run["truth"] = fit.truth_summary;
     files.push_back({"history.csv", fit.history_csv});
-    residuals_mm = fit.fit.residuals_mm;
+    residuals_mm = fit.report.fit.residuals_mm;
     spdlog::info(
         "fit ({}): {} in {} steps, {:.3f} s; residual mean {:.3f} mm, max {:.3f} mm; volume "
         "{:+.2f}%",
-        fit.fit_summary["method"].get<std::string>(), fit.fit.stop_reason, fit.fit.steps,
-        fit.fit.wall_s, fit.fit.residual_mean_mm, fit.fit.residual_max_mm,
+        fit.report.method, fit.report.fit.stop_reason, fit.report.fit.steps, fit.report.fit.wall_s,
+        fit.report.fit.residual_mean_mm, fit.report.fit.residual_max_mm,
         fit.fit_summary["volume_change_pct"].get<double>());
     if (!fit.truth_summary.is_null()) {
       spdlog::info(
@@ -438,29 +336,12 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
           fit.truth_summary["msd_floor_mm"].get<double>(),
           fit.truth_summary["hd95_mm"].get<double>(), fit.truth_summary["recovery"].get<double>());
     }
-    const double organ_change = fit.fit_summary["volume_change_pct"].get<double>();
-    const double balls_change = fit.fit_summary["particle_body_volume_change_pct"].get<double>();
-    if (std::abs(organ_change) > 1.0)
-      warn(
-          std::abs(balls_change) <= 1.0 && std::abs(organ_change) > 3.0
-              ? fmt::format(
-                    "fit: the organ's volume changed by {:+.1f}% while the particles' own body "
-                    "changed by {:+.1f}%: the particles rearranged under a deformation larger than "
-                    "the global map explains, and the organ they carry is not to be trusted there",
-                    organ_change, balls_change)
-              : fmt::format("fit: the organ's volume changed by {:+.1f}%", organ_change));
-    if (fit.global_map.shears_dropped)
-      warn(
-          "fit: the points asked for an implausible bend (fit.max_global_stretch and a quarter of "
-          "the organ's size bound it); the global stage used a stretch and shift only");
-    if (fit.fit_summary["rejected_points"].get<int>() > 0) {
-      warn(fmt::format("fit: {} points rejected as outliers",
-                       fit.fit_summary["rejected_points"].get<int>()));
-    }
+    for (const auto& w : fit_warnings(fit))
+      warn(w);
     not_converged = fit.not_converged_message;
     deformation_folds = fit.deformation_folds;
-    deformation = fit.deformation;
-    uncertainty = fit.uncertainty;
+    deformation = fit.report.deformation;
+    uncertainty = fit.report.uncertainty;
     if (!not_converged.empty()) run["warnings"].push_back(not_converged);
   }
   // Export: the (fitted) model on the planning CT's grid (RTSTRUCT, labels), its surface
@@ -470,30 +351,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   std::string model_file;
   if (scene.has_section("export") && model && !deformation_folds) {
     Stopwatch clock;
-    ExportRequest request;
-    auto in_out = [&](const char* key) {
-      const std::string& file = scene.text("export", key);
-      return file.empty() ? fs::path() : stage / file;
-    };
-    request.rtstruct = in_out("rtstruct");
-    request.labels = in_out("labels");
-    request.mesh = in_out("mesh");
-    request.displacement_field = in_out("displacement_field");
-    request.jacobian = in_out("jacobian");
-    request.uncertainty = in_out("uncertainty");
+    ExportRequest request = export_request_from(scene, staging, organ_name, organ_look);
     request.sigma = uncertainty;
-    request.registration = in_out("registration");
-    request.field_spacing_mm = scene.number("export", "field_spacing_mm");
-    request.roi_name = scene.text("export", "roi_name");
-    request.fixed_uids = scene.flag("export", "fixed_uids");
-    if (request.roi_name.empty()) request.roi_name = organ_name + "_fit";
-    request.roi_colour = organ_look.colour;
-    request.roi_type = organ_look.interpreted_type;
-    if (const Eigen::Vector3d c = scene.vec3("export", "roi_color");
-        c != Eigen::Vector3d(-1, -1, -1)) {
-      for (int i = 0; i < 3; ++i)
-        request.roi_colour[static_cast<size_t>(i)] = static_cast<int>(std::lround(c[i]));
-    }
     double ct_read_s = 0;  // its own stage, not the export's
     if ((request.needs_ct() || (scene.has_section("report") && ct_reference)) && !ct) {
       // A session: the planning CT named in the model file, checked to be the same series.
@@ -545,8 +404,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     if (planning_modelling_s >= 0) timing["planning_modelling_s"] = planning_modelling_s;
     double update = 0;
     for (const auto& st : run["stages"])
-      for (const char* stage : {"planning_model", "points", "fit"})
-        if (st["name"] == stage) update += st["wall_s"].get<double>();
+      for (const char* stage_name : {"planning_model", "points", "fit"})
+        if (st["name"] == stage_name) update += st["wall_s"].get<double>();
     if (scene.has_section("fit")) timing["update_s"] = update;
     run["timing"] = timing;
     if (planning_modelling_s >= 0 && scene.has_section("fit"))
@@ -578,7 +437,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   // Files are committed only now: a run that fails with an error leaves none. A fit
   // that did not converge still writes its results (run.json says so), then exits 3.
   for (const auto& f : files)
-    write_file_atomically(stage / f.first, f.second);
+    write_file_atomically(staging / f.first, f.second);
   for (const auto& write : deferred_writes)
     write();
   if (pending) {
@@ -596,7 +455,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
       std::vector<fs::path> dicom_files;
       for (const char* key : {"rtstruct", "registration"})
         if (!scene.text("export", key).empty())
-          dicom_files.push_back(stage / scene.text("export", key));
+          dicom_files.push_back(staging / scene.text("export", key));
       try {
         run["export"]["sent"] = send_exported(scene, dicom_files);
         spdlog::info("export: {} object(s) sent to {} in {:.2f} s", dicom_files.size(),
@@ -616,7 +475,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         {"scene", name},
         {"modelling_wall_s", planning_modelling_s >= 0 ? planning_modelling_s : modelling_s()},
         {"fitted", scene.has_section("fit")}};
-    save_model(stage / model_file, *model, organ_name, organ_look, ct_reference, provenance);
+    save_model(staging / model_file, *model, organ_name, organ_look, ct_reference, provenance);
   }
   if (scene.has_section("report")) {
     Stopwatch clock;
@@ -648,7 +507,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     run["outputs"].push_back(file);
     record_stage("report", clock.elapsed_s());  // the page's own time is shown without itself
     context.run = run;
-    write_file_atomically(stage / file, build_report(context));
+    write_file_atomically(staging / file, build_report(context));
     run["stages"].back()["wall_s"] = clock.elapsed_s();
     run["stages"].back()["peak_memory_mib"] = peak_memory_mib();
     spdlog::info("report: {}", (out_dir / file).string());
@@ -656,8 +515,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   // The whole run's, the report included (the page shows them as they were before it).
   run["wall_s"] = total.elapsed_s();
   run["peak_memory_mib"] = peak_memory_mib();
-  write_file_atomically(stage / "resolved.yaml", scene.resolved_yaml());
-  write_file_atomically(stage / "run.json", run.dump(2) + "\n");
+  write_file_atomically(staging / "resolved.yaml", scene.resolved_yaml());
+  write_file_atomically(staging / "run.json", run.dump(2) + "\n");
   output.commit();
   if (!send_failure.empty())
     throw dicomnet::NodeError(send_failure + "; the written files are in " + out_dir.string());

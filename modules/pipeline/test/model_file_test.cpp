@@ -137,7 +137,7 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
     for (int j = 4; j < 22; ++j)
       for (int i = 5; i < 25; ++i)
         mask->at(i, j, k) = (i - 15) * (i - 15) + (j - 13) * (j - 13) < 64 ? 1 : 0;
-  const evaluation::Shape organ = evaluation::make_mask_shape(mask);
+  const geometry::Shape organ = geometry::make_mask_shape(mask);
   std::ofstream(dir_ / "rt.dcm") << "";  // the organ's input file must exist; it is not read here
   const config::Scene scene =
       config::parse_scene("organ:\n  roi: X\n  rtstruct: rt.dcm\nmodel:\n  radius_mm: 2.0\n",

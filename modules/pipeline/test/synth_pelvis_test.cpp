@@ -9,7 +9,7 @@
 #include "organfit/dicom/structure_set.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/itkbridge/itk_images.h"
-#include "organfit/pipeline/synth_command.h"
+#include "organfit/pipeline/phantom_stage.h"
 #include "organfit/segmentation/segment.h"
 #include "organfit/support/error.h"
 
@@ -34,7 +34,7 @@ class PelvisOnDisk : public ::testing::Test {
   static void SetUpTestSuite() {
     dir_ = scratch("default");
     fs::remove_all(dir_);
-    result_ = run_synth_pelvis(dir_, phantom::PelvisOptions{});
+    result_ = write_pelvis_phantom(dir_, phantom::PelvisOptions{});
     ct_ = dicom::read_ct_series(dir_ / "ct");
     truth_ = itkbridge::read_label_volume(dir_ / "labels.nrrd");
   }
@@ -108,14 +108,14 @@ TEST(SynthPelvis, SameSeedSameBytesOtherSeedOtherNoise) {
   const fs::path a = scratch("a"), b = scratch("b"), c = scratch("c");
   for (const auto& d : {a, b, c})
     fs::remove_all(d);
-  run_synth_pelvis(a, o);
-  run_synth_pelvis(b, o);
+  write_pelvis_phantom(a, o);
+  write_pelvis_phantom(b, o);
   o.seed = 2;
-  run_synth_pelvis(c, o);
+  write_pelvis_phantom(c, o);
   for (const char* f : {"ct/CT0006.dcm", "rtstruct.dcm", "labels.nrrd", "phantom.json"})
     EXPECT_EQ(bytes(a / f), bytes(b / f)) << f;
   EXPECT_NE(bytes(a / "ct/CT0006.dcm"), bytes(c / "ct/CT0006.dcm"));
-  EXPECT_THROW(run_synth_pelvis(a, o), InputError);  // not an empty folder
+  EXPECT_THROW(write_pelvis_phantom(a, o), InputError);  // not an empty folder
   for (const auto& d : {a, b, c})
     fs::remove_all(d);
 }

@@ -12,40 +12,13 @@
 #include "organfit/fitting/attractive_points.h"
 #include "organfit/fitting/embedded_body.h"
 #include "organfit/geometry/mask_ops.h"
+#include "organfit/geometry/shape.h"
 
 namespace organfit::evaluation {
 
-/// An organ shape given by an inside test, in mm: analytic, or a label mask (an organ
-/// segmented or imported from CT).
-struct Shape {
-  std::string kind;                                   ///< "ellipsoid", "box", "egg", "lung", "mask"
-  Eigen::Vector3d size_mm = Eigen::Vector3d::Ones();  ///< full extents (before the notch)
-  Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();  ///< centre (a mask: its centroid)
-  std::shared_ptr<const geometry::LabelVolume> mask;  ///< kind "mask": label 1 is inside (surface:
-                                                      ///< 0.5 level of its trilinear interpolation)
-  geometry::Aabb box;                                 ///< kind "mask": bounds of its voxels
-  bool inside(const Eigen::Vector3d& p) const;
-  geometry::Aabb bounds() const {
-    return mask ? box : geometry::Aabb{centre_mm - 0.5 * size_mm, centre_mm + 0.5 * size_mm};
-  }
-};
-
-/// A shape from a mask (label 1). Throws std::invalid_argument when the mask is empty.
-Shape make_mask_shape(std::shared_ptr<const geometry::LabelVolume> mask);
-
-/// Makes a shape: "ellipsoid" and "box" as named; "egg" is an ellipsoid whose cross-
-/// section narrows linearly towards -x (a prostate's apex, 30% narrower at the tip);
-/// "lung" is an ellipsoid with a spherical notch cut from its -x side (the cardiac
-/// notch). Throws std::invalid_argument on an unknown kind or non-positive size.
-Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
-                 const Eigen::Vector3d& centre_mm);
-
-/// Volume of a shape by counting voxel centres (mm^3).
-double shape_volume_mm3(const Shape& shape, double voxel_mm);
-
 /// A displacement sampled on a grid: a point x moves to x + u(x), u trilinear between the
 /// voxel centres and held at its border value beyond the grid (mm, patient frame). A FEM
-/// solution is one (testdata/fem/fem_cases.py, read by pipeline/fem_cases.h).
+/// solution is one (testdata/fem/fem_cases.py, read by bench/fem_cases.h).
 struct SampledDisplacement {
   geometry::ImageGeometry grid;  ///< axis-aligned (identity direction)
   std::vector<float> u_mm;       ///< x, y, z per voxel, i fastest
@@ -106,12 +79,12 @@ struct SamplingOptions {
 /// Points on the deformed surface: boundary points of `shape` found along rays from its
 /// centre (uniform directions; bisection to 0.01 mm), mapped by `deformation`, then noise
 /// and outliers. Deterministic for a seed.
-std::vector<fitting::AttractivePoint> sample_deformed_surface(const Shape& shape,
+std::vector<fitting::AttractivePoint> sample_deformed_surface(const geometry::Shape& shape,
                                                               const Deformation& deformation,
                                                               const SamplingOptions& options);
 
 /// The deformed shape's inside test: inside(deformation.inverse(p)).
-std::function<bool(const Eigen::Vector3d&)> deformed_inside(const Shape& shape,
+std::function<bool(const Eigen::Vector3d&)> deformed_inside(const geometry::Shape& shape,
                                                             const Deformation& deformation);
 
 /// Voxel (mm) of the grid on which a fit is compared with a known truth (surface

@@ -32,11 +32,13 @@
 #include <string>
 #include <vector>
 
+#include "organfit/config/scene.h"
 #include "organfit/dicom/ct_series.h"
 #include "organfit/dicom/structure_set.h"
 #include "organfit/fitting/embedded_body.h"
 #include "organfit/fitting/surface_uncertainty.h"
 #include "organfit/particles/state.h"
+#include "organfit/pipeline/model_file.h"
 
 namespace organfit::pipeline {
 
@@ -92,10 +94,17 @@ class PendingExport {
 /// CT (patient, study, Frame of Reference). Throws InputError naming `file`.
 dicom::StructureSet read_rois_to_copy(const std::filesystem::path& file, const dicom::CtSeries& ct);
 
-/// Computes the exports of the organ a model carries (pipeline::organ_body), whose
+/// Computes the exports of the organ a model carries (fitting::organ_body), whose
 /// particles have radius `rho_mm` (the mesh's voxel). `ct` is needed for the RT
 /// Structure Set and the label map (InputError otherwise).
 PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho_mm,
                              const dicom::CtSeries* ct, const ExportRequest& request);
+
+/// The scene's `export` section as a request: each file key under `staging` (empty: not
+/// written), the ROI named `organ_name` + "_fit" unless export.roi_name says otherwise,
+/// in the source ROI's colour and type unless export.roi_color is given. `sigma` and the
+/// ROIs to copy are the caller's to set.
+ExportRequest export_request_from(const config::Scene& scene, const std::filesystem::path& staging,
+                                  const std::string& organ_name, const OrganLook& look);
 
 }  // namespace organfit::pipeline

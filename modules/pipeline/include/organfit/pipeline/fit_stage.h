@@ -1,5 +1,7 @@
 #pragma once
-// The points stage (generate on a known deformation, or read a file) and the fit stage.
+// The fit stage: the model fitted to the attractive points by the scene's method (the
+// paper's, or ours: a global map, then the local stage), with the measures run.json
+// reports, the uncertainty, and the truth when the points were made on a known one.
 #include <filesystem>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -9,38 +11,16 @@
 #include "organfit/evaluation/synthetic.h"
 #include "organfit/fitting/fit.h"
 #include "organfit/fitting/global_fit.h"
+#include "organfit/fitting/organ_fit.h"
 #include "organfit/fitting/surface_uncertainty.h"
 #include "organfit/pipeline/model_stage.h"
-#include "organfit/pipeline/points_file.h"
+#include "organfit/pipeline/points_stage.h"
 
 namespace organfit::pipeline {
 
-struct PointsStageResult {
-  std::vector<fitting::AttractivePoint> points;
-  std::optional<evaluation::Deformation> truth;  ///< set when the points were generated
-  evaluation::Shape truth_shape;                 ///< the shape they were sampled on
-  PointsCt declared_ct;                          ///< the CT a points file declares
-  nlohmann::json summary;
-};
-
-/// A point set by extension: a table (read_points_table, with the CT it declares), or the
-/// vertices of a .ply, .vtk or .vtp. Throws InputError naming the file on bad content or
-/// no points.
-PointsTable read_points_file(const std::filesystem::path& file);
-
-PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model);
-
-/// The true deformation the points section describes (evaluation::Deformation), about the
-/// shape's centre.
-evaluation::Deformation deformation_from(const config::Scene& scene,
-                                         const evaluation::Shape& shape);
-
-/// A box holding the deformed shape: its corners mapped, widened by the non-affine parts.
-geometry::Aabb deformed_bounds(const evaluation::Shape& shape,
-                               const evaluation::Deformation& deformation);
-
 struct FitStageResult {
-  fitting::FitResult fit;
+  ModelStageResult model;        ///< the fitted model
+  fitting::FitReport report;     ///< the fit's own account (fitting/organ_fit.h)
   nlohmann::json fit_summary;    ///< run.json "fit"
   nlohmann::json truth_summary;  ///< run.json "truth" (when the truth is known)
   std::string history_csv;
@@ -48,15 +28,6 @@ struct FitStageResult {
   /// The fitted deformation folds (det(grad phi) <= 0 somewhere): the run exits 3 and
   /// exports nothing, since a folded map puts one point of tissue in two places.
   bool deformation_folds = false;
-  /// The fitted deformation (what the export and the report show the organ through).
-  std::shared_ptr<const fitting::Deformation> deformation;
-  /// Where the true surface may lie given the points (run.json fit.uncertainty).
-  std::shared_ptr<const fitting::SurfaceUncertainty> uncertainty;
-  /// How the organ's reference body follows the particles (fitting/embedded_body.h):
-  /// the global map (identity for the paper's method) and where the particles were
-  /// placed before the local stage.
-  fitting::GlobalMap global_map;
-  particles::Positions placed;
   double truth_wall_s = 0;  ///< measuring against the known truth (not part of the update)
 };
 
@@ -72,7 +43,7 @@ struct UncertaintyOnSurface {
   nlohmann::json summary;
   bool unseen(size_t i) const { return nearest[i] > split_mm; }
 };
-UncertaintyOnSurface uncertainty_on_surface(const evaluation::Shape& planning,
+UncertaintyOnSurface uncertainty_on_surface(const geometry::Shape& planning,
                                             const fitting::Deformation& phi,
                                             const fitting::SurfaceUncertainty& u);
 
@@ -83,7 +54,23 @@ nlohmann::json uncertainty_coverage(const UncertaintyOnSurface& on_surface,
                                     const std::function<bool(const Eigen::Vector3d&)>& truth_inside,
                                     const geometry::Aabb& truth_bounds, double voxel_mm);
 
-FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult& model,
+/// The scene's fit settings for both methods, and for each.
+fitting::OrganFitOptions organ_fit_options_from(const config::Scene& scene);
+fitting::PaperFitOptions paper_fit_options_from(const config::Scene& scene);
+fitting::SpreadFitOptions spread_fit_options_from(const config::Scene& scene);
+
+/// run.json's "fit" (without its "uncertainty", which the stage adds).
+nlohmann::json fit_summary(const fitting::FitReport& report);
+
+/// Fits `model` (moved in) to the points by fit.method, measures the truth when the
+/// points were made on a known one (fit.measure_truth), and returns the fitted model.
+/// Throws InputError on bad points and TargetNotMetError when the points ask for an
+/// implausible change of the whole organ or the model does not hold together.
+FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult model,
                              const PointsStageResult& points);
+
+/// What a user must be told of a fit that ran: the organ's volume changed by more than 1%
+/// (and whether the particles' own body did), shears dropped, points rejected.
+std::vector<std::string> fit_warnings(const FitStageResult& fit);
 
 }  // namespace organfit::pipeline

@@ -16,11 +16,10 @@ namespace organfit::pipeline {
 struct ReportContext {
   nlohmann::json run;  ///< run.json as it will be written
   std::string scene_yaml, history_csv;
-  const dicom::CtSeries* ct = nullptr;          ///< null: no CT views
-  const evaluation::Shape* planning = nullptr;  ///< the organ before the fit (its contour)
-  const fitting::EmbeddedBody* fitted =
-      nullptr;        ///< the organ after the fit (pipeline::organ_body)
-  double rho_mm = 0;  ///< the particles' radius: the 3D view's voxel
+  const dicom::CtSeries* ct = nullptr;            ///< null: no CT views
+  const geometry::Shape* planning = nullptr;      ///< the organ before the fit (its contour)
+  const fitting::EmbeddedBody* fitted = nullptr;  ///< the organ after the fit (fitting::organ_body)
+  double rho_mm = 0;                              ///< the particles' radius: the 3D view's voxel
   /// The fitted organ as the export made it, on the CT's grid and on the grid of rho
   /// (pipeline::PendingExport); null: made here from `fitted`.
   const geometry::LabelVolume* fitted_on_ct = nullptr;

@@ -5,7 +5,7 @@
 
 #include "organfit/config/scene.h"
 #include "organfit/dicom/ct_series.h"
-#include "organfit/pipeline/fit_stage.h"
+#include "organfit/pipeline/points_stage.h"
 #include "organfit/ultrasound/simulator.h"
 
 namespace organfit::pipeline {
@@ -33,7 +33,7 @@ ultrasound::SimulatorOptions tissue_class_simulator_options();
 /// Today's anatomy for the simulator: `organ` deformed by `deformation`, the rest as the
 /// planning CT has it (tissue classes and HU on its grid), fat where the organ was.
 ultrasound::TissueAt deformed_anatomy(const geometry::LabelVolume& tissue,
-                                      const std::vector<float>& hu, const evaluation::Shape& organ,
+                                      const std::vector<float>& hu, const geometry::Shape& organ,
                                       const evaluation::Deformation& deformation);
 
 /// Runs the stage. `ct` and `organ_mask` (on the CT grid) are needed to simulate;
@@ -43,5 +43,11 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene,
                                            const ModelStageResult& model, const dicom::CtSeries* ct,
                                            const geometry::LabelVolume* organ_mask,
                                            const geometry::LabelVolume* anatomy = nullptr);
+
+/// How far simulated points lie from the true (deformed) surface, against a dense noise-
+/// free sampling of it, and the share on the part the probe sees (within 1.5 mm of
+/// `true_boundary_mm`): median, p90 and largest distance (mm), shares, into points.summary.
+void measure_points_against_truth(PointsStageResult& points,
+                                  const std::vector<Eigen::Vector3d>& true_boundary_mm);
 
 }  // namespace organfit::pipeline

@@ -1,0 +1,140 @@
+// `organfit export`: a saved model (planning or fitted) written for the planning system
+// outside a scene: the same export stage a scene's `export` section runs.
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+
+#include "commands.h"
+#include "organfit/pipeline/export_stage.h"
+#include "organfit/pipeline/model_file.h"
+#include "organfit/support/error.h"
+#include "organfit/support/output_folder.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::app {
+namespace {
+
+struct ExportCommand {
+  std::filesystem::path model;  ///< model file (export.model of a scene)
+  std::filesystem::path ct;     ///< planning CT folder; default: the one the model names
+  std::filesystem::path rtstruct, labels, mesh;
+  std::filesystem::path displacement_field, jacobian, registration;  ///< on the CT's grid
+  double field_spacing_mm = 0;           ///< their grid: 0, the CT's (ExportRequest)
+  std::string roi_name;                  ///< default: the model's organ + "_fit"
+  std::filesystem::path copy_rois_from;  ///< an RT Structure Set whose ROIs are copied alongside
+};
+
+/// Runs the export; returns the summary (as run.json's "export"). Throws InputError on
+/// bad input (nothing written then): no output named, a CT whose series or Frame of
+/// Reference is not the model's, a model outside the CT.
+nlohmann::json run_export_command(const ExportCommand& c) {
+  const std::vector<fs::path> outputs = {c.rtstruct,           c.labels,   c.mesh,
+                                         c.displacement_field, c.jacobian, c.registration};
+  if (std::all_of(outputs.begin(), outputs.end(), [](const fs::path& f) { return f.empty(); }))
+    throw InputError(
+        "export: name at least one output (--rtstruct, --labels, --mesh, "
+        "--displacement-field, --registration, --jacobian)");
+  std::vector<fs::path> inputs = {c.model, c.ct, c.copy_rois_from};
+  for (const auto& f : outputs)
+    if (!f.empty())
+      check_output_location(f.parent_path().empty() ? fs::path(".") : f.parent_path(), inputs,
+                            "the output", OutputKind::kFile);
+  const pipeline::SavedModel saved = pipeline::load_model(c.model);
+  if (saved.ct)
+    for (const auto& f : outputs)
+      if (!f.empty())
+        check_output_location(f.parent_path().empty() ? fs::path(".") : f.parent_path(),
+                              {saved.ct->folder}, "the output", OutputKind::kFile);
+  pipeline::ExportRequest request;
+  request.rtstruct = c.rtstruct, request.labels = c.labels, request.mesh = c.mesh;
+  request.displacement_field = c.displacement_field, request.jacobian = c.jacobian;
+  request.registration = c.registration;
+  request.field_spacing_mm = c.field_spacing_mm;
+  request.roi_name = c.roi_name.empty() ? saved.organ_name + "_fit" : c.roi_name;
+  request.roi_colour = saved.organ_look.colour;
+  request.roi_type = saved.organ_look.interpreted_type;
+  std::optional<dicom::CtSeries> ct;
+  if (request.needs_ct()) {
+    if (c.ct.empty() && !saved.ct)
+      throw InputError(c.model.string() + ": the model names no planning CT; give --ct");
+    const fs::path folder = c.ct.empty() ? fs::path(saved.ct->folder) : c.ct;
+    // The model's own series when its folder is used; a folder given with --ct must hold
+    // one CT series, and it must be the model's (series and Frame of Reference).
+    dicom::CtReadOptions o;
+    if (saved.ct && c.ct.empty()) o.series_instance_uid = saved.ct->series_instance_uid;
+    ct = dicom::read_ct_series(folder, o);
+    if (saved.ct && (ct->frame_of_reference_uid != saved.ct->frame_of_reference_uid ||
+                     ct->series_instance_uid != saved.ct->series_instance_uid))
+      throw InputError(fmt::format(
+          "{}: this CT series (or its Frame of Reference) is not the model's: the model "
+          "was built on another CT",
+          folder.string()));
+    for (const auto& w : ct->warnings)
+      spdlog::warn(w);
+  }
+  std::optional<dicom::StructureSet> other;
+  if (!c.copy_rois_from.empty()) {
+    if (c.rtstruct.empty()) throw InputError("export: --copy-rois-from needs --rtstruct");
+    other = pipeline::read_rois_to_copy(c.copy_rois_from, *ct);
+    request.copy_rois_from = &*other;
+    request.skip_roi = saved.organ_name;  // the fitted ROI replaces its source
+  }
+  pipeline::PendingExport pending =
+      prepare_export(fitting::organ_body(saved.model), saved.model.model->radius_mm(),
+                     ct ? &*ct : nullptr, request);
+  for (const auto& w : pending.warnings)
+    spdlog::warn(w);
+  std::vector<std::unique_ptr<CreatedFolders>> folders;
+  for (const auto& f : outputs)
+    if (!f.empty() && !f.parent_path().empty())
+      folders.push_back(std::make_unique<CreatedFolders>(f.parent_path()));
+  pending.commit();
+  for (auto& f : folders)
+    f->keep();
+  return pending.summary;
+}
+
+}  // namespace
+
+Command add_export(CLI::App& app) {
+  auto exp = std::make_shared<ExportCommand>();
+  auto* export_cmd = app.add_subcommand(
+      "export", "Write a saved model for the planning system: RTSTRUCT, label map, mesh");
+  export_cmd->add_option("--model", exp->model, "Model file (a scene's export.model)")->required();
+  export_cmd->add_option("--ct", exp->ct,
+                         "Planning CT folder (default: the one the model was built on)");
+  export_cmd->add_option("--rtstruct", exp->rtstruct, "RT Structure Set to write (.dcm)");
+  export_cmd->add_option("--labels", exp->labels,
+                         "Label map to write (.nrrd, .mha, .nii, .nii.gz)");
+  export_cmd->add_option("--mesh", exp->mesh, "Surface mesh to write (.stl, .vtp, .ply, .obj)");
+  export_cmd->add_option("--displacement-field", exp->displacement_field,
+                         "Deformation field to write on the planning CT's grid (.mha, .nrrd): "
+                         "phi^-1(q) - q, as plastimatch warp --xf reads it");
+  export_cmd->add_option("--registration", exp->registration,
+                         "DICOM Deformable Spatial Registration (REG) to write: the same field");
+  export_cmd
+      ->add_option("--field-spacing", exp->field_spacing_mm,
+                   "Grid of the field, REG and Jacobian (mm; 0: the CT's grid)")
+      ->check(CLI::Range(0.0, 50.0));
+  export_cmd->add_option("--jacobian", exp->jacobian,
+                         "det(grad phi) to write on the planning CT's grid (.nrrd, .mha)");
+  export_cmd->add_option("--roi-name", exp->roi_name,
+                         "Name of the exported ROI (default: the organ's name + _fit)");
+  export_cmd->add_option("--copy-rois-from", exp->copy_rois_from,
+                         "RT Structure Set whose other ROIs are copied alongside");
+  return {export_cmd, [exp] {
+            std::cout << run_export_command(*exp).dump() << "\n";
+            return 0;
+          }};
+}
+
+}  // namespace organfit::app

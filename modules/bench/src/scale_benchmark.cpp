@@ -1,0 +1,194 @@
+#include "organfit/bench/scale_benchmark.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <fstream>
+#include <tuple>
+
+#include "organfit/support/atomic_file.h"
+#include "organfit/support/error.h"
+#include "organfit/support/interrupt.h"
+#include "organfit/support/output_folder.h"
+#include "organfit/support/resources.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::bench {
+namespace {
+
+/// One organ: the planning scene's organ and model sections, and the session's points.
+struct ScaleCase {
+  std::string name, description;
+  std::string planning;             ///< YAML after the scene section
+  std::vector<int> session_points;  ///< a session run for each count
+  bool measure_truth = true;  ///< fit.measure_truth (the 1M body: its grids alone take minutes)
+};
+
+std::vector<ScaleCase> all_cases() {
+  const std::string data = ORGANFIT_SHARED_DATA_DIR_STRING;
+  // The lung: an ellipsoid of 250 x 115 x 165 mm with its cardiac notch, 2.23 L.
+  const std::string lung = "body:\n  shape: lung\n  size_mm: [250, 115, 165]\n";
+  return {
+      {"prostate",
+       "the pelvis phantom's prostate (35 cm3), radius 1.92 mm",
+       "phantom:\n  kind: pelvis\norgan:\n  roi: Prostate\nmodel:\n  radius_mm: 1.92\n",
+       {87}},
+      {"gtv",
+       "the real GTV of ct-sts-004 (296 cm3), radius 2 mm",
+       fmt::format("ct:\n  folder: '{0}/ct-sts-004/ct'\norgan:\n  rtstruct: "
+                   "'{0}/ct-sts-004/rtstruct.dcm'\n  roi: GTV_Mass_CT\nmodel:\n  radius_mm: 2\n",
+                   data),
+       {87}},
+      {"lung", "a phantom lung of 2.23 L, radius 2 mm", lung + "model:\n  radius_mm: 2\n", {87}},
+      {"million",
+       "the phantom lung at radius 0.75 mm (about 1M particles)",
+       lung + "model:\n  radius_mm: 0.75\n",
+       {87, 10000},
+       false},
+  };
+}
+
+/// The run.json of `organfit run scene --out folder`, run as a child process.
+nlohmann::json run_child(const fs::path& scene, const fs::path& folder, int threads) {
+  const std::string cmd = fmt::format(
+      "'{}' --quiet run '{}' --out '{}' --set scene.threads={} > /dev/null",
+      fs::read_symlink("/proc/self/exe").string(), scene.string(), folder.string(), threads);
+  const int status = run_command(cmd);
+  throw_if_interrupted();
+  // Exit 3 (ran, a target not met: e.g. the fit did not converge) still measures the run.
+  const bool ran = WIFEXITED(status) && (WEXITSTATUS(status) == 0 || WEXITSTATUS(status) == 3);
+  std::ifstream in(folder / "run.json");
+  if (!ran || !in)
+    throw Error(
+        ExitCode::kInternal,
+        fmt::format("bench scale: the run of {} failed (wait status {})", scene.string(), status));
+  return nlohmann::json::parse(in);
+}
+
+/// A run's stages as {name: {wall_s, peak_memory_mib}}, with the whole run's (wall_s as
+/// measured here, process start included).
+nlohmann::json stages_of(const nlohmann::json& run, double wall_s) {
+  nlohmann::json stages = nlohmann::json::object();
+  // run.json's own peak is taken before its last stages: the run's is the largest.
+  double peak = run["peak_memory_mib"].get<double>();
+  for (const auto& st : run["stages"]) {
+    stages[st["name"].get<std::string>()] = {{"wall_s", st["wall_s"]},
+                                             {"peak_memory_mib", st["peak_memory_mib"]}};
+    peak = std::max(peak, st["peak_memory_mib"].get<double>());
+  }
+  return {{"wall_s", wall_s}, {"peak_memory_mib", peak}, {"stages", stages}};
+}
+
+double stage_s(const nlohmann::json& run, const std::string& name) {
+  const auto& st = run["stages"];
+  return st.contains(name) ? st[name]["wall_s"].get<double>() : 0.0;
+}
+
+nlohmann::json run_cases(const std::vector<const ScaleCase*>& chosen, const ScaleBenchOptions& o) {
+  nlohmann::json results = nlohmann::json::array();
+  for (const ScaleCase* c : chosen) {
+    if (c->name == "gtv" && !fs::exists(fs::path(ORGANFIT_SHARED_DATA_DIR_STRING) / "ct-sts-004")) {
+      spdlog::warn("bench scale: {} skipped: {} is not there", c->name,
+                   ORGANFIT_SHARED_DATA_DIR_STRING);
+      continue;
+    }
+    const fs::path dir = o.out / c->name;
+    fs::create_directories(dir);
+    spdlog::info("bench scale: {}: planning", c->name);
+    write_file_atomically(dir / "planning.yaml",
+                          fmt::format("scene:\n  name: {}-planning\n  description: {}\n{}export:\n "
+                                      " model: model.json\n",
+                                      c->name, c->description, c->planning));
+    Stopwatch clock;
+    const nlohmann::json plan = run_child(dir / "planning.yaml", dir / "planning", o.threads);
+    nlohmann::json row = {{"case", c->name},
+                          {"description", c->description},
+                          {"particles", plan["model"]["particles"]},
+                          {"radius_mm", plan["model"]["radius_mm"]},
+                          {"volume_cm3", plan["model"]["reference_volume_mm3"].get<double>() / 1e3},
+                          {"planning", stages_of(plan, clock.elapsed_s())}};
+    const double n = plan["model"]["particles"].get<double>();
+    const double relax_s = plan["model"]["relax_wall_s"].get<double>();
+    row["relax_particle_steps_per_s"] =
+        relax_s > 0 ? n * plan["model"]["relax_steps"].get<double>() / relax_s : 0.0;
+    nlohmann::json sessions = nlohmann::json::array();
+    for (int count : c->session_points) {
+      const std::string name = fmt::format("session-{}", count);
+      spdlog::info("bench scale: {}: session with {} points", c->name, count);
+      write_file_atomically(
+          dir / (name + ".yaml"),
+          fmt::format("scene:\n  name: {}-{}\n  description: {}, {} points\nplanning:\n  model: "
+                      "'{}'\npoints:\n  count: {}\n  stretch: 1.1\n  bend_mm: 2\nfit:\n  method: "
+                      "spread\n  measure_truth: {}\nexport:\n  mesh: fit.stl\nreport:\n  file: "
+                      "report.html\n",
+                      c->name, name, c->description, count,
+                      fs::absolute(dir / "planning" / "model.json").string(), count,
+                      c->measure_truth));
+      clock.restart();
+      const nlohmann::json s = run_child(dir / (name + ".yaml"), dir / name, o.threads);
+      nlohmann::json entry = stages_of(s, clock.elapsed_s());
+      entry["points"] = count;
+      // The update a clinic waits for: load the saved model, the points, the fit.
+      entry["update_s"] =
+          stage_s(entry, "planning_model") + stage_s(entry, "points") + stage_s(entry, "fit");
+      // The fit loop alone: run.json's fit.wall_s includes the global stage.
+      const double fit_loop_s =
+          s["fit"]["wall_s"].get<double>() -
+          (s["fit"].contains("global") ? s["fit"]["global"]["wall_s"].get<double>() : 0.0);
+      entry["fit_particle_steps_per_s"] =
+          fit_loop_s > 0 ? n * s["fit"]["iterations"].get<double>() / fit_loop_s : 0.0;
+      if (s.contains("truth")) entry["truth_msd_mm"] = s["truth"]["msd_mm"];
+      entry["volume_change_pct"] = s["fit"]["volume_change_pct"];
+      sessions.push_back(entry);
+    }
+    row["sessions"] = sessions;
+    if (c->name == "lung") {
+      // Issue 26's targets for a 2.3 L lung at radius 2 mm on 2 cores.
+      const auto& se = sessions[0];
+      double peak = row["planning"]["peak_memory_mib"].get<double>();
+      peak = std::max(peak, se["peak_memory_mib"].get<double>());
+      const std::vector<std::tuple<std::string, double, double>> t = {
+          {"planning_s", row["planning"]["wall_s"].get<double>(), 5.0},
+          {"update_s", se["update_s"].get<double>(), 2.0},
+          {"export_s", stage_s(se, "export"), 1.0},
+          {"report_s", stage_s(se, "report"), 1.0},
+          {"truth_s", stage_s(se, "truth"), 2.0},
+          {"peak_memory_mib", peak, 1024.0}};
+      nlohmann::json targets = nlohmann::json::object();
+      for (const auto& [key, value, limit] : t)
+        targets[key] = {{"value", value}, {"limit", limit}, {"met", value <= limit}};
+      row["targets"] = targets;
+    }
+    results.push_back(row);
+  }
+  nlohmann::json summary = {{"benchmark", "scale"}, {"cases", results}, {"out", o.out.string()}};
+  write_file_atomically(o.out / "scale.json", summary.dump(2) + "\n");
+  return summary;
+}
+
+}  // namespace
+
+nlohmann::json run_scale_benchmark(const ScaleBenchOptions& o) {
+  const auto cases = all_cases();
+  std::vector<const ScaleCase*> chosen;
+  for (const auto& c : cases)
+    if (o.cases.empty() || std::find(o.cases.begin(), o.cases.end(), c.name) != o.cases.end())
+      chosen.push_back(&c);
+  for (const auto& name : o.cases)
+    if (std::none_of(cases.begin(), cases.end(),
+                     [&](const ScaleCase& c) { return c.name == name; }))
+      throw InputError("--cases: unknown case '" + echo(name, 40) +
+                       "' (prostate, gtv, lung, million)");
+  check_output_location(o.out, {}, "--out");
+  if (fs::exists(o.out)) throw InputError(o.out.string() + ": exists (bench scale makes it new)");
+  CreatedFolders folder(o.out, /*with_contents=*/true);  // a stopped or failed bench: gone
+  nlohmann::json summary = run_cases(chosen, o);
+  folder.keep();
+  return summary;
+}
+
+}  // namespace organfit::bench

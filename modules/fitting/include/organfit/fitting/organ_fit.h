@@ -1,0 +1,129 @@
+#pragma once
+// The fit of an organ model to attractive points (METHOD.md s.3 and s.4), as library
+// calls: no scene, file, log or known truth inside.
+//   fit_paper   the paper's method: each point pulls the skin particles within its
+//               influence radius (PaperAttractiveForce, eq. 5-7) until the residuals
+//               settle;
+//   fit_spread  ours: a volume-preserving map of the whole organ fitted to the points
+//               (global_fit.h), the body re-filled in its mapped shape and settled, the
+//               skeleton rebuilt on it, then smooth local patches (SpreadAttractiveForce)
+//               with the skeleton's rest shape following the fit; a local stage that tears
+//               the organ into pieces is undone (the global stage's organ is kept).
+// Both take the model by value (move it in, or pass copy_model(m) to keep m) and return
+// it fitted, with the organ it carries before and after and what run.json's `fit` says.
+#include <Eigen/Core>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "organfit/fitting/attractive_points.h"
+#include "organfit/fitting/fit.h"
+#include "organfit/fitting/global_fit.h"
+#include "organfit/fitting/organ_model.h"
+#include "organfit/fitting/spread_force.h"
+#include "organfit/fitting/surface_uncertainty.h"
+
+namespace organfit::fitting {
+
+/// Settings both fits share (the scene's fit keys of the same names, where their units
+/// and defaults are declared).
+struct OrganFitOptions {
+  double damping_ratio = 0;  ///< of critical damping, during the fit
+  double skin_voxel_r0 = 0;  ///< voxel of the skin detector (r0)
+  /// On the mean residual (mm), beside the model's own residual floor (in quadrature).
+  double residual_tolerance_mm = 0;
+  double residual_max_tolerance_mm = 0;  ///< on the largest residual (mm)
+  double kinetic_tolerance = 0;          ///< kinetic energy per particle at rest (E0)
+  long long max_steps = 0;
+  double max_wall_s = 0;
+  int record_every = 0;  ///< steps between history rows
+  /// The prior standard deviation (mm) of the local change where no point is, for the
+  /// fit's uncertainty (surface_uncertainty.h).
+  double unseen_change_sd_mm = 0;
+};
+
+struct PaperFitOptions {
+  OrganFitOptions fit;
+  PaperForceParams force;
+};
+
+struct SpreadFitOptions {
+  OrganFitOptions fit;
+  AffineFitOptions global;  ///< the global stage's map (its noise: the points' noise, mm)
+  SpreadForceParams local;  ///< the local stage's patches
+};
+
+/// What a long fit tells its caller while it runs; each may be empty.
+struct FitObserver {
+  /// Step `step` of the `steps` before the fit loop is done (the organ's volume, the
+  /// residual floor, the global map, the re-fill, the skeleton, the surface feet).
+  std::function<void(int step, int steps, const std::string& done)> preparing;
+  /// Each history row of the fit loop; may throw to stop the fit (an interrupt).
+  std::function<void(const HistoryRow&)> row;
+};
+
+/// The global stage of fit_spread.
+struct GlobalStageReport {
+  GlobalMap map;
+  Eigen::Vector3d principal_stretches = Eigen::Vector3d::Ones();  ///< singular values of a
+  LargestMoves moves;          ///< largest moves of the shears and fields (mm)
+  double shape_change_mm = 0;  ///< shape_change_mm(map, surface)
+  int refill_passes = 0;       ///< re-fills until the settled volume matched
+  int particles_after_refill = 0;
+  double volume_change_after_settling_pct = 0;
+  double wall_s = 0;
+};
+
+struct FitReport {
+  std::string method;  ///< "paper" or "spread"
+  FitResult fit;       ///< the fit loop (wall_s includes the global stage)
+  /// fit_spread: the points asked for a change of the whole organ beyond the plausible
+  /// (global_fit.h, GlobalMap::refused): nothing was fitted, the model is as it came.
+  bool refused = false;
+  int points = 0, rejected_points = 0;
+  int pieces = 1;                    ///< > 1: the local stage tore the organ; it was undone
+  double residual_floor_mm = 0;      ///< a point on the model's own surface, on average
+  double residual_tolerance_mm = 0;  ///< on the mean: the stated one and the floor
+  /// The organ's volume (mm^3) before and after, counted on a grid of volume_voxel_mm;
+  /// and after/before from the deformation's Jacobian over it (the grid's error cancels).
+  double volume_voxel_mm = 0, volume_before_mm3 = 0, volume_after_mm3 = 0, volume_ratio = 1;
+  double particle_body_volume_change_pct = 0;  ///< the balls' own body (closed by rho)
+  int components = 0;                          ///< of the particles after the fit
+  size_t skin_particles = 0;
+  bool finite = true;                                     ///< every position finite
+  std::optional<GlobalStageReport> global;                ///< fit_spread
+  std::shared_ptr<const Deformation> deformation;         ///< phi, planning to today
+  std::shared_ptr<const SurfaceUncertainty> uncertainty;  ///< where the surface may lie
+};
+
+/// The model after the fit, the organ it carried before and carries now, the report.
+struct FittedOrgan {
+  OrganModel model;
+  std::optional<EmbeddedBody> before, after;  ///< unset when refused
+  FitReport report;
+};
+
+/// The model did not hold together (particles flung apart): no organ to carry.
+class ModelBrokeError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// The fits. Throw std::invalid_argument on bad points (fitting::validate_points),
+/// ModelBrokeError when the fitted particles no longer make one organ, and
+/// particles::StabilityError when the simulation cannot continue stably.
+FittedOrgan fit_paper(OrganModel model, const std::vector<AttractivePoint>& points,
+                      const PaperFitOptions& options, const FitObserver& observer = {});
+FittedOrgan fit_spread(OrganModel model, const std::vector<AttractivePoint>& points,
+                       const SpreadFitOptions& options, const FitObserver& observer = {});
+
+/// Voxel (mm) of the volume measures made in every fit: half the particle radius, but
+/// coarse enough that the organ holds at most about 8 million voxels (a voxel count's
+/// error is about its surface voxels over its volume: 0.1% there), so that a model of
+/// small particles in a large organ is not measured on a grid of 10^8 voxels.
+double volume_voxel_mm(double rho_mm, double organ_volume_mm3);
+
+}  // namespace organfit::fitting

@@ -1,0 +1,88 @@
+#pragma once
+// The organ model (METHOD.md s.2): particles filling the organ at the relaxed fcc spacing
+// of their Lennard-Jones law, the force terms that hold them together (cohesion, and a
+// skeleton inside), and the organ they stand for: its shape, the same body as a mask
+// (the reference), and how that reference follows the particles once a fit moved them
+// (a global map, then where the particles were placed; fitting/embedded_body.h).
+#include <cstdint>
+#include <memory>
+
+#include "organfit/fitting/embedded_body.h"
+#include "organfit/fitting/global_fit.h"
+#include "organfit/geometry/shape.h"
+#include "organfit/geometry/signed_distance.h"
+#include "organfit/particles/integrator.h"
+#include "organfit/particles/model.h"
+#include "organfit/particles/skeleton.h"
+
+namespace organfit::fitting {
+
+/// What a model is built with (the scene's `model` keys; meanings and units in
+/// pipeline/scene_schema.cpp), kept with it so that a saved model rebuilds the same terms.
+struct ModelSettings {
+  double radius_mm = 0, cohesion_energy = 0;
+  int exponent_m = 0, exponent_n = 0;
+  double cutoff_r0 = 0, floor_r0 = 0, mass = 0, damping_ratio = 0, pair_damping = 0;
+  double neighbour_skin_r0 = 0, time_step_fraction = 0;
+  long long relax_steps = 0;
+  double relax_tolerance = 0;
+  bool skeleton = false;
+  double skeleton_stiffness = 0, skeleton_node_spacing_r0 = 0, skeleton_overlap_r0 = 0;
+  std::uint64_t seed = 0;  ///< thermostat noise
+};
+
+struct OrganModel {
+  ModelSettings settings;
+  particles::State state;
+  std::unique_ptr<particles::Model> model;
+  geometry::Shape shape;            ///< the body that was filled
+  geometry::LabelVolume reference;  ///< the same body as a mask (voxels of r0/4)
+  double lattice_spacing_mm = 0;    ///< relaxed fcc nearest-neighbour distance
+  particles::CohesionParams cohesion;
+  particles::SkeletonForce* skeleton = nullptr;  ///< owned by `model`; null without skeleton
+  particles::SkeletonParams skeleton_params;
+  double skeleton_node_spacing_mm = 0;
+  /// How the reference follows the particles (fitting/embedded_body.h): the fit's global
+  /// map and where it placed the particles (empty: they are where the model put them).
+  GlobalMap global_map;
+  particles::Positions placed;
+  /// The planning organ as organ_body tests it (the shape's mask, or `reference` for an
+  /// analytic body) and its unsmoothed signed distance: made on first use, then shared by
+  /// every organ_body of this model (a cache, hence mutable; copies share it).
+  mutable std::shared_ptr<const geometry::LabelVolume> planning_mask;
+  mutable std::shared_ptr<const geometry::SignedDistance> planning_distance;
+};
+
+/// The particle radius (mm) that fills `shape` with about `count` particles at the law's
+/// relaxed fcc spacing (model.particles), from the body's volume: within 5% for rounded
+/// bodies; a box whose faces lie on lattice planes gets 10 to 18% more.
+double radius_for_count(const ModelSettings& settings, const geometry::Shape& shape,
+                        long long count);
+
+/// Cohesion law and integrator settings of a model.
+particles::CohesionParams cohesion_params_from(const ModelSettings& s);
+particles::IntegratorOptions integrator_options_from(const ModelSettings& s,
+                                                     const particles::Model& model);
+
+/// The reference body of a shape: a mask on a grid of r0/4 covering it.
+geometry::LabelVolume reference_body(const geometry::Shape& shape, double r0_mm);
+
+/// The model's force terms (cohesion, and the skeleton when `skeleton` has nodes) around
+/// given positions: what the model stage builds, and what loading a saved model rebuilds.
+/// Fills model.model, model.skeleton, model.skeleton_params and
+/// model.skeleton_node_spacing_mm from model.settings and model.state.
+void build_model_terms(OrganModel& model, const particles::Skeleton* skeleton);
+/// Ties model.state's current positions (the rest shape) to `skeleton`.
+void add_skeleton_term(OrganModel& model, const particles::Skeleton& skeleton);
+
+/// A model of its own with the same particles, shape, reference and skeleton (the terms
+/// rebuilt; the planning organ's cache shared): what a fit may move without moving this.
+OrganModel copy_model(const OrganModel& model);
+
+/// The organ as the model carries it now: the reference body moved with the particles
+/// (at rest, the reference itself). What is exported, reported and measured.
+EmbeddedBody organ_body(const OrganModel& model);
+/// The same through a deformation already made (the fit's), not made again.
+EmbeddedBody organ_body(const OrganModel& model, std::shared_ptr<const Deformation> deformation);
+
+}  // namespace organfit::fitting

@@ -1,0 +1,125 @@
+#include "organfit/fitting/organ_model.h"
+
+#include <cmath>
+#include <optional>
+
+#include "organfit/geometry/mask_ops.h"
+#include "organfit/particles/cohesion_force.h"
+#include "organfit/particles/lattice_fill.h"
+
+namespace organfit::fitting {
+
+particles::CohesionParams cohesion_params_from(const ModelSettings& s) {
+  particles::CohesionParams p;
+  p.E0 = s.cohesion_energy;
+  p.r0_mm = 2.0 * s.radius_mm;
+  p.m = s.exponent_m;
+  p.n = s.exponent_n;
+  p.cutoff_r0 = s.cutoff_r0;
+  p.floor_r0 = s.floor_r0;
+  return p;
+}
+
+particles::IntegratorOptions integrator_options_from(const ModelSettings& s,
+                                                     const particles::Model& model) {
+  particles::IntegratorOptions opt;
+  opt.time_step_fraction = s.time_step_fraction;
+  opt.damping = s.damping_ratio * 2.0 * std::sqrt(model.stiffness() * model.mass());
+  opt.length_scale_mm = 2.0 * model.radius_mm();
+  // No particle may carry more than 5 well depths of kinetic energy (see IntegratorOptions).
+  opt.max_speed_mm_s = std::sqrt(2.0 * 5.0 * s.cohesion_energy / model.mass());
+  opt.seed = s.seed;
+  return opt;
+}
+
+geometry::LabelVolume reference_body(const geometry::Shape& shape, double r0_mm) {
+  const geometry::ImageGeometry g =
+      geometry::grid_covering(shape.bounds(), 0.25 * r0_mm, 0.5 * r0_mm);
+  geometry::LabelVolume reference(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        reference.at(i, j, k) = shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  return reference;
+}
+
+void build_model_terms(OrganModel& model, const particles::Skeleton* skeleton) {
+  const ModelSettings& s = model.settings;
+  const particles::CohesionParams cp = cohesion_params_from(s);
+  const particles::LennardJones law(cp);
+  model.cohesion = cp;
+  model.model = std::make_unique<particles::Model>(model.state.size(), s.mass, 0.5 * cp.r0_mm);
+  model.model->add(std::make_unique<particles::CohesionForce>(law, s.neighbour_skin_r0 * cp.r0_mm,
+                                                              s.pair_damping));
+  model.skeleton_node_spacing_mm = s.skeleton_node_spacing_r0 * cp.r0_mm;
+  model.skeleton_params.stiffness = s.skeleton_stiffness * law.stiffness();
+  model.skeleton_params.overlap_mm = s.skeleton_overlap_r0 * cp.r0_mm;
+  model.skeleton = nullptr;
+  if (skeleton && skeleton->node_count() > 0) add_skeleton_term(model, *skeleton);
+}
+
+namespace {
+/// The planning organ itself when it is a mask (on the CT's grid: phi = identity gives it
+/// voxel for voxel); an analytic body as its reference mask. Made once per model.
+void make_planning_organ(const OrganModel& m) {
+  if (m.planning_mask) return;
+  m.planning_mask =
+      m.shape.mask ? m.shape.mask : std::make_shared<const geometry::LabelVolume>(m.reference);
+  m.planning_distance = std::make_shared<const geometry::SignedDistance>(*m.planning_mask, false);
+}
+}  // namespace
+
+EmbeddedBody organ_body(const OrganModel& m) {
+  const bool fitted = m.placed.cols() == m.state.x.cols() && m.placed.cols() > 0;
+  make_planning_organ(m);
+  return EmbeddedBody(
+      m.planning_mask, m.planning_distance,
+      std::make_shared<const Deformation>(m.global_map, fitted ? m.placed : m.state.x, m.state.x,
+                                          embedding_support_mm(m.lattice_spacing_mm)));
+}
+
+EmbeddedBody organ_body(const OrganModel& m, std::shared_ptr<const Deformation> deformation) {
+  make_planning_organ(m);
+  return EmbeddedBody(m.planning_mask, m.planning_distance, std::move(deformation));
+}
+
+void add_skeleton_term(OrganModel& model, const particles::Skeleton& skeleton) {
+  model.skeleton = &model.model->add(
+      std::make_unique<particles::SkeletonForce>(skeleton, model.state.x, model.skeleton_params));
+}
+
+double radius_for_count(const ModelSettings& s, const geometry::Shape& shape, long long count) {
+  // The fcc spacing is a fixed multiple of r0 for a law's exponents, cutoff and floor (in
+  // r0), and an fcc lattice of spacing a holds sqrt(2) / a^3 particles per mm^3.
+  ModelSettings unit = s;
+  unit.radius_mm = 0.5;  // r0 = 1 mm
+  const double spacing_per_r0 =
+      particles::fcc_equilibrium_spacing(particles::LennardJones(cohesion_params_from(unit)));
+  const Eigen::Vector3d extent = shape.bounds().max_mm - shape.bounds().min_mm;
+  const double volume_mm3 =
+      shape.mask ? shape.mask->volume_mm3(1)
+                 : geometry::shape_volume_mm3(shape, std::max(0.05, extent.maxCoeff() / 200));
+  // The surface's partial cells make the count differ a little from the volume's; a box
+  // whose faces lie on lattice planes gains whole face layers (+10% at 6,000 particles).
+  const double a = std::cbrt(std::sqrt(2.0) * volume_mm3 / static_cast<double>(count));
+  return 0.5 * a / spacing_per_r0;
+}
+
+OrganModel copy_model(const OrganModel& m) {
+  OrganModel c;
+  c.settings = m.settings;
+  c.state = particles::State(m.state.x);
+  c.shape = m.shape;
+  c.reference = m.reference;
+  c.lattice_spacing_mm = m.lattice_spacing_mm;
+  c.global_map = m.global_map;
+  c.placed = m.placed;
+  c.planning_mask = m.planning_mask;  // the same shape and reference: the same cache
+  c.planning_distance = m.planning_distance;
+  std::optional<particles::Skeleton> skeleton;
+  if (m.skeleton) skeleton = m.skeleton->skeleton();
+  build_model_terms(c, skeleton ? &*skeleton : nullptr);
+  return c;
+}
+
+}  // namespace organfit::fitting

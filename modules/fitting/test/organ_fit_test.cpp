@@ -1,0 +1,118 @@
+// The fits as library calls: a model in, the fitted model and its report out, the model
+// passed in untouched (when copied in), the data term gone from the returned model, and
+// points that ask for an implausible change of the whole organ refused with the model
+// as it came.
+#include "organfit/fitting/organ_fit.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "organfit/particles/lattice_fill.h"
+
+namespace organfit::fitting {
+namespace {
+
+/// An ellipsoid of 36 x 28 x 24 mm filled at rho = 1.85 mm (about 1,200 particles) with
+/// the scene's default model settings, not relaxed (the lattice is at its equilibrium).
+OrganModel ellipsoid_model() {
+  OrganModel m;
+  ModelSettings& s = m.settings;
+  s.radius_mm = 1.85, s.cohesion_energy = 1, s.exponent_m = 6, s.exponent_n = 12;
+  s.cutoff_r0 = 2.5, s.floor_r0 = 0.5, s.mass = 1, s.damping_ratio = 0.5;
+  s.neighbour_skin_r0 = 0.3, s.time_step_fraction = 0.1;
+  s.skeleton = false, s.skeleton_stiffness = 0.2, s.skeleton_node_spacing_r0 = 3;
+  s.skeleton_overlap_r0 = 0.5, s.seed = 1;
+  m.shape = geometry::make_shape("ellipsoid", {36, 28, 24}, {0, 0, 0});
+  const particles::LennardJones law(cohesion_params_from(s));
+  m.lattice_spacing_mm = particles::fcc_equilibrium_spacing(law);
+  m.state = particles::State(
+      particles::fcc_lattice_points(m.shape.bounds(), m.shape.centre_mm, m.lattice_spacing_mm,
+                                    [&](const Eigen::Vector3d& p) { return m.shape.inside(p); }));
+  m.reference = reference_body(m.shape, law.r0());
+  build_model_terms(m, nullptr);
+  return m;
+}
+
+/// `count` points on the ellipsoid stretched by `s` along x (1/sqrt(s) across: its volume
+/// kept), spread by a Fibonacci spiral, no noise.
+std::vector<AttractivePoint> stretched_surface(double s, int count) {
+  const Eigen::Vector3d semi(18 * s, 14 / std::sqrt(s), 12 / std::sqrt(s));
+  std::vector<AttractivePoint> points;
+  for (int k = 0; k < count; ++k) {
+    const double z = 1 - 2 * (k + 0.5) / count, r = std::sqrt(1 - z * z);
+    const double phi = k * M_PI * (3 - std::sqrt(5.0));
+    points.push_back(
+        {Eigen::Vector3d(r * std::cos(phi), r * std::sin(phi), z).cwiseProduct(semi), 1.0});
+  }
+  return points;
+}
+
+SpreadFitOptions default_spread_options() {
+  SpreadFitOptions o;
+  OrganFitOptions& f = o.fit;
+  f.damping_ratio = 0.5, f.skin_voxel_r0 = 0.5, f.residual_tolerance_mm = 0.5;
+  f.kinetic_tolerance = 1e-4, f.max_steps = 4000, f.max_wall_s = 60, f.record_every = 20;
+  f.unseen_change_sd_mm = 1.7;
+  o.global.max_stretch = 1.5;
+  o.global.field_sigma_mm = 10;
+  o.global.noise_mm = 0.5;
+  return o;
+}
+
+TEST(FitSpread, FitsAVolumePreservingStretchAndLeavesTheModelPassedInAsItWas) {
+  const OrganModel planning = ellipsoid_model();
+  const particles::Positions before = planning.state.x;
+  const size_t terms = planning.model->terms().size();
+  int preparing_steps = 0, rows = 0;
+  FitObserver observer;
+  observer.preparing = [&](int step, int steps, const std::string&) {
+    EXPECT_EQ(steps, 6);
+    preparing_steps = step;
+  };
+  observer.row = [&](const HistoryRow&) { ++rows; };
+  const FittedOrgan fitted = fit_spread(copy_model(planning), stretched_surface(1.15, 87),
+                                        default_spread_options(), observer);
+  const FitReport& r = fitted.report;
+  EXPECT_FALSE(r.refused);
+  EXPECT_EQ(r.method, "spread");
+  EXPECT_TRUE(r.fit.converged) << r.fit.stop_reason;
+  EXPECT_LE(r.fit.residual_mean_mm, r.residual_tolerance_mm);
+  ASSERT_TRUE(r.global.has_value());
+  // The global map's largest principal stretch is the points' 1.15; the volume is kept.
+  EXPECT_NEAR(r.global->principal_stretches.maxCoeff(), 1.15, 0.03);
+  EXPECT_NEAR(r.volume_ratio, 1.0, 0.01);
+  EXPECT_EQ(preparing_steps, 6);
+  EXPECT_GT(rows, 0);
+  ASSERT_TRUE(fitted.before && fitted.after && r.deformation && r.uncertainty);
+  // The particles moved: their x extent grew by about 15%; those passed in did not move.
+  auto extent_x = [](const particles::Positions& x) {
+    return x.row(0).maxCoeff() - x.row(0).minCoeff();
+  };
+  EXPECT_NEAR(extent_x(fitted.model.state.x) / extent_x(before), 1.15, 0.06);
+  EXPECT_EQ(planning.state.x, before);
+  // The returned model keeps only its own terms (cohesion), not the fit's data term.
+  EXPECT_EQ(fitted.model.model->terms().size(), terms);
+  EXPECT_EQ(fitted.model.placed.cols(), fitted.model.state.x.cols());
+}
+
+TEST(FitSpread, RefusesAStretchBeyondThePlausibleAndReturnsTheModelAsItCame) {
+  const OrganModel planning = ellipsoid_model();
+  const FittedOrgan fitted =
+      fit_spread(copy_model(planning), stretched_surface(2.5, 87), default_spread_options());
+  EXPECT_TRUE(fitted.report.refused);
+  EXPECT_FALSE(fitted.after.has_value());
+  EXPECT_EQ(fitted.model.state.x, planning.state.x);
+  EXPECT_EQ(fitted.model.model->terms().size(), planning.model->terms().size());
+}
+
+TEST(FitPaper, RejectsBadPointsBeforeAnything) {
+  PaperFitOptions o;
+  o.fit = default_spread_options().fit;
+  std::vector<AttractivePoint> bad = stretched_surface(1.0, 10);
+  bad[3].p_mm.x() = std::nan("");
+  EXPECT_THROW(fit_paper(ellipsoid_model(), bad, o), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace organfit::fitting

@@ -1,0 +1,39 @@
+#pragma once
+// An organ's shape as an inside test, in mm (patient LPS): analytic (the paper's cube,
+// an ellipsoid, a prostate-like egg, a notched lung) or a label mask (an organ imported
+// from an RT Structure Set or segmented from CT).
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+
+#include "organfit/geometry/mask_ops.h"
+
+namespace organfit::geometry {
+
+struct Shape {
+  std::string kind;                                   ///< "ellipsoid", "box", "egg", "lung", "mask"
+  Eigen::Vector3d size_mm = Eigen::Vector3d::Ones();  ///< full extents (before the notch)
+  Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();  ///< centre (a mask: its centroid)
+  std::shared_ptr<const LabelVolume> mask;  ///< kind "mask": label 1 is inside (surface: the
+                                            ///< 0.5 level of its trilinear interpolation)
+  Aabb box;                                 ///< kind "mask": bounds of its voxels
+  bool inside(const Eigen::Vector3d& p) const;
+  Aabb bounds() const {
+    return mask ? box : Aabb{centre_mm - 0.5 * size_mm, centre_mm + 0.5 * size_mm};
+  }
+};
+
+/// A shape from a mask (label 1). Throws std::invalid_argument when the mask is empty.
+Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask);
+
+/// Makes a shape: "ellipsoid" and "box" as named; "egg" is an ellipsoid whose cross-
+/// section narrows linearly towards -x (a prostate's apex, 30% narrower at the tip);
+/// "lung" is an ellipsoid with a spherical notch cut from its -x side (the cardiac
+/// notch). Throws std::invalid_argument on an unknown kind or non-positive size.
+Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
+                 const Eigen::Vector3d& centre_mm);
+
+/// Volume of a shape by counting the voxel centres of a grid of `voxel_mm` inside it (mm^3).
+double shape_volume_mm3(const Shape& shape, double voxel_mm);
+
+}  // namespace organfit::geometry

@@ -1,0 +1,43 @@
+#pragma once
+// The organ stage: the organ on the planning CT's grid, imported from an RT Structure
+// Set's ROI (organ.source: rtstruct; the file, the phantom's, or one pulled from
+// organ.node) or grown from a seed in an HU window (organ.source: seed).
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "organfit/config/scene.h"
+#include "organfit/dicom/ct_series.h"
+#include "organfit/geometry/shape.h"
+#include "organfit/pipeline/model_file.h"
+#include "organfit/pipeline/node_stage.h"
+#include "organfit/segmentation/segment.h"
+
+namespace organfit::pipeline {
+
+/// The scene's seed growing settings (organ.seed_mm, hu_low, hu_high, ...).
+segmentation::SeedOptions seed_options_from(const config::Scene& scene);
+
+struct OrganStageResult {
+  geometry::Shape shape;   ///< a mask shape (label 1 on the CT's grid)
+  OrganLook look;          ///< the source ROI's colour and type (an imported organ)
+  nlohmann::json summary;  ///< run.json "organ"
+  std::vector<std::string> warnings;
+  /// organ.node: what was pulled, and where the structure set is read from and where it
+  /// is once the run is committed.
+  std::optional<PulledSeries> pulled;
+  double pull_wall_s = 0, pull_peak_memory_mib = 0;
+  std::filesystem::path rtstruct_file, structure_set_home;
+};
+
+/// Makes the organ. `rtstruct_file`: the structure set to import from (the scene's or the
+/// phantom's; ignored for a seed or a pull); `staging`/`out_dir` as for the ct stage.
+/// Fails naming organ.roi when the organ covers no voxel.
+OrganStageResult run_organ_stage(const config::Scene& scene, const dicom::CtSeries& ct,
+                                 const std::filesystem::path& rtstruct_file,
+                                 const std::filesystem::path& staging,
+                                 const std::filesystem::path& out_dir);
+
+}  // namespace organfit::pipeline

@@ -1,0 +1,42 @@
+#pragma once
+// The points stage: the attractive points of a run, generated on the model's shape (or
+// another of its volume) under a known deformation (points.source: generate), or read
+// from a file (points.source: file: a table, or a mesh's vertices).
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <vector>
+
+#include "organfit/config/scene.h"
+#include "organfit/evaluation/synthetic.h"
+#include "organfit/fitting/attractive_points.h"
+#include "organfit/geometry/shape.h"
+#include "organfit/pipeline/model_stage.h"
+#include "organfit/pipeline/points_file.h"
+
+namespace organfit::pipeline {
+
+struct PointsStageResult {
+  std::vector<fitting::AttractivePoint> points;
+  std::optional<evaluation::Deformation> truth;  ///< set when the points were generated
+  geometry::Shape truth_shape;                   ///< the shape they were sampled on
+  PointsCt declared_ct;                          ///< the CT a points file declares
+  nlohmann::json summary;
+};
+
+/// A point set by extension: a table (read_points_table, with the CT it declares), or the
+/// vertices of a .ply, .vtk or .vtp. Throws InputError naming the file on bad content or
+/// no points.
+PointsTable read_points_file(const std::filesystem::path& file);
+
+PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model);
+
+/// The true deformation the points section describes (evaluation::Deformation), about the
+/// shape's centre.
+evaluation::Deformation deformation_from(const config::Scene& scene, const geometry::Shape& shape);
+
+/// A box holding the deformed shape: its corners mapped, widened by the non-affine parts.
+geometry::Aabb deformed_bounds(const geometry::Shape& shape,
+                               const evaluation::Deformation& deformation);
+
+}  // namespace organfit::pipeline

@@ -1,0 +1,72 @@
+#include "organfit/pipeline/organ_stage.h"
+
+#include <spdlog/spdlog.h>
+
+#include "organfit/dicom/structure_set.h"
+#include "organfit/support/error.h"
+#include "organfit/support/resources.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::pipeline {
+
+segmentation::SeedOptions seed_options_from(const config::Scene& scene) {
+  segmentation::SeedOptions s;
+  s.seed_mm = scene.vec3("organ", "seed_mm");
+  s.hu_low = scene.number("organ", "hu_low");
+  s.hu_high = scene.number("organ", "hu_high");
+  s.smoothing_iterations = static_cast<int>(scene.integer("organ", "smoothing_iterations"));
+  s.opening_radius_voxels = static_cast<int>(scene.integer("organ", "opening_radius_voxels"));
+  s.search_box_mm = scene.number("organ", "search_box_mm");
+  return s;
+}
+
+OrganStageResult run_organ_stage(const config::Scene& scene, const dicom::CtSeries& ct,
+                                 const fs::path& rtstruct_file, const fs::path& staging,
+                                 const fs::path& out_dir) {
+  OrganStageResult r;
+  const std::string roi = scene.text("organ", "roi");
+  geometry::LabelVolume mask;
+  if (scene.text("organ", "source") == "seed") {
+    segmentation::SeededOrgan grown =
+        segmentation::segment_from_seed(ct.geometry, ct.hu, seed_options_from(scene));
+    r.warnings = grown.warnings;
+    mask = std::move(grown.mask);
+    r.summary = {{"roi", roi}, {"source", "seed"}, {"volume_cm3", mask.volume_mm3(1) / 1000.0}};
+    spdlog::info("organ: '{}' grown from the seed, {:.2f} cm3", roi, mask.volume_mm3(1) / 1000.0);
+  } else {
+    r.rtstruct_file = rtstruct_file;
+    if (scene.is_given("organ", "node")) {
+      Stopwatch clock;
+      r.pulled =
+          pull_structure_set(scene, ct.patient.study_instance_uid, staging / "cache" / "rtstruct");
+      r.rtstruct_file = r.pulled->files.front();
+      r.structure_set_home = out_dir / fs::relative(r.rtstruct_file, staging);
+      r.pull_wall_s = clock.elapsed_s();
+      r.pull_peak_memory_mib = peak_memory_mib();
+      spdlog::info("organ: the structure set pulled from {} in {:.2f} s",
+                   scene.text("organ", "node"), r.pull_wall_s);
+    }
+    const fs::path& file = r.rtstruct_file;
+    dicom::RasterisedRoi imported =
+        dicom::rasterise_roi(dicom::read_rtstruct(file), roi, ct, file.string(),
+                             static_cast<int>(scene.integer("organ", "roi_number")));
+    r.warnings = imported.warnings;
+    r.summary = {{"roi", roi},
+                 {"source", "rtstruct"},
+                 {"contours", imported.contours},
+                 {"matched_by_position", imported.matched_by_position},
+                 {"volume_cm3", imported.mask.volume_mm3(1) / 1000.0}};
+    spdlog::info("organ: ROI '{}', {} contours, {:.2f} cm3", roi, imported.contours,
+                 imported.mask.volume_mm3(1) / 1000.0);
+    r.look = {imported.colour, imported.interpreted_type};  // an empty type is written as ORGAN
+    mask = std::move(imported.mask);
+  }
+  if (mask.count(1) == 0)
+    scene.fail("organ", "roi", "the organ '" + echo(roi) + "' covers no voxel of the CT");
+  r.shape =
+      geometry::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(mask)));
+  return r;
+}
+
+}  // namespace organfit::pipeline

@@ -1,0 +1,106 @@
+#include "organfit/pipeline/points_stage.h"
+
+#include <cmath>
+
+#include "organfit/meshing/surface.h"
+#include "organfit/support/error.h"
+
+namespace fs = std::filesystem;
+
+namespace organfit::pipeline {
+
+PointsTable read_points_file(const fs::path& file) {
+  const std::string ext = file.extension().string();
+  if (ext != ".ply" && ext != ".vtk" && ext != ".vtp") return read_points_table(file);
+  PointsTable table;  // a mesh's vertices declare no CT
+  for (const auto& p : meshing::read_point_set(file)) {
+    if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])))
+      throw InputError(file.string() + ": a point has a non-finite coordinate");
+    if (!(p[3] > 0 && p[3] <= 1))
+      throw InputError(file.string() + ": a confidence is outside (0, 1]");
+    table.points.push_back({Eigen::Vector3d(p[0], p[1], p[2]), p[3]});
+  }
+  if (table.points.empty()) throw InputError(file.string() + ": no points in the file");
+  return table;
+}
+
+evaluation::Deformation deformation_from(const config::Scene& scene, const geometry::Shape& shape) {
+  evaluation::Deformation d;
+  d.stretch = scene.number("points", "stretch");
+  d.bend_mm = scene.number("points", "bend_mm");
+  d.twist_rad = scene.number("points", "twist_deg") * M_PI / 180;
+  d.indent_mm = scene.number("points", "indent_mm");
+  d.push_mm = scene.number("points", "push_mm");
+  d.bump_sigma_mm = scene.number("points", "bump_sigma_mm");
+  d.centre_mm = shape.centre_mm;
+  d.half_length_mm = 0.5 * shape.size_mm.x() * d.stretch;
+  return d;
+}
+
+PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model) {
+  PointsStageResult r;
+  if (scene.text("points", "source") == "file") {
+    PointsTable table = read_points_file(scene.path("points", "file"));
+    r.points = std::move(table.points);
+    r.declared_ct = table.ct;
+    r.summary = {{"source", "file"}, {"count", r.points.size()}};
+    return r;
+  }
+  // The shape the points come from: the body itself, or another of the same volume.
+  r.truth_shape = model.shape;
+  const std::string target = scene.text("points", "target_shape");
+  if (target != "same") {
+    geometry::Shape t =
+        geometry::make_shape(target, scene.vec3("points", "target_size_mm"), model.shape.centre_mm);
+    const double voxel = 0.25 * model.cohesion.r0_mm;
+    const double scale = std::cbrt(geometry::shape_volume_mm3(model.shape, voxel) /
+                                   geometry::shape_volume_mm3(t, voxel));
+    t.size_mm *= scale;
+    r.truth_shape = t;
+  }
+  const evaluation::Deformation d = deformation_from(scene, r.truth_shape);
+  evaluation::SamplingOptions o;
+  o.count = static_cast<int>(scene.integer("points", "count"));
+  o.noise_mm = scene.number("points", "noise_mm");
+  o.outlier_fraction = scene.number("points", "outlier_fraction");
+  o.half_coverage = scene.text("points", "coverage") == "half";
+  o.seed = static_cast<unsigned>(scene.integer("scene", "seed"));
+  r.points = evaluation::sample_deformed_surface(r.truth_shape, d, o);
+  r.truth = d;
+  r.summary = {{"source", "generate"},
+               {"count", r.points.size()},
+               {"noise_mm", o.noise_mm},
+               {"outlier_fraction", o.outlier_fraction},
+               {"coverage", scene.text("points", "coverage")},
+               {"stretch", d.stretch},
+               {"bend_mm", d.bend_mm},
+               {"twist_rad", d.twist_rad},
+               {"indent_mm", d.indent_mm},
+               {"push_mm", d.push_mm},
+               {"target_shape", r.truth_shape.kind},
+               {"target_size_mm",
+                {r.truth_shape.size_mm.x(), r.truth_shape.size_mm.y(), r.truth_shape.size_mm.z()}}};
+  return r;
+}
+
+geometry::Aabb deformed_bounds(const geometry::Shape& s, const evaluation::Deformation& d) {
+  const geometry::Aabb b = s.bounds();
+  geometry::Aabb out{Eigen::Vector3d::Constant(1e300), Eigen::Vector3d::Constant(-1e300)};
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d corner((c & 1) ? b.max_mm.x() : b.min_mm.x(),
+                                 (c & 2) ? b.max_mm.y() : b.min_mm.y(),
+                                 (c & 4) ? b.max_mm.z() : b.min_mm.z());
+    const Eigen::Vector3d q = d.apply(corner);
+    out.min_mm = out.min_mm.cwiseMin(q);
+    out.max_mm = out.max_mm.cwiseMax(q);
+  }
+  // The non-affine parts move points off the corners' hull by at most their amplitudes.
+  const double margin = std::abs(d.bend_mm) + std::abs(d.indent_mm) + std::abs(d.push_mm) +
+                        std::abs(d.twist_rad) * 0.5 * (b.max_mm - b.min_mm).maxCoeff() +
+                        (d.field ? d.field->largest_mm : 0.0);
+  out.min_mm.array() -= margin;
+  out.max_mm.array() += margin;
+  return out;
+}
+
+}  // namespace organfit::pipeline
