@@ -45,15 +45,8 @@ geometry::Aabb EmbeddedBody::bounds() const {
   // No particles: the reference's box moved by the global map (its corners' images:
   // exact for an affine map).
   const geometry::Aabb r = reference_->geometry.bounds_mm();
-  geometry::Aabb out{Eigen::Vector3d::Constant(1e300), Eigen::Vector3d::Constant(-1e300)};
-  for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d corner((c & 1) ? r.max_mm.x() : r.min_mm.x(),
-                                 (c & 2) ? r.max_mm.y() : r.min_mm.y(),
-                                 (c & 4) ? r.max_mm.z() : r.min_mm.z());
-    const Eigen::Vector3d moved = deformation_->push_forward(corner);
-    out.min_mm = out.min_mm.cwiseMin(moved), out.max_mm = out.max_mm.cwiseMax(moved);
-  }
-  return out;
+  return geometry::image_of_box(
+      r, [this](const Eigen::Vector3d& p) { return deformation_->push_forward(p); });
 }
 
 geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid) const {

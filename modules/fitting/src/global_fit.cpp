@@ -9,85 +9,12 @@
 #include <numeric>
 #include <optional>
 
+#include "mapped_samples.h"
 #include "organfit/fitting/robust.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/sample_grid.h"
-#include "organfit/particles/diagnostics.h"
-#include "organfit/particles/lattice_fill.h"
 
 namespace organfit::fitting {
-
-SurfaceSamples surface_samples(const particles::Positions& x, const std::vector<int>& skin,
-                               double radius_mm) {
-  const double r0 = 2 * radius_mm;
-  const double reach2 = (1.6 * r0) * (1.6 * r0);
-  SurfaceSamples out;
-  out.points.resize(3, static_cast<Eigen::Index>(skin.size()));
-  out.normals.resize(3, static_cast<Eigen::Index>(skin.size()));
-  const Eigen::Vector3d body_centre = x.rowwise().mean();
-  for (size_t s = 0; s < skin.size(); ++s) {
-    const int i = skin[s];
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    int count = 0;
-    for (int j = 0; j < x.cols(); ++j) {
-      if (j != i && (x.col(j) - x.col(i)).squaredNorm() < reach2) sum += x.col(j), ++count;
-    }
-    Eigen::Vector3d n =
-        count > 0 ? Eigen::Vector3d(x.col(i) - sum / count) : Eigen::Vector3d::Zero();
-    if (n.norm() < 1e-6 * r0) n = x.col(i) - body_centre;  // flat spot: point away from the centre
-    n.normalize();
-    out.normals.col(static_cast<Eigen::Index>(s)) = n;
-    out.points.col(static_cast<Eigen::Index>(s)) = x.col(i) + radius_mm * n;
-  }
-  return out;
-}
-
-SurfaceSamples reference_surface(const geometry::LabelVolume& reference, int stride) {
-  return reference_surface(reference, geometry::SignedDistance(reference), stride);
-}
-
-namespace {
-/// Whether voxel `v` is among a deterministic, spatially unbiased 1 in `stride`: by a
-/// hash of its index (splitmix64). Counting boundary voxels in raster order aliased: a
-/// box's rows each cross two of them, so 1 in 2 kept the -x face and none of the +x face
-/// (the samples' centre 4.9 mm off the 30 mm cube's).
-bool kept_one_in(int stride, std::uint64_t v) {
-  if (stride <= 1) return true;
-  v += 0x9e3779b97f4a7c15ULL;
-  v = (v ^ (v >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  v = (v ^ (v >> 27)) * 0x94d049bb133111ebULL;
-  v ^= v >> 31;
-  return v % static_cast<std::uint64_t>(stride) == 0;
-}
-}  // namespace
-
-SurfaceSamples reference_surface(const geometry::LabelVolume& reference,
-                                 const geometry::SignedDistance& distance, int stride) {
-  const geometry::ImageGeometry& g = reference.geometry;
-  auto sd = [&](int i, int j, int k) { return distance.at_voxel(i, j, k); };
-  const std::vector<std::uint8_t> boundary = geometry::surface_of(reference);
-  std::vector<Eigen::Vector3d> pts, nrm;
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i) {
-        const auto v = static_cast<std::uint64_t>(g.linear_index(i, j, k));
-        if (!boundary[v] || !kept_one_in(stride, v)) continue;
-        Eigen::Vector3d grad((sd(i + 1, j, k) - sd(i - 1, j, k)) / (2 * g.spacing_mm.x()),
-                             (sd(i, j + 1, k) - sd(i, j - 1, k)) / (2 * g.spacing_mm.y()),
-                             (sd(i, j, k + 1) - sd(i, j, k - 1)) / (2 * g.spacing_mm.z()));
-        if (grad.norm() < 1e-9) continue;
-        grad = g.direction * grad;
-        const Eigen::Vector3d n = grad.normalized();
-        pts.push_back(g.index_to_physical(Eigen::Vector3d(i, j, k)) - sd(i, j, k) * n);
-        nrm.push_back(n);
-      }
-  SurfaceSamples s;
-  s.points.resize(3, static_cast<Eigen::Index>(pts.size()));
-  s.normals.resize(3, static_cast<Eigen::Index>(pts.size()));
-  for (size_t q = 0; q < pts.size(); ++q)
-    s.points.col(q) = pts[q], s.normals.col(q) = nrm[q];
-  return s;
-}
 
 namespace {
 
@@ -246,159 +173,12 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
   return fit;
 }
 
-Eigen::Vector3d QuadraticShears::apply(const Eigen::Vector3d& q) const {
-  Eigen::Vector3d u = q - centre;
-  u.x() += c(0) * u.y() * u.y() + c(1) * u.z() * u.z() + c(2) * u.y() * u.z();
-  u.y() += c(3) * u.x() * u.x() + c(4) * u.z() * u.z() + c(5) * u.x() * u.z();
-  u.z() += c(6) * u.x() * u.x() + c(7) * u.y() * u.y() + c(8) * u.x() * u.y();
-  u.y() += c(9) * u.x() * u.x() + c(10) * u.z() * u.z() + c(11) * u.x() * u.z();
-  u.x() += c(12) * u.y() * u.y() + c(13) * u.z() * u.z() + c(14) * u.y() * u.z();
-  return centre + u;
-}
-
-Eigen::Vector3d QuadraticShears::inverse(const Eigen::Vector3d& q) const {
-  Eigen::Vector3d u = q - centre;  // undo the shears in reverse order
-  u.x() -= c(12) * u.y() * u.y() + c(13) * u.z() * u.z() + c(14) * u.y() * u.z();
-  u.y() -= c(9) * u.x() * u.x() + c(10) * u.z() * u.z() + c(11) * u.x() * u.z();
-  u.z() -= c(6) * u.x() * u.x() + c(7) * u.y() * u.y() + c(8) * u.x() * u.y();
-  u.y() -= c(3) * u.x() * u.x() + c(4) * u.z() * u.z() + c(5) * u.x() * u.z();
-  u.x() -= c(0) * u.y() * u.y() + c(1) * u.z() * u.z() + c(2) * u.y() * u.z();
-  return centre + u;
-}
-
-namespace {
-/// The two axes other than `a`, in order.
-std::pair<int, int> other_axes(int a) {
-  return {a == 0 ? 1 : 0, a == 2 ? 1 : 2};
-}
-}  // namespace
-
-ShearFields ShearFields::over(const Eigen::Vector3d& box_min_mm, const Eigen::Vector3d& box_max_mm,
-                              double sigma_mm) {
-  ShearFields f;
-  f.sigma_mm = sigma_mm;
-  if (!(sigma_mm > 0)) return f;
-  for (int a = 0; a < 3; ++a) {  // centred on the box, reaching one spacing beyond it
-    const double span = box_max_mm(a) - box_min_mm(a) + 2 * sigma_mm;
-    f.count(a) = 1 + static_cast<int>(std::ceil(std::max(0.0, span) / sigma_mm));
-    f.origin_mm(a) = 0.5 * (box_min_mm(a) + box_max_mm(a)) - 0.5 * (f.count(a) - 1) * sigma_mm;
-  }
-  f.weights = Eigen::VectorXd::Zero(3 * f.block());
-  return f;
-}
-
-int ShearFields::block() const {
-  int most = 0;
-  for (int a = 0; a < 3; ++a) {
-    const auto [b, c] = other_axes(a);
-    most = std::max(most, count(b) * count(c));
-  }
-  return most;
-}
-
-namespace {
-/// Calls visit(index, value) for each bump of field `a` of `f` at q at least 1e-6 (the
-/// centres within 5.3 sigmas of q's other two coordinates), in a fixed order.
-template <class Visit>
-void for_each_bump(const ShearFields& f, int a, const Eigen::Vector3d& q, Visit&& visit) {
-  if (!(f.sigma_mm > 0)) return;
-  const auto [b, c] = other_axes(a);
-  const double reach = 5.3;  // sigmas: exp(-5.3^2 / 2) < 1e-6
-  const double ub = (q(b) - f.origin_mm(b)) / f.sigma_mm, uc = (q(c) - f.origin_mm(c)) / f.sigma_mm;
-  const int i0 = std::max(0, static_cast<int>(std::ceil(ub - reach))),
-            i1 = std::min(f.count(b) - 1, static_cast<int>(std::floor(ub + reach)));
-  const int j0 = std::max(0, static_cast<int>(std::ceil(uc - reach))),
-            j1 = std::min(f.count(c) - 1, static_cast<int>(std::floor(uc + reach)));
-  if (i1 - i0 >= 16) return;  // cannot happen: 2 x 5.3 sigmas span at most 11 centres
-  // The Gaussian is separable: one exp per row and per column, not per bump.
-  double along_b[16];
-  for (int i = i0; i <= i1; ++i)
-    along_b[i - i0] = std::exp(-0.5 * (ub - i) * (ub - i));
-  const int first = a * f.block();
-  for (int j = j0; j <= j1; ++j) {
-    const double along_c = std::exp(-0.5 * (uc - j) * (uc - j));
-    for (int i = i0; i <= i1; ++i) {
-      const double e = along_b[i - i0] * along_c;
-      if (e >= 1e-6) visit(first + i + f.count(b) * j, e);
-    }
-  }
-}
-}  // namespace
-
-void ShearFields::bumps(int a, const Eigen::Vector3d& q,
-                        std::vector<std::pair<int, double>>& out) const {
-  out.clear();
-  for_each_bump(*this, a, q, [&](int index, double value) { out.emplace_back(index, value); });
-}
-
-double ShearFields::field(int a, const Eigen::Vector3d& q) const {
-  // Summed as visited, without a list: it is called for every lattice site of a re-fill
-  // and every voxel an evaluation asks about.
-  double f = 0;
-  if (weights.size() == 0) return f;
-  for_each_bump(*this, a, q, [&](int index, double value) { f += weights(index) * value; });
-  return f;
-}
-
-Eigen::Vector3d ShearFields::apply(const Eigen::Vector3d& q) const {
-  Eigen::Vector3d u = q;
-  if (weights.size() == 0) return u;
-  for (int a = 0; a < 3; ++a)
-    u(a) += field(a, u);
-  return u;
-}
-
-Eigen::Vector3d ShearFields::inverse(const Eigen::Vector3d& q) const {
-  Eigen::Vector3d u = q;  // undo the fields in reverse order
-  if (weights.size() == 0) return u;
-  for (int a = 2; a >= 0; --a)
-    u(a) -= field(a, u);
-  return u;
-}
-
-Eigen::Vector3d GlobalMap::inverse(const Eigen::Vector3d& q) const {
-  return inverse(q, affine.a.inverse());
-}
-
 namespace {
 
 /// Principal stretches within [1 / max_stretch, max_stretch].
 bool within_stretch(const Eigen::Matrix3d& a, const AffineFitOptions& o) {
   const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(a).singularValues();
   return sv[0] <= o.max_stretch && sv[2] >= 1.0 / o.max_stretch;
-}
-
-/// A map's images of the surface samples: after its affine part, and in full. Each
-/// candidate's samples are mapped once for the three questions asked of it (plausible,
-/// point_to_plane_rms, shape change).
-struct MappedSamples {
-  Eigen::Matrix3Xd affine, sheared, full;  ///< mm
-};
-
-MappedSamples map_samples(const GlobalMap& map, const SurfaceSamples& surface) {
-  const Eigen::Index n = surface.points.cols();
-  MappedSamples m{Eigen::Matrix3Xd(3, n), Eigen::Matrix3Xd(3, n), Eigen::Matrix3Xd(3, n)};
-  for (Eigen::Index j = 0; j < n; ++j) {
-    m.affine.col(j) = map.affine.a * surface.points.col(j) + map.affine.t;
-    m.sheared.col(j) = map.shears.apply(m.affine.col(j));
-    m.full.col(j) = map.fields.apply(m.sheared.col(j));
-  }
-  return m;
-}
-
-/// RMS displacement (mm) of `moved` from `original` about its mean displacement.
-double shape_change_of(const Eigen::Matrix3Xd& moved, const Eigen::Matrix3Xd& original) {
-  const Eigen::Matrix3Xd d = moved - original;
-  const Eigen::Vector3d mean = d.rowwise().mean();
-  return std::sqrt((d.colwise() - mean).colwise().squaredNorm().mean());
-}
-
-/// largest_moves (global_fit.h) of samples already mapped.
-LargestMoves largest_moves_of(const MappedSamples& mapped) {
-  auto largest_move = [](const Eigen::Matrix3Xd& to, const Eigen::Matrix3Xd& from) {
-    return to.cols() > 0 ? (to - from).colwise().norm().maxCoeff() : 0.0;
-  };
-  return {largest_move(mapped.sheared, mapped.affine), largest_move(mapped.full, mapped.sheared)};
 }
 
 /// Stretches within bounds, and neither the quadratic shears nor the shear fields moving
@@ -851,32 +631,6 @@ double truncated_rms(const GlobalMap& map, const geometry::SignedDistance& dista
 
 }  // namespace
 
-SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface) {
-  SurfaceSamples out;
-  out.points.resize(3, surface.points.cols());
-  out.normals.resize(3, surface.points.cols());
-  const double h = 1e-3;  // mm: the shears' second derivatives are ~1/100 mm^-1
-  for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
-    const Eigen::Vector3d s = surface.points.col(j);
-    Eigen::Matrix3d jacobian;
-    for (int c = 0; c < 3; ++c) {
-      const Eigen::Vector3d e = h * Eigen::Vector3d::Unit(c);
-      jacobian.col(c) = (map.apply(s + e) - map.apply(s - e)) / (2 * h);
-    }
-    out.points.col(j) = map.apply(s);
-    out.normals.col(j) = (jacobian.inverse().transpose() * surface.normals.col(j)).normalized();
-  }
-  return out;
-}
-
-double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface) {
-  return shape_change_of(map_samples(map, surface).full, surface.points);
-}
-
-LargestMoves largest_moves(const GlobalMap& map, const SurfaceSamples& surface) {
-  return largest_moves_of(map_samples(map, surface));
-}
-
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
                          const AffineFitOptions& o, const geometry::SignedDistance* distance) {
   // Each pull towards the identity (the stated one, and the alternative if any) gives an
@@ -1039,89 +793,6 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     all.push_back(&f);
   GlobalMap out = *all[least_change_of_equally_good(rms, change)];
   out.shears_dropped = shears_dropped;
-  return out;
-}
-
-particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, int count,
-                                        double a_nn_mm, const GlobalMap& map) {
-  if (count <= 0) return particles::Positions(3, 0);
-  const geometry::ImageGeometry& g = reference.geometry;
-  // Signed depth in the reference body: distance to the nearest outside voxel inside,
-  // minus the distance to the body outside. Ranking sites by it selects a level set
-  // of the mapped body, which can sit a little outside it when the count asks so.
-  std::vector<std::uint8_t> outside(reference.labels.size()), inside_mask(reference.labels.size());
-  for (size_t i = 0; i < outside.size(); ++i)
-    outside[i] = reference.labels[i] == 0, inside_mask[i] = !outside[i];
-  const std::vector<double> depth2 = geometry::squared_distance_transform(outside, g);
-  const std::vector<double> away2 = geometry::squared_distance_transform(inside_mask, g);
-  const double off_grid = -std::numeric_limits<double>::infinity();
-  auto depth_at = [&](const Eigen::Vector3d& q) {
-    const Eigen::Vector3d idx = g.physical_to_index(q);
-    const int i = static_cast<int>(std::lround(idx.x())),
-              j = static_cast<int>(std::lround(idx.y())),
-              k = static_cast<int>(std::lround(idx.z()));
-    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2])
-      return off_grid;
-    const long long v = g.linear_index(i, j, k);
-    return inside_mask[v] ? std::sqrt(depth2[v]) : -std::sqrt(away2[v]);
-  };
-  // Candidate sites: the lattice over the mapped box, centred on the mapped centroid.
-  const geometry::Aabb box = g.bounds_mm();
-  geometry::Aabb mapped{Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()),
-                        Eigen::Vector3d::Constant(-std::numeric_limits<double>::infinity())};
-  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-  long long inside = 0;
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        if (reference.at(i, j, k))
-          centroid += g.index_to_physical(Eigen::Vector3d(i, j, k)), ++inside;
-  centroid /= static_cast<double>(std::max<long long>(1, inside));
-  for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d corner((c & 1) ? box.max_mm.x() : box.min_mm.x(),
-                                 (c & 2) ? box.max_mm.y() : box.min_mm.y(),
-                                 (c & 4) ? box.max_mm.z() : box.min_mm.z());
-    const Eigen::Vector3d q = map.apply(corner);
-    mapped.min_mm = mapped.min_mm.cwiseMin(q);
-    mapped.max_mm = mapped.max_mm.cwiseMax(q);
-  }
-  mapped.min_mm.array() -= a_nn_mm;  // room for a level set just outside the body
-  mapped.max_mm.array() += a_nn_mm;
-  const particles::Positions sites = particles::fcc_lattice_points(
-      mapped, map.apply(centroid), a_nn_mm, [](const Eigen::Vector3d&) { return true; });
-  std::vector<double> d(sites.cols());
-  for (Eigen::Index s = 0; s < sites.cols(); ++s)
-    d[s] = depth_at(map.inverse(sites.col(s)));
-  // Sites by signed depth, deepest first (ties by index: deterministic); sites off the
-  // reference's grid are never taken.
-  std::vector<int> idx;
-  for (Eigen::Index s = 0; s < sites.cols(); ++s)
-    if (d[s] > off_grid) idx.push_back(static_cast<int>(s));
-  std::stable_sort(idx.begin(), idx.end(), [&](int l, int r) { return d[l] > d[r]; });
-  const int keep = std::min<int>(count, static_cast<int>(idx.size()));
-  // One body: the largest group of the deepest `keep` sites (joined within 1.2 a_nn),
-  // topped up with the next deepest sites that touch it.
-  const double link2 = (1.2 * a_nn_mm) * (1.2 * a_nn_mm);
-  particles::Positions chosen(3, keep);
-  for (int s = 0; s < keep; ++s)
-    chosen.col(s) = sites.col(idx[s]);
-  const std::vector<int> body = particles::largest_component(chosen, 1.2 * a_nn_mm);
-  std::vector<char> taken(sites.cols(), 0);
-  std::vector<int> result;
-  for (int b : body)
-    result.push_back(idx[b]), taken[idx[b]] = 1;
-  for (size_t q = keep; q < idx.size() && static_cast<int>(result.size()) < keep; ++q) {
-    const int s = idx[q];
-    for (int r : result)
-      if ((sites.col(s) - sites.col(r)).squaredNorm() < link2) {
-        result.push_back(s), taken[s] = 1;
-        break;
-      }
-  }
-  std::sort(result.begin(), result.end());
-  particles::Positions out(3, static_cast<Eigen::Index>(result.size()));
-  for (size_t s = 0; s < result.size(); ++s)
-    out.col(static_cast<Eigen::Index>(s)) = sites.col(result[s]);
   return out;
 }
 

@@ -57,14 +57,9 @@ IndexRange LabelVolume::range(std::uint8_t label) const {
 }
 
 IndexRange index_range(const ImageGeometry& grid, const Aabb& box, int pad) {
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = Eigen::Vector3d::Constant(-1e300);
-  for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d corner((c & 1) ? box.max_mm.x() : box.min_mm.x(),
-                                 (c & 2) ? box.max_mm.y() : box.min_mm.y(),
-                                 (c & 4) ? box.max_mm.z() : box.min_mm.z());
-    const Eigen::Vector3d idx = grid.physical_to_index(corner);
-    lo = lo.cwiseMin(idx), hi = hi.cwiseMax(idx);
-  }
+  const Aabb index_box =
+      image_of_box(box, [&grid](const Eigen::Vector3d& p) { return grid.physical_to_index(p); });
+  const Eigen::Vector3d &lo = index_box.min_mm, &hi = index_box.max_mm;  // voxel indices
   IndexRange r;
   for (int d = 0; d < 3; ++d) {  // clamped as doubles: no int overflow for far boxes
     r.lo[d] = static_cast<int>(std::clamp(std::floor(lo[d]) - pad, 0.0, double(grid.size[d])));

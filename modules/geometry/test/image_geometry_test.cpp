@@ -58,3 +58,20 @@ TEST(LabelVolume, CountsVolumeAndPhysicalLookup) {
 
 }  // namespace
 }  // namespace organfit::geometry
+
+namespace organfit::geometry {
+namespace {
+
+// The box of a box's image: exact for an affine map (a rotation by 90 degrees about z and
+// a shift here), the corners' hull for any map.
+TEST(ImageOfBox, IsTheImageOfTheBoxUnderAnAffineMap) {
+  const Aabb box{{0, 0, 0}, {2, 4, 6}};
+  const Aabb r = image_of_box(box, [](const Eigen::Vector3d& p) -> Eigen::Vector3d {
+    return Eigen::Vector3d(-p.y(), p.x(), p.z()) + Eigen::Vector3d(10, 0, -1);
+  });
+  EXPECT_TRUE(r.min_mm.isApprox(Eigen::Vector3d(6, 0, -1)));
+  EXPECT_TRUE(r.max_mm.isApprox(Eigen::Vector3d(10, 2, 5)));
+}
+
+}  // namespace
+}  // namespace organfit::geometry

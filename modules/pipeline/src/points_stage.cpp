@@ -85,15 +85,8 @@ PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageR
 
 geometry::Aabb deformed_bounds(const geometry::Shape& s, const evaluation::Deformation& d) {
   const geometry::Aabb b = s.bounds();
-  geometry::Aabb out{Eigen::Vector3d::Constant(1e300), Eigen::Vector3d::Constant(-1e300)};
-  for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3d corner((c & 1) ? b.max_mm.x() : b.min_mm.x(),
-                                 (c & 2) ? b.max_mm.y() : b.min_mm.y(),
-                                 (c & 4) ? b.max_mm.z() : b.min_mm.z());
-    const Eigen::Vector3d q = d.apply(corner);
-    out.min_mm = out.min_mm.cwiseMin(q);
-    out.max_mm = out.max_mm.cwiseMax(q);
-  }
+  geometry::Aabb out =
+      geometry::image_of_box(b, [&d](const Eigen::Vector3d& p) { return d.apply(p); });
   // The non-affine parts move points off the corners' hull by at most their amplitudes.
   const double margin = std::abs(d.bend_mm) + std::abs(d.indent_mm) + std::abs(d.push_mm) +
                         std::abs(d.twist_rad) * 0.5 * (b.max_mm - b.min_mm).maxCoeff() +

@@ -11,6 +11,9 @@
 #include <vector>
 
 #include "organfit/fitting/attractive_points.h"
+#include "organfit/fitting/global_map.h"
+#include "organfit/fitting/refill.h"
+#include "organfit/fitting/surface_samples.h"
 #include "organfit/geometry/image_geometry.h"
 #include "organfit/geometry/signed_distance.h"
 #include "organfit/particles/state.h"
@@ -60,31 +63,6 @@ struct AffineFitOptions {
   double max_shear_mm = 0.25;
 };
 
-struct AffineFit {
-  Eigen::Matrix3d a = Eigen::Matrix3d::Identity();  ///< det(a) = 1
-  Eigen::Vector3d t = Eigen::Vector3d::Zero();
-  double rms_before_mm = 0, rms_after_mm = 0;  ///< point-to-surface, over the kept points
-  int iterations = 0;
-};
-
-/// Surface samples of a particle body: each skin centre pushed out by `radius_mm` along
-/// its outward normal (away from the centroid of its neighbours within 1.6 r0).
-struct SurfaceSamples {
-  Eigen::Matrix3Xd points;   ///< mm
-  Eigen::Matrix3Xd normals;  ///< unit, outward
-};
-SurfaceSamples surface_samples(const particles::Positions& x, const std::vector<int>& skin,
-                               double radius_mm);
-
-/// Surface samples of a reference body (a mask): one in `stride` boundary voxels (chosen
-/// by a hash of the voxel's index: spread evenly over the surface, the same every run),
-/// moved onto the zero level of the signed distance, with the distance's gradient as
-/// normal. Denser and smoother than the particles' own surface.
-SurfaceSamples reference_surface(const geometry::LabelVolume& reference, int stride = 1);
-/// The same with the reference's signed distance already at hand (it is what costs).
-SurfaceSamples reference_surface(const geometry::LabelVolume& reference,
-                                 const geometry::SignedDistance& distance, int stride = 1);
-
 /// Robust ICP for x -> a x + t with det(a) = 1 matching the surface to the points:
 /// point-to-plane (normals mapped by a^-T) plus a small point-to-point term, outliers
 /// by a median + MAD rule, then det(a) = 1 by scaling at each iteration. The pull towards
@@ -93,99 +71,6 @@ SurfaceSamples reference_surface(const geometry::LabelVolume& reference,
 AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
                                        const std::vector<AttractivePoint>& points,
                                        const AffineFitOptions& options);
-
-/// Bending and twisting on top of the affine map: five shears applied in turn about
-/// `centre` (u = q - centre),
-///   x += c0 u_y^2 + c1 u_z^2 + c2 u_y u_z,
-///   y += c3 u_x^2 + c4 u_z^2 + c5 u_x u_z,
-///   z += c6 u_x^2 + c7 u_y^2 + c8 u_x u_y,
-///   y += c9 u_x^2 + c10 u_z^2 + c11 u_x u_z,
-///   x += c12 u_y^2 + c13 u_z^2 + c14 u_y u_z,
-/// each moving one coordinate by a function of the other two: every shear, and so the
-/// whole map, keeps volume exactly (Jacobian determinant 1), and inverts exactly. The
-/// last two make a twist about any axis (a rotation growing along it) a sequence of three
-/// shears, y z y about x (a rotation by phi is y -= tan(phi/2) z, z += sin(phi) y, y -=
-/// tan(phi/2) z), x z x about y, x y x about z: with the first three alone, a cube's
-/// corners twisted by 38 degrees were left 3 mm in (the cosine's part, second order).
-struct QuadraticShears {
-  static constexpr int kCount = 15;
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  Eigen::Matrix<double, kCount, 1> c = Eigen::Matrix<double, kCount, 1>::Zero();
-  Eigen::Vector3d apply(const Eigen::Vector3d& q) const;
-  Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
-};
-
-/// Smooth shears on top of the quadratic ones: three fields applied in turn,
-///   x += f_x(y, z),  y += f_y(x, z),  z += f_z(x, y),
-/// each a sum of Gaussian bumps, f_a(v) = sum_j w_aj exp(-|v - c_j|^2 / (2 sigma^2)), their
-/// centres c_j on a square grid of spacing sigma over the body's box in the plane of the
-/// other two coordinates. Like the quadratic shears, each moves one coordinate by a
-/// function of the other two: volume kept exactly, inverse exact. They carry what a
-/// quadratic cannot, a change of shape over part of the organ (a dent from the rectum, a
-/// push from the bladder), and carry it through the organ: a dent in the side the probe
-/// sees moves the side it does not, as an incompressible body must.
-struct ShearFields {
-  double sigma_mm = 0;  ///< width of the bumps and spacing of their centres (0: no fields)
-  Eigen::Vector3d origin_mm = Eigen::Vector3d::Zero();  ///< the grid's first centre, each axis
-  Eigen::Vector3i count = Eigen::Vector3i::Zero();      ///< centres along each axis
-  /// the bumps' heights (mm): field a's (a = 0, 1, 2) for the centres of the grid over the
-  /// other two axes (b < c), centre (i, j) at index a * block + i + count[b] * j, where
-  /// block is the largest count[b] * count[c] (unused entries zero)
-  Eigen::VectorXd weights;
-
-  /// A grid over `box` widened by one spacing, all weights zero.
-  static ShearFields over(const Eigen::Vector3d& box_min_mm, const Eigen::Vector3d& box_max_mm,
-                          double sigma_mm);
-  bool empty() const { return sigma_mm <= 0 || weights.size() == 0 || weights.isZero(0); }
-  int block() const;
-  /// The bumps of field `a` at q (only q's other two coordinates count), index and value;
-  /// those below 1e-6 are left out.
-  void bumps(int a, const Eigen::Vector3d& q, std::vector<std::pair<int, double>>& out) const;
-  double field(int a, const Eigen::Vector3d& q) const;  ///< f_a at q (mm)
-  Eigen::Vector3d apply(const Eigen::Vector3d& q) const;
-  Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
-};
-
-/// The global map: affine (det 1), then quadratic shears, then smooth shear fields.
-/// Volume-preserving.
-struct GlobalMap {
-  AffineFit affine;
-  QuadraticShears shears;
-  ShearFields fields;
-  double rms_after_mm = 0;      ///< point-to-surface over the kept points
-  bool refused = false;         ///< no plausible map: the identity instead
-  bool shears_dropped = false;  ///< the shears were implausible: the affine part alone
-  /// which fit of fit_global_map's it is: "affine", "whole map", "whole map annealed",
-  /// "signed distance", "signed distance (shears)", "signed distance (stiffer shears)"
-  /// ("none": not fitted); with shear fields on top of it when `fields` is not empty
-  const char* found_by = "none";
-  Eigen::Vector3d apply(const Eigen::Vector3d& p) const {
-    return fields.apply(shears.apply(affine.a * p + affine.t));
-  }
-  Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
-  /// The same with affine.a's inverse at hand (`a_inverse`), for callers that invert
-  /// many points through one map.
-  Eigen::Vector3d inverse(const Eigen::Vector3d& q, const Eigen::Matrix3d& a_inverse) const {
-    return a_inverse * (shears.inverse(fields.inverse(q)) - affine.t);
-  }
-};
-
-/// The surface samples moved by `map`: points mapped, normals turned by the inverse
-/// transpose of its Jacobian (by central differences) and made unit again.
-SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface);
-
-/// How much `map` changes the shape and orientation of the body whose surface is sampled
-/// (mm): the RMS displacement of the samples about their mean displacement (the
-/// translation).
-double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface);
-
-/// How far (mm) the quadratic shears, and the shear fields, each move any of the surface
-/// samples at most: the shears from the affine image, the fields from the sheared one.
-/// Each is bounded by max_shear_mm x the body's size for a map to be plausible.
-struct LargestMoves {
-  double shears_mm = 0, fields_mm = 0;
-};
-LargestMoves largest_moves(const GlobalMap& map, const SurfaceSamples& surface);
 
 /// Fits the whole map jointly (Gauss-Newton, point-to-plane plus a small point-to-point
 /// term, the same outlier rule), from two starts: the affine fit, and its translation
@@ -236,13 +121,5 @@ LargestMoves largest_moves(const GlobalMap& map, const SurfaceSamples& surface);
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
                          const AffineFitOptions& options,
                          const geometry::SignedDistance* distance = nullptr);
-
-/// The model's reference body (the mask it was filled from) mapped by `map` and re-filled
-/// with exactly `count` particles: the deepest sites of an fcc lattice of spacing
-/// `a_nn_mm` inside the mapped body. Same count, same density: the same volume. The
-/// reference, not the particles' own ball surface, is mapped: re-sampling the balls
-/// would add a second discretisation error to the first.
-particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, int count,
-                                        double a_nn_mm, const GlobalMap& map);
 
 }  // namespace organfit::fitting

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 namespace organfit::geometry {
@@ -18,6 +19,22 @@ struct Aabb {
   Eigen::Vector3d max_mm = Eigen::Vector3d::Constant(0);
   Eigen::Vector3d size_mm() const { return max_mm - min_mm; }
 };
+
+/// The box of the images of `box`'s 8 corners under `f` (mm in, whatever units out):
+/// the image of the box itself for an affine f, a box to widen for any other.
+inline Aabb image_of_box(const Aabb& box,
+                         const std::function<Eigen::Vector3d(const Eigen::Vector3d&)>& f) {
+  Aabb out{Eigen::Vector3d::Constant(1e300), Eigen::Vector3d::Constant(-1e300)};
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d corner((c & 1) ? box.max_mm.x() : box.min_mm.x(),
+                                 (c & 2) ? box.max_mm.y() : box.min_mm.y(),
+                                 (c & 4) ? box.max_mm.z() : box.min_mm.z());
+    const Eigen::Vector3d q = f(corner);
+    out.min_mm = out.min_mm.cwiseMin(q);
+    out.max_mm = out.max_mm.cwiseMax(q);
+  }
+  return out;
+}
 
 struct ImageGeometry {
   std::array<int, 3> size{0, 0, 0};                         ///< voxels along i, j, k

@@ -1,0 +1,113 @@
+#pragma once
+// The global map of our fit (docs/method.md): x -> fields(shears(a x + t)), an affine
+// part with det(a) = 1, quadratic shears, smooth shear fields. Each part keeps volume
+// exactly (Jacobian determinant 1) and inverts exactly; global_fit.h fits it.
+#include <Eigen/Core>
+#include <utility>
+#include <vector>
+
+#include "organfit/fitting/surface_samples.h"
+
+namespace organfit::fitting {
+
+struct AffineFit {
+  Eigen::Matrix3d a = Eigen::Matrix3d::Identity();  ///< det(a) = 1
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  double rms_before_mm = 0, rms_after_mm = 0;  ///< point-to-surface, over the kept points
+  int iterations = 0;
+};
+
+/// Bending and twisting on top of the affine map: five shears applied in turn about
+/// `centre` (u = q - centre),
+///   x += c0 u_y^2 + c1 u_z^2 + c2 u_y u_z,
+///   y += c3 u_x^2 + c4 u_z^2 + c5 u_x u_z,
+///   z += c6 u_x^2 + c7 u_y^2 + c8 u_x u_y,
+///   y += c9 u_x^2 + c10 u_z^2 + c11 u_x u_z,
+///   x += c12 u_y^2 + c13 u_z^2 + c14 u_y u_z,
+/// each moving one coordinate by a function of the other two: every shear, and so the
+/// whole map, keeps volume exactly (Jacobian determinant 1), and inverts exactly. The
+/// last two make a twist about any axis (a rotation growing along it) a sequence of three
+/// shears, y z y about x (a rotation by phi is y -= tan(phi/2) z, z += sin(phi) y, y -=
+/// tan(phi/2) z), x z x about y, x y x about z: with the first three alone, a cube's
+/// corners twisted by 38 degrees were left 3 mm in (the cosine's part, second order).
+struct QuadraticShears {
+  static constexpr int kCount = 15;
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  Eigen::Matrix<double, kCount, 1> c = Eigen::Matrix<double, kCount, 1>::Zero();
+  Eigen::Vector3d apply(const Eigen::Vector3d& q) const;
+  Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
+};
+
+/// Smooth shears on top of the quadratic ones: three fields applied in turn,
+///   x += f_x(y, z),  y += f_y(x, z),  z += f_z(x, y),
+/// each a sum of Gaussian bumps, f_a(v) = sum_j w_aj exp(-|v - c_j|^2 / (2 sigma^2)), their
+/// centres c_j on a square grid of spacing sigma over the body's box in the plane of the
+/// other two coordinates. Like the quadratic shears, each moves one coordinate by a
+/// function of the other two: volume kept exactly, inverse exact. They carry what a
+/// quadratic cannot, a change of shape over part of the organ (a dent from the rectum, a
+/// push from the bladder), and carry it through the organ: a dent in the side the probe
+/// sees moves the side it does not, as an incompressible body must.
+struct ShearFields {
+  double sigma_mm = 0;  ///< width of the bumps and spacing of their centres (0: no fields)
+  Eigen::Vector3d origin_mm = Eigen::Vector3d::Zero();  ///< the grid's first centre, each axis
+  Eigen::Vector3i count = Eigen::Vector3i::Zero();      ///< centres along each axis
+  /// the bumps' heights (mm): field a's (a = 0, 1, 2) for the centres of the grid over the
+  /// other two axes (b < c), centre (i, j) at index a * block + i + count[b] * j, where
+  /// block is the largest count[b] * count[c] (unused entries zero)
+  Eigen::VectorXd weights;
+
+  /// A grid over `box` widened by one spacing, all weights zero.
+  static ShearFields over(const Eigen::Vector3d& box_min_mm, const Eigen::Vector3d& box_max_mm,
+                          double sigma_mm);
+  bool empty() const { return sigma_mm <= 0 || weights.size() == 0 || weights.isZero(0); }
+  int block() const;
+  /// The bumps of field `a` at q (only q's other two coordinates count), index and value;
+  /// those below 1e-6 are left out.
+  void bumps(int a, const Eigen::Vector3d& q, std::vector<std::pair<int, double>>& out) const;
+  double field(int a, const Eigen::Vector3d& q) const;  ///< f_a at q (mm)
+  Eigen::Vector3d apply(const Eigen::Vector3d& q) const;
+  Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
+};
+
+/// The global map: affine (det 1), then quadratic shears, then smooth shear fields.
+/// Volume-preserving.
+struct GlobalMap {
+  AffineFit affine;
+  QuadraticShears shears;
+  ShearFields fields;
+  double rms_after_mm = 0;      ///< point-to-surface over the kept points
+  bool refused = false;         ///< no plausible map: the identity instead
+  bool shears_dropped = false;  ///< the shears were implausible: the affine part alone
+  /// which fit of fit_global_map's it is: "affine", "whole map", "whole map annealed",
+  /// "signed distance", "signed distance (shears)", "signed distance (stiffer shears)"
+  /// ("none": not fitted); with shear fields on top of it when `fields` is not empty
+  const char* found_by = "none";
+  Eigen::Vector3d apply(const Eigen::Vector3d& p) const {
+    return fields.apply(shears.apply(affine.a * p + affine.t));
+  }
+  Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
+  /// The same with affine.a's inverse at hand (`a_inverse`), for callers that invert
+  /// many points through one map.
+  Eigen::Vector3d inverse(const Eigen::Vector3d& q, const Eigen::Matrix3d& a_inverse) const {
+    return a_inverse * (shears.inverse(fields.inverse(q)) - affine.t);
+  }
+};
+
+/// The surface samples moved by `map`: points mapped, normals turned by the inverse
+/// transpose of its Jacobian (by central differences) and made unit again.
+SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface);
+
+/// How much `map` changes the shape and orientation of the body whose surface is sampled
+/// (mm): the RMS displacement of the samples about their mean displacement (the
+/// translation).
+double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface);
+
+/// How far (mm) the quadratic shears, and the shear fields, each move any of the surface
+/// samples at most: the shears from the affine image, the fields from the sheared one.
+/// Each is bounded by max_shear_mm x the body's size for a map to be plausible.
+struct LargestMoves {
+  double shears_mm = 0, fields_mm = 0;
+};
+LargestMoves largest_moves(const GlobalMap& map, const SurfaceSamples& surface);
+
+}  // namespace organfit::fitting

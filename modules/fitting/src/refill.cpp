@@ -1,0 +1,90 @@
+#include "organfit/fitting/refill.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "organfit/geometry/mask_ops.h"
+#include "organfit/geometry/sample_grid.h"
+#include "organfit/geometry/signed_distance.h"
+#include "organfit/particles/diagnostics.h"
+#include "organfit/particles/lattice_fill.h"
+
+namespace organfit::fitting {
+
+particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, int count,
+                                        double a_nn_mm, const GlobalMap& map) {
+  if (count <= 0) return particles::Positions(3, 0);
+  const geometry::ImageGeometry& g = reference.geometry;
+  // Signed depth in the reference body: distance to the nearest outside voxel inside,
+  // minus the distance to the body outside. Ranking sites by it selects a level set
+  // of the mapped body, which can sit a little outside it when the count asks so.
+  std::vector<std::uint8_t> outside(reference.labels.size()), inside_mask(reference.labels.size());
+  for (size_t i = 0; i < outside.size(); ++i)
+    outside[i] = reference.labels[i] == 0, inside_mask[i] = !outside[i];
+  const std::vector<double> depth2 = geometry::squared_distance_transform(outside, g);
+  const std::vector<double> away2 = geometry::squared_distance_transform(inside_mask, g);
+  const double off_grid = -std::numeric_limits<double>::infinity();
+  auto depth_at = [&](const Eigen::Vector3d& q) {
+    const Eigen::Vector3d idx = g.physical_to_index(q);
+    const int i = static_cast<int>(std::lround(idx.x())),
+              j = static_cast<int>(std::lround(idx.y())),
+              k = static_cast<int>(std::lround(idx.z()));
+    if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2])
+      return off_grid;
+    const long long v = g.linear_index(i, j, k);
+    return inside_mask[v] ? std::sqrt(depth2[v]) : -std::sqrt(away2[v]);
+  };
+  // Candidate sites: the lattice over the mapped box, centred on the mapped centroid.
+  const geometry::Aabb box = g.bounds_mm();
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  long long inside = 0;
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        if (reference.at(i, j, k))
+          centroid += g.index_to_physical(Eigen::Vector3d(i, j, k)), ++inside;
+  centroid /= static_cast<double>(std::max<long long>(1, inside));
+  geometry::Aabb mapped =
+      geometry::image_of_box(box, [&map](const Eigen::Vector3d& p) { return map.apply(p); });
+  mapped.min_mm.array() -= a_nn_mm;  // room for a level set just outside the body
+  mapped.max_mm.array() += a_nn_mm;
+  const particles::Positions sites = particles::fcc_lattice_points(
+      mapped, map.apply(centroid), a_nn_mm, [](const Eigen::Vector3d&) { return true; });
+  std::vector<double> d(sites.cols());
+  for (Eigen::Index s = 0; s < sites.cols(); ++s)
+    d[s] = depth_at(map.inverse(sites.col(s)));
+  // Sites by signed depth, deepest first (ties by index: deterministic); sites off the
+  // reference's grid are never taken.
+  std::vector<int> idx;
+  for (Eigen::Index s = 0; s < sites.cols(); ++s)
+    if (d[s] > off_grid) idx.push_back(static_cast<int>(s));
+  std::stable_sort(idx.begin(), idx.end(), [&](int l, int r) { return d[l] > d[r]; });
+  const int keep = std::min<int>(count, static_cast<int>(idx.size()));
+  // One body: the largest group of the deepest `keep` sites (joined within 1.2 a_nn),
+  // topped up with the next deepest sites that touch it.
+  const double link2 = (1.2 * a_nn_mm) * (1.2 * a_nn_mm);
+  particles::Positions chosen(3, keep);
+  for (int s = 0; s < keep; ++s)
+    chosen.col(s) = sites.col(idx[s]);
+  const std::vector<int> body = particles::largest_component(chosen, 1.2 * a_nn_mm);
+  std::vector<char> taken(sites.cols(), 0);
+  std::vector<int> result;
+  for (int b : body)
+    result.push_back(idx[b]), taken[idx[b]] = 1;
+  for (size_t q = keep; q < idx.size() && static_cast<int>(result.size()) < keep; ++q) {
+    const int s = idx[q];
+    for (int r : result)
+      if ((sites.col(s) - sites.col(r)).squaredNorm() < link2) {
+        result.push_back(s), taken[s] = 1;
+        break;
+      }
+  }
+  std::sort(result.begin(), result.end());
+  particles::Positions out(3, static_cast<Eigen::Index>(result.size()));
+  for (size_t s = 0; s < result.size(); ++s)
+    out.col(static_cast<Eigen::Index>(s)) = sites.col(result[s]);
+  return out;
+}
+
+}  // namespace organfit::fitting

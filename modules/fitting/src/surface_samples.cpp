@@ -1,0 +1,81 @@
+#include "organfit/fitting/surface_samples.h"
+
+#include <cstdint>
+
+#include "organfit/geometry/mask_ops.h"
+
+namespace organfit::fitting {
+
+SurfaceSamples surface_samples(const particles::Positions& x, const std::vector<int>& skin,
+                               double radius_mm) {
+  const double r0 = 2 * radius_mm;
+  const double reach2 = (1.6 * r0) * (1.6 * r0);
+  SurfaceSamples out;
+  out.points.resize(3, static_cast<Eigen::Index>(skin.size()));
+  out.normals.resize(3, static_cast<Eigen::Index>(skin.size()));
+  const Eigen::Vector3d body_centre = x.rowwise().mean();
+  for (size_t s = 0; s < skin.size(); ++s) {
+    const int i = skin[s];
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    int count = 0;
+    for (int j = 0; j < x.cols(); ++j) {
+      if (j != i && (x.col(j) - x.col(i)).squaredNorm() < reach2) sum += x.col(j), ++count;
+    }
+    Eigen::Vector3d n =
+        count > 0 ? Eigen::Vector3d(x.col(i) - sum / count) : Eigen::Vector3d::Zero();
+    if (n.norm() < 1e-6 * r0) n = x.col(i) - body_centre;  // flat spot: point away from the centre
+    n.normalize();
+    out.normals.col(static_cast<Eigen::Index>(s)) = n;
+    out.points.col(static_cast<Eigen::Index>(s)) = x.col(i) + radius_mm * n;
+  }
+  return out;
+}
+
+SurfaceSamples reference_surface(const geometry::LabelVolume& reference, int stride) {
+  return reference_surface(reference, geometry::SignedDistance(reference), stride);
+}
+
+namespace {
+/// Whether voxel `v` is among a deterministic, spatially unbiased 1 in `stride`: by a
+/// hash of its index (splitmix64). Counting boundary voxels in raster order aliased: a
+/// box's rows each cross two of them, so 1 in 2 kept the -x face and none of the +x face
+/// (the samples' centre 4.9 mm off the 30 mm cube's).
+bool kept_one_in(int stride, std::uint64_t v) {
+  if (stride <= 1) return true;
+  v += 0x9e3779b97f4a7c15ULL;
+  v = (v ^ (v >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  v = (v ^ (v >> 27)) * 0x94d049bb133111ebULL;
+  v ^= v >> 31;
+  return v % static_cast<std::uint64_t>(stride) == 0;
+}
+}  // namespace
+
+SurfaceSamples reference_surface(const geometry::LabelVolume& reference,
+                                 const geometry::SignedDistance& distance, int stride) {
+  const geometry::ImageGeometry& g = reference.geometry;
+  auto sd = [&](int i, int j, int k) { return distance.at_voxel(i, j, k); };
+  const std::vector<std::uint8_t> boundary = geometry::surface_of(reference);
+  std::vector<Eigen::Vector3d> pts, nrm;
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        const auto v = static_cast<std::uint64_t>(g.linear_index(i, j, k));
+        if (!boundary[v] || !kept_one_in(stride, v)) continue;
+        Eigen::Vector3d grad((sd(i + 1, j, k) - sd(i - 1, j, k)) / (2 * g.spacing_mm.x()),
+                             (sd(i, j + 1, k) - sd(i, j - 1, k)) / (2 * g.spacing_mm.y()),
+                             (sd(i, j, k + 1) - sd(i, j, k - 1)) / (2 * g.spacing_mm.z()));
+        if (grad.norm() < 1e-9) continue;
+        grad = g.direction * grad;
+        const Eigen::Vector3d n = grad.normalized();
+        pts.push_back(g.index_to_physical(Eigen::Vector3d(i, j, k)) - sd(i, j, k) * n);
+        nrm.push_back(n);
+      }
+  SurfaceSamples s;
+  s.points.resize(3, static_cast<Eigen::Index>(pts.size()));
+  s.normals.resize(3, static_cast<Eigen::Index>(pts.size()));
+  for (size_t q = 0; q < pts.size(); ++q)
+    s.points.col(q) = pts[q], s.normals.col(q) = nrm[q];
+  return s;
+}
+
+}  // namespace organfit::fitting
