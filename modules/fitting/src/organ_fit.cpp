@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "mapped_samples.h"
 #include "organfit/fitting/embedded_body.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/signed_distance.h"
@@ -135,8 +136,9 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     }
     preparing(4, "the body re-filled in its mapped shape (" + std::to_string(passes) + " passes)");
     global.principal_stretches = Eigen::JacobiSVD<Eigen::Matrix3d>(map.affine.a).singularValues();
-    global.moves = largest_moves(map, samples);
-    global.shape_change_mm = shape_change_mm(map, samples);
+    const MappedSamples mapped = map_samples(map, samples);  // once, for both measures
+    global.moves = largest_moves_of(mapped);
+    global.shape_change_mm = shape_change_of(mapped.full, samples.points);
     global.refill_passes = passes;
     global.particles_after_refill = state.size();
     global.volume_change_after_settling_pct = settled_change_pct;

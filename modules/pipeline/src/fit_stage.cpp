@@ -3,19 +3,14 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
-#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <sstream>
 
 #include "organfit/fitting/embedded_body.h"
 #include "organfit/fitting/global_fit.h"
-#include "organfit/fitting/spread_force.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/signed_distance.h"
-#include "organfit/meshing/surface.h"
-#include "organfit/particles/diagnostics.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
 #include "organfit/support/progress.h"
