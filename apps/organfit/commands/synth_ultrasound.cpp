@@ -85,15 +85,14 @@ nlohmann::json run_synth_ultrasound(const SynthUltrasoundCommand& c) {
   d.half_length_mm = 0.5 * organ.size_mm.x() * d.stretch;
   const geometry::LabelVolume tissue = pipeline::pelvis_tissue_classes(labels);
 
-  ultrasound::ProbePose probe;
-  probe.position_mm = organ.centre_mm + Eigen::Vector3d(0, 38, 0);
+  ultrasound::ProbePose probe = pipeline::transrectal_probe_pose();
+  probe.position_mm += organ.centre_mm;
   if (c.probe.size() >= 3) probe.position_mm = Eigen::Vector3d(c.probe[0], c.probe[1], c.probe[2]);
   if (c.probe.size() >= 6)
     probe.axis = Eigen::Vector3d(c.probe[3], c.probe[4], c.probe[5]).normalized();
   if (c.probe.size() == 9)
     probe.lateral = Eigen::Vector3d(c.probe[6], c.probe[7], c.probe[8]).normalized();
   ultrasound::SimulatorOptions so = pipeline::tissue_class_simulator_options();
-  so.probe_radius_mm = 12;
   so.speckle = c.speckle;
   so.seed = c.seed;
   const ultrasound::TissueAt today = pipeline::deformed_anatomy(tissue, hu, organ, d);

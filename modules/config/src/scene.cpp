@@ -3,8 +3,10 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <sstream>
 
 #include "organfit/support/error.h"
@@ -167,11 +169,31 @@ class Parser {
   const Schema& schema_;
 };
 
-std::vector<std::string> section_names(const Schema& schema) {
+/// The names a misspelled section is compared with: the top-level ones, or all
+/// ("fit.paper") for --set.
+std::vector<std::string> section_names(const Schema& schema, bool top_level_only = false) {
   std::vector<std::string> out;
   for (const auto& s : schema.sections())
-    out.push_back(s.name);
+    if (!top_level_only || s.depth() == 0) out.push_back(s.name);
   return out;
+}
+
+/// An unknown key's hint: the nearest key or sub-section of its own section, else the
+/// same key in another section of the same stage (a key given one level too high or in
+/// the other method's sub-section: "fit.alpha" is "fit.paper.alpha").
+std::string key_hint(const Schema& schema, const std::string& section, const std::string& name) {
+  std::vector<std::string> known;
+  for (const auto* p : schema.params_of(section))
+    known.push_back(p->name);
+  for (const auto* sub : schema.subsections_of(section))
+    known.push_back(sub->leaf());
+  const std::string near = suggestion(name, known);
+  if (!near.empty()) return near;
+  const std::string stage = section.substr(0, section.find('.'));
+  for (const auto& p : schema.params())
+    if (p.name == name && p.section != section && p.section.substr(0, p.section.find('.')) == stage)
+      return fmt::format(" (did you mean '{}'?)", p.key());
+  return "";
 }
 
 }  // namespace
@@ -195,18 +217,13 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
     };
     const auto eq = o.find('=');
     const std::string key = o.substr(0, eq);
-    const auto dot = key.find('.');
+    const auto dot = key.rfind('.');
     if (eq == std::string::npos || dot == std::string::npos || dot == 0 || dot + 1 == key.size())
       refuse("expected section.key=value");
     const std::string sec = key.substr(0, dot), name = key.substr(dot + 1);
     if (!schema.find_section(sec))
       refuse("unknown section" + suggestion(sec, section_names(schema)));
-    if (!schema.find(sec, name)) {
-      std::vector<std::string> known;
-      for (const auto* p : schema.params_of(sec))
-        known.push_back(p->name);
-      refuse("unknown key" + suggestion(name, known));
-    }
+    if (!schema.find(sec, name)) refuse("unknown key" + key_hint(schema, sec, name));
     if (parser.overrides.count(key)) refuse("the key is set twice");
     YAML::Node value;
     try {
@@ -215,79 +232,106 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
       refuse("YAML syntax error: " + e.msg);
     }
     if (!value || value.IsNull()) refuse("no value");
-    if (!root[sec] || root[sec].IsNull()) root[sec] = YAML::Node(YAML::NodeType::Map);
-    if (!root[sec].IsMap())
-      parser.fail(root[sec].Mark().line, sec, "a section is a mapping of keys");
-    root[sec][name] = value;
+    // Down the section's path ("fit.paper": root[fit][paper]), making what is missing.
+    YAML::Node at = root;
+    std::string path;
+    for (size_t start = 0; start <= sec.size();) {
+      const size_t end = std::min(sec.find('.', start), sec.size());
+      const std::string part = sec.substr(start, end - start);
+      path += (path.empty() ? "" : ".") + part;
+      if (!at[part] || at[part].IsNull()) at[part] = YAML::Node(YAML::NodeType::Map);
+      if (!at[part].IsMap())
+        parser.fail(at[part].Mark().line, path, "a section is a mapping of keys");
+      at.reset(at[part]);
+      start = end + 1;
+    }
+    at[name] = value;
     parser.overrides[key] = o;
   }
 
   Scene scene;
   scene.file_ = file;
   scene.schema_ = &schema;
+  // One section's body: its keys, its sub-sections (given or not), their defaults.
+  std::function<void(const std::string&, const YAML::Node*, int)> read_section =
+      [&](const std::string& sec, const YAML::Node* body, int sec_line) {
+        if (scene.sections_.count(sec)) parser.fail(sec_line, sec, "section given twice");
+        scene.sections_.insert(sec);
+        scene.section_lines_[sec] = sec_line + 1;
+        if (body && !body->IsNull() && !body->IsMap())
+          parser.fail(body->Mark().line, sec, "a section is a mapping of keys");
+        std::set<std::string> given_subsections;
+        if (body && body->IsMap()) {
+          for (const auto& item : *body) {
+            const std::string name = item.first.Scalar();
+            const int line = item.first.Mark().line;
+            if (schema.find_section(sec + "." + name)) {
+              given_subsections.insert(sec + "." + name);
+              scene.given_sections_.insert(sec + "." + name);
+              read_section(sec + "." + name, &item.second, line);
+              continue;
+            }
+            const ParamSpec* spec = schema.find(sec, name);
+            if (!spec) {
+              parser.fail(line, sec + "." + name, "unknown key" + key_hint(schema, sec, name));
+            }
+            if (scene.entries_.count(spec->key()))
+              parser.fail(line, spec->key(), "key given twice");
+            const auto set = parser.overrides.find(spec->key());
+            scene.entries_[spec->key()] = {parser.convert(*spec, item.second), line + 1, true,
+                                           set == parser.overrides.end() ? "" : set->second};
+          }
+        }
+        for (const auto* p : schema.params_of(sec)) {
+          if (scene.entries_.count(p->key())) continue;
+          if (p->required()) parser.fail(sec_line, p->key(), "required key is missing");
+          scene.entries_[p->key()] = {p->default_value, sec_line + 1, false, {}};
+        }
+        // A sub-section not written takes its defaults, placed at its parent's line.
+        for (const auto* sub : schema.subsections_of(sec))
+          if (!given_subsections.count(sub->name)) read_section(sub->name, nullptr, sec_line);
+      };
   for (const auto& kv : root) {
     const std::string sec = kv.first.Scalar();
     const int sec_line = kv.first.Mark().line;
-    if (!schema.find_section(sec)) {
-      parser.fail(sec_line, sec, "unknown section" + suggestion(sec, section_names(schema)));
+    const SectionSpec* spec = schema.find_section(sec);
+    if (!spec || spec->depth() > 0) {
+      parser.fail(sec_line, sec, "unknown section" + suggestion(sec, section_names(schema, true)));
     }
-    if (scene.sections_.count(sec)) parser.fail(sec_line, sec, "section given twice");
-    scene.sections_.insert(sec);
-    scene.section_lines_[sec] = sec_line + 1;
-    const YAML::Node& body = kv.second;
-    if (!body.IsNull() && !body.IsMap()) {
-      parser.fail(body.Mark().line, sec, "a section is a mapping of keys");
-    }
-    std::vector<std::string> known;
-    for (const auto* p : schema.params_of(sec))
-      known.push_back(p->name);
-    if (body.IsMap()) {
-      for (const auto& item : body) {
-        const std::string name = item.first.Scalar();
-        const int line = item.first.Mark().line;
-        const ParamSpec* spec = schema.find(sec, name);
-        if (!spec) {
-          parser.fail(line, sec + "." + name, "unknown key" + suggestion(name, known));
-        }
-        if (scene.entries_.count(spec->key())) parser.fail(line, spec->key(), "key given twice");
-        const auto set = parser.overrides.find(spec->key());
-        scene.entries_[spec->key()] = {parser.convert(*spec, item.second), line + 1, true,
-                                       set == parser.overrides.end() ? "" : set->second};
-      }
-    }
-    for (const auto* p : schema.params_of(sec)) {
-      if (scene.entries_.count(p->key())) continue;
-      if (p->required()) parser.fail(sec_line, p->key(), "required key is missing");
-      scene.entries_[p->key()] = {p->default_value, sec_line + 1, false};
-    }
+    scene.given_sections_.insert(sec);
+    read_section(sec, &kv.second, sec_line);
   }
   for (const auto& sec : schema.sections()) {
-    if (!sec.always_present || scene.sections_.count(sec.name)) continue;
-    scene.sections_.insert(sec.name);
+    if (!sec.always_present || sec.depth() > 0 || scene.sections_.count(sec.name)) continue;
+    read_section(sec.name, nullptr, 0);
     scene.section_lines_[sec.name] = 1;
-    for (const auto* p : schema.params_of(sec.name)) {
-      if (p->required()) parser.fail(0, p->key(), "required key is missing");
-      scene.entries_[p->key()] = {p->default_value, 1, false};
-    }
   }
-  // A key the run would ignore is refused: its value would silently not be what ran.
-  for (const auto& [key, entry] : scene.entries_) {
-    if (!entry.given) continue;
-    const ParamSpec* spec =
-        schema.find(key.substr(0, key.find('.')), key.substr(key.find('.') + 1));
-    if (!spec) continue;
-    const UseCondition* failed = scene.unmet_condition(*spec);
-    if (!failed) continue;
-    const auto it = scene.entries_.find(failed->key);
+  // A key (or a sub-section) the run would ignore is refused: its value would silently
+  // not be what ran.
+  auto refuse_ignored = [&](const std::string& key, int line0, const UseCondition& failed,
+                            const std::string& used_with) {
+    const auto it = scene.entries_.find(failed.key);
     const std::string value =
         it == scene.entries_.end() ? std::string() : value_to_text(it->second.value);
-    parser.fail(entry.line - 1, key,
+    parser.fail(line0, key,
                 fmt::format("not used when {}: the run would ignore it (it is used with {})",
                             it != scene.entries_.end()
-                                ? failed->key + " is '" + echo(value) + "'"
+                                ? failed.key + " is '" + echo(value) + "'"
                                 : "the scene has no '" +
-                                      failed->key.substr(0, failed->key.find('.')) + "' section",
-                            spec->used_when_text()));
+                                      failed.key.substr(0, failed.key.rfind('.')) + "' section",
+                            used_with));
+  };
+  for (const auto& [key, entry] : scene.entries_) {
+    if (!entry.given) continue;
+    const ParamSpec* spec = schema.find_key(key);
+    if (!spec) continue;
+    if (const UseCondition* failed = scene.unmet_condition(*spec))
+      refuse_ignored(key, entry.line - 1, *failed, scene.used_when_text(*spec));
+  }
+  for (const auto& sec : scene.given_sections_) {
+    const SectionSpec* spec = schema.find_section(sec);
+    if (const UseCondition* failed = scene.unmet_section_condition(sec))
+      refuse_ignored(sec, scene.section_lines_.at(sec) - 1, *failed, scene.used_when_text(*spec));
   }
   return scene;
 }
@@ -349,7 +393,29 @@ Eigen::Vector3d Scene::vec3(const std::string& s, const std::string& n) const {
   return std::get<Eigen::Vector3d>(entry(s, n, ParamType::kVec3).value);
 }
 
+bool Scene::holds(const UseCondition& c) const {
+  // A condition compares the value's text: "rtstruct", "0", "true".
+  const auto it = entries_.find(c.key);
+  if (it == entries_.end() || std::holds_alternative<std::monostate>(it->second.value))
+    return false;
+  return std::find(c.values.begin(), c.values.end(), value_to_text(it->second.value)) !=
+         c.values.end();
+}
+
+const UseCondition* Scene::unmet_section_condition(const std::string& section) const {
+  // From the top: "fit", then "fit.paper".
+  for (size_t dot = 0; dot != std::string::npos;) {
+    dot = section.find('.', dot + 1);
+    const SectionSpec* spec = schema_->find_section(section.substr(0, dot));
+    if (!spec) continue;
+    for (const auto& c : spec->used_when)
+      if (!holds(c)) return &c;
+  }
+  return nullptr;
+}
+
 const UseCondition* Scene::unmet_condition(const ParamSpec& spec) const {
+  if (const UseCondition* failed = unmet_section_condition(spec.section)) return failed;
   if (spec.used_when.empty()) return nullptr;
   // The condition to name: the first that fails in the alternative that came closest.
   const UseCondition* failed = nullptr;
@@ -357,12 +423,7 @@ const UseCondition* Scene::unmet_condition(const ParamSpec& spec) const {
   for (const auto& alternative : spec.used_when) {
     size_t held = 0;
     for (const auto& c : alternative) {
-      // A condition compares the value's text: "rtstruct", "0", "true".
-      const auto it = entries_.find(c.key);
-      const bool set =
-          it != entries_.end() && !std::holds_alternative<std::monostate>(it->second.value);
-      const std::string value = set ? value_to_text(it->second.value) : std::string();
-      if (!set || std::find(c.values.begin(), c.values.end(), value) == c.values.end()) {
+      if (!holds(c)) {
         if (!failed || held > best_held) failed = &c, best_held = held;
         break;
       }
@@ -371,6 +432,30 @@ const UseCondition* Scene::unmet_condition(const ParamSpec& spec) const {
     if (held == alternative.size()) return nullptr;
   }
   return failed;
+}
+
+std::string Scene::used_when_text(const SectionSpec& section) const {
+  std::string out;
+  for (size_t dot = 0; dot != std::string::npos;) {
+    dot = section.name.find('.', dot + 1);
+    const SectionSpec* spec = schema_->find_section(section.name.substr(0, dot));
+    if (!spec) continue;
+    for (const auto& c : spec->used_when) {
+      std::string values;
+      for (const auto& v : c.values)
+        values += (values.empty() ? "" : " or ") + v;
+      out += (out.empty() ? "" : " and ") + c.key + ": " + values;
+    }
+  }
+  return out;
+}
+
+std::string Scene::used_when_text(const ParamSpec& spec) const {
+  const SectionSpec* section = schema_->find_section(spec.section);
+  const std::string of_section = section ? used_when_text(*section) : std::string();
+  const std::string of_key = spec.used_when_text();
+  if (of_section.empty() || of_key.empty()) return of_section + of_key;
+  return of_section + ", and " + of_key;
 }
 
 int Scene::line_of(const std::string& s, const std::string& n) const {
@@ -396,9 +481,19 @@ std::string Scene::resolved_yaml() const {
   for (const auto& [key, e] : entries_)
     if (!e.set_on_command_line.empty())
       out << "# Set on the command line: --set " << e.set_on_command_line << "\n";
+  // Sub-sections follow their parent's keys in the schema: one pass, indented by depth.
   for (const auto& sec : schema_->sections()) {
     if (!has_section(sec.name)) continue;
-    out << sec.name << ":\n";
+    const std::string indent(2 * static_cast<size_t>(sec.depth()), ' ');
+    // What this run does not use is shown, commented out, so that the file stays a
+    // scene that runs the same.
+    const bool section_unused = unmet_section_condition(sec.name) != nullptr;
+    const std::string hide = section_unused ? "# " : "";
+    if (sec.depth() > 0)
+      out << indent << hide << sec.leaf() << ":  # "
+          << (section_unused ? "not used by this run; " : "") << sec.doc << "\n";
+    else
+      out << sec.name << ":\n";
     for (const auto* p : schema_->params_of(sec.name)) {
       const auto& e = entries_.at(p->key());
       std::string v = value_to_text(e.value);
@@ -407,13 +502,11 @@ std::string Scene::resolved_yaml() const {
         em << YAML::DoubleQuoted << v;
         v = em.c_str();
       }
-      // What this run does not use is shown, commented out, so that the file stays a
-      // scene that runs the same.
       const bool unused = unmet_condition(*p) != nullptr ||
                           (p->type == ParamType::kInputPath && value_to_text(e.value).empty());
-      out << fmt::format("  {}{}: {}  # {}{}{}{}\n", unused ? "# " : "", p->name, v,
+      out << fmt::format("{}  {}{}: {}  # {}{}{}{}\n", indent, unused ? "# " : "", p->name, v,
                          p->unit.empty() ? "" : p->unit + "; ", e.given ? "" : "default; ",
-                         unused ? "not used by this run; " : "", p->doc);
+                         unused && !section_unused ? "not used by this run; " : "", p->doc);
     }
   }
   return out.str();
@@ -443,7 +536,10 @@ nlohmann::json Scene::to_json() const {
         s[p->name] = rows;
       }
     }
-    j[sec.name] = s;
+    // "fit.paper" is j["fit"]["paper"]; the parent came first.
+    std::string pointer = "/" + sec.name;
+    std::replace(pointer.begin(), pointer.end(), '.', '/');
+    j[nlohmann::json::json_pointer(pointer)] = s;
   }
   return j;
 }

@@ -2,7 +2,9 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <sstream>
 #include <stdexcept>
 
@@ -31,9 +33,12 @@ const char* to_string(ParamType type) {
 }
 
 namespace {
+/// Six significant digits when they give the number back, else as many as it takes: a
+/// resolved scene holds exactly the values that ran.
 std::string format_number(double v) {
   if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  return fmt::format("{:g}", v);
+  const std::string short_form = fmt::format("{:g}", v);
+  return std::strtod(short_form.c_str(), nullptr) == v ? short_form : fmt::format("{}", v);
 }
 }  // namespace
 
@@ -71,19 +76,39 @@ std::string ParamSpec::range_text() const {
                      max ? format_number(*max) : "inf");
 }
 
-std::string ParamSpec::used_when_text() const {
+namespace {
+/// "fit.method: paper" or "points.source: generate and ultrasound.source: simulate".
+std::string conditions_text(const std::vector<UseCondition>& all) {
   std::string out;
-  for (const auto& alternative : used_when) {
-    std::string all;
-    for (const auto& c : alternative) {
-      std::string values;
-      for (const auto& v : c.values)
-        values += (values.empty() ? "" : " or ") + v;
-      all += (all.empty() ? "" : " and ") + c.key + ": " + values;
-    }
-    out += (out.empty() ? "" : "; or ") + all;
+  for (const auto& c : all) {
+    std::string values;
+    for (const auto& v : c.values)
+      values += (values.empty() ? "" : " or ") + v;
+    out += (out.empty() ? "" : " and ") + c.key + ": " + values;
   }
   return out;
+}
+}  // namespace
+
+std::string ParamSpec::used_when_text() const {
+  std::string out;
+  for (const auto& alternative : used_when)
+    out += (out.empty() ? "" : "; or ") + conditions_text(alternative);
+  return out;
+}
+
+std::string SectionSpec::parent() const {
+  const auto dot = name.rfind('.');
+  return dot == std::string::npos ? std::string() : name.substr(0, dot);
+}
+
+std::string SectionSpec::leaf() const {
+  const auto dot = name.rfind('.');
+  return dot == std::string::npos ? name : name.substr(dot + 1);
+}
+
+int SectionSpec::depth() const {
+  return static_cast<int>(std::count(name.begin(), name.end(), '.'));
 }
 
 Schema& Schema::used_when(std::vector<UseCondition> conditions) {
@@ -96,8 +121,28 @@ Schema& Schema::used_when(std::vector<UseCondition> conditions) {
 }
 
 Schema& Schema::section(const std::string& name, const std::string& doc, bool always_present) {
+  if (name.empty() || name.find('.') != std::string::npos)
+    throw std::logic_error("schema: a section's name has no dot (subsection): " + name);
   if (find_section(name)) throw std::logic_error("schema: section declared twice: " + name);
-  sections_.push_back({name, doc, always_present});
+  sections_.push_back({name, doc, always_present, {}});
+  return *this;
+}
+
+Schema& Schema::subsection(const std::string& name, const std::string& doc,
+                           std::vector<UseCondition> used_when) {
+  const auto top = std::find_if(sections_.rbegin(), sections_.rend(),
+                                [](const SectionSpec& s) { return s.depth() == 0; });
+  if (top == sections_.rend()) throw std::logic_error("schema: subsection before any section");
+  if (name.empty() || name.find('.') != std::string::npos)
+    throw std::logic_error("schema: a subsection's name has no dot: " + name);
+  const std::string full = top->name + "." + name;
+  if (find_section(full)) throw std::logic_error("schema: section declared twice: " + full);
+  if (find(top->name, name))
+    throw std::logic_error("schema: subsection named as a key of its section: " + full);
+  for (const auto& c : used_when)
+    if (c.key.find('.') == std::string::npos || c.values.empty())
+      throw std::logic_error("schema: a condition names section.key and its values");
+  sections_.push_back({full, doc, true, std::move(used_when)});
   return *this;
 }
 
@@ -115,6 +160,8 @@ Schema& Schema::add(ParamSpec spec) {
   if (find(spec.section, spec.name)) {
     throw std::logic_error("schema: key declared twice: " + spec.key());
   }
+  if (find_section(spec.key()))
+    throw std::logic_error("schema: key named as a subsection: " + spec.key());
   // A default outside its own range is a declaration bug: catch it at start-up.
   bool ok = true;
   if (auto* d = std::get_if<double>(&spec.default_value)) ok = number_in_range(spec, *d);
@@ -238,16 +285,32 @@ std::vector<const ParamSpec*> Schema::params_of(const std::string& section) cons
   return out;
 }
 
+std::vector<const SectionSpec*> Schema::subsections_of(const std::string& name) const {
+  std::vector<const SectionSpec*> out;
+  for (const auto& s : sections_)
+    if (s.parent() == name && s.depth() > 0) out.push_back(&s);
+  return out;
+}
+
+const ParamSpec* Schema::find_key(const std::string& dotted) const {
+  const auto dot = dotted.rfind('.');
+  if (dot == std::string::npos || dot == 0) return nullptr;
+  return find(dotted.substr(0, dot), dotted.substr(dot + 1));
+}
+
 std::string Schema::to_text() const {
   std::ostringstream out;
   for (const auto& sec : sections_) {
-    out << sec.name << ":  # " << sec.doc << "\n";
+    const std::string indent(2 * static_cast<size_t>(sec.depth()), ' ');
+    const std::string when = conditions_text(sec.used_when);
+    out << indent << sec.leaf() << ":  # " << sec.doc
+        << (when.empty() ? "" : " [used with " + when + "]") << "\n";
     for (const auto* p : params_of(sec.name)) {
-      const std::string when = p->used_when_text();
-      out << fmt::format("  {:<22} {:<8} default {:<16} {:<6} {:<14} {}{}\n", p->name,
+      const std::string key_when = p->used_when_text();
+      out << fmt::format("{}  {:<22} {:<8} default {:<16} {:<6} {:<14} {}{}\n", indent, p->name,
                          to_string(p->type), value_to_text(p->default_value),
                          p->unit.empty() ? "-" : p->unit, p->range_text(), p->doc,
-                         when.empty() ? "" : " [used with " + when + "]");
+                         key_when.empty() ? "" : " [used with " + key_when + "]");
     }
   }
   return out.str();
@@ -268,7 +331,10 @@ nlohmann::json Schema::to_json() const {
                           {"used_when", p->used_when_text()}};
       keys.push_back(k);
     }
-    sections.push_back({{"section", sec.name}, {"doc", sec.doc}, {"keys", keys}});
+    sections.push_back({{"section", sec.name},
+                        {"doc", sec.doc},
+                        {"used_when", conditions_text(sec.used_when)},
+                        {"keys", keys}});
   }
   return sections;
 }

@@ -229,3 +229,124 @@ TEST(SceneResolved, CommentsOutWhatTheRunDoesNotUseAndRecordsTheCommandLine) {
 
 }  // namespace
 }  // namespace organfit::config
+
+// Sub-sections: one method's settings within its stage (fit.paper, fit.spread).
+namespace organfit::config {
+namespace {
+
+Schema schema_with_subsections() {
+  Schema s;
+  s.section("fit", "the fit")
+      .choice("method", "spread", {"paper", "spread"}, "fit variant")
+      .number("tolerance_mm", 0.5, "mm", 0.0, 10.0, "either method");
+  s.subsection("paper", "the paper's force", {{"fit.method", {"paper"}}})
+      .number("alpha", 2.0, "", 1.0, 20.0, "fall-off exponent");
+  s.subsection("spread", "ours", {{"fit.method", {"spread"}}})
+      .number("stretch", 1.5, "", 1.0, 10.0, "largest stretch")
+      .integer("iterations", 60, 1, 1000, "iterations");
+  s.section("report", "the report").text("file", "report.html", "file name");
+  return s;
+}
+
+std::string subsection_error(const std::string& text, const std::vector<std::string>& sets = {}) {
+  const Schema schema = schema_with_subsections();
+  try {
+    parse_scene(text, "/scenes/s.yaml", schema, sets);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+TEST(SceneSubsections, AreThereWithTheirDefaultsWheneverTheParentIs) {
+  const Schema schema = schema_with_subsections();
+  const Scene scene =
+      parse_scene("fit:\n  method: spread\n  spread:\n    stretch: 2\n", "/s.yaml", schema);
+  EXPECT_TRUE(scene.has_section("fit.paper"));
+  EXPECT_TRUE(scene.has_section("fit.spread"));
+  EXPECT_FALSE(scene.has_section("report"));
+  EXPECT_DOUBLE_EQ(scene.number("fit.spread", "stretch"), 2.0);
+  EXPECT_EQ(scene.line_of("fit.spread", "stretch"), 4);
+  EXPECT_TRUE(scene.is_given("fit.spread", "stretch"));
+  EXPECT_EQ(scene.integer("fit.spread", "iterations"), 60);
+  EXPECT_DOUBLE_EQ(scene.number("fit.paper", "alpha"), 2.0);
+  EXPECT_EQ(scene.given_sections(), (std::set<std::string>{"fit", "fit.spread"}));
+  const nlohmann::json j = scene.to_json();
+  EXPECT_DOUBLE_EQ(j["fit"]["spread"]["stretch"].get<double>(), 2.0);
+  EXPECT_DOUBLE_EQ(j["fit"]["paper"]["alpha"].get<double>(), 2.0);
+  EXPECT_EQ(j["fit"]["method"], "spread");
+}
+
+TEST(SceneSubsections, TheOtherMethodsSettingsAreRefusedNamingTheKeyThatDecides) {
+  EXPECT_EQ(subsection_error("fit:\n  method: spread\n  paper:\n    alpha: 3\n"),
+            "/scenes/s.yaml:4: fit.paper.alpha: not used when fit.method is 'spread': the run "
+            "would ignore it (it is used with fit.method: paper)");
+  // An empty sub-section of the other method too: it says the scene means another run.
+  EXPECT_EQ(subsection_error("fit:\n  paper:\n"),
+            "/scenes/s.yaml:2: fit.paper: not used when fit.method is 'spread': the run would "
+            "ignore it (it is used with fit.method: paper)");
+  EXPECT_EQ(subsection_error("fit:\n  method: paper\n  paper:\n    alpha: 3\n"), "no error");
+  EXPECT_EQ(subsection_error("fit:\n  spread:\n    strech: 2\n"),
+            "/scenes/s.yaml:3: fit.spread.strech: unknown key (did you mean 'stretch'?)");
+  EXPECT_EQ(subsection_error("fit:\n  spread: 3\n"),
+            "/scenes/s.yaml:2: fit.spread: a section is a mapping of keys");
+  EXPECT_EQ(subsection_error("spread:\n  stretch: 2\n"),
+            "/scenes/s.yaml:1: spread: unknown section");
+}
+
+TEST(SceneSubsections, AKeyOneLevelTooHighIsPointedToItsSubsection) {
+  EXPECT_EQ(subsection_error("fit:\n  stretch: 2\n"),
+            "/scenes/s.yaml:2: fit.stretch: unknown key (did you mean 'fit.spread.stretch'?)");
+  EXPECT_EQ(subsection_error("fit:\n  spread:\n    tolerance_mm: 2\n"),
+            "/scenes/s.yaml:3: fit.spread.tolerance_mm: unknown key (did you mean "
+            "'fit.tolerance_mm'?)");
+}
+
+TEST(SceneSubsections, SetReachesThemAndIsValidatedAsTheFileIs) {
+  const Schema schema = schema_with_subsections();
+  const Scene scene =
+      parse_scene("", "/s.yaml", schema, {"fit.method=paper", "fit.paper.alpha=4.5"});
+  EXPECT_DOUBLE_EQ(scene.number("fit.paper", "alpha"), 4.5);
+  EXPECT_EQ(subsection_error("fit:\n", {"fit.paper.alpha=4"}),
+            "--set fit.paper.alpha=4: not used when fit.method is 'spread': the run would ignore "
+            "it (it is used with fit.method: paper)");
+  EXPECT_EQ(subsection_error("fit:\n", {"fit.spread.stretch=20"}),
+            "--set fit.spread.stretch=20: 20 is out of range [1, 10]");
+  EXPECT_EQ(subsection_error("fit:\n", {"fit.spread.iterations=x"}),
+            "--set fit.spread.iterations=x: expected an integer, got 'x'");
+  EXPECT_EQ(subsection_error("fit:\n", {"fit.stretch=2"}),
+            "--set fit.stretch=2: unknown key (did you mean 'fit.spread.stretch'?)");
+}
+
+TEST(SceneSubsections, ResolvedYamlNestsThemAndParsesBackToTheSameValues) {
+  const Schema schema = schema_with_subsections();
+  const Scene scene = parse_scene("fit:\n  spread:\n    stretch: 2\n", "/s.yaml", schema,
+                                  {"fit.spread.iterations=7"});
+  const std::string yaml = scene.resolved_yaml();
+  EXPECT_NE(yaml.find("\n  spread:  # ours\n    stretch: 2  # "), std::string::npos) << yaml;
+  EXPECT_NE(yaml.find("\n  # paper:  # not used by this run; the paper's force\n    # alpha: 2"),
+            std::string::npos)
+      << yaml;
+  const Scene again = parse_scene(yaml, "/resolved.yaml", schema);
+  EXPECT_EQ(again.to_json(), scene.to_json());
+  EXPECT_EQ(again.integer("fit.spread", "iterations"), 7);
+  // Every digit that ran, not six of them.
+  const Scene precise = parse_scene("fit:\n  tolerance_mm: 0.123456789012345\n", "/s.yaml", schema);
+  EXPECT_EQ(parse_scene(precise.resolved_yaml(), "/r.yaml", schema).number("fit", "tolerance_mm"),
+            0.123456789012345);
+}
+
+TEST(SceneSubsections, SchemaRefusesDeclarationBugs) {
+  Schema s;
+  EXPECT_THROW(s.subsection("paper", "no parent"), std::logic_error);
+  s.section("fit", "the fit").number("paper", 1.0, "", 0.0, 2.0, "a key");
+  EXPECT_THROW(s.subsection("paper", "named as a key"), std::logic_error);
+  EXPECT_THROW(s.section("fit.x", "a dot"), std::logic_error);
+  s.subsection("spread", "ours");
+  EXPECT_THROW(s.subsection("spread", "twice"), std::logic_error);
+  EXPECT_NE(s.to_text().find("fit:  # the fit\n  paper "), std::string::npos) << s.to_text();
+  EXPECT_NE(s.to_text().find("\n  spread:  # ours\n"), std::string::npos) << s.to_text();
+}
+
+}  // namespace
+}  // namespace organfit::config

@@ -90,16 +90,28 @@ void validate_points(const std::vector<AttractivePoint>& points) {
   }
 }
 
-PaperAttractiveForce::PaperAttractiveForce(std::vector<AttractivePoint> points,
-                                           const particles::LennardJones& law, double radius_mm,
-                                           const PaperForceParams& params, double skin_voxel_mm)
+AttractivePointTerm::AttractivePointTerm(std::vector<AttractivePoint> points,
+                                         const particles::LennardJones& law, double radius_mm,
+                                         double skin_voxel_mm, double first_shell_r0)
     : points_(std::move(points)),
       rho_(radius_mm),
       r0_(law.r0()),
       f_max_(law.f_max()),
-      params_(params),
-      skin_(skin_voxel_mm, radius_mm) {
+      skin_(skin_voxel_mm, radius_mm),
+      first_shell_mm_(first_shell_r0 * law.r0()) {
   validate_points(points_);
+  status_.resize(points_.size());
+}
+
+void AttractivePointTerm::count_first_shells(const particles::Positions& x) {
+  w_ = first_shell_counts(x, first_shell_mm_);
+}
+
+PaperAttractiveForce::PaperAttractiveForce(std::vector<AttractivePoint> points,
+                                           const particles::LennardJones& law, double radius_mm,
+                                           const PaperForceParams& params, double skin_voxel_mm)
+    : AttractivePointTerm(std::move(points), law, radius_mm, skin_voxel_mm, params.first_shell_r0),
+      params_(params) {
   if (!(params.alpha >= 1)) throw std::invalid_argument("attractive force: alpha must be >= 1");
   if (!(params.influence_radius_min_r0 > 0) ||
       !(params.influence_radius_max_r0 >= params.influence_radius_min_r0))
@@ -108,14 +120,13 @@ PaperAttractiveForce::PaperAttractiveForce(std::vector<AttractivePoint> points,
     throw std::invalid_argument("attractive force: influence growth must be >= 0");
   if (!(params.total_force_factor >= 1))
     throw std::invalid_argument("attractive force: total force factor must be >= 1");
-  status_.resize(points_.size());
   influence_.resize(points_.size());
   k_.assign(points_.size(), 0.0);
 }
 
 void PaperAttractiveForce::assign(const particles::Positions& x) {
   const auto& skin = skin_.skin();
-  w_ = first_shell_counts(x, params_.first_shell_r0 * r0_);
+  count_first_shells(x);
   // Default outlier distance: half the model's diameter.
   const double outlier =
       params_.outlier_distance_mm > 0 ? params_.outlier_distance_mm : default_outlier_distance(x);

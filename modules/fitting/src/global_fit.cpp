@@ -79,6 +79,50 @@ struct StiffnessSchedule {
   }
 };
 
+/// The closest-point step of the map x -> a s + t + B(s) c (a row-major, then t, then
+/// the K shear coefficients c; B(s) the shears' 3 x K Jacobian at sample s): the weighted
+/// normal equations of point-to-plane rows n^T (a s + t + B c) = n^T p, with n the
+/// matched normal mapped by a^-T, and point-to-point rows (.)_r = p_r weighted
+/// `point_to_point`; pulls lambda_a |a - I|^2 and lambda_c |c|^2. Returns their
+/// solution theta (12 + K). `match[k]` is point k's sample, `w[k]` its weight (0: unused).
+template <int K, class ShearJacobian>
+Eigen::Matrix<double, 12 + K, 1> solve_matched_step(
+    const SurfaceSamples& surface, const Eigen::Matrix3Xd& p, const std::vector<int>& match,
+    const std::vector<double>& w, const Eigen::Matrix3d& normal_map, double point_to_point,
+    double lambda_a, double lambda_c, ShearJacobian&& jacobian) {
+  using Vec = Eigen::Matrix<double, 12 + K, 1>;
+  Eigen::Matrix<double, 12 + K, 12 + K> nrm = Eigen::Matrix<double, 12 + K, 12 + K>::Zero();
+  Vec rhs = Vec::Zero();
+  for (Eigen::Index k = 0; k < p.cols(); ++k) {
+    if (w[k] == 0) continue;
+    const Eigen::Vector3d s = surface.points.col(match[k]);
+    const Eigen::Vector3d n = (normal_map * surface.normals.col(match[k])).normalized();
+    const Eigen::Matrix<double, 3, K> b = jacobian(match[k]);
+    Vec row;
+    row.template segment<3>(0) = n.x() * s, row.template segment<3>(3) = n.y() * s;
+    row.template segment<3>(6) = n.z() * s, row.template segment<3>(9) = n;
+    if constexpr (K > 0) row.template tail<K>() = (n.transpose() * b).transpose();
+    nrm += w[k] * row * row.transpose();
+    rhs += w[k] * row * n.dot(p.col(k));
+    for (int c = 0; c < 3; ++c) {
+      Vec pp = Vec::Zero();
+      pp.template segment<3>(3 * c) = s;
+      pp(9 + c) = 1.0;
+      if constexpr (K > 0) pp.template tail<K>() = b.row(c).transpose();
+      nrm += point_to_point * w[k] * pp * pp.transpose();
+      rhs += point_to_point * w[k] * pp * p(c, k);
+    }
+  }
+  for (int c = 0; c < 3; ++c) {
+    for (int d = 0; d < 3; ++d)
+      nrm(3 * c + d, 3 * c + d) += lambda_a;
+    rhs(3 * c + c) += lambda_a;
+  }
+  for (int c = 0; c < K; ++c)
+    nrm(12 + c, 12 + c) += lambda_c;
+  return nrm.ldlt().solve(rhs);
+}
+
 }  // namespace
 
 AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
@@ -114,34 +158,9 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
   StiffnessSchedule schedule{4, o.iterations};
   for (int it = 0; it < schedule.levels * o.iterations; ++it) {
     const double lambda = lambda_final * schedule.factor();
-    // Unknowns theta = [a row 0, a row 1, a row 2, t] (12). Point-to-plane rows
-    // n^T (a s + t) = n^T p with n the matched normal mapped by a^-T; point-to-point rows
-    // (a s + t)_r = p_r with weight mu; a pull lambda |a - I|^2.
-    const Eigen::Matrix3d normal_map = fit.a.inverse().transpose();
-    Eigen::Matrix<double, 12, 12> nrm = Eigen::Matrix<double, 12, 12>::Zero();
-    Eigen::Matrix<double, 12, 1> rhs = Eigen::Matrix<double, 12, 1>::Zero();
-    for (int k = 0; k < m; ++k) {
-      if (w[k] == 0) continue;
-      const Eigen::Vector3d s = surface.points.col(match[k]);
-      const Eigen::Vector3d n = (normal_map * surface.normals.col(match[k])).normalized();
-      Eigen::Matrix<double, 12, 1> row;
-      row << n.x() * s, n.y() * s, n.z() * s, n;
-      nrm += w[k] * row * row.transpose();
-      rhs += w[k] * row * n.dot(p.col(k));
-      for (int c = 0; c < 3; ++c) {
-        Eigen::Matrix<double, 12, 1> pp = Eigen::Matrix<double, 12, 1>::Zero();
-        pp.segment<3>(3 * c) = s;
-        pp(9 + c) = 1.0;
-        nrm += o.point_to_point * w[k] * pp * pp.transpose();
-        rhs += o.point_to_point * w[k] * pp * p(c, k);
-      }
-    }
-    for (int c = 0; c < 3; ++c) {
-      for (int d = 0; d < 3; ++d)
-        nrm(3 * c + d, 3 * c + d) += lambda;
-      rhs(3 * c + c) += lambda;
-    }
-    const Eigen::Matrix<double, 12, 1> theta = nrm.ldlt().solve(rhs);
+    const Eigen::Matrix<double, 12, 1> theta =
+        solve_matched_step<0>(surface, p, match, w, fit.a.inverse().transpose(), o.point_to_point,
+                              lambda, 0.0, [](int) { return Eigen::Matrix<double, 3, 0>(); });
     Eigen::Matrix3d a;
     a << theta.segment<3>(0).transpose(), theta.segment<3>(3).transpose(),
         theta.segment<3>(6).transpose();
@@ -250,35 +269,9 @@ std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& su
     if (!go_on || schedule.level != level) ends.push_back(map);
     if (!go_on) break;
     // Linearised image of sample s: a s + t + B(u) c, u = the current affine image - centre.
-    const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
-    Eigen::Matrix<double, 21, 21> nrm = Eigen::Matrix<double, 21, 21>::Zero();
-    Vec21 rhs = Vec21::Zero();
-    for (int k = 0; k < m; ++k) {
-      if (w[k] == 0) continue;
-      const Eigen::Vector3d s = surface.points.col(match[k]);
-      const Eigen::Vector3d n = (normal_map * surface.normals.col(match[k])).normalized();
-      const Eigen::Matrix<double, 3, 9> b = basis(affine_img.col(match[k]) - map.shears.centre);
-      Vec21 row;
-      row << n.x() * s, n.y() * s, n.z() * s, n, (n.transpose() * b).transpose();
-      nrm += w[k] * row * row.transpose();
-      rhs += w[k] * row * n.dot(p.col(k));
-      for (int c = 0; c < 3; ++c) {
-        Vec21 pp = Vec21::Zero();
-        pp.segment<3>(3 * c) = s;
-        pp(9 + c) = 1.0;
-        pp.segment<9>(12) = b.row(c).transpose();
-        nrm += o.point_to_point * w[k] * pp * pp.transpose();
-        rhs += o.point_to_point * w[k] * pp * p(c, k);
-      }
-    }
-    for (int c = 0; c < 3; ++c) {
-      for (int d = 0; d < 3; ++d)
-        nrm(3 * c + d, 3 * c + d) += lambda_a;
-      rhs(3 * c + c) += lambda_a;
-    }
-    for (int c = 0; c < 9; ++c)
-      nrm(12 + c, 12 + c) += lambda_c;
-    const Vec21 theta = nrm.ldlt().solve(rhs);
+    const Vec21 theta = solve_matched_step<9>(
+        surface, p, match, w, map.affine.a.inverse().transpose(), o.point_to_point, lambda_a,
+        lambda_c, [&](int j) { return basis(affine_img.col(j) - map.shears.centre); });
     Eigen::Matrix3d a;
     a << theta.segment<3>(0).transpose(), theta.segment<3>(3).transpose(),
         theta.segment<3>(6).transpose();

@@ -103,7 +103,10 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     // mapped shape.
     const auto started = std::chrono::steady_clock::now();
     const SurfaceSamples samples = reference_surface(model.reference, reference_distance, 2);
-    const GlobalMap map = fit_global_map(samples, points, spread->global, &reference_distance);
+    AffineFitOptions global_options = spread->global;
+    // The points' noise is what the fit accepts: the scale of fits equally good.
+    global_options.noise_mm = spread->fit.residual_tolerance_mm;
+    const GlobalMap map = fit_global_map(samples, points, global_options, &reference_distance);
     if (map.refused) {
       report.refused = true;
       out.before.reset();

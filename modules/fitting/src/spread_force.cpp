@@ -11,14 +11,9 @@ namespace organfit::fitting {
 SpreadAttractiveForce::SpreadAttractiveForce(std::vector<AttractivePoint> points,
                                              const particles::LennardJones& law, double radius_mm,
                                              const SpreadForceParams& params, double skin_voxel_mm)
-    : points_(std::move(points)),
-      rho_(radius_mm),
-      r0_(law.r0()),
+    : AttractivePointTerm(std::move(points), law, radius_mm, skin_voxel_mm, kFirstShellR0),
       kappa_(params.stiffness_fraction * law.stiffness()),
-      f_max_(law.f_max()),
-      params_(params),
-      skin_(skin_voxel_mm, radius_mm) {
-  validate_points(points_);
+      params_(params) {
   if (!(params.stiffness_fraction > 0))
     throw std::invalid_argument("spread force: stiffness must be > 0");
   if (!(params.patch_sigma_r0 > 0) || !(params.patch_radius_r0 > 0))
@@ -26,7 +21,6 @@ SpreadAttractiveForce::SpreadAttractiveForce(std::vector<AttractivePoint> points
   if (!(params.consistency_threshold >= 0) || params.consistency_neighbours < 0 ||
       !(params.consistency_noise_mm >= 0))
     throw std::invalid_argument("spread force: consistency test settings must be >= 0");
-  status_.resize(points_.size());
   patch_.resize(points_.size());
   if (params.consistency_threshold > 0) {
     std::vector<Eigen::Vector3d> p;
@@ -49,7 +43,7 @@ void SpreadAttractiveForce::set_surface_feet(SurfaceFeet feet) {
 
 void SpreadAttractiveForce::assign(const particles::Positions& x) {
   const auto& skin = skin_.skin();
-  w_ = first_shell_counts(x, 1.3 * r0_);
+  count_first_shells(x);
   const double outlier =
       params_.outlier_distance_mm > 0 ? params_.outlier_distance_mm : default_outlier_distance(x);
   const double sigma = params_.patch_sigma_r0 * r0_, radius = params_.patch_radius_r0 * r0_;

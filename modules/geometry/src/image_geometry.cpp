@@ -68,4 +68,38 @@ IndexRange index_range(const ImageGeometry& grid, const Aabb& box, int pad) {
   return r;
 }
 
+PlainGeometry to_plain(const ImageGeometry& g) {
+  PlainGeometry p;
+  p.size = g.size;
+  for (int d = 0; d < 3; ++d) {
+    p.spacing_mm[d] = g.spacing_mm[d];
+    p.origin_mm[d] = g.origin_mm[d];
+    for (int e = 0; e < 3; ++e)
+      p.direction[3 * d + e] = g.direction(d, e);
+  }
+  return p;
+}
+
+ImageGeometry from_plain(const PlainGeometry& p) {
+  ImageGeometry g;
+  g.size = p.size;
+  for (int d = 0; d < 3; ++d) {
+    g.spacing_mm[d] = p.spacing_mm[d];
+    g.origin_mm[d] = p.origin_mm[d];
+    for (int e = 0; e < 3; ++e)
+      g.direction(d, e) = p.direction[3 * d + e];
+  }
+  return g;
+}
+
+PlainMask to_plain(const LabelVolume& labels) {
+  return {to_plain(labels.geometry), labels.labels};
+}
+
+LabelVolume from_plain(const PlainMask& mask) {
+  LabelVolume out(from_plain(mask.geometry));
+  out.labels = mask.labels;
+  return out;
+}
+
 }  // namespace organfit::geometry

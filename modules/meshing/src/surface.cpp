@@ -7,20 +7,6 @@ namespace organfit::meshing {
 
 namespace {
 
-PlainMask plain(const geometry::LabelVolume& mask) {
-  PlainMask m;
-  const auto& g = mask.geometry;
-  m.size = g.size;
-  for (int d = 0; d < 3; ++d) {
-    m.spacing_mm[d] = g.spacing_mm[d];
-    m.origin_mm[d] = g.origin_mm[d];
-    for (int e = 0; e < 3; ++e)
-      m.direction[3 * d + e] = g.direction(d, e);
-  }
-  m.labels = mask.labels;
-  return m;
-}
-
 SurfaceReport report_of(const PlainSurfaceReport& p) {
   SurfaceReport r;
   r.points = p.points;
@@ -36,7 +22,7 @@ SurfaceReport report_of(const PlainSurfaceReport& p) {
 }  // namespace
 
 SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesystem::path& file) {
-  return report_of(vtk_write_surface(plain(mask), file.string()));
+  return report_of(vtk_write_surface(geometry::to_plain(mask), file.string()));
 }
 
 SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesystem::path& file,
@@ -44,11 +30,11 @@ SurfaceReport write_surface(const geometry::LabelVolume& mask, const std::filesy
                             const std::function<double(const Eigen::Vector3d&)>& value) {
   const PointScalar scalar{
       name, [&value](const double* x) { return value(Eigen::Vector3d(x[0], x[1], x[2])); }};
-  return report_of(vtk_write_surface(plain(mask), file.string(), false, &scalar));
+  return report_of(vtk_write_surface(geometry::to_plain(mask), file.string(), false, &scalar));
 }
 
 SurfaceMesh surface_mesh(const geometry::LabelVolume& mask) {
-  PlainSurfaceReport p = vtk_write_surface(plain(mask), "", true);
+  PlainSurfaceReport p = vtk_write_surface(geometry::to_plain(mask), "", true);
   SurfaceMesh out;
   out.report = report_of(p);
   out.vertex_mm = std::move(p.vertex_mm);

@@ -65,32 +65,33 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
              ply = ends_with(file, ".ply"), obj = ends_with(file, ".obj");
   if (!file.empty() && !stl && !vtp && !ply && !obj)
     throw InputError(file + ": unknown mesh format (use .stl, .vtp, .ply or .obj)");
+  const geometry::PlainGeometry& g = m.geometry;
   // Pad by one empty voxel all round so the surface closes at the grid border.
-  const int nx = m.size[0] + 2, ny = m.size[1] + 2, nz = m.size[2] + 2;
+  const int nx = g.size[0] + 2, ny = g.size[1] + 2, nz = g.size[2] + 2;
   vtkNew<vtkImageData> image;
   image->SetDimensions(nx, ny, nz);
-  image->SetSpacing(m.spacing_mm.data());
+  image->SetSpacing(g.spacing_mm.data());
   double origin[3];
   for (int d = 0; d < 3; ++d) {  // origin of the padded grid: one voxel back along each axis
-    origin[d] = m.origin_mm[d];
+    origin[d] = g.origin_mm[d];
     for (int e = 0; e < 3; ++e)
-      origin[d] -= m.direction[3 * d + e] * m.spacing_mm[e];
+      origin[d] -= g.direction[3 * d + e] * g.spacing_mm[e];
   }
   image->SetOrigin(origin);
   vtkNew<vtkMatrix3x3> direction;
   for (int d = 0; d < 3; ++d)
     for (int e = 0; e < 3; ++e)
-      direction->SetElement(d, e, m.direction[3 * d + e]);
+      direction->SetElement(d, e, g.direction[3 * d + e]);
   image->SetDirectionMatrix(direction);
   vtkNew<vtkUnsignedCharArray> scalars;
   scalars->SetNumberOfTuples(static_cast<vtkIdType>(nx) * ny * nz);
   scalars->FillValue(0);
   long long inside = 0;
-  for (int k = 0; k < m.size[2]; ++k)
-    for (int j = 0; j < m.size[1]; ++j)
-      for (int i = 0; i < m.size[0]; ++i) {
-        const unsigned char v = m.labels[i + static_cast<size_t>(m.size[0]) *
-                                                 (j + static_cast<size_t>(m.size[1]) * k)] == 1;
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        const unsigned char v = m.labels[i + static_cast<size_t>(g.size[0]) *
+                                                 (j + static_cast<size_t>(g.size[1]) * k)] == 1;
         inside += v;
         scalars->SetValue(
             (i + 1) + static_cast<vtkIdType>(nx) * ((j + 1) + static_cast<vtkIdType>(ny) * (k + 1)),

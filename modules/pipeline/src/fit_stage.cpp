@@ -11,6 +11,7 @@
 #include "organfit/fitting/global_fit.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/signed_distance.h"
+#include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
 #include "organfit/support/progress.h"
@@ -90,38 +91,16 @@ nlohmann::json uncertainty_coverage(const UncertaintyOnSurface& s,
 }
 
 fitting::OrganFitOptions organ_fit_options_from(const config::Scene& scene) {
-  fitting::OrganFitOptions o;
-  o.damping_ratio = scene.number("fit", "damping_ratio");
-  o.skin_voxel_r0 = scene.number("fit", "skin_voxel_r0");
-  o.residual_tolerance_mm = scene.number("fit", "residual_tolerance_mm");
-  o.residual_max_tolerance_mm = scene.number("fit", "residual_max_tolerance_mm");
-  o.kinetic_tolerance = scene.number("fit", "kinetic_tolerance");
-  o.max_steps = scene.integer("fit", "max_steps");
-  o.max_wall_s = scene.number("fit", "max_wall_s");
-  o.record_every = static_cast<int>(scene.integer("fit", "record_every"));
-  o.unseen_change_sd_mm = scene.number("fit", "unseen_change_sd_mm");
-  return o;
+  return keys::fit().read(scene);
 }
 
 fitting::PaperFitOptions paper_fit_options_from(const config::Scene& scene) {
-  fitting::PaperFitOptions o;
-  o.fit = organ_fit_options_from(scene);
-  o.force.alpha = scene.number("fit", "alpha");
-  o.force.influence_radius_min_r0 = scene.number("fit", "influence_radius_min_r0");
-  o.force.influence_growth = scene.number("fit", "influence_growth");
-  o.force.influence_radius_max_r0 = scene.number("fit", "influence_radius_max_r0");
-  o.force.total_force_factor = scene.number("fit", "total_force_factor");
-  o.force.outlier_distance_mm = scene.number("fit", "outlier_distance_mm");
-  return o;
+  return {organ_fit_options_from(scene), keys::fit_paper().read(scene)};
 }
 
 fitting::SpreadFitOptions spread_fit_options_from(const config::Scene& scene) {
-  fitting::SpreadFitOptions o;
-  o.fit = organ_fit_options_from(scene);
-  o.global.max_stretch = scene.number("fit", "max_global_stretch");
-  o.global.field_sigma_mm = scene.number("fit", "global_shear_field_mm");
-  o.global.noise_mm = o.fit.residual_tolerance_mm;  // the points' noise is what the fit accepts
-  return o;
+  return {organ_fit_options_from(scene), keys::fit_spread_global().read(scene),
+          keys::fit_spread_local().read(scene)};
 }
 
 nlohmann::json fit_summary(const fitting::FitReport& r) {
@@ -223,9 +202,11 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult model,
   if (fitted.report.refused)
     throw TargetNotMetError(fmt::format(
         "fit: the points ask for an implausible change of the whole organ (a stretch beyond {}x, "
-        "fit.max_global_stretch, or a bend beyond a quarter of its size); check that they belong "
-        "to this organ and are in the same patient coordinates",
-        scene.number("fit", "max_global_stretch")));
+        "fit.spread.max_global_stretch, or a bend beyond {} of its size, "
+        "fit.spread.global_max_shear); check that they belong to this organ and are in the same "
+        "patient coordinates",
+        scene.number("fit.spread", "max_global_stretch"),
+        scene.number("fit.spread", "global_max_shear")));
   if (fitted.report.pieces > 1)
     spdlog::warn(
         "fit: the local stage tore the organ into {} pieces; the global stage's organ is kept",
@@ -346,8 +327,8 @@ std::vector<std::string> fit_warnings(const FitStageResult& fit) {
             : fmt::format("fit: the organ's volume changed by {:+.1f}%", organ_change));
   if (fit.report.global && fit.report.global->map.shears_dropped)
     w.push_back(
-        "fit: the points asked for an implausible bend (fit.max_global_stretch and a quarter of "
-        "the organ's size bound it); the global stage used a stretch and shift only");
+        "fit: the points asked for an implausible bend (fit.spread.max_global_stretch and "
+        "fit.spread.global_max_shear bound it); the global stage used a stretch and shift only");
   if (fit.fit_summary["rejected_points"].get<int>() > 0) {
     w.push_back(fmt::format("fit: {} points rejected as outliers",
                             fit.fit_summary["rejected_points"].get<int>()));

@@ -8,6 +8,7 @@
 #include "organfit/particles/diagnostics.h"
 #include "organfit/particles/lattice_fill.h"
 #include "organfit/particles/skeleton.h"
+#include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
 #include "organfit/support/progress.h"
@@ -16,24 +17,7 @@
 namespace organfit::pipeline {
 
 ModelSettings model_settings_from(const config::Scene& scene) {
-  ModelSettings s;
-  s.radius_mm = scene.number("model", "radius_mm");
-  s.cohesion_energy = scene.number("model", "cohesion_energy");
-  s.exponent_m = static_cast<int>(scene.integer("model", "exponent_m"));
-  s.exponent_n = static_cast<int>(scene.integer("model", "exponent_n"));
-  s.cutoff_r0 = scene.number("model", "cutoff_r0");
-  s.floor_r0 = scene.number("model", "floor_r0");
-  s.mass = scene.number("model", "mass");
-  s.damping_ratio = scene.number("model", "damping_ratio");
-  s.pair_damping = scene.number("model", "pair_damping");
-  s.neighbour_skin_r0 = scene.number("model", "neighbour_skin_r0");
-  s.time_step_fraction = scene.number("model", "time_step_fraction");
-  s.relax_steps = scene.integer("model", "relax_steps");
-  s.relax_tolerance = scene.number("model", "relax_tolerance");
-  s.skeleton = scene.flag("model", "skeleton");
-  s.skeleton_stiffness = scene.number("model", "skeleton_stiffness");
-  s.skeleton_node_spacing_r0 = scene.number("model", "skeleton_node_spacing_r0");
-  s.skeleton_overlap_r0 = scene.number("model", "skeleton_overlap_r0");
+  ModelSettings s = keys::model().read(scene);
   s.seed = static_cast<std::uint64_t>(scene.integer("scene", "seed"));
   return s;
 }

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include "organfit/dicom/structure_set.h"
+#include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
 #include "organfit/support/resources.h"
 
@@ -11,14 +12,7 @@ namespace fs = std::filesystem;
 namespace organfit::pipeline {
 
 segmentation::SeedOptions seed_options_from(const config::Scene& scene) {
-  segmentation::SeedOptions s;
-  s.seed_mm = scene.vec3("organ", "seed_mm");
-  s.hu_low = scene.number("organ", "hu_low");
-  s.hu_high = scene.number("organ", "hu_high");
-  s.smoothing_iterations = static_cast<int>(scene.integer("organ", "smoothing_iterations"));
-  s.opening_radius_voxels = static_cast<int>(scene.integer("organ", "opening_radius_voxels"));
-  s.search_box_mm = scene.number("organ", "search_box_mm");
-  return s;
+  return keys::organ_seed().read(scene);
 }
 
 OrganStageResult run_organ_stage(const config::Scene& scene, const dicom::CtSeries& ct,

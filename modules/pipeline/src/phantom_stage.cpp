@@ -7,6 +7,7 @@
 #include "organfit/dicom/ct_writer.h"
 #include "organfit/dicom/rtstruct_writer.h"
 #include "organfit/itkbridge/itk_images.h"
+#include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 #include "organfit/support/output_folder.h"
@@ -88,15 +89,7 @@ SynthResult write_pelvis_phantom(const fs::path& out, const phantom::PelvisOptio
 }
 
 phantom::PelvisOptions phantom_options_from(const config::Scene& scene) {
-  phantom::PelvisOptions p;
-  p.seed = static_cast<std::uint64_t>(scene.integer("phantom", "seed"));
-  p.columns = static_cast<int>(scene.integer("phantom", "columns"));
-  p.rows = static_cast<int>(scene.integer("phantom", "rows"));
-  p.slices = static_cast<int>(scene.integer("phantom", "slices"));
-  p.pixel_mm = scene.number("phantom", "pixel_mm");
-  p.slice_mm = scene.number("phantom", "slice_mm");
-  p.noise_hu = scene.number("phantom", "noise_hu");
-  return p;
+  return keys::phantom().read(scene);
 }
 
 }  // namespace organfit::pipeline

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "organfit/meshing/surface.h"
+#include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
 
 namespace fs = std::filesystem;
@@ -25,13 +26,8 @@ PointsTable read_points_file(const fs::path& file) {
 }
 
 evaluation::Deformation deformation_from(const config::Scene& scene, const geometry::Shape& shape) {
-  evaluation::Deformation d;
-  d.stretch = scene.number("points", "stretch");
-  d.bend_mm = scene.number("points", "bend_mm");
+  evaluation::Deformation d = keys::points_deformation().read(scene);
   d.twist_rad = scene.number("points", "twist_deg") * M_PI / 180;
-  d.indent_mm = scene.number("points", "indent_mm");
-  d.push_mm = scene.number("points", "push_mm");
-  d.bump_sigma_mm = scene.number("points", "bump_sigma_mm");
   d.centre_mm = shape.centre_mm;
   d.half_length_mm = 0.5 * shape.size_mm.x() * d.stretch;
   return d;
@@ -59,10 +55,8 @@ PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageR
     r.truth_shape = t;
   }
   const evaluation::Deformation d = deformation_from(scene, r.truth_shape);
-  evaluation::SamplingOptions o;
+  evaluation::SamplingOptions o = keys::points_sampling().read(scene);
   o.count = static_cast<int>(scene.integer("points", "count"));
-  o.noise_mm = scene.number("points", "noise_mm");
-  o.outlier_fraction = scene.number("points", "outlier_fraction");
   o.half_coverage = scene.text("points", "coverage") == "half";
   o.seed = static_cast<unsigned>(scene.integer("scene", "seed"));
   r.points = evaluation::sample_deformed_surface(r.truth_shape, d, o);

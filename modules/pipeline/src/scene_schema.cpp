@@ -7,9 +7,290 @@
 #include <initializer_list>
 
 #include "organfit/dicomnet/node.h"
+#include "organfit/pipeline/export_stage.h"
 #include "organfit/pipeline/fit_stage.h"
+#include "organfit/pipeline/ultrasound_stage.h"
 
 namespace organfit::pipeline {
+namespace keys {
+
+const config::Binding<fitting::OrganFitOptions>& fit() {
+  using O = fitting::OrganFitOptions;
+  constexpr auto none = std::nullopt;
+  static const auto b =
+      config::Binding<O>("fit")
+          .number("residual_tolerance_mm", &O::residual_tolerance_mm, "mm", 0.0, none,
+                  "converged when the mean data residual is at most this", true)
+          .number("residual_max_tolerance_mm", &O::residual_max_tolerance_mm, "mm", 0.0, none,
+                  "... and the 95th percentile at most this (0 = the particle radius)")
+          .integer("max_steps", &O::max_steps, 1, 100000000, "step budget")
+          .number("max_wall_s", &O::max_wall_s, "s", 0.0, none, "wall-time budget", true)
+          .integer("record_every", &O::record_every, 1, 100000, "steps between history rows")
+          .number("damping_ratio", &O::damping_ratio, "", 0.0, none,
+                  "damping during the fit, fraction of critical", true)
+          .number("kinetic_tolerance", &O::kinetic_tolerance, "E", 0.0, none,
+                  "settled when KE per particle is below this", true)
+          .number("skin_voxel_r0", &O::skin_voxel_r0, "r0", 0.0, none,
+                  "voxel size of skin detection (0.5 r0 = rho)", true)
+          .number("unseen_change_sd_mm", &O::unseen_change_sd_mm, "mm", 0.0, 50.0,
+                  "the uncertainty's prior: how far the surface may change locally where no "
+                  "point is (1.7 mm: the prostate between fractions, Nakazawa et al. 2015)",
+                  true);
+  return b;
+}
+
+const config::Binding<fitting::PaperForceParams>& fit_paper() {
+  using O = fitting::PaperForceParams;
+  constexpr auto none = std::nullopt;
+  static const auto b =
+      config::Binding<O>("fit.paper")
+          .number("alpha", &O::alpha, "", 1.0, 20.0, "fall-off exponent alpha_k of eq. 5")
+          .number("influence_radius_min_r0", &O::influence_radius_min_r0, "r0", 0.0, none,
+                  "influence radius at contact", true)
+          .number("influence_growth", &O::influence_growth, "", 0.0, none,
+                  "extra influence radius per mm of distance")
+          .number("influence_radius_max_r0", &O::influence_radius_max_r0, "r0", 0.0, none,
+                  "bound on the influence radius (>= influence_radius_min_r0)", true)
+          .number("total_force_factor", &O::total_force_factor, "", 1.0, none,
+                  "a point's total force <= this x F_max_k")
+          .number("outlier_distance_mm", &O::outlier_distance_mm, "mm", 0.0, none,
+                  "reject points farther than this from the model (0 = half its diameter)")
+          .number("first_shell_r0", &O::first_shell_r0, "r0", 1.0, 2.0,
+                  "W(i), the force cap's neighbour count, counts neighbours within this");
+  return b;
+}
+
+const config::Binding<fitting::AffineFitOptions>& fit_spread_global() {
+  using O = fitting::AffineFitOptions;
+  static const auto b =
+      config::Binding<O>("fit.spread")
+          .number("max_global_stretch", &O::max_stretch, "", 1.0, 10.0,
+                  "refuse points that ask the whole organ to stretch more than this (or less "
+                  "than its inverse)")
+          .number("global_max_shear", &O::max_shear_mm, "", 0.0, 10.0,
+                  "... or whose shears, or shear fields, move the surface by more than this x "
+                  "the body's size",
+                  true)
+          .number("global_shear_field_mm", &O::field_sigma_mm, "mm", 0.0, 100.0,
+                  "width and spacing of the smooth shear fields the global map may add (0 = "
+                  "none)")
+          .number("global_field_stiffness", &O::field_stiffness, "", 0.0, 100.0,
+                  "pull of the fields' heights towards none (a prior sd of 0.5 mm / sqrt(this))")
+          .integer("global_iterations", &O::iterations, 1, 1000,
+                   "iterations of the global map's robust fit")
+          .number("global_outlier_mads", &O::outlier_mads, "", 0.0, 100.0,
+                  "points beyond the median residual + this x 1.4826 MAD get no weight", true)
+          .number("global_point_to_point", &O::point_to_point, "", 0.0, 10.0,
+                  "weight of the point-to-point term beside point-to-plane")
+          .number("global_regularisation", &O::regularisation, "", 0.0, 1.0,
+                  "pull of the affine part towards the identity, relative to the points' spread")
+          .number("global_regularisation_alternative", &O::regularisation_alternative, "", 0.0, 1.0,
+                  "a second pull also tried, the better fit kept (0 = none)")
+          .number("global_shear_regularisation", &O::shear_regularisation, "", 0.0, 1.0,
+                  "pull of the quadratic shears towards none")
+          .number("global_equally_good_dof", &O::equally_good_dof, "", 0.0, 1000.0,
+                  "fits within this / (points) of the best's mean square are equally good; the "
+                  "one changing the shape least is kept")
+          .number("global_distance_scale_mm", &O::distance_scale_mm, "mm", 0.0, 50.0,
+                  "robust scale of the fit on the signed distance (Geman-McClure)", true)
+          .number("global_few_points_shear_stiffness", &O::few_points_shear_stiffness, "", 0.0,
+                  1000.0,
+                  "with fewer points than the map's 21 unknowns, the shears are also fitted this "
+                  "much stiffer (0 = not)");
+  return b;
+}
+
+const config::Binding<fitting::SpreadForceParams>& fit_spread_local() {
+  using O = fitting::SpreadForceParams;
+  constexpr auto none = std::nullopt;
+  static const auto b =
+      config::Binding<O>("fit.spread")
+          .number("local_stiffness", &O::stiffness_fraction, "k", 0.0, 10.0,
+                  "a patch's stiffness kappa, as a fraction of the LJ stiffness m n E0 / r0^2",
+                  true)
+          .number("local_patch_sigma_r0", &O::patch_sigma_r0, "r0", 0.0, 20.0,
+                  "Gaussian width of a point's patch", true)
+          .number("local_patch_radius_r0", &O::patch_radius_r0, "r0", 0.0, 50.0,
+                  "bound of a point's patch", true)
+          .flag("local_hold_volume", &O::hold_volume,
+                "take the patches' net outward push back over the skin (keeps the volume)")
+          .number("outlier_distance_mm", &O::outlier_distance_mm, "mm", 0.0, none,
+                  "reject points farther than this from the model (0 = half its diameter)")
+          .number("consistency_threshold", &O::consistency_threshold, "", 0.0, 100.0,
+                  "reject a point whose residual is this many times its neighbours' scatter "
+                  "off theirs (0 = no such test)")
+          .integer("consistency_neighbours", &O::consistency_neighbours, 1, 1000,
+                   "neighbours of a point for that test")
+          .number("consistency_noise_mm", &O::consistency_noise_mm, "mm", 0.0, 50.0,
+                  "the residuals' noise in that test (0 = half the particle radius)");
+  return b;
+}
+
+const config::Binding<fitting::ModelSettings>& model() {
+  using O = fitting::ModelSettings;
+  constexpr auto none = std::nullopt;
+  static const auto b =
+      config::Binding<O>("model")
+          .number("radius_mm", &O::radius_mm, "mm", 0.0, 100.0,
+                  "particle radius rho; the LJ equilibrium distance r0 is 2 rho", true)
+          .used_when({{"model.particles", {"0"}}})
+          .number("cohesion_energy", &O::cohesion_energy, "E", 0.0, none,
+                  "well depth E0 of the LJ potential", true)
+          .integer("exponent_m", &O::exponent_m, 1, 63, "attractive exponent m of the LJ law")
+          .integer("exponent_n", &O::exponent_n, 2, 64,
+                   "repulsive exponent n of the LJ law (n > m)")
+          .number("cutoff_r0", &O::cutoff_r0, "r0", 1.0, 5.0, "cutoff of the pair force, in r0",
+                  true)
+          .number("floor_r0", &O::floor_r0, "r0", 0.0, 0.95,
+                  "below this distance the repulsion is linearised (finite forces)", true)
+          .number("mass", &O::mass, "M", 0.0, none, "mass of one particle", true)
+          .number("damping_ratio", &O::damping_ratio, "", 0.0, none,
+                  "damping K_a as a fraction of the critical 2 sqrt(k M) of one pair")
+          .number("pair_damping", &O::pair_damping, "M/s", 0.0, none,
+                  "momentum-conserving pairwise damping coefficient (0 = off)")
+          .number("neighbour_skin_r0", &O::neighbour_skin_r0, "r0", 0.0, 2.0,
+                  "Verlet skin of the neighbour list", true)
+          .number("time_step_fraction", &O::time_step_fraction, "", 0.0, 0.9,
+                  "time step as a fraction of the stability limit 2 sqrt(M/k)", true)
+          .integer("relax_steps", &O::relax_steps, 0, 10000000,
+                   "most steps of the damped relaxation after filling")
+          .number("relax_tolerance", &O::relax_tolerance, "E", 0.0, none,
+                  "relaxation ends when kinetic energy per particle falls below this", true)
+          .flag("skeleton", &O::skeleton,
+                "tie the particles to a medial skeleton that keeps the global shape")
+          .number("skeleton_stiffness", &O::skeleton_stiffness, "k", 0.0, none,
+                  "skeleton stiffness k_s as a fraction of the LJ stiffness k = m n E0 / r0^2",
+                  true)
+          .number("skeleton_node_spacing_r0", &O::skeleton_node_spacing_r0, "r0", 0.0, none,
+                  "distance between skeleton nodes on the medial axis", true)
+          .number("skeleton_overlap_r0", &O::skeleton_overlap_r0, "r0", 0.0, none,
+                  "a particle also joins nodes this much farther than its nearest one");
+  return b;
+}
+
+const config::Binding<phantom::PelvisOptions>& phantom() {
+  using O = phantom::PelvisOptions;
+  constexpr auto none = std::nullopt;
+  static const auto b =
+      config::Binding<O>("phantom")
+          .integer("seed", &O::seed, 0, none, "seed of the CT noise (the anatomy is fixed)")
+          .integer("columns", &O::columns, 8, 2048, "voxels along x")
+          .integer("rows", &O::rows, 8, 2048, "voxels along y")
+          .integer("slices", &O::slices, 8, 2000, "slices along z, centred on the prostate")
+          .number("pixel_mm", &O::pixel_mm, "mm", 0.1, 10.0, "in-plane voxel spacing")
+          .number("slice_mm", &O::slice_mm, "mm", 0.1, 20.0, "slice spacing and thickness")
+          .number("noise_hu", &O::noise_hu, "HU", 0.0, 500.0, "standard deviation of the CT noise");
+  return b;
+}
+
+const config::Binding<segmentation::SeedOptions>& organ_seed() {
+  using O = segmentation::SeedOptions;
+  constexpr auto none = std::nullopt;
+  const std::vector<config::UseCondition> seed = {{"organ.source", {"seed"}}};
+  static const auto b =
+      config::Binding<O>("organ")
+          .vec3("seed_mm", &O::seed_mm, "mm", none,
+                "seed inside the organ, patient coordinates (source: seed)")
+          .used_when(seed)
+          .number("hu_low", &O::hu_low, "HU", -1024.0, 3071.0,
+                  "lowest HU grown into (source: seed)")
+          .used_when(seed)
+          .number("hu_high", &O::hu_high, "HU", -1024.0, 3071.0,
+                  "highest HU grown into (source: seed)")
+          .used_when(seed)
+          .integer("smoothing_iterations", &O::smoothing_iterations, 0, 100,
+                   "curvature-flow iterations before growing (source: seed)")
+          .used_when(seed)
+          .integer("opening_radius_voxels", &O::opening_radius_voxels, 0, 10,
+                   "morphological opening that cuts thin leaks (source: seed)")
+          .used_when(seed)
+          .number("search_box_mm", &O::search_box_mm, "mm", 0.0, 2000.0,
+                  "side of the cube around the seed the organ is grown in; 0 = the whole CT "
+                  "(source: seed)")
+          .used_when(seed);
+  return b;
+}
+
+const config::Binding<evaluation::SamplingOptions>& points_sampling() {
+  using O = evaluation::SamplingOptions;
+  static const auto b = config::Binding<O>("points")
+                            .number("noise_mm", &O::noise_mm, "mm", 0.0, 20.0,
+                                    "Gaussian noise added to generated points")
+                            .used_when({{"points.source", {"generate"}}})
+                            .number("outlier_fraction", &O::outlier_fraction, "", 0.0, 0.5,
+                                    "fraction of generated points moved 5-15 mm off")
+                            .used_when({{"points.source", {"generate"}}});
+  return b;
+}
+
+const config::Binding<evaluation::Deformation>& points_deformation() {
+  using O = evaluation::Deformation;
+  // The true deformation: of the generated points, or of the simulated ultrasound.
+  const std::vector<config::UseCondition> generate = {{"points.source", {"generate"}}};
+  const std::vector<config::UseCondition> simulate = {{"points.source", {"ultrasound"}},
+                                                      {"ultrasound.source", {"simulate"}}};
+  static const auto b =
+      config::Binding<O>("points")
+          .number("stretch", &O::stretch, "", 0.5, 2.0,
+                  "volume-preserving stretch along x of the true deformation")
+          .used_when(generate)
+          .used_when(simulate)
+          .number("bend_mm", &O::bend_mm, "mm", -30.0, 30.0,
+                  "sideways (y) displacement of the ends in the true deformation")
+          .used_when(generate)
+          .used_when(simulate)
+          .number("indent_mm", &O::indent_mm, "mm", -20.0, 20.0,
+                  "Gaussian column shift along y (rectal filling: < 0 moves it anteriorly)")
+          .used_when(generate)
+          .used_when(simulate)
+          .number("push_mm", &O::push_mm, "mm", -20.0, 20.0,
+                  "Gaussian column shift along z (bladder push: < 0 moves it inferiorly)")
+          .used_when(generate)
+          .used_when(simulate)
+          .number("bump_sigma_mm", &O::bump_sigma_mm, "mm", 1.0, 100.0,
+                  "width of the indent and push bumps", true)
+          .used_when(generate)
+          .used_when(simulate);
+  return b;
+}
+
+const config::Binding<ultrasound::SimulatorOptions>& ultrasound_simulator() {
+  using O = ultrasound::SimulatorOptions;
+  const std::vector<config::UseCondition> simulate = {{"ultrasound.source", {"simulate"}}};
+  static const auto b =
+      config::Binding<O>("ultrasound")
+          .number("probe_radius_mm", &O::probe_radius_mm, "mm", 0.0, 50.0,
+                  "imaging starts this far from the probe's centre (its face; it displaces "
+                  "rectal gas)")
+          .used_when(simulate)
+          .number("max_depth_mm", &O::max_depth_mm, "mm", 10.0, 300.0,
+                  "imaging depth from the probe's centre (simulate)")
+          .used_when(simulate)
+          .number("speckle", &O::speckle, "", 0.0, 1.0,
+                  "speckle level: 0 none, 1 fully developed Rayleigh (simulate)")
+          .used_when(simulate)
+          .number("voxel_mm", &O::voxel_mm, "mm", 0.1, 5.0, "voxel size of the simulated volume",
+                  true)
+          .used_when(simulate);
+  return b;
+}
+
+const config::Binding<ultrasound::BoundaryOptions>& ultrasound_boundary() {
+  using O = ultrasound::BoundaryOptions;
+  static const auto b =
+      config::Binding<O>("ultrasound")
+          .integer("rays", &O::rays, 16, 100000, "edge-search rays from the organ's centre")
+          .number("band_mm", &O::band_mm, "mm", 1.0, 100.0,
+                  "search band around the model's surface along each ray")
+          .number("smoothing_mm", &O::smoothing_mm, "mm", 0.0, 10.0,
+                  "Gaussian speckle reduction before the edge search")
+          .number("mad_threshold", &O::mad_threshold, "", 1.0, 20.0,
+                  "a ray's boundary radius this many MADs off its neighbours' is rejected");
+  return b;
+}
+
+}  // namespace keys
+
 namespace {
 
 config::Schema build_schema() {
@@ -32,14 +313,8 @@ config::Schema build_schema() {
   s.section("phantom",
             "a synthetic planning CT with known organs, written to OUT/phantom/ and read as the CT")
       .choice("kind", "pelvis", {"pelvis"},
-              "pelvis: body, bones, bladder, rectum, a 35 cm3 prostate")
-      .integer("seed", 1, 0, none, "seed of the CT noise (the anatomy is fixed)")
-      .integer("columns", 320, 8, 2048, "voxels along x")
-      .integer("rows", 320, 8, 2048, "voxels along y")
-      .integer("slices", 56, 8, 2000, "slices along z, centred on the prostate")
-      .number("pixel_mm", 1.25, "mm", 0.1, 10.0, "in-plane voxel spacing")
-      .number("slice_mm", 2.5, "mm", 0.1, 20.0, "slice spacing and thickness")
-      .number("noise_hu", 12.0, "HU", 0.0, 500.0, "standard deviation of the CT noise");
+              "pelvis: body, bones, bladder, rectum, a 35 cm3 prostate");
+  keys::phantom().declare(s);
 
   s.section("ct",
             "the planning CT: a DICOM folder (other objects in it are ignored), or a series "
@@ -76,24 +351,8 @@ config::Schema build_schema() {
       .text("series_uid", "",
             "Series Instance UID of the structure set on organ.node (default: the study's only "
             "RTSTRUCT series)")
-      .used_when({{"organ.source", {"rtstruct"}}})
-      .vec3("seed_mm", Vector3d(0, 0, 0), "mm", none,
-            "seed inside the organ, patient coordinates (source: seed)")
-      .used_when({{"organ.source", {"seed"}}})
-      .number("hu_low", 20.0, "HU", -1024.0, 3071.0, "lowest HU grown into (source: seed)")
-      .used_when({{"organ.source", {"seed"}}})
-      .number("hu_high", 80.0, "HU", -1024.0, 3071.0, "highest HU grown into (source: seed)")
-      .used_when({{"organ.source", {"seed"}}})
-      .integer("smoothing_iterations", 5, 0, 100,
-               "curvature-flow iterations before growing (source: seed)")
-      .used_when({{"organ.source", {"seed"}}})
-      .integer("opening_radius_voxels", 1, 0, 10,
-               "morphological opening that cuts thin leaks (source: seed)")
-      .used_when({{"organ.source", {"seed"}}})
-      .number("search_box_mm", 200.0, "mm", 0.0, 2000.0,
-              "side of the cube around the seed the organ is grown in; 0 = the whole CT (source: "
-              "seed)")
-      .used_when({{"organ.source", {"seed"}}});
+      .used_when({{"organ.source", {"rtstruct"}}});
+  keys::organ_seed().declare(s);
 
   s.section("body", "an analytic organ shape, for scenes without CT")
       .choice("shape", "ellipsoid", {"ellipsoid", "box", "egg", "lung"},
@@ -103,37 +362,10 @@ config::Schema build_schema() {
       .vec3("centre_mm", Vector3d(0, 0, 0), "mm", none, "centre, in patient coordinates");
 
   s.section("model", "the particle model: cohesion (paper eq. 1-4), fill and relaxation")
-      .number("radius_mm", 1.85, "mm", 0.0, 100.0,
-              "particle radius rho; the LJ equilibrium distance r0 is 2 rho", true)
-      .used_when({{"model.particles", {"0"}}})
       .integer("particles", 0, 0, 20000000,
                "about this many particles instead of radius_mm: the radius follows the body's "
-               "volume (0: radius_mm sets it)")
-      .number("cohesion_energy", 1.0, "E", 0.0, none, "well depth E0 of the LJ potential", true)
-      .integer("exponent_m", 6, 1, 63, "attractive exponent m of the LJ law")
-      .integer("exponent_n", 12, 2, 64, "repulsive exponent n of the LJ law (n > m)")
-      .number("cutoff_r0", 2.5, "r0", 1.0, 5.0, "cutoff of the pair force, in r0", true)
-      .number("floor_r0", 0.5, "r0", 0.0, 0.95,
-              "below this distance the repulsion is linearised (finite forces)", true)
-      .number("mass", 1.0, "M", 0.0, none, "mass of one particle", true)
-      .number("damping_ratio", 0.5, "", 0.0, none,
-              "damping K_a as a fraction of the critical 2 sqrt(k M) of one pair")
-      .number("pair_damping", 0.0, "M/s", 0.0, none,
-              "momentum-conserving pairwise damping coefficient (0 = off)")
-      .number("neighbour_skin_r0", 0.3, "r0", 0.0, 2.0, "Verlet skin of the neighbour list", true)
-      .number("time_step_fraction", 0.1, "", 0.0, 0.9,
-              "time step as a fraction of the stability limit 2 sqrt(M/k)", true)
-      .integer("relax_steps", 5000, 0, 10000000,
-               "most steps of the damped relaxation after filling")
-      .number("relax_tolerance", 1e-6, "E", 0.0, none,
-              "relaxation ends when kinetic energy per particle falls below this", true)
-      .flag("skeleton", true, "tie the particles to a medial skeleton that keeps the global shape")
-      .number("skeleton_stiffness", 0.2, "k", 0.0, none,
-              "skeleton stiffness k_s as a fraction of the LJ stiffness k = m n E0 / r0^2", true)
-      .number("skeleton_node_spacing_r0", 3.0, "r0", 0.0, none,
-              "distance between skeleton nodes on the medial axis", true)
-      .number("skeleton_overlap_r0", 0.5, "r0", 0.0, none,
-              "a particle also joins nodes this much farther than its nearest one");
+               "volume (0: radius_mm sets it)");
+  keys::model().declare(s);
   s.section("points", "attractive points: generated on a known deformation of the body, or read")
       .choice("source", "generate", {"generate", "file", "ultrasound"},
               "generate on the deformed body (truth known), read from points.file, or segment the "
@@ -143,36 +375,16 @@ config::Schema build_schema() {
                   "(source: file)",
                   false)
       .used_when({{"points.source", {"file"}}})
-      .integer("count", 87, 1, 100000, "number of points to generate")
-      .used_when({{"points.source", {"generate", "ultrasound"}}})
-      .number("noise_mm", 0.5, "mm", 0.0, 20.0, "Gaussian noise added to generated points")
-      .used_when({{"points.source", {"generate"}}})
-      .number("outlier_fraction", 0.0, "", 0.0, 0.5,
-              "fraction of generated points moved 5-15 mm off")
-      .used_when({{"points.source", {"generate"}}})
-      .choice("coverage", "full", {"full", "half"}, "surface the points cover (half: the +y side)")
-      .used_when({{"points.source", {"generate"}}})
-      .number("stretch", 1.0, "", 0.5, 2.0,
-              "volume-preserving stretch along x of the true deformation")
-      .used_when({{"points.source", {"generate"}}})
-      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
-      .number("bend_mm", 0.0, "mm", -30.0, 30.0,
-              "sideways (y) displacement of the ends in the true deformation")
-      .used_when({{"points.source", {"generate"}}})
-      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
-      .number("twist_deg", 0.0, "deg", -90.0, 90.0,
-              "turn of the ends about the x axis in the true deformation")
-      .used_when({{"points.source", {"generate"}}})
-      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
-      .number("indent_mm", 0.0, "mm", -20.0, 20.0,
-              "Gaussian column shift along y (rectal filling: < 0 moves it anteriorly)")
-      .used_when({{"points.source", {"generate"}}})
-      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
-      .number("push_mm", 0.0, "mm", -20.0, 20.0,
-              "Gaussian column shift along z (bladder push: < 0 moves it inferiorly)")
-      .used_when({{"points.source", {"generate"}}})
-      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
-      .number("bump_sigma_mm", 8.0, "mm", 1.0, 100.0, "width of the indent and push bumps", true)
+      .integer("count", evaluation::SamplingOptions{}.count, 1, 100000,
+               "number of points to generate")
+      .used_when({{"points.source", {"generate", "ultrasound"}}});
+  keys::points_sampling().declare(s);
+  s.choice("coverage", evaluation::SamplingOptions{}.half_coverage ? "half" : "full",
+           {"full", "half"}, "surface the points cover (half: the +y side)")
+      .used_when({{"points.source", {"generate"}}});
+  keys::points_deformation().declare(s);
+  s.number("twist_deg", evaluation::Deformation{}.twist_rad * 180 / M_PI, "deg", -90.0, 90.0,
+           "turn of the ends about the x axis in the true deformation")
       .used_when({{"points.source", {"generate"}}})
       .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
       .choice("target_shape", "same", {"same", "ellipsoid", "box", "egg", "lung"},
@@ -208,84 +420,41 @@ config::Schema build_schema() {
       .number("pixel_mm", 0.0, "mm", 0.0, 10.0,
               "pixel size of a DICOM image without a calibrated region (0: from it)")
       .used_when({{"ultrasound.source", {"dicom"}}})
-      .vec3("probe_offset_mm", Vector3d(0, 38, 0), "mm", none,
+      .vec3("probe_offset_mm", transrectal_probe_pose().position_mm, "mm", none,
             "probe position from the organ's centre (simulate)")
       .used_when({{"ultrasound.source", {"simulate"}}})
-      .vec3("probe_axis", Vector3d(0, -1, 0), "", none,
+      .vec3("probe_axis", transrectal_probe_pose().axis, "", none,
             "beam direction (simulate; default: anterior, transrectal)")
       .used_when({{"ultrasound.source", {"simulate"}}})
-      .vec3("probe_lateral", Vector3d(1, 0, 0), "", none,
+      .vec3("probe_lateral", transrectal_probe_pose().lateral, "", none,
             "image's lateral direction, perpendicular to the axis")
       .used_when({{"ultrasound.source", {"simulate"}}})
-      .number("probe_radius_mm", 12.0, "mm", 0.0, 50.0,
-              "imaging starts this far from the probe's centre (its face; it displaces rectal gas)")
-      .used_when({{"ultrasound.source", {"simulate"}}})
-      .number("max_depth_mm", 70.0, "mm", 10.0, 300.0,
-              "imaging depth from the probe's centre (simulate)")
-      .used_when({{"ultrasound.source", {"simulate"}}})
-      .number("half_angle_deg", 50.0, "deg", 5.0, 80.0,
-              "half-angle of the field of view (simulate)")
-      .used_when({{"ultrasound.source", {"simulate"}}})
-      .number("speckle", 1.0, "", 0.0, 1.0,
-              "speckle level: 0 none, 1 fully developed Rayleigh (simulate)")
-      .used_when({{"ultrasound.source", {"simulate"}}})
-      .number("voxel_mm", 0.5, "mm", 0.1, 5.0, "voxel size of the simulated volume", true)
-      .used_when({{"ultrasound.source", {"simulate"}}})
-      .integer("rays", 2000, 16, 100000, "edge-search rays from the organ's centre")
-      .number("band_mm", 8.0, "mm", 1.0, 100.0,
-              "search band around the model's surface along each ray")
-      .number("smoothing_mm", 1.0, "mm", 0.0, 10.0,
-              "Gaussian speckle reduction before the edge search")
-      .number("mad_threshold", 3.0, "", 1.0, 20.0,
-              "a ray's boundary radius this many MADs off its neighbours' is rejected")
-      .text("save_volume", "",
-            "file name inside --out for the ultrasound volume used (.mha, .nrrd; empty: none)");
+      .number("half_angle_deg", tissue_class_simulator_options().lateral_half_angle_deg, "deg", 5.0,
+              80.0, "half-angle of the field of view (simulate)")
+      .used_when({{"ultrasound.source", {"simulate"}}});
+  keys::ultrasound_simulator().declare(s, tissue_class_simulator_options());
+  keys::ultrasound_boundary().declare(s);
+  s.text("save_volume", "",
+         "file name inside --out for the ultrasound volume used (.mha, .nrrd; empty: none)");
 
   s.section("fit", "deform the model onto the attractive points (paper s.3)")
       .choice("method", "spread", {"paper", "spread"},
-              "paper = the literal method with METHOD s.8's fixes; spread = ours (docs/method.md)")
+              "paper = the literal method with METHOD s.8's fixes (fit.paper); spread = ours "
+              "(fit.spread, docs/method.md)")
       .flag("measure_truth", true,
             "measure the fit against the known deformation the points came from (run.json "
             "truth; 0.5 mm voxels over the organ: tens of seconds for a lung)")
       .used_when({{"points.source", {"generate"}}})
-      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}})
-      .number("residual_tolerance_mm", 0.5, "mm", 0.0, none,
-              "converged when the mean data residual is at most this", true)
-      .number("residual_max_tolerance_mm", 0.0, "mm", 0.0, none,
-              "... and the 95th percentile at most this (0 = the particle radius)")
-      .integer("max_steps", 20000, 1, 100000000, "step budget")
-      .number("max_wall_s", 60.0, "s", 0.0, none, "wall-time budget", true)
-      .integer("record_every", 20, 1, 100000, "steps between history rows")
-      .number("damping_ratio", 0.5, "", 0.0, none, "damping during the fit, fraction of critical",
-              true)
-      .number("kinetic_tolerance", 1e-4, "E", 0.0, none,
-              "settled when KE per particle is below this", true)
-      .number("alpha", 2.0, "", 1.0, 20.0, "fall-off exponent alpha_k of eq. 5")
-      .used_when({{"fit.method", {"paper"}}})
-      .number("influence_radius_min_r0", 1.2, "r0", 0.0, none, "influence radius at contact", true)
-      .used_when({{"fit.method", {"paper"}}})
-      .number("influence_growth", 0.5, "", 0.0, none, "extra influence radius per mm of distance")
-      .used_when({{"fit.method", {"paper"}}})
-      .number("influence_radius_max_r0", 4.0, "r0", 0.0, none, "bound on the influence radius",
-              true)
-      .used_when({{"fit.method", {"paper"}}})
-      .number("total_force_factor", 3.0, "", 1.0, none, "a point's total force <= this x F_max_k")
-      .used_when({{"fit.method", {"paper"}}})
-      .number("outlier_distance_mm", 0.0, "mm", 0.0, none,
-              "reject points farther than this from the model (0 = half its diameter)")
-      .used_when({{"fit.method", {"paper"}}})
-      .number("skin_voxel_r0", 0.5, "r0", 0.0, none, "voxel size of skin detection (0.5 r0 = rho)",
-              true)
-      .number("max_global_stretch", 1.5, "", 1.0, 10.0,
-              "spread: refuse points that ask the whole organ to stretch more than this")
-      .used_when({{"fit.method", {"spread"}}})
-      .number("unseen_change_sd_mm", 1.7, "mm", 0.0, 50.0,
-              "the uncertainty's prior: how far the surface may change locally where no point "
-              "is (1.7 mm: the prostate between fractions, Nakazawa et al. 2015)",
-              true)
-      .number("global_shear_field_mm", 10.0, "mm", 0.0, 100.0,
-              "spread: width of the smooth shears the global map may add (0 = none)")
-      .used_when({{"fit.method", {"spread"}}});
+      .used_when({{"points.source", {"ultrasound"}}, {"ultrasound.source", {"simulate"}}});
+  keys::fit().declare(s);
+  s.subsection("paper", "the paper's attractive force (eq. 5-6, METHOD s.8's fixes)",
+               {{"fit.method", {"paper"}}});
+  keys::fit_paper().declare(s);
+  s.subsection("spread",
+               "our method: a volume-preserving global map, then local patches (docs/method.md)",
+               {{"fit.method", {"spread"}}});
+  keys::fit_spread_global().declare(s);
+  keys::fit_spread_local().declare(s);
   s.section("network", "organfit on the DICOM network: for ct.node, organ.node, export.send_to")
       .text("aet", dicomnet::NetworkOptions{}.calling_aet,
             "our own AE title, as the nodes know us (1-16 characters)")
@@ -302,7 +471,7 @@ config::Schema build_schema() {
             "DICOM Deformable Spatial Registration file name inside --out: the same field, "
             "on the planning CT's grid and Frame of Reference (empty: none)")
       .number(
-          "field_spacing_mm", 0.0, "mm", 0.0, 50.0,
+          "field_spacing_mm", ExportRequest{}.field_spacing_mm, "mm", 0.0, 50.0,
           "grid of the displacement field, registration and Jacobian: 0, the planning CT's; "
           "else this spacing on every axis over the CT's box (warp with plastimatch --fixed CT)")
       .text("jacobian", "",
@@ -318,7 +487,7 @@ config::Schema build_schema() {
       .flag("copy_other_rois", false,
             "copy the organ's structure set's other ROIs into the exported one (not the "
             "fitted ROI's source, which it replaces)")
-      .flag("fixed_uids", false,
+      .flag("fixed_uids", ExportRequest{}.fixed_uids,
             "derive the RT Structure Set's UIDs from the CT's and fix its dates (tests)")
       .text("model", "",
             "model file name inside --out (empty: none): the model as built, or as fitted, "
@@ -547,6 +716,17 @@ void check_scene_rules(const config::Scene& scene) {
       scene.fail("report", "file", "a file name inside --out, without folders");
     if (scene.flag("report", "show_patient") && !has_ct && !scene.has_section("planning"))
       scene.fail("report", "show_patient", "the patient's name comes from the CT: there is none");
+  }
+  if (scene.has_section("fit") && scene.text("fit", "method") == "paper") {
+    const double low = scene.number("fit.paper", "influence_radius_min_r0");
+    const double high = scene.number("fit.paper", "influence_radius_max_r0");
+    if (low > high)
+      scene.fail("fit.paper",
+                 scene.is_given("fit.paper", "influence_radius_max_r0") ? "influence_radius_max_r0"
+                                                                        : "influence_radius_min_r0",
+                 fmt::format("the influence radius's bound ({} r0) is below its value at contact "
+                             "({} r0)",
+                             high, low));
   }
   if (scene.has_section("fit")) {
     if (!has_model) scene.fail("fit", "method", "a fit needs a 'model' (or 'planning') section");

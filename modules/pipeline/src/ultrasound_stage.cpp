@@ -11,6 +11,7 @@
 #include "organfit/dicom/us_image.h"
 #include "organfit/itkbridge/itk_images.h"
 #include "organfit/phantom/pelvis.h"
+#include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
 #include "organfit/support/resources.h"
 #include "organfit/ultrasound/boundary_points.h"
@@ -65,7 +66,16 @@ ultrasound::SimulatorOptions tissue_class_simulator_options() {
   so.echogenicity[4] = 0.5f;
   so.echogenicity[5] = 0.7f, so.echogenicity[6] = 1.0f, so.echogenicity[7] = 0.3f;
   so.organ_label = 7;
+  so.probe_radius_mm = 12;  // a transrectal probe's face: it displaces the rectal gas
   return so;
+}
+
+ultrasound::ProbePose transrectal_probe_pose() {
+  ultrasound::ProbePose pose;
+  pose.position_mm = Eigen::Vector3d(0, 38, 0);  // in the rectum, posterior of the prostate
+  pose.axis = Eigen::Vector3d(0, -1, 0);         // the beam anterior
+  pose.lateral = Eigen::Vector3d(1, 0, 0);
+  return pose;
 }
 
 ultrasound::TissueAt deformed_anatomy(const geometry::LabelVolume& tissue,
@@ -117,13 +127,10 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene,
     probe.position_mm = model.shape.centre_mm + scene.vec3("ultrasound", "probe_offset_mm");
     probe.axis = scene.vec3("ultrasound", "probe_axis").normalized();
     probe.lateral = scene.vec3("ultrasound", "probe_lateral").normalized();
-    ultrasound::SimulatorOptions so = tissue_class_simulator_options();
-    so.probe_radius_mm = scene.number("ultrasound", "probe_radius_mm");
-    so.max_depth_mm = scene.number("ultrasound", "max_depth_mm");
+    ultrasound::SimulatorOptions so =
+        keys::ultrasound_simulator().read(scene, tissue_class_simulator_options());
     so.lateral_half_angle_deg = so.elevation_half_angle_deg =
         scene.number("ultrasound", "half_angle_deg");
-    so.speckle = scene.number("ultrasound", "speckle");
-    so.voxel_mm = scene.number("ultrasound", "voxel_mm");
     so.seed = static_cast<std::uint64_t>(scene.integer("scene", "seed"));
     ultrasound::SimulatedUltrasound sim;
     try {
@@ -189,15 +196,11 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene,
     }
   }
   Stopwatch clock;
-  ultrasound::BoundaryOptions bo;
+  ultrasound::BoundaryOptions bo = keys::ultrasound_boundary().read(scene);
   bo.centre_mm = model.shape.centre_mm;
-  bo.r_max_mm = 0.5 * model.shape.size_mm.maxCoeff() + scene.number("ultrasound", "band_mm");
-  bo.band_mm = scene.number("ultrasound", "band_mm");
+  bo.r_max_mm = 0.5 * model.shape.size_mm.maxCoeff() + bo.band_mm;
   const geometry::Shape& prior = model.shape;
   bo.prior_inside = [&prior](const Eigen::Vector3d& p) { return prior.inside(p); };
-  bo.rays = static_cast<int>(scene.integer("ultrasound", "rays"));
-  bo.smoothing_mm = scene.number("ultrasound", "smoothing_mm");
-  bo.mad_threshold = scene.number("ultrasound", "mad_threshold");
   bo.target_count = static_cast<int>(scene.integer("points", "count"));
   ultrasound::BoundaryResult found;
   try {

@@ -2,6 +2,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_stage.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
@@ -34,6 +35,50 @@ TEST(SceneRules, CutoffMustExceedRMin) {
   EXPECT_EQ(error_of("body:\nmodel:\n  cutoff_r0: 1.05\n"),
             "/s.yaml:3: model.cutoff_r0: must exceed r_min = 1.1087 r0 for m=6, n=12, else "
             "nothing holds the body together");
+}
+
+TEST(SceneRules, ThePaperForcesInfluenceBoundIsNotBelowItsStart) {
+  EXPECT_EQ(error_of("body:\nmodel:\npoints:\nfit:\n  method: paper\n  paper:\n"
+                     "    influence_radius_max_r0: 1.0\n"),
+            "/s.yaml:7: fit.paper.influence_radius_max_r0: the influence radius's bound (1 r0) "
+            "is below its value at contact (1.2 r0)");
+}
+
+// Each method's settings are the scene's: a default scene gives the option structs'
+// own defaults, and a key of fit.spread reaches the field it names.
+TEST(SceneSchema, TheFitsOptionsAreTheStructsDefaultsAndTheScenesValues) {
+  const config::Scene defaults = parse("body:\nmodel:\npoints:\nfit:\n");
+  const fitting::SpreadFitOptions d = spread_fit_options_from(defaults);
+  const fitting::SpreadFitOptions s0;
+  EXPECT_EQ(d.fit.residual_tolerance_mm, s0.fit.residual_tolerance_mm);
+  EXPECT_EQ(d.fit.max_steps, s0.fit.max_steps);
+  EXPECT_EQ(d.fit.unseen_change_sd_mm, s0.fit.unseen_change_sd_mm);
+  EXPECT_EQ(d.global.max_stretch, s0.global.max_stretch);
+  EXPECT_EQ(d.global.regularisation_alternative, s0.global.regularisation_alternative);
+  EXPECT_EQ(d.global.max_shear_mm, s0.global.max_shear_mm);
+  EXPECT_EQ(d.local.patch_sigma_r0, s0.local.patch_sigma_r0);
+  EXPECT_EQ(d.local.consistency_neighbours, s0.local.consistency_neighbours);
+  EXPECT_EQ(d.local.hold_volume, s0.local.hold_volume);
+  const config::Scene tuned = parse(
+      "body:\nmodel:\npoints:\nfit:\n  max_wall_s: 20\n  spread:\n    global_iterations: 30\n"
+      "    global_few_points_shear_stiffness: 5\n    local_patch_sigma_r0: 2.5\n"
+      "    local_hold_volume: false\n    consistency_neighbours: 12\n");
+  const fitting::SpreadFitOptions t = spread_fit_options_from(tuned);
+  EXPECT_EQ(t.fit.max_wall_s, 20.0);
+  EXPECT_EQ(t.global.iterations, 30);
+  EXPECT_EQ(t.global.few_points_shear_stiffness, 5.0);
+  EXPECT_EQ(t.local.patch_sigma_r0, 2.5);
+  EXPECT_FALSE(t.local.hold_volume);
+  EXPECT_EQ(t.local.consistency_neighbours, 12);
+  // resolved.yaml holds them: it parses back to the same settings.
+  const config::Scene again =
+      config::parse_scene(tuned.resolved_yaml(), "/resolved.yaml", scene_schema());
+  EXPECT_EQ(again.to_json(), tuned.to_json());
+  EXPECT_EQ(spread_fit_options_from(again).local.patch_sigma_r0, 2.5);
+  const fitting::PaperFitOptions p = paper_fit_options_from(
+      parse("body:\nmodel:\npoints:\nfit:\n  method: paper\n  paper:\n    alpha: 3\n"));
+  EXPECT_EQ(p.force.alpha, 3.0);
+  EXPECT_EQ(p.force.first_shell_r0, fitting::PaperForceParams{}.first_shell_r0);
 }
 
 TEST(SceneSchema, EveryKeyHasADocAndDefaultsPassTheirOwnRules) {

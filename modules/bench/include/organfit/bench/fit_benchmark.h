@@ -32,7 +32,7 @@
 // prostate up to 2 mm); with --fem, fem_probe and fem_bladder: the organ deformed by a FEM
 // engine (pipeline/fem_cases.h), whose own volume change is the row's
 // truth_volume_change_pct.
-// The particle fits run with the scene defaults except fit.max_global_stretch: 2 (the
+// The particle fits run with the scene defaults except fit.spread.max_global_stretch: 2 (the
 // grid stretches a 30 mm cube by up to 2x; the default 1.5 would refuse it) and
 // fit.max_wall_s: 20.
 // Work precision: each method also runs at other settings of its effort (TPS 1, 2 and

@@ -19,8 +19,11 @@ class Scene {
   const std::filesystem::path& file() const { return file_; }
   const Schema& schema() const { return *schema_; }
 
+  /// A sub-section ("fit.paper") is there whenever its parent is.
   bool has_section(const std::string& section) const { return sections_.count(section) > 0; }
   const std::set<std::string>& sections() const { return sections_; }
+  /// The sections written in the scene (or by --set), sub-sections included.
+  const std::set<std::string>& given_sections() const { return given_sections_; }
   /// True when the key was written in the scene (not defaulted).
   bool is_given(const std::string& section, const std::string& name) const;
 
@@ -34,9 +37,14 @@ class Scene {
   Eigen::Vector3d vec3(const std::string& section, const std::string& name) const;
   Eigen::Matrix4d matrix4(const std::string& section, const std::string& name) const;
 
-  /// The first condition of `spec.used_when` this scene does not meet (nullptr: the run
-  /// uses the key).
+  /// The first condition of the key's section (and its parents) or of `spec.used_when`
+  /// this scene does not meet (nullptr: the run uses the key).
   const UseCondition* unmet_condition(const ParamSpec& spec) const;
+  /// The first condition of a section or its parents this scene does not meet.
+  const UseCondition* unmet_section_condition(const std::string& section) const;
+  /// When the run uses a section's keys, or a key: "fit.method: paper", for messages.
+  std::string used_when_text(const SectionSpec& section) const;
+  std::string used_when_text(const ParamSpec& spec) const;
   /// Line (1-based) where the key was given, or where its section starts when defaulted.
   int line_of(const std::string& section, const std::string& name) const;
   /// Throws InputError "file:line: section.name: reason" (for cross-key rules).
@@ -46,7 +54,7 @@ class Scene {
   /// The fully resolved scene as YAML: every key of each present section, with
   /// defaults filled in and the unit and doc as comments.
   std::string resolved_yaml() const;
-  /// The same values as JSON {section: {key: value}}.
+  /// The same values as JSON {section: {key: value, subsection: {key: value}}}.
   nlohmann::json to_json() const;
 
  private:
@@ -59,10 +67,12 @@ class Scene {
     std::string set_on_command_line;  ///< "section.key=value" when --set gave it
   };
   const Entry& entry(const std::string& section, const std::string& name, ParamType type) const;
+  bool holds(const UseCondition& c) const;
 
   std::filesystem::path file_;
   const Schema* schema_ = nullptr;
   std::set<std::string> sections_;
+  std::set<std::string> given_sections_;
   std::map<std::string, int> section_lines_;
   std::map<std::string, Entry> entries_;  // by "section.name"
 };

@@ -2,8 +2,10 @@
 // The scene schema: every scene key declared once, with its type, default, unit,
 // allowed range and a one-line doc. `organfit schema` prints it; loading enforces it.
 //
-// A scene is YAML with two levels, `section: {key: value}`. A section names a stage
-// or a part of the model; scenes name only the sections they use (SOFA-like).
+// A scene is YAML, `section: {key: value}`. A section names a stage or a part of the
+// model; scenes name only the sections they use (SOFA-like). A section may hold
+// sub-sections ("fit.paper" is `fit: {paper: {key: value}}`): one method's settings
+// within its stage.
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -61,9 +63,21 @@ struct ParamSpec {
 };
 
 struct SectionSpec {
-  std::string name;
+  std::string name;  ///< "fit", or "fit.paper" for a sub-section of "fit"
   std::string doc;
-  bool always_present = false;  ///< its defaults apply even when the scene omits it
+  /// Its defaults apply even when the scene omits it (a sub-section: whenever its
+  /// parent is there).
+  bool always_present = false;
+  /// The run uses the section's keys only when all of these hold (empty: always); a
+  /// key of it given when one fails is refused.
+  std::vector<UseCondition> used_when;
+
+  /// "fit" for "fit.paper"; "" for a top-level section.
+  std::string parent() const;
+  /// "paper" for "fit.paper"; the name itself for a top-level section.
+  std::string leaf() const;
+  /// Depth below the top level: 0 for "fit", 1 for "fit.paper".
+  int depth() const;
 };
 
 /// The declared keys, grouped by section, in declaration order.
@@ -72,6 +86,11 @@ class Schema {
   /// Declares a section; keys added after it belong to it. An `always_present`
   /// section (run-wide settings) takes its defaults when a scene does not name it.
   Schema& section(const std::string& name, const std::string& doc, bool always_present = false);
+  /// Declares "parent.name", a sub-section of the last declared top-level section: its
+  /// defaults apply whenever the parent is present, and its keys are used only when
+  /// all of `used_when` hold (e.g. fit.paper only with fit.method: paper).
+  Schema& subsection(const std::string& name, const std::string& doc,
+                     std::vector<UseCondition> used_when = {});
   /// The last declared key is used only when all of `conditions` hold, or when another
   /// alternative given by a further call holds (e.g. `points.file` only with
   /// `points.source: file`).
@@ -100,6 +119,11 @@ class Schema {
   const std::vector<SectionSpec>& sections() const { return sections_; }
   const std::vector<ParamSpec>& params() const { return params_; }
   const SectionSpec* find_section(const std::string& name) const;
+  /// The sub-sections of `name`, in declaration order.
+  std::vector<const SectionSpec*> subsections_of(const std::string& name) const;
+  /// The section and key of a dotted key ("fit.paper.alpha" -> {"fit.paper", "alpha"}),
+  /// or nullptr when no declared key has that name.
+  const ParamSpec* find_key(const std::string& dotted) const;
   const ParamSpec* find(const std::string& section, const std::string& name) const;
   std::vector<const ParamSpec*> params_of(const std::string& section) const;
 

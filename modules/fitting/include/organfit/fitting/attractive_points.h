@@ -18,6 +18,10 @@ struct AttractivePoint {
 /// W(i) for every particle: neighbours within `shell_mm` (the first shell), O(N).
 std::vector<int> first_shell_counts(const particles::Positions& x, double shell_mm);
 
+/// The first shell of a relaxed fcc lattice, in r0: its 12 neighbours lie within this,
+/// the next shell (at sqrt(2) times the spacing) beyond.
+constexpr double kFirstShellR0 = 1.3;
+
 /// Scales the data force on each particle down to at most W(i) F_max / 2 (paper s.3.3:
 /// what a particle's neighbours can hold), so that however many points pull on one
 /// particle, it is not torn off. `touched` lists the particles that got data forces.
@@ -76,6 +80,36 @@ struct PointStatus {
   double f_max_k = 0;  ///< force on the epicentre when the point was assigned
 };
 
+/// What the attractive forces (the paper's and ours) share: the points, the model's
+/// radius rho, r0 and F_max (mm, mm, force units), its skin, each point's status at the
+/// last evaluation, and W(i), each particle's first-shell count at the last assignment
+/// (for the cap W(i) F_max / 2 of paper s.3.3).
+class AttractivePointTerm : public particles::ForceTerm {
+ public:
+  bool conservative() const override { return false; }
+
+  const std::vector<AttractivePoint>& points() const { return points_; }
+  const std::vector<PointStatus>& status() const { return status_; }
+  const SkinDetector& skin() const { return skin_; }
+  double f_max() const { return f_max_; }
+
+ protected:
+  /// Throws std::invalid_argument on a bad point (validate_points).
+  AttractivePointTerm(std::vector<AttractivePoint> points, const particles::LennardJones& law,
+                      double radius_mm, double skin_voxel_mm, double first_shell_r0);
+  /// W(i) at `x`: neighbours within first_shell_r0 r0.
+  void count_first_shells(const particles::Positions& x);
+
+  std::vector<AttractivePoint> points_;
+  double rho_, r0_, f_max_;
+  SkinDetector skin_;
+  std::vector<PointStatus> status_;
+  std::vector<int> w_;
+
+ private:
+  double first_shell_mm_;
+};
+
 struct PaperForceParams {
   double alpha = 2.0;                    ///< fall-off exponent alpha_k (> 1: falls off)
   double influence_radius_min_r0 = 1.2;  ///< influence radius at d_min = rho, in r0
@@ -84,7 +118,7 @@ struct PaperForceParams {
   double total_force_factor = 3.0;       ///< a point's total force <= this x its F_max_k
   double outlier_distance_mm =
       0.0;  ///< reject points farther than this from the skin (0: 0.5 x model diameter)
-  double first_shell_r0 = 1.3;  ///< W(i) counts neighbours within this distance
+  double first_shell_r0 = kFirstShellR0;  ///< W(i) counts neighbours within this distance
 };
 
 /// The paper's attractive force, with the fixes METHOD.md s.8 calls for:
@@ -106,7 +140,7 @@ struct PaperForceParams {
 ///    farther than outlier_distance from the skin are rejected: a far outlier can
 ///    neither drag nor tear the body.
 /// The paper's damping -K_a v is the integrator's (IntegratorOptions::damping).
-class PaperAttractiveForce : public particles::ForceTerm {
+class PaperAttractiveForce : public AttractivePointTerm {
  public:
   /// Throws std::invalid_argument on bad points or parameters (alpha < 1, ...).
   PaperAttractiveForce(std::vector<AttractivePoint> points, const particles::LennardJones& law,
@@ -114,23 +148,12 @@ class PaperAttractiveForce : public particles::ForceTerm {
 
   std::string name() const override { return "attractive_points_paper"; }
   double add_forces(const particles::State& state, particles::Forces& f, bool want_energy) override;
-  bool conservative() const override { return false; }
-
-  const std::vector<AttractivePoint>& points() const { return points_; }
-  const std::vector<PointStatus>& status() const { return status_; }
-  const SkinDetector& skin() const { return skin_; }
-  double f_max() const { return f_max_; }
 
  private:
   void assign(const particles::Positions& x);
-  std::vector<AttractivePoint> points_;
-  double rho_, r0_, f_max_;
   PaperForceParams params_;
-  SkinDetector skin_;
-  std::vector<PointStatus> status_;
   std::vector<std::vector<int>> influence_;
   std::vector<double> k_;  // K_k of eq. 6
-  std::vector<int> w_;     // W(i) at the last assignment
   particles::Forces g_;    // this term's forces, before the per-particle cap
   std::vector<int> touched_;
 };

@@ -28,21 +28,21 @@
 
 namespace organfit::fitting {
 
-/// Settings both fits share (the scene's fit keys of the same names, where their units
-/// and defaults are declared).
+/// The fit loop's settings, either method's (the scene's `fit` section; these defaults are
+/// the scene's, pipeline/scene_schema.cpp declares the keys from them).
 struct OrganFitOptions {
-  double damping_ratio = 0;  ///< of critical damping, during the fit
-  double skin_voxel_r0 = 0;  ///< voxel of the skin detector (r0)
+  double damping_ratio = 0.5;  ///< of critical damping, during the fit
+  double skin_voxel_r0 = 0.5;  ///< voxel of the skin detector (r0; 0.5 r0 = rho)
   /// On the mean residual (mm), beside the model's own residual floor (in quadrature).
-  double residual_tolerance_mm = 0;
-  double residual_max_tolerance_mm = 0;  ///< on the largest residual (mm)
-  double kinetic_tolerance = 0;          ///< kinetic energy per particle at rest (E0)
-  long long max_steps = 0;
-  double max_wall_s = 0;
-  int record_every = 0;  ///< steps between history rows
+  double residual_tolerance_mm = 0.5;
+  double residual_max_tolerance_mm = 0.0;  ///< on the 95th percentile (mm; 0: the radius)
+  double kinetic_tolerance = 1e-4;         ///< kinetic energy per particle at rest (E0)
+  long long max_steps = 20000;
+  double max_wall_s = 60.0;
+  int record_every = 20;  ///< steps between history rows
   /// The prior standard deviation (mm) of the local change where no point is, for the
   /// fit's uncertainty (surface_uncertainty.h).
-  double unseen_change_sd_mm = 0;
+  double unseen_change_sd_mm = 1.7;
 };
 
 struct PaperFitOptions {
@@ -52,7 +52,9 @@ struct PaperFitOptions {
 
 struct SpreadFitOptions {
   OrganFitOptions fit;
-  AffineFitOptions global;  ///< the global stage's map (its noise: the points' noise, mm)
+  /// The global stage's map. Its noise_mm is not read: the points' noise is what the fit
+  /// accepts, fit.residual_tolerance_mm.
+  AffineFitOptions global;
   SpreadForceParams local;  ///< the local stage's patches
 };
 

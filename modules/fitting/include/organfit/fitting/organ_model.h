@@ -17,18 +17,20 @@
 
 namespace organfit::fitting {
 
-/// What a model is built with (the scene's `model` keys; meanings and units in
-/// pipeline/scene_schema.cpp), kept with it so that a saved model rebuilds the same terms.
+/// What a model is built with (the scene's `model` section: its keys, units and docs in
+/// pipeline/scene_schema.cpp, their defaults these), kept with the model so that a saved
+/// model rebuilds the same terms.
 struct ModelSettings {
-  double radius_mm = 0, cohesion_energy = 0;
-  int exponent_m = 0, exponent_n = 0;
-  double cutoff_r0 = 0, floor_r0 = 0, mass = 0, damping_ratio = 0, pair_damping = 0;
-  double neighbour_skin_r0 = 0, time_step_fraction = 0;
-  long long relax_steps = 0;
-  double relax_tolerance = 0;
-  bool skeleton = false;
-  double skeleton_stiffness = 0, skeleton_node_spacing_r0 = 0, skeleton_overlap_r0 = 0;
-  std::uint64_t seed = 0;  ///< thermostat noise
+  double radius_mm = 1.85;  ///< particle radius rho; r0 = 2 rho
+  double cohesion_energy = 1.0;
+  int exponent_m = 6, exponent_n = 12;
+  double cutoff_r0 = 2.5, floor_r0 = 0.5, mass = 1.0, damping_ratio = 0.5, pair_damping = 0.0;
+  double neighbour_skin_r0 = 0.3, time_step_fraction = 0.1;
+  long long relax_steps = 5000;
+  double relax_tolerance = 1e-6;
+  bool skeleton = true;
+  double skeleton_stiffness = 0.2, skeleton_node_spacing_r0 = 3.0, skeleton_overlap_r0 = 0.5;
+  std::uint64_t seed = 1;  ///< thermostat noise
 };
 
 struct OrganModel {

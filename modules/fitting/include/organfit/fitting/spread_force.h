@@ -40,18 +40,15 @@ struct SpreadForceParams {
   bool hold_volume = true;            ///< take the patches' net outward push back over the skin
 };
 
-class SpreadAttractiveForce : public particles::ForceTerm {
+class SpreadAttractiveForce : public AttractivePointTerm {
  public:
+  /// Throws std::invalid_argument on bad points or parameters (a stiffness <= 0, ...).
   SpreadAttractiveForce(std::vector<AttractivePoint> points, const particles::LennardJones& law,
                         double radius_mm, const SpreadForceParams& params, double skin_voxel_mm);
 
   std::string name() const override { return "attractive_points_spread"; }
   double add_forces(const particles::State& state, particles::Forces& f, bool want_energy) override;
-  bool conservative() const override { return false; }
   double stiffness() const override { return kappa_; }
-
-  const SkinDetector& skin() const { return skin_; }
-  const std::vector<PointStatus>& status() const { return status_; }
 
   /// The organ's surface as each particle sees it (one column per particle; see
   /// fitting/embedded_body.h, surface_feet): a point's epicentre becomes the skin
@@ -62,14 +59,10 @@ class SpreadAttractiveForce : public particles::ForceTerm {
 
  private:
   void assign(const particles::Positions& x);
-  std::vector<AttractivePoint> points_;
-  double rho_, r0_, kappa_, f_max_;
+  double kappa_;
   SpreadForceParams params_;
-  SkinDetector skin_;
-  std::vector<PointStatus> status_;
   std::vector<std::vector<std::pair<int, double>>> patch_;  // (particle, weight) per point
   std::vector<std::vector<int>> neighbours_;  // each point's nearest points (fixed: points stay)
-  std::vector<int> w_;                        // W(i) at the last assignment
   SurfaceFeet feet_;                          // empty: the balls' surface
   std::vector<double> gap_;                   // each point's signed residual at assignment
   std::vector<Eigen::Vector3d> num_;

@@ -11,6 +11,8 @@
 #include <functional>
 #include <vector>
 
+#include "organfit/geometry/plain_image.h"
+
 namespace organfit::geometry {
 
 /// Axis-aligned box in mm.
@@ -103,5 +105,11 @@ void for_each_trilinear_corner(const Eigen::Vector3d& f, Visit&& visit) {
           (di ? f.x() : 1 - f.x()) * (dj ? f.y() : 1 - f.y()) * (dk ? f.z() : 1 - f.z()));
   }
 }
+
+/// The same grid and mask as plain arrays (plain_image.h), exactly, and back.
+PlainGeometry to_plain(const ImageGeometry& g);
+ImageGeometry from_plain(const PlainGeometry& g);
+PlainMask to_plain(const LabelVolume& labels);
+LabelVolume from_plain(const PlainMask& mask);
 
 }  // namespace organfit::geometry

@@ -9,10 +9,8 @@
 
 namespace organfit::itkbridge {
 
-PlainGeometry to_plain(const geometry::ImageGeometry& g);
-geometry::ImageGeometry from_plain(const PlainGeometry& g);
-PlainMask to_plain(const geometry::LabelVolume& labels);
-geometry::LabelVolume from_plain(const PlainMask& mask);
+using geometry::from_plain;  // ImageGeometry and LabelVolume <-> plain arrays
+using geometry::to_plain;
 
 /// write_mask / read_mask for a LabelVolume (geometry kept exactly).
 void write_label_volume(const std::filesystem::path& file, const geometry::LabelVolume& labels);

@@ -9,20 +9,12 @@
 #include <filesystem>
 #include <vector>
 
+#include "organfit/geometry/plain_image.h"
+
 namespace organfit::itkbridge {
 
-struct PlainGeometry {
-  std::array<int, 3> size{0, 0, 0};
-  std::array<double, 3> spacing_mm{1, 1, 1};
-  std::array<double, 3> origin_mm{0, 0, 0};
-  std::array<double, 9> direction{1, 0, 0, 0, 1, 0, 0, 0, 1};  ///< row-major
-  size_t voxel_count() const { return static_cast<size_t>(size[0]) * size[1] * size[2]; }
-};
-
-struct PlainMask {
-  PlainGeometry geometry;
-  std::vector<std::uint8_t> labels;  ///< i fastest
-};
+using geometry::PlainGeometry;
+using geometry::PlainMask;
 
 struct PlainFloatImage {
   PlainGeometry geometry;

@@ -6,14 +6,11 @@
 #include <string>
 #include <vector>
 
+#include "organfit/geometry/plain_image.h"
+
 namespace organfit::meshing {
 
-struct PlainMask {
-  std::array<int, 3> size{0, 0, 0};
-  std::array<double, 3> spacing_mm{1, 1, 1}, origin_mm{0, 0, 0};
-  std::array<double, 9> direction{1, 0, 0, 0, 1, 0, 0, 0, 1};  ///< row-major
-  std::vector<std::uint8_t> labels;                            ///< i fastest; 1 inside
-};
+using geometry::PlainMask;  // label 1 inside
 
 struct PlainSurfaceReport {
   long long points = 0, triangles = 0, boundary_edges = 0, non_manifold_edges = 0;

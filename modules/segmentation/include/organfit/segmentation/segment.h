@@ -19,7 +19,7 @@ namespace organfit::segmentation {
 
 struct SeedOptions {
   Eigen::Vector3d seed_mm = Eigen::Vector3d::Zero();  ///< patient coordinates (LPS)
-  double hu_low = 0, hu_high = 0;                     ///< window, HU
+  double hu_low = 20, hu_high = 80;                   ///< window, HU
   int smoothing_iterations = 5;
   int opening_radius_voxels = 1;
   double search_box_mm = 200;  ///< side of the cube around the seed grown in (0: the whole CT)

@@ -32,8 +32,8 @@ struct BoundaryOptions {
   Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();  ///< inside the organ (volume frame)
   double r_min_mm = 2, r_max_mm = 40;
   std::function<bool(const Eigen::Vector3d&)>
-      prior_inside;     ///< optional organ prior (volume frame)
-  double band_mm = 12;  ///< search band around the prior's surface
+      prior_inside;    ///< optional organ prior (volume frame)
+  double band_mm = 8;  ///< search band around the prior's surface (used with a prior)
   int rays = 2000;
   double smoothing_mm = 1.0;
   double mad_threshold = 3.0;
