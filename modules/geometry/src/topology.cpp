@@ -1,100 +1,188 @@
 #include "organfit/geometry/topology.h"
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
+#include <cstdlib>
+#include <numeric>
 #include <vector>
 
 namespace organfit::geometry {
+namespace {
 
-Topology topology_of(const LabelVolume& mask) {
-  const IndexRange box = mask.range(1);
-  const std::array<int, 3>&lo = box.lo, &hi = box.hi;
-  Topology t;
-  if (box.empty()) return t;
-  // The box plus a layer of background all round (outside the grid counts as
-  // background), so that the outside is one 6-connected piece touching the box's border.
-  int n[3];
-  for (int d = 0; d < 3; ++d)
-    n[d] = hi[d] - lo[d] + 3;
-  const long long total = 1LL * n[0] * n[1] * n[2];
-  std::vector<std::uint8_t> in(static_cast<size_t>(total), 0);
-  for (int k = 1; k + 1 < n[2]; ++k)
-    for (int j = 1; j + 1 < n[1]; ++j)
-      for (int i = 1; i + 1 < n[0]; ++i)
-        in[static_cast<size_t>(i + 1LL * n[0] * (j + 1LL * n[1] * k))] =
-            mask.at(lo[0] + i - 1, lo[1] + j - 1, lo[2] + k - 1) == 1;
-  std::vector<std::uint8_t> seen(static_cast<size_t>(total), 0);
-  std::vector<long long> stack;
-  // Flood fill from v over voxels whose `in` is `value`, with 26 or 6 neighbours; returns
-  // the piece's size and whether it reaches the box's border.
-  auto fill = [&](long long v, std::uint8_t value, bool full) {
-    long long size = 0;
-    bool border = false;
-    stack.assign(1, v);
-    seen[static_cast<size_t>(v)] = 1;
-    while (!stack.empty()) {
-      const long long w = stack.back();
-      stack.pop_back();
-      ++size;
-      const int i = static_cast<int>(w % n[0]), j = static_cast<int>((w / n[0]) % n[1]),
-                k = static_cast<int>(w / (1LL * n[0] * n[1]));
-      if (i == 0 || j == 0 || k == 0 || i == n[0] - 1 || j == n[1] - 1 || k == n[2] - 1)
-        border = true;
-      for (int dk = -1; dk <= 1; ++dk)
-        for (int dj = -1; dj <= 1; ++dj)
-          for (int di = -1; di <= 1; ++di) {
-            const int steps = std::abs(di) + std::abs(dj) + std::abs(dk);
-            if (steps == 0 || (!full && steps > 1)) continue;
-            const int a = i + di, b = j + dj, c = k + dk;
-            if (a < 0 || b < 0 || c < 0 || a >= n[0] || b >= n[1] || c >= n[2]) continue;
-            const long long u = a + 1LL * n[0] * (b + 1LL * n[1] * c);
-            if (seen[static_cast<size_t>(u)] || in[static_cast<size_t>(u)] != value) continue;
-            seen[static_cast<size_t>(u)] = 1;
-            stack.push_back(u);
-          }
-    }
-    return std::make_pair(size, border);
+/// The connected pieces of a mask's label 1 (26-connected) and of the rest (6-connected),
+/// on the box of its voxels plus a layer of background all round (outside the grid counts
+/// as background), so that the outside is one piece touching the box's border.
+struct Pieces {
+  IndexRange box;
+  int n[3] = {0, 0, 0};
+  std::vector<int> id;  ///< each padded voxel's piece
+  struct Piece {
+    bool organ = false;   ///< a piece of label 1, or of the rest
+    bool border = false;  ///< reaches the padded box's border (the outside)
+    long long size = 0;   ///< voxels
   };
-  for (long long v = 0; v < total; ++v) {
-    if (seen[static_cast<size_t>(v)]) continue;
-    if (in[static_cast<size_t>(v)]) {
-      ++t.components;
-      t.single_voxel_components += fill(v, 1, true).first == 1;
-    } else {
-      const auto [size, border] = fill(v, 0, false);
-      if (border) continue;
-      ++t.cavities;
-      t.single_voxel_cavities += size == 1;
+  std::vector<Piece> pieces;
+
+  explicit Pieces(const LabelVolume& mask) : box(mask.range(1)) {
+    if (box.empty()) return;
+    for (int d = 0; d < 3; ++d)
+      n[d] = box.hi[d] - box.lo[d] + 3;
+    const long long total = 1LL * n[0] * n[1] * n[2];
+    std::vector<std::uint8_t> in(static_cast<size_t>(total), 0);
+    for (int k = 1; k + 1 < n[2]; ++k)
+      for (int j = 1; j + 1 < n[1]; ++j)
+        for (int i = 1; i + 1 < n[0]; ++i)
+          in[index(i, j, k)] =
+              mask.at(box.lo[0] + i - 1, box.lo[1] + j - 1, box.lo[2] + k - 1) == 1;
+    id.assign(static_cast<size_t>(total), -1);
+    std::vector<long long> stack;
+    for (long long v = 0; v < total; ++v) {
+      if (id[static_cast<size_t>(v)] >= 0) continue;
+      const bool organ = in[static_cast<size_t>(v)];
+      Piece p{organ, false, 0};
+      const int label = static_cast<int>(pieces.size());
+      stack.assign(1, v);
+      id[static_cast<size_t>(v)] = label;
+      while (!stack.empty()) {
+        const long long w = stack.back();
+        stack.pop_back();
+        ++p.size;
+        const int i = static_cast<int>(w % n[0]), j = static_cast<int>((w / n[0]) % n[1]),
+                  k = static_cast<int>(w / (1LL * n[0] * n[1]));
+        if (i == 0 || j == 0 || k == 0 || i == n[0] - 1 || j == n[1] - 1 || k == n[2] - 1)
+          p.border = true;
+        for (int dk = -1; dk <= 1; ++dk)
+          for (int dj = -1; dj <= 1; ++dj)
+            for (int di = -1; di <= 1; ++di) {
+              const int steps = std::abs(di) + std::abs(dj) + std::abs(dk);
+              if (steps == 0 || (!organ && steps > 1)) continue;
+              const int a = i + di, b = j + dj, c = k + dk;
+              if (a < 0 || b < 0 || c < 0 || a >= n[0] || b >= n[1] || c >= n[2]) continue;
+              const size_t u = index(a, b, c);
+              if (id[u] >= 0 || in[u] != organ) continue;
+              id[u] = label;
+              stack.push_back(static_cast<long long>(u));
+            }
+      }
+      pieces.push_back(p);
     }
   }
-  return t;
+  size_t index(int i, int j, int k) const {
+    return static_cast<size_t>(i + 1LL * n[0] * (j + 1LL * n[1] * k));
+  }
+  bool cavity(const Piece& p) const { return !p.organ && !p.border; }
+  Topology topology() const {
+    Topology t;
+    for (const Piece& p : pieces) {
+      if (p.organ) ++t.components, t.single_voxel_components += p.size == 1;
+      if (cavity(p)) ++t.cavities, t.single_voxel_cavities += p.size == 1;
+    }
+    return t;
+  }
+  /// Sets every voxel of the pieces `which` (flags by piece) to `label` in `mask`.
+  long long set(LabelVolume& mask, const std::vector<bool>& which, std::uint8_t label) const {
+    long long changed = 0;
+    for (int k = 1; k + 1 < n[2]; ++k)
+      for (int j = 1; j + 1 < n[1]; ++j)
+        for (int i = 1; i + 1 < n[0]; ++i)
+          if (which[static_cast<size_t>(id[index(i, j, k)])]) {
+            mask.at(box.lo[0] + i - 1, box.lo[1] + j - 1, box.lo[2] + k - 1) = label;
+            ++changed;
+          }
+    return changed;
+  }
+  /// The pieces of one kind beyond the `keep` largest, flagged; how many.
+  int smallest_beyond(bool want_cavities, int keep, std::vector<bool>& flags) const {
+    std::vector<int> of_kind;
+    for (size_t p = 0; p < pieces.size(); ++p)
+      if (want_cavities ? cavity(pieces[p]) : pieces[p].organ)
+        of_kind.push_back(static_cast<int>(p));
+    flags.assign(pieces.size(), false);
+    if (static_cast<int>(of_kind.size()) <= keep) return 0;
+    std::stable_sort(of_kind.begin(), of_kind.end(), [&](int a, int b) {
+      return pieces[static_cast<size_t>(a)].size > pieces[static_cast<size_t>(b)].size;
+    });
+    for (size_t q = static_cast<size_t>(std::max(keep, 0)); q < of_kind.size(); ++q)
+      flags[static_cast<size_t>(of_kind[q])] = true;
+    return static_cast<int>(of_kind.size()) - std::max(keep, 0);
+  }
+};
+
+/// One slice's one-pixel islands (label 1 with none of its 8 in-slice neighbours) and
+/// holes (not label 1 with its 4 in-slice neighbours all label 1), visited in order.
+template <class Visit>
+void for_each_speck(const LabelVolume& mask, int k, const IndexRange& r, Visit&& visit) {
+  const ImageGeometry& g = mask.geometry;
+  auto in = [&](int i, int j) {
+    return i >= 0 && j >= 0 && i < g.size[0] && j < g.size[1] && mask.at(i, j, k) == 1;
+  };
+  for (int j = r.lo[1]; j <= r.hi[1]; ++j)
+    for (int i = r.lo[0]; i <= r.hi[0]; ++i) {
+      if (in(i, j)) {
+        bool alone = true;
+        for (int dj = -1; dj <= 1 && alone; ++dj)
+          for (int di = -1; di <= 1 && alone; ++di)
+            if ((di || dj) && in(i + di, j + dj)) alone = false;
+        if (alone) visit(i, j, true);
+      } else if (in(i - 1, j) && in(i + 1, j) && in(i, j - 1) && in(i, j + 1)) {
+        visit(i, j, false);
+      }
+    }
+}
+
+}  // namespace
+
+Topology topology_of(const LabelVolume& mask) {
+  return Pieces(mask).topology();
 }
 
 std::vector<SliceSpecks> slice_specks(const LabelVolume& mask) {
-  const ImageGeometry& g = mask.geometry;
-  auto in = [&](int i, int j, int k) {
-    return i >= 0 && j >= 0 && i < g.size[0] && j < g.size[1] && mask.at(i, j, k) == 1;
-  };
   std::vector<SliceSpecks> out;
   const IndexRange r = mask.range(1);  // a speck lies within the organ's box
   if (r.empty()) return out;
   for (int k = r.lo[2]; k <= r.hi[2]; ++k) {
     SliceSpecks s{k, 0, 0};
-    for (int j = r.lo[1]; j <= r.hi[1]; ++j)
-      for (int i = r.lo[0]; i <= r.hi[0]; ++i) {
-        if (in(i, j, k)) {
-          bool alone = true;
-          for (int dj = -1; dj <= 1 && alone; ++dj)
-            for (int di = -1; di <= 1 && alone; ++di)
-              if ((di || dj) && in(i + di, j + dj, k)) alone = false;
-          s.islands += alone;
-        } else {
-          s.holes += in(i - 1, j, k) && in(i + 1, j, k) && in(i, j - 1, k) && in(i, j + 1, k);
-        }
-      }
+    for_each_speck(mask, k, r, [&](int, int, bool island) { island ? ++s.islands : ++s.holes; });
     if (s.islands || s.holes) out.push_back(s);
   }
   return out;
+}
+
+TopologyRepair restore_topology(LabelVolume& mask, const LabelVolume& planning) {
+  TopologyRepair repair;
+  // Slice by slice: one-pixel specks where the planning organ's slice has none of that kind.
+  const IndexRange r = mask.range(1);
+  if (r.empty() || planning.range(1).empty()) return repair;
+  std::vector<SliceSpecks> planned(static_cast<size_t>(mask.geometry.size[2]));
+  for (const SliceSpecks& s : slice_specks(planning))
+    if (s.k >= 0 && s.k < mask.geometry.size[2]) planned[static_cast<size_t>(s.k)] = s;
+  for (int k = r.lo[2]; k <= r.hi[2]; ++k) {
+    const SliceSpecks& p = planned[static_cast<size_t>(k)];
+    std::vector<std::array<int, 3>> flips;  // i, j, new label
+    for_each_speck(mask, k, r, [&](int i, int j, bool island) {
+      if (island && p.islands == 0) flips.push_back({i, j, 0}), ++repair.slice_islands_removed;
+      if (!island && p.holes == 0) flips.push_back({i, j, 1}), ++repair.slice_holes_filled;
+    });
+    for (const auto& f : flips)
+      mask.at(f[0], f[1], k) = static_cast<std::uint8_t>(f[2]);
+    repair.voxels_changed += static_cast<long long>(flips.size());
+  }
+  // In 3D: pieces beyond the planning organ's count removed, smallest first; then (the
+  // pieces removed may have sat in a cavity) cavities beyond its count filled, smallest first.
+  const Topology want = topology_of(planning);
+  std::vector<bool> flags;
+  {
+    const Pieces pieces(mask);
+    if ((repair.components_removed = pieces.smallest_beyond(false, want.components, flags)) > 0)
+      repair.voxels_changed += pieces.set(mask, flags, 0);
+  }
+  {
+    const Pieces pieces(mask);
+    if ((repair.cavities_filled = pieces.smallest_beyond(true, want.cavities, flags)) > 0)
+      repair.voxels_changed += pieces.set(mask, flags, 1);
+  }
+  return repair;
 }
 
 }  // namespace organfit::geometry

@@ -82,5 +82,45 @@ TEST(SliceSpecks, CountOnePixelIslandsAndHolesPerSlice) {
   EXPECT_EQ(slice_contours(m, 1).size(), 10u);
 }
 
+// restore_topology: a crevice one voxel wide that closed at its mouth (a sealed cavity), a
+// voxel left behind off the organ (an island in 3D and on its slice) and a one-pixel hole
+// are undone, and nothing else changes; what the planning organ has itself is kept.
+TEST(RestoreTopology, UndoesSamplingArtefactsTheMapCannotMake) {
+  const LabelVolume planning = box_mask(14);
+  LabelVolume sampled = planning;
+  sampled.at(5, 5, 5) = 0, sampled.at(6, 5, 5) = 0;  // a sealed cavity of 2 voxels
+  sampled.at(8, 8, 8) = 0;                           // a pinhole, also a one-pixel hole
+  sampled.at(0, 6, 6) = 1;                           // an island one voxel off the box
+  ASSERT_EQ(topology_of(sampled), (Topology{2, 2, 1, 1}));
+  const TopologyRepair r = restore_topology(sampled, planning);
+  EXPECT_EQ(topology_of(sampled), topology_of(planning));
+  EXPECT_EQ(sampled.labels, planning.labels);
+  EXPECT_EQ(r.slice_islands_removed, 1);
+  EXPECT_EQ(r.slice_holes_filled, 1);  // the pinhole; the 2-voxel cavity is no speck
+  EXPECT_EQ(r.components_removed, 0);  // the island went as a speck
+  EXPECT_EQ(r.cavities_filled, 1);
+  EXPECT_EQ(r.voxels_changed, 4);
+
+  // An island of two voxels side by side in a slice is no speck: removed as the smaller piece.
+  LabelVolume two = planning;
+  two.at(0, 6, 6) = 1, two.at(0, 7, 6) = 1;
+  EXPECT_EQ(restore_topology(two, planning).components_removed, 1);
+  EXPECT_EQ(two.labels, planning.labels);
+
+  // The planning organ's own cavity and one-pixel hole are kept; a broken piece is not
+  // made up (the planning organ has two, the sampled one lost the small one).
+  LabelVolume holed = planning;
+  holed.at(6, 6, 6) = 0;
+  holed.at(0, 0, 0) = 1;
+  LabelVolume same = holed;
+  const TopologyRepair none = restore_topology(same, holed);
+  EXPECT_EQ(none.voxels_changed, 0);
+  EXPECT_EQ(same.labels, holed.labels);
+  LabelVolume lost = holed;
+  lost.at(0, 0, 0) = 0;
+  EXPECT_EQ(restore_topology(lost, holed).voxels_changed, 0);
+  EXPECT_EQ(topology_of(lost).components, 1);
+}
+
 }  // namespace
 }  // namespace organfit::geometry

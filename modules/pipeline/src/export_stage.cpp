@@ -52,11 +52,18 @@ nlohmann::json to_json(const geometry::Topology& t) {
           {"single_voxel_cavities", t.single_voxel_cavities}};
 }
 
-/// The checks of the exported organ against the planning organ on the same grid.
+/// The checks of the exported organ (after `repair`) against the planning organ on the
+/// same grid.
 void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume& exported,
                  const geometry::LabelVolume& planning,
-                 const std::vector<geometry::SliceContour>& exported_contours, PendingExport& out) {
+                 const std::vector<geometry::SliceContour>& exported_contours,
+                 const geometry::TopologyRepair& repair, PendingExport& out) {
   nlohmann::json checks;
+  checks["sampling_repaired"] = {{"slice_islands_removed", repair.slice_islands_removed},
+                                 {"slice_holes_filled", repair.slice_holes_filled},
+                                 {"components_removed", repair.components_removed},
+                                 {"cavities_filled", repair.cavities_filled},
+                                 {"voxels", repair.voxels_changed}};
   const geometry::Topology before = geometry::topology_of(planning),
                            after = geometry::topology_of(exported);
   checks["topology_planning"] = to_json(before);
@@ -239,14 +246,19 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     out.organ_on_ct = mask;
     if (mask->count(1) == 0)
       throw InputError("export: the model lies outside the planning CT's grid");
+    // The planning organ on the same grid; phi is one-to-one (a folding one is never
+    // exported), so the sampled organ's extra pieces, cavities and one-pixel specks are
+    // the grid's, not the fit's: undone before anything is written.
+    const fitting::EmbeddedBody planning_body(organ.shared_reference(), organ.shared_distance(),
+                                              std::make_shared<const fitting::Deformation>());
+    const geometry::LabelVolume planning = planning_body.on_grid(ct->geometry);
+    const geometry::TopologyRepair repair = geometry::restore_topology(*mask, planning);
     auto contours = geometry::slice_contours(*mask, 1);
     progress.update(++done, "its contours");
     out.summary["roi"] = r.roi_name;
     out.summary["contours"] = contours.size();
     out.summary["volume_on_ct_grid_cm3"] = mask->volume_mm3(1) / 1000.0;
-    const fitting::EmbeddedBody planning(organ.shared_reference(), organ.shared_distance(),
-                                         std::make_shared<const fitting::Deformation>());
-    check_organ(organ, *mask, planning.on_grid(ct->geometry), contours, out);
+    check_organ(organ, *mask, planning, contours, repair, out);
     progress.update(++done, "its checks against the planning organ");
     if (!r.rtstruct.empty()) {
       auto rois = std::make_shared<std::vector<dicom::RtstructRoi>>();

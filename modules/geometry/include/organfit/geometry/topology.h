@@ -37,4 +37,24 @@ struct SliceSpecks {
 /// The slices of label 1 of `mask` with at least one island or hole, by slice index.
 std::vector<SliceSpecks> slice_specks(const LabelVolume& mask);
 
+/// What restore_topology changed.
+struct TopologyRepair {
+  int slice_islands_removed = 0, slice_holes_filled = 0;  ///< one-pixel specks
+  int components_removed = 0, cavities_filled = 0;        ///< 3D pieces
+  long long voxels_changed = 0;
+};
+
+/// Gives label 1 of `mask` back the topology of `planning` (label 1, same grid) where
+/// sampling broke it. `mask` is meant to be the image of `planning` under a one-to-one
+/// continuous map (the fit's phi, det(grad phi) > 0) sampled at the voxel centres: that
+/// image has planning's pieces and cavities, and no one-pixel speck a slice of planning
+/// lacks. Sampling breaks this only where the organ is about a voxel thin or a crevice a
+/// voxel wide (a crevice closing at one voxel seals what lies beyond as a cavity; a thin
+/// tip leaves a voxel behind as an island). Repaired by the smallest change, in order:
+/// one-pixel islands removed and holes filled on each slice whose planning slice has none
+/// of that kind; then pieces beyond planning's count removed and cavities beyond its count
+/// filled, the smallest first. What planning has and the mask lost (a thin bridge broken,
+/// a cavity opened) is not made up: topology_of still shows it.
+TopologyRepair restore_topology(LabelVolume& mask, const LabelVolume& planning);
+
 }  // namespace organfit::geometry
