@@ -557,6 +557,27 @@ TEST(ShearFields, KeepVolumeAndInvertExactly) {
   EXPECT_NEAR(moved.z(), -4.0, 1e-12);
   EXPECT_NEAR(moved.y(), 7.0 + expected, 1e-12);
   EXPECT_GT(expected, 2.0);  // neighbouring bumps overlap: a plateau, not a spike
+  // Each bump is the Gaussian of its centre's distance, exp(-|v - c|^2 / (2 sigma^2)), to
+  // 1e-12 of its value (it is evaluated as a product of one exp per axis), and every
+  // centre above 1e-6 of its peak is listed.
+  for (const Eigen::Vector3d& q :
+       {Eigen::Vector3d(3, 0, -4), Eigen::Vector3d(-17.3, 2, 28.9), Eigen::Vector3d(0, 0, 0)}) {
+    one.bumps(1, q, near);  // the centres (i, j) over (x, z): index i + count.x * j
+    int above = 0;
+    for (int j = 0; j < one.count.z(); ++j)
+      for (int i = 0; i < one.count.x(); ++i) {
+        const double dx = q.x() - (one.origin_mm.x() + i * one.sigma_mm),
+                     dz = q.z() - (one.origin_mm.z() + j * one.sigma_mm);
+        const double exact = std::exp(-(dx * dx + dz * dz) / (2 * one.sigma_mm * one.sigma_mm));
+        above += exact >= 1e-6;
+        for (const auto& [index, value] : near) {
+          if (index == one.block() + i + one.count.x() * j) {
+            EXPECT_NEAR(value, exact, 1e-12 * exact) << q.transpose() << " " << i << " " << j;
+          }
+        }
+      }
+    EXPECT_EQ(static_cast<int>(near.size()), above) << q.transpose();
+  }
 }
 
 }  // namespace

@@ -25,18 +25,45 @@ PointsTable read_points_file(const fs::path& file) {
   return table;
 }
 
-evaluation::Deformation deformation_from(const config::Scene& scene, const geometry::Shape& shape) {
-  evaluation::Deformation d = keys::points_deformation().read(scene);
-  d.twist_rad = scene.number("points", "twist_deg") * M_PI / 180;
+evaluation::Deformation deformation_about(evaluation::Deformation d, const geometry::Shape& shape) {
   d.centre_mm = shape.centre_mm;
   d.half_length_mm = 0.5 * shape.size_mm.x() * d.stretch;
   return d;
 }
 
-PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model) {
+namespace {
+evaluation::Deformation deformation_keys(const config::Scene& scene) {
+  evaluation::Deformation d = keys::points_deformation().read(scene);
+  d.twist_rad = scene.number("points", "twist_deg") * M_PI / 180;
+  return d;
+}
+}  // namespace
+
+evaluation::Deformation deformation_from(const config::Scene& scene, const geometry::Shape& shape) {
+  return deformation_about(deformation_keys(scene), shape);
+}
+
+PointsOptions points_options_from(const config::Scene& scene) {
+  PointsOptions o;
+  o.source = scene.text("points", "source");
+  if (o.source == "file") {
+    o.file = scene.path("points", "file");
+    return o;
+  }
+  o.deformation = deformation_keys(scene);
+  o.sampling = keys::points_sampling().read(scene);
+  o.sampling.count = static_cast<int>(scene.integer("points", "count"));
+  o.sampling.half_coverage = scene.text("points", "coverage") == "half";
+  o.sampling.seed = static_cast<unsigned>(scene.integer("scene", "seed"));
+  o.target_shape = scene.text("points", "target_shape");
+  o.target_size_mm = scene.vec3("points", "target_size_mm");
+  return o;
+}
+
+PointsStageResult run_points_stage(const PointsOptions& o, const ModelStageResult& model) {
   PointsStageResult r;
-  if (scene.text("points", "source") == "file") {
-    PointsTable table = read_points_file(scene.path("points", "file"));
+  if (o.source == "file") {
+    PointsTable table = read_points_file(o.file);
     r.points = std::move(table.points);
     r.declared_ct = table.ct;
     r.summary = {{"source", "file"}, {"count", r.points.size()}};
@@ -44,28 +71,23 @@ PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageR
   }
   // The shape the points come from: the body itself, or another of the same volume.
   r.truth_shape = model.shape;
-  const std::string target = scene.text("points", "target_shape");
-  if (target != "same") {
+  if (o.target_shape != "same") {
     geometry::Shape t =
-        geometry::make_shape(target, scene.vec3("points", "target_size_mm"), model.shape.centre_mm);
+        geometry::make_shape(o.target_shape, o.target_size_mm, model.shape.centre_mm);
     const double voxel = 0.25 * model.cohesion.r0_mm;
     const double scale = std::cbrt(geometry::shape_volume_mm3(model.shape, voxel) /
                                    geometry::shape_volume_mm3(t, voxel));
     t.size_mm *= scale;
     r.truth_shape = t;
   }
-  const evaluation::Deformation d = deformation_from(scene, r.truth_shape);
-  evaluation::SamplingOptions o = keys::points_sampling().read(scene);
-  o.count = static_cast<int>(scene.integer("points", "count"));
-  o.half_coverage = scene.text("points", "coverage") == "half";
-  o.seed = static_cast<unsigned>(scene.integer("scene", "seed"));
-  r.points = evaluation::sample_deformed_surface(r.truth_shape, d, o);
+  const evaluation::Deformation d = deformation_about(o.deformation, r.truth_shape);
+  r.points = evaluation::sample_deformed_surface(r.truth_shape, d, o.sampling);
   r.truth = d;
   r.summary = {{"source", "generate"},
                {"count", r.points.size()},
-               {"noise_mm", o.noise_mm},
-               {"outlier_fraction", o.outlier_fraction},
-               {"coverage", scene.text("points", "coverage")},
+               {"noise_mm", o.sampling.noise_mm},
+               {"outlier_fraction", o.sampling.outlier_fraction},
+               {"coverage", o.sampling.half_coverage ? "half" : "full"},
                {"stretch", d.stretch},
                {"bend_mm", d.bend_mm},
                {"twist_rad", d.twist_rad},

@@ -270,7 +270,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         deferred_outputs.push_back(save);
       }
     } else {
-      points = run_points_stage(scene, *model);
+      points = run_points_stage(points_options_from(scene), *model);
       // Points declared in another CT than the planning CT are in other coordinates.
       if (ct_reference) {
         const PointsCt& declared = points->declared_ct;

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "organfit/config/scene.h"
@@ -29,10 +30,26 @@ struct PointsStageResult {
 /// no points.
 PointsTable read_points_file(const std::filesystem::path& file);
 
-PointsStageResult run_points_stage(const config::Scene& scene, const ModelStageResult& model);
+/// What the points section asks for (its keys; units and docs in scene_schema.cpp).
+struct PointsOptions {
+  std::string source = "generate";  ///< generate, file (ultrasound: the ultrasound stage's)
+  std::filesystem::path file;       ///< source: file
+  /// source: generate: the true deformation's parameters (its centre and length are the
+  /// shape's, set by deformation_about), the sampling (count, noise, outliers, half
+  /// coverage, seed), and the shape sampled ("same": the model's; else a shape of its
+  /// volume, of target_size_mm's proportions).
+  evaluation::Deformation deformation;
+  evaluation::SamplingOptions sampling;
+  std::string target_shape = "same";
+  Eigen::Vector3d target_size_mm = Eigen::Vector3d(40, 30, 60);
+};
+PointsOptions points_options_from(const config::Scene& scene);
+
+PointsStageResult run_points_stage(const PointsOptions& options, const ModelStageResult& model);
 
 /// The true deformation the points section describes (evaluation::Deformation), about the
 /// shape's centre.
+evaluation::Deformation deformation_about(evaluation::Deformation d, const geometry::Shape& shape);
 evaluation::Deformation deformation_from(const config::Scene& scene, const geometry::Shape& shape);
 
 /// A box holding the deformed shape: its corners mapped, widened by the non-affine parts.
