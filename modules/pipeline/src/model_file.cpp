@@ -252,11 +252,10 @@ SavedModel load_model(const fs::path& file) {
       saved.organ_look.interpreted_type = organ.at("interpreted_type").get<std::string>();
     if (!j.at("ct").is_null()) {
       const auto& c = j.at("ct");
-      saved.ct = CtReference{c.at("folder").get<std::string>(),
-                             c.at("series_instance_uid").get<std::string>(),
-                             c.at("frame_of_reference_uid").get<std::string>()};
-      if (c.contains("structure_set"))
-        saved.ct->structure_set = c.at("structure_set").get<std::string>();
+      saved.ct = CtReference{
+          c.at("folder").get<std::string>(), c.at("series_instance_uid").get<std::string>(),
+          c.at("frame_of_reference_uid").get<std::string>(),
+          c.contains("structure_set") ? c.at("structure_set").get<std::string>() : std::string()};
     }
     saved.provenance = j.value("provenance", nlohmann::json::object());
   } catch (const nlohmann::json::exception& e) {

@@ -45,7 +45,7 @@ class ModelFile : public ::testing::Test {
 TEST_F(ModelFile, SavedAndLoadedModelsAreTheSame) {
   ModelStageResult m = build("body:\n  shape: egg\n  size_mm: [30, 24, 20]\n");
   ASSERT_NE(m.skeleton, nullptr);
-  const CtReference ct{"/data/ct", "1.2.3", "1.2.4"};
+  const CtReference ct{"/data/ct", "1.2.3", "1.2.4", ""};
   save_model(dir_ / "m.json", m, "Prostate", OrganLook{{12, 34, 56}, "GTV"}, ct,
              {{"scene", "t"}, {"modelling_wall_s", 1.5}});
   SavedModel back = load_model(dir_ / "m.json");
