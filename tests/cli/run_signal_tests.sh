@@ -82,8 +82,8 @@ done
 signal_after synth_pelvis.sigterm 1.0 TERM "$tmp/pelvis" -- --quiet synth pelvis --out "$tmp/pelvis"
 signal_after synth_pelvis.sigint 2.0 INT "$tmp/pelvis" -- --quiet synth pelvis --out "$tmp/pelvis"
 signal_after bench_ct.sigterm 1.0 TERM "$tmp/none" -- --quiet bench ct --columns 256 --rows 256 --slices 60
-# bench ct makes its phantom with a child organfit: the child stops too, and neither leaves
-# its work folder (the child is given its own 0.5 s, then looked for).
+# bench ct makes its phantom in a work folder of its own (in this process: a child organfit
+# stopped with it could outlive it and make the folder again): nothing of it is left.
 sleep 0.7
 if [[ ! -e "${TMPDIR:-/tmp}/organfit_bench_ct_$last_pid" ]] && ! pgrep -f "organfit_bench_ct_$last_pid/" > /dev/null; then
   echo "ok   bench_ct.child_stopped_and_nothing_left"

@@ -3,8 +3,10 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
 
+#include "organfit/pipeline/phantom_stage.h"
 #include "organfit/pipeline/runner.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
@@ -33,13 +35,13 @@ nlohmann::json run_ct_benchmark(const CtBenchOptions& o) {
   fs::path ct = o.ct;
   double synth_s = 0;
   if (ct.empty()) {
+    // In this process, as `organfit synth pelvis` makes it: a child process stopped with
+    // this one could outlive it and write into the work folder after it was removed.
     Stopwatch clock;
-    const std::string cmd = fmt::format(
-        "'{}' --quiet synth pelvis --out '{}' --columns {} --rows {} --slices {} --pixel-mm {} > "
-        "/dev/null",
-        fs::read_symlink("/proc/self/exe").string(), (work / "phantom").string(), o.columns, o.rows,
-        o.slices, 400.0 / std::max(o.columns, o.rows));
-    if (run_command(cmd) != 0) throw InputError("bench ct: making the phantom failed: " + cmd);
+    phantom::PelvisOptions pelvis;
+    pelvis.columns = o.columns, pelvis.rows = o.rows, pelvis.slices = o.slices;
+    pelvis.pixel_mm = 400.0 / std::max(o.columns, o.rows);
+    pipeline::write_pelvis_phantom(work / "phantom", pelvis);
     synth_s = clock.elapsed_s();
     ct = work / "phantom" / "ct";
   }
