@@ -4,7 +4,6 @@
 #include <array>
 #include <cstdint>
 #include <cstdlib>
-#include <numeric>
 #include <vector>
 
 namespace organfit::geometry {
@@ -149,13 +148,14 @@ std::vector<SliceSpecks> slice_specks(const LabelVolume& mask) {
   return out;
 }
 
-TopologyRepair restore_topology(LabelVolume& mask, const LabelVolume& planning) {
+TopologyRepair restore_topology(LabelVolume& mask, const Topology& want,
+                                const std::vector<SliceSpecks>& planning_specks) {
   TopologyRepair repair;
   // Slice by slice: one-pixel specks where the planning organ's slice has none of that kind.
   const IndexRange r = mask.range(1);
-  if (r.empty() || planning.range(1).empty()) return repair;
+  if (r.empty() || want.components == 0) return repair;
   std::vector<SliceSpecks> planned(static_cast<size_t>(mask.geometry.size[2]));
-  for (const SliceSpecks& s : slice_specks(planning))
+  for (const SliceSpecks& s : planning_specks)
     if (s.k >= 0 && s.k < mask.geometry.size[2]) planned[static_cast<size_t>(s.k)] = s;
   for (int k = r.lo[2]; k <= r.hi[2]; ++k) {
     const SliceSpecks& p = planned[static_cast<size_t>(k)];
@@ -170,7 +170,6 @@ TopologyRepair restore_topology(LabelVolume& mask, const LabelVolume& planning) 
   }
   // In 3D: pieces beyond the planning organ's count removed, smallest first; then (the
   // pieces removed may have sat in a cavity) cavities beyond its count filled, smallest first.
-  const Topology want = topology_of(planning);
   std::vector<bool> flags;
   {
     const Pieces pieces(mask);

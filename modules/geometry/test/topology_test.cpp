@@ -92,7 +92,7 @@ TEST(RestoreTopology, UndoesSamplingArtefactsTheMapCannotMake) {
   sampled.at(8, 8, 8) = 0;                           // a pinhole, also a one-pixel hole
   sampled.at(0, 6, 6) = 1;                           // an island one voxel off the box
   ASSERT_EQ(topology_of(sampled), (Topology{2, 2, 1, 1}));
-  const TopologyRepair r = restore_topology(sampled, planning);
+  const TopologyRepair r = restore_topology(sampled, topology_of(planning), slice_specks(planning));
   EXPECT_EQ(topology_of(sampled), topology_of(planning));
   EXPECT_EQ(sampled.labels, planning.labels);
   EXPECT_EQ(r.slice_islands_removed, 1);
@@ -104,7 +104,8 @@ TEST(RestoreTopology, UndoesSamplingArtefactsTheMapCannotMake) {
   // An island of two voxels side by side in a slice is no speck: removed as the smaller piece.
   LabelVolume two = planning;
   two.at(0, 6, 6) = 1, two.at(0, 7, 6) = 1;
-  EXPECT_EQ(restore_topology(two, planning).components_removed, 1);
+  EXPECT_EQ(restore_topology(two, topology_of(planning), slice_specks(planning)).components_removed,
+            1);
   EXPECT_EQ(two.labels, planning.labels);
 
   // The planning organ's own cavity and one-pixel hole are kept; a broken piece is not
@@ -113,12 +114,12 @@ TEST(RestoreTopology, UndoesSamplingArtefactsTheMapCannotMake) {
   holed.at(6, 6, 6) = 0;
   holed.at(0, 0, 0) = 1;
   LabelVolume same = holed;
-  const TopologyRepair none = restore_topology(same, holed);
+  const TopologyRepair none = restore_topology(same, topology_of(holed), slice_specks(holed));
   EXPECT_EQ(none.voxels_changed, 0);
   EXPECT_EQ(same.labels, holed.labels);
   LabelVolume lost = holed;
   lost.at(0, 0, 0) = 0;
-  EXPECT_EQ(restore_topology(lost, holed).voxels_changed, 0);
+  EXPECT_EQ(restore_topology(lost, topology_of(holed), slice_specks(holed)).voxels_changed, 0);
   EXPECT_EQ(topology_of(lost).components, 1);
 }
 

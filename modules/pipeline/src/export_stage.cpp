@@ -52,10 +52,21 @@ nlohmann::json to_json(const geometry::Topology& t) {
           {"single_voxel_cavities", t.single_voxel_cavities}};
 }
 
+/// The planning organ on the export's grid, measured once for the repair and the checks.
+struct PlanningOnGrid {
+  geometry::LabelVolume mask;
+  geometry::Topology topology;
+  std::vector<geometry::SliceSpecks> specks;
+  explicit PlanningOnGrid(geometry::LabelVolume m)
+      : mask(std::move(m)),
+        topology(geometry::topology_of(mask)),
+        specks(geometry::slice_specks(mask)) {}
+};
+
 /// The checks of the exported organ (after `repair`) against the planning organ on the
 /// same grid.
 void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume& exported,
-                 const geometry::LabelVolume& planning,
+                 const PlanningOnGrid& planned,
                  const std::vector<geometry::SliceContour>& exported_contours,
                  const geometry::TopologyRepair& repair, PendingExport& out) {
   nlohmann::json checks;
@@ -64,8 +75,9 @@ void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume
                                  {"components_removed", repair.components_removed},
                                  {"cavities_filled", repair.cavities_filled},
                                  {"voxels", repair.voxels_changed}};
-  const geometry::Topology before = geometry::topology_of(planning),
-                           after = geometry::topology_of(exported);
+  const geometry::LabelVolume& planning = planned.mask;
+  const geometry::Topology& before = planned.topology;
+  const geometry::Topology after = geometry::topology_of(exported);
   checks["topology_planning"] = to_json(before);
   checks["topology_exported"] = to_json(after);
   checks["topology_kept"] = before == after;
@@ -111,7 +123,7 @@ void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume
   // grid resolves, so a defect of the export, never a change of shape (a slice whose
   // contours merge or split under a bend is; it is listed above, not warned about).
   std::map<int, geometry::SliceSpecks> planned_specks;
-  for (const geometry::SliceSpecks& s : geometry::slice_specks(planning))
+  for (const geometry::SliceSpecks& s : planned.specks)
     planned_specks[s.k] = s;
   nlohmann::json specks = nlohmann::json::array();
   std::string named;
@@ -251,8 +263,9 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     // the grid's, not the fit's: undone before anything is written.
     const fitting::EmbeddedBody planning_body(organ.shared_reference(), organ.shared_distance(),
                                               std::make_shared<const fitting::Deformation>());
-    const geometry::LabelVolume planning = planning_body.on_grid(ct->geometry);
-    const geometry::TopologyRepair repair = geometry::restore_topology(*mask, planning);
+    const PlanningOnGrid planning(planning_body.on_grid(ct->geometry));
+    const geometry::TopologyRepair repair =
+        geometry::restore_topology(*mask, planning.topology, planning.specks);
     auto contours = geometry::slice_contours(*mask, 1);
     progress.update(++done, "its contours");
     out.summary["roi"] = r.roi_name;

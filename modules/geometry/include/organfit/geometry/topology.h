@@ -44,8 +44,9 @@ struct TopologyRepair {
   long long voxels_changed = 0;
 };
 
-/// Gives label 1 of `mask` back the topology of `planning` (label 1, same grid) where
-/// sampling broke it. `mask` is meant to be the image of `planning` under a one-to-one
+/// Gives label 1 of `mask` back the topology of the planning organ on the same grid
+/// (`planning`: its topology_of; `planning_specks`: its slice_specks) where sampling broke
+/// it. `mask` is meant to be the image of `planning` under a one-to-one
 /// continuous map (the fit's phi, det(grad phi) > 0) sampled at the voxel centres: that
 /// image has planning's pieces and cavities, and no one-pixel speck a slice of planning
 /// lacks. Sampling breaks this only where the organ is about a voxel thin or a crevice a
@@ -55,6 +56,7 @@ struct TopologyRepair {
 /// of that kind; then pieces beyond planning's count removed and cavities beyond its count
 /// filled, the smallest first. What planning has and the mask lost (a thin bridge broken,
 /// a cavity opened) is not made up: topology_of still shows it.
-TopologyRepair restore_topology(LabelVolume& mask, const LabelVolume& planning);
+TopologyRepair restore_topology(LabelVolume& mask, const Topology& planning,
+                                const std::vector<SliceSpecks>& planning_specks);
 
 }  // namespace organfit::geometry
