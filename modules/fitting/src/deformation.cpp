@@ -49,6 +49,22 @@ struct Buckets {
   }
 };
 
+/// The particles in bucket order (column k is particle order[k]): where they are now, and
+/// their moves back to where the global stage placed them. A node's neighbours are then
+/// read from a few contiguous runs instead of from all over the arrays.
+struct SortedParticles {
+  particles::Positions current, back;
+  SortedParticles(const Buckets& b, const particles::Positions& placed,
+                  const particles::Positions& now)
+      : current(3, now.cols()), back(3, now.cols()) {
+    for (size_t k = 0; k < b.order.size(); ++k) {
+      const int p = b.order[k];
+      current.col(static_cast<Eigen::Index>(k)) = now.col(p);
+      back.col(static_cast<Eigen::Index>(k)) = placed.col(p) - now.col(p);
+    }
+  }
+};
+
 /// The moving least squares' answer at q: u(q), and whether it is kept (well posed, and
 /// the neighbours weigh at least one particle at q).
 struct LocalFit {
@@ -56,8 +72,8 @@ struct LocalFit {
   bool kept = false;
 };
 
-LocalFit moving_least_squares(const Eigen::Vector3d& q, const particles::Positions& placed,
-                              const particles::Positions& current, const Buckets& b, double h0) {
+LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& sorted,
+                              const Buckets& b, double h0) {
   LocalFit out;
   if (b.dims.prod() == 0) return out;
   const Eigen::Vector3d c = ((q - b.lo) / h0).array().floor();
@@ -82,14 +98,13 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const particles::Positio
           const size_t cell =
               static_cast<size_t>(cc.x() + b.dims.x() * (cc.y() + b.dims.y() * cc.z()));
           for (int k = b.start[cell]; k < b.start[cell + 1]; ++k) {
-            const int p = b.order[static_cast<size_t>(k)];
-            const Eigen::Vector3d d = current.col(p) - q;
+            const Eigen::Vector3d d = sorted.current.col(k) - q;
             const double s = d.squaredNorm() / h2;
             if (s >= 1) continue;
             const double w = (1 - s) * (1 - s) * (1 - s);
             const Eigen::Vector4d phi(1, d.x() / h, d.y() / h, d.z() / h);
             m.noalias() += w * phi * phi.transpose();
-            r.noalias() += w * phi * (placed.col(p) - current.col(p)).transpose();
+            r.noalias() += w * phi * sorted.back.col(k).transpose();
             ++count;
           }
         }
@@ -146,6 +161,7 @@ void solve_laplace(const std::vector<std::array<int, 6>>& neighbours,
   for (int it = 0; it < 5000 && rr > stop; ++it) {
     apply(p, ap);
     const double alpha = rr / dot(p, ap);
+#pragma omp parallel for schedule(static)
     for (long long i = 0; i < n; ++i) {
       x[static_cast<size_t>(i)] += alpha * p[static_cast<size_t>(i)];
       r[static_cast<size_t>(i)] -= alpha * ap[static_cast<size_t>(i)];
@@ -153,6 +169,7 @@ void solve_laplace(const std::vector<std::array<int, 6>>& neighbours,
     const double rr_next = dot(r, r);
     const double beta = rr_next / rr;
     rr = rr_next;
+#pragma omp parallel for schedule(static)
     for (long long i = 0; i < n; ++i)
       p[static_cast<size_t>(i)] = r[static_cast<size_t>(i)] + beta * p[static_cast<size_t>(i)];
   }
@@ -197,9 +214,10 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
   std::vector<std::uint8_t> fitted(static_cast<size_t>(nodes), 0);  // the MLS's answer kept
   {
     const Buckets buckets(current, h_);
+    const SortedParticles sorted(buckets, placed, current);
 #pragma omp parallel for schedule(dynamic, 64)
     for (long long v = 0; v < nodes; ++v) {
-      const LocalFit f = moving_least_squares(node(v), placed, current, buckets, h_);
+      const LocalFit f = moving_least_squares(node(v), sorted, buckets, h_);
       if (!f.kept) continue;
       values_[static_cast<size_t>(v)] = f.u.cast<float>();
       fitted[static_cast<size_t>(v)] = 1;
@@ -221,6 +239,39 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
         lo_det = std::min(lo_det, det), hi_det = std::max(hi_det, det);
       }
   min_det_ = lo_det, max_det_ = hi_det;
+  // u's largest size and gradient (for pull_back_stretch): at a node, the largest edge
+  // difference either side along each axis, over the spacing.
+  const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
+  double largest_u = 0, largest_grad_sq = 0;
+#pragma omp parallel for collapse(2) reduction(max : largest_u, largest_grad_sq)
+  for (int k = 0; k < n_[2]; ++k)
+    for (int j = 0; j < n_[1]; ++j)
+      for (int i = 0; i < n_[0]; ++i) {
+        const int at[3] = {i, j, k};
+        const long long v = i + step[1] * j + step[2] * k;
+        const Eigen::Vector3d u = values_[static_cast<size_t>(v)].cast<double>();
+        largest_u = std::max(largest_u, u.norm());
+        double sq = 0;
+        for (int d = 0; d < 3; ++d) {
+          double edge = 0;
+          if (at[d] > 0)
+            edge = (values_[static_cast<size_t>(v - step[d])].cast<double>() - u).squaredNorm();
+          if (at[d] + 1 < n_[d])
+            edge = std::max(
+                edge, (values_[static_cast<size_t>(v + step[d])].cast<double>() - u).squaredNorm());
+          sq += edge;
+        }
+        largest_grad_sq = std::max(largest_grad_sq, sq / (spacing_ * spacing_));
+      }
+  largest_u_mm_ = largest_u, largest_grad_u_ = std::sqrt(largest_grad_sq);
+}
+
+StretchBound Deformation::pull_back_stretch(const geometry::Aabb& box) const {
+  const geometry::Aabb grown{box.min_mm.array() - largest_u_mm_,
+                             box.max_mm.array() + largest_u_mm_};
+  StretchBound b = map_.inverse_stretch(grown);
+  b.stretch *= 1 + largest_grad_u_;
+  return b;
 }
 
 double Deformation::min_volume_ratio() const {

@@ -1,7 +1,9 @@
 #include "organfit/fitting/global_map.h"
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "mapped_samples.h"
@@ -120,6 +122,126 @@ Eigen::Vector3d ShearFields::inverse(const Eigen::Vector3d& q) const {
 
 Eigen::Vector3d GlobalMap::inverse(const Eigen::Vector3d& q) const {
   return inverse(q, affine.a.inverse());
+}
+
+namespace {
+/// sup over x of sum_i |t|^p exp(-t^2 / 2) ... for the sums of a row of unit bumps and of
+/// their derivatives (t = x - i): [0] sum_i g(t), [1] sum_i |g'(t)| = |t| g(t), [2] sum_i
+/// |g''(t)| = |t^2 - 1| g(t). Sampled over a period at 1/1000 and raised by 0.01, more
+/// than the sampling can miss (the sums' slopes are below 3).
+const std::array<double, 3>& bump_sum_bounds() {
+  static const std::array<double, 3> bounds = [] {
+    std::array<double, 3> b{0, 0, 0};
+    for (int s = 0; s <= 1000; ++s) {
+      const double x = s / 1000.0;
+      std::array<double, 3> sum{0, 0, 0};
+      for (int i = -12; i <= 12; ++i) {
+        const double t = x - i, e = std::exp(-0.5 * t * t);
+        sum[0] += e, sum[1] += std::abs(t) * e, sum[2] += std::abs(t * t - 1) * e;
+      }
+      for (int k = 0; k < 3; ++k)
+        b[k] = std::max(b[k], sum[k] + 0.01);
+    }
+    return b;
+  }();
+  return bounds;
+}
+
+/// The largest singular value of a shear I - e_a g^T whose gradient g (of length `g`) is
+/// normal to e_a: (g + sqrt(g^2 + 4)) / 2, about 1 + g / 2 for a small one.
+double shear_stretch(double g) {
+  return 0.5 * (g + std::sqrt(g * g + 4));
+}
+
+/// What the bumps ShearFields leaves out (each below 1e-6) sum to at most, per unit
+/// weight: about 2 pi e^(-5.3^2 / 2) = 6e-6 over the plane; 1e-4 to spare.
+constexpr double kLeftOutBumps = 1e-4;
+}  // namespace
+
+double ShearFields::largest_gradient(int a, const geometry::Aabb& box) const {
+  if (empty()) return 0;
+  const auto [b, c] = other_axes(a);
+  const double w = weights.segment(a * block(), block()).cwiseAbs().maxCoeff();
+  if (w == 0) return 0;
+  const auto& sums = bump_sum_bounds();
+  // |grad f_a| sampled at most delta = sigma / 8 apart over the box's projection, every
+  // bump counted; between samples it can be larger by at most the Hessian's norm (bounded
+  // from the largest weight) times the distance to the nearest sample, delta / sqrt(2).
+  const double hessian = w / (sigma_mm * sigma_mm) *
+                         std::sqrt(2 * std::pow(sums[2] * sums[0], 2) + 2 * std::pow(sums[1], 4));
+  const double delta = sigma_mm / 8;
+  const double span_b = std::max(0.0, box.max_mm[b] - box.min_mm[b]),
+               span_c = std::max(0.0, box.max_mm[c] - box.min_mm[c]);
+  const int nb = 1 + static_cast<int>(std::ceil(span_b / delta)),
+            nc = 1 + static_cast<int>(std::ceil(span_c / delta));
+  if (1.0 * nb * nc > 1e6)  // a box far larger than the fields: the bound from the weights
+    return std::sqrt(2.0) * w * sums[1] * sums[0] / sigma_mm;
+  double largest = 0;
+  for (int jc = 0; jc < nc; ++jc)
+    for (int jb = 0; jb < nb; ++jb) {
+      const double ub = (box.min_mm[b] + (nb > 1 ? span_b * jb / (nb - 1) : 0) - origin_mm[b]) /
+                        sigma_mm,
+                   uc = (box.min_mm[c] + (nc > 1 ? span_c * jc / (nc - 1) : 0) - origin_mm[c]) /
+                        sigma_mm;
+      double gb = 0, gc = 0;
+      const int i0 = std::max(0, static_cast<int>(std::ceil(ub - 9))),
+                i1 = std::min(count(b) - 1, static_cast<int>(std::floor(ub + 9)));
+      const int j0 = std::max(0, static_cast<int>(std::ceil(uc - 9))),
+                j1 = std::min(count(c) - 1, static_cast<int>(std::floor(uc + 9)));
+      double along_b[19];
+      for (int i = i0; i <= i1; ++i)
+        along_b[i - i0] = std::exp(-0.5 * (ub - i) * (ub - i));
+      for (int j = j0; j <= j1; ++j) {
+        const double tc = uc - j, ec = std::exp(-0.5 * tc * tc);
+        for (int i = i0; i <= i1; ++i) {
+          const double tb = ub - i, eb = along_b[i - i0];
+          const double wij = weights(a * block() + i + count(b) * j);
+          gb -= wij * tb * eb * ec, gc -= wij * eb * tc * ec;
+        }
+      }
+      largest = std::max(largest, std::hypot(gb, gc) / sigma_mm);
+    }
+  // Bumps beyond 9 sigmas (each below e^-40) are not worth a term; 1e-12 covers them.
+  return largest + hessian * delta / std::sqrt(2.0) + 1e-12 * w;
+}
+
+StretchBound GlobalMap::inverse_stretch(const geometry::Aabb& box) const {
+  StretchBound out;
+  Eigen::Vector3d lo = box.min_mm, hi = box.max_mm;
+  double stretch = 1, slack = 0;
+  // The fields, undone z, y, x: each step q_a -= f_a(q_b, q_c) is a shear, Jacobian I - e_a
+  // grad f_a^T (shear_stretch), and moves q_a by at most |f_a|.
+  if (!fields.empty()) {
+    const double sum0 = bump_sum_bounds()[0];
+    for (int a = 2; a >= 0; --a) {
+      const double w =
+          fields.weights.segment(a * fields.block(), fields.block()).cwiseAbs().maxCoeff();
+      stretch *= shear_stretch(fields.largest_gradient(a, geometry::Aabb{lo, hi}));
+      const double move = w * (sum0 * sum0 + kLeftOutBumps);
+      lo[a] -= move, hi[a] += move;
+      slack += w * kLeftOutBumps;
+    }
+  }
+  // The shears, undone in reverse order: each moves one coordinate of u = q - centre by a
+  // quadratic of the other two, whose gradient and size grow with |u| (bounded per axis,
+  // grown by each step's move).
+  Eigen::Vector3d u = (lo - shears.centre).cwiseAbs().cwiseMax((hi - shears.centre).cwiseAbs());
+  const auto& c = shears.c;
+  auto undo = [&](int a, int b, int d, int first) {  // q_a -= c0 u_b^2 + c1 u_d^2 + c2 u_b u_d
+    const double c0 = std::abs(c(first)), c1 = std::abs(c(first + 1)), c2 = std::abs(c(first + 2));
+    stretch *= shear_stretch(std::hypot(2 * c0 * u[b] + c2 * u[d], 2 * c1 * u[d] + c2 * u[b]));
+    u[a] += c0 * u[b] * u[b] + c1 * u[d] * u[d] + c2 * u[b] * u[d];
+  };
+  undo(0, 1, 2, 12), undo(1, 0, 2, 9), undo(2, 0, 1, 6), undo(1, 0, 2, 3), undo(0, 1, 2, 0);
+  // The affine part: a^-1's largest singular value.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ata;
+  ata.computeDirect(affine.a.transpose() * affine.a, Eigen::EigenvaluesOnly);
+  stretch /= std::sqrt(ata.eigenvalues()(0));
+  out.stretch = stretch;
+  // A left-out bump's error in one step is carried through the steps after it, each
+  // stretching by at most the whole bound.
+  out.slack_mm = stretch * slack;
+  return out;
 }
 
 SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface) {

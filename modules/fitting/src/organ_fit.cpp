@@ -58,7 +58,14 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   // dense samples of the reference surface against the model before the fit; the
   // tolerance on the mean residual is the stated one and this floor in quadrature.
   double residual_floor = 0;
-  const geometry::SignedDistance reference_distance(model.reference);
+  // The reference's signed distance, unsmoothed (the re-fill's depth; for an analytic
+  // body it is the planning organ's, made by organ_body above) and smoothed (its surface
+  // samples and the global fit's distance).
+  const std::shared_ptr<const geometry::SignedDistance> reference_exact =
+      model.shape.mask || !model.planning_distance
+          ? std::make_shared<const geometry::SignedDistance>(model.reference, false)
+          : model.planning_distance;
+  const geometry::SignedDistance reference_distance = reference_exact->smoothed();
   {
     SkinDetector skin0(skin_voxel, rho);
     skin0.update(start);
@@ -127,10 +134,10 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     int count = state.size();
     int passes = 0;
     double settled_change_pct = 0;
+    const MappedBodySites sites(model.reference, *reference_exact, model.lattice_spacing_mm, map);
     while (passes < 3) {
       ++passes;
-      state = particles::State(
-          refill_mapped_body(model.reference, count, model.lattice_spacing_mm, map));
+      state = particles::State(sites.fill(count));
       particles::relax(m, state, opt, 300, common.kinetic_tolerance);
       const double v = body_volume(state.x, rho, volume_voxel);
       settled_change_pct = 100.0 * (v - v0) / v0;

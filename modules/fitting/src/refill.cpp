@@ -1,12 +1,12 @@
 #include "organfit/fitting/refill.h"
 
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <numeric>
 
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/sample_grid.h"
-#include "organfit/geometry/signed_distance.h"
 #include "organfit/particles/diagnostics.h"
 #include "organfit/particles/lattice_fill.h"
 
@@ -15,15 +15,19 @@ namespace organfit::fitting {
 particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, int count,
                                         double a_nn_mm, const GlobalMap& map) {
   if (count <= 0) return particles::Positions(3, 0);
+  return MappedBodySites(reference, geometry::SignedDistance(reference, false), a_nn_mm, map)
+      .fill(count);
+}
+
+MappedBodySites::MappedBodySites(const geometry::LabelVolume& reference,
+                                 const geometry::SignedDistance& depth, double a_nn_mm,
+                                 const GlobalMap& map)
+    : a_nn_mm_(a_nn_mm) {
   const geometry::ImageGeometry& g = reference.geometry;
-  // Signed depth in the reference body: distance to the nearest outside voxel inside,
-  // minus the distance to the body outside. Ranking sites by it selects a level set
-  // of the mapped body, which can sit a little outside it when the count asks so.
-  std::vector<std::uint8_t> outside(reference.labels.size()), inside_mask(reference.labels.size());
-  for (size_t i = 0; i < outside.size(); ++i)
-    outside[i] = reference.labels[i] == 0, inside_mask[i] = !outside[i];
-  const std::vector<double> depth2 = geometry::squared_distance_transform(outside, g);
-  const std::vector<double> away2 = geometry::squared_distance_transform(inside_mask, g);
+  // Signed depth in the reference body at the nearest voxel centre: the distance to the
+  // nearest centre across the boundary (less half a voxel), negated so that deeper ranks
+  // higher. Ranking sites by it selects a level set of the mapped body, which can sit a
+  // little outside it when the count asks so.
   const double off_grid = -std::numeric_limits<double>::infinity();
   auto depth_at = [&](const Eigen::Vector3d& q) {
     const Eigen::Vector3d idx = g.physical_to_index(q);
@@ -32,8 +36,7 @@ particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, 
               k = static_cast<int>(std::lround(idx.z()));
     if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2])
       return off_grid;
-    const long long v = g.linear_index(i, j, k);
-    return inside_mask[v] ? std::sqrt(depth2[v]) : -std::sqrt(away2[v]);
+    return -depth.at_voxel(i, j, k);
   };
   // Candidate sites: the lattice over the mapped box, centred on the mapped centroid.
   const geometry::Aabb box = g.bounds_mm();
@@ -49,17 +52,28 @@ particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, 
       geometry::image_of_box(box, [&map](const Eigen::Vector3d& p) { return map.apply(p); });
   mapped.min_mm.array() -= a_nn_mm;  // room for a level set just outside the body
   mapped.max_mm.array() += a_nn_mm;
-  const particles::Positions sites = particles::fcc_lattice_points(
-      mapped, map.apply(centroid), a_nn_mm, [](const Eigen::Vector3d&) { return true; });
+  sites_ = particles::fcc_lattice_points(mapped, map.apply(centroid), a_nn_mm,
+                                         [](const Eigen::Vector3d&) { return true; });
+  const particles::Positions& sites = sites_;
   std::vector<double> d(sites.cols());
-  for (Eigen::Index s = 0; s < sites.cols(); ++s)
-    d[s] = depth_at(map.inverse(sites.col(s)));
+  const Eigen::Matrix3d a_inverse = map.affine.a.inverse();
+  const long n = static_cast<long>(sites.cols());
+#pragma omp parallel for schedule(static)
+  for (long s = 0; s < n; ++s)
+    d[s] = depth_at(map.inverse(sites.col(s), a_inverse));
   // Sites by signed depth, deepest first (ties by index: deterministic); sites off the
   // reference's grid are never taken.
-  std::vector<int> idx;
+  std::vector<int>& idx = ranked_;
   for (Eigen::Index s = 0; s < sites.cols(); ++s)
     if (d[s] > off_grid) idx.push_back(static_cast<int>(s));
   std::stable_sort(idx.begin(), idx.end(), [&](int l, int r) { return d[l] > d[r]; });
+}
+
+particles::Positions MappedBodySites::fill(int count) const {
+  if (count <= 0) return particles::Positions(3, 0);
+  const particles::Positions& sites = sites_;
+  const std::vector<int>& idx = ranked_;
+  const double a_nn_mm = a_nn_mm_;
   const int keep = std::min<int>(count, static_cast<int>(idx.size()));
   // One body: the largest group of the deepest `keep` sites (joined within 1.2 a_nn),
   // topped up with the next deepest sites that touch it.

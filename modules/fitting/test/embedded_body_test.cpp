@@ -110,6 +110,54 @@ TEST(EmbeddedBody, AppliesTheGlobalMapsInverse) {
   EXPECT_NEAR(body.volume_mm3(0.75) / mask->volume_mm3(1), 1.0, 0.01);
 }
 
+// on_grid sets blocks far from the surface without evaluating their voxels: the labels
+// are exactly those of evaluating inside() at every voxel, on a rotated, anisotropic grid,
+// under a global map with shears and fields and a local push the particles carry.
+TEST(EmbeddedBody, OnGridIsEveryVoxelsInsideTest) {
+  const auto mask = ellipsoid_mask(Eigen::Vector3d(3, -2, 5));
+  const particles::Positions x0 = fill(*mask);
+  GlobalMap map;
+  map.affine.a = Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitZ()).toRotationMatrix() *
+                 Eigen::Vector3d(1.1, 1 / 1.1, 1.0).asDiagonal();
+  map.affine.t = Eigen::Vector3d(1, -2, 0.5);
+  map.shears.centre = Eigen::Vector3d(3, -2, 5);
+  map.shears.c(3) = 0.004, map.shears.c(10) = -0.003;
+  map.fields = ShearFields::over({-20, -18, -8}, {26, 14, 18}, 8.0);
+  std::mt19937 rng(3);
+  std::normal_distribution<double> g(0.0, 0.6);
+  for (Eigen::Index i = 0; i < map.fields.weights.size(); ++i)
+    map.fields.weights(i) = g(rng);
+  particles::Positions placed(3, x0.cols()), current(3, x0.cols());
+  for (Eigen::Index i = 0; i < x0.cols(); ++i) {
+    placed.col(i) = map.apply(x0.col(i));
+    const double push =
+        2.5 * std::exp(-(placed.col(i) - Eigen::Vector3d(20, 0, 5)).squaredNorm() / 80);
+    current.col(i) = placed.col(i) - push * Eigen::Vector3d::UnitX();  // a dent from +x
+  }
+  const EmbeddedBody body(mask, map, placed, current, embedding_support_mm(kSpacing));
+  geometry::ImageGeometry grid = geometry::grid_covering(body.bounds(), 0.6, 2.0);
+  grid.spacing_mm = Eigen::Vector3d(0.6, 0.5, 1.1);
+  grid.size = {static_cast<int>(grid.size[0] * 1.4), static_cast<int>(grid.size[1] * 1.4),
+               static_cast<int>(grid.size[2] * 0.8)};
+  grid.direction = Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, 1, 0).normalized()).toRotationMatrix();
+  const Eigen::Vector3d middle = 0.5 * (body.bounds().min_mm + body.bounds().max_mm);
+  grid.origin_mm = middle - grid.direction *
+                                grid.spacing_mm.cwiseProduct(Eigen::Vector3d(
+                                    grid.size[0] - 1, grid.size[1] - 1, grid.size[2] - 1)) /
+                                2;
+  const geometry::LabelVolume labels = body.on_grid(grid);
+  long long inside = 0, differ = 0;
+  for (int k = 0; k < grid.size[2]; ++k)
+    for (int j = 0; j < grid.size[1]; ++j)
+      for (int i = 0; i < grid.size[0]; ++i) {
+        const bool in = body.inside(grid.index_to_physical(Eigen::Vector3d(i, j, k)));
+        inside += in;
+        differ += in != (labels.at(i, j, k) == 1);
+      }
+  EXPECT_EQ(differ, 0);
+  EXPECT_GT(inside, 10000);  // the organ is on the grid
+}
+
 TEST(EmbeddedBody, IsEmptyFarFromTheParticlesAndRefusesBadInput) {
   const auto mask = ellipsoid_mask(Eigen::Vector3d::Zero());
   const particles::Positions x = fill(*mask);

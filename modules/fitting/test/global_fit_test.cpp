@@ -580,5 +580,54 @@ TEST(ShearFields, KeepVolumeAndInvertExactly) {
   }
 }
 
+// The inverse's stretch bound holds between any two points of the box (near pairs for the
+// local slope, far ones too), with affine, shears and fields all at work, and is within
+// 3.5x of the largest stretch seen (a product of the parts' bounds: the fields' and
+// shears' steps need not stretch most at the same point); the affine part's alone exact.
+TEST(GlobalMap, InverseStretchBoundsTheInverseOverTheBox) {
+  GlobalMap map;
+  map.affine.a = Eigen::Vector3d(1.15, 1 / std::sqrt(1.15), 1.0).asDiagonal();
+  map.affine.a = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()) * map.affine.a;
+  map.affine.t = Eigen::Vector3d(2, -1, 4);
+  map.shears.centre = Eigen::Vector3d(1, 2, -3);
+  std::mt19937 rng(11);
+  std::normal_distribution<double> g(0.0, 1.0);
+  for (int k = 0; k < QuadraticShears::kCount; ++k)
+    map.shears.c(k) = 0.002 * g(rng);  // 1/mm: up to ~2 mm over 30 mm
+  map.fields = ShearFields::over({-30, -25, -20}, {30, 25, 20}, 10.0);
+  for (Eigen::Index i = 0; i < map.fields.weights.size(); ++i)
+    map.fields.weights(i) = 0.8 * g(rng);  // mm
+  const geometry::Aabb box{Eigen::Vector3d(-35, -30, -25), Eigen::Vector3d(35, 30, 25)};
+  const StretchBound bound = map.inverse_stretch(box);
+  ASSERT_TRUE(std::isfinite(bound.stretch));
+  EXPECT_GT(bound.slack_mm, 0);
+  EXPECT_LT(bound.slack_mm, 1e-2);
+  const Eigen::Matrix3d a_inverse = map.affine.a.inverse();
+  std::uniform_real_distribution<double> u(0, 1);
+  auto in_box = [&] {
+    return Eigen::Vector3d(box.min_mm.array() + (box.max_mm - box.min_mm).array() *
+                                                    Eigen::Array3d(u(rng), u(rng), u(rng)));
+  };
+  double largest = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    const Eigen::Vector3d p = in_box();
+    const Eigen::Vector3d step(g(rng), g(rng), g(rng));
+    const Eigen::Vector3d q = trial % 2 ? in_box() : Eigen::Vector3d(p + 1e-3 * step.normalized());
+    const double apart = (map.inverse(p, a_inverse) - map.inverse(q, a_inverse)).norm();
+    EXPECT_LE(apart, bound.stretch * (p - q).norm() + bound.slack_mm) << p.transpose();
+    largest = std::max(largest, apart / (p - q).norm());
+  }
+  EXPECT_GT(largest, 1.0);
+  EXPECT_LT(bound.stretch, 3.5 * largest);
+  GlobalMap affine_only;
+  affine_only.affine = map.affine;
+  EXPECT_NEAR(affine_only.inverse_stretch(box).stretch,
+              Eigen::JacobiSVD<Eigen::Matrix3d>(a_inverse).singularValues()(0), 1e-12);
+  // The identity stretches nothing.
+  const StretchBound identity = GlobalMap{}.inverse_stretch(box);
+  EXPECT_DOUBLE_EQ(identity.stretch, 1.0);
+  EXPECT_EQ(identity.slack_mm, 0.0);
+}
+
 }  // namespace
 }  // namespace organfit::fitting

@@ -64,7 +64,9 @@ std::vector<double> squared_distance_transform(const std::vector<std::uint8_t>& 
   for (int axis = 0; axis < 3; ++axis) {
     const int n = dims[axis];
     const long long stride = strides[axis];
-    const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+    // The other two axes, the one of smaller stride inner: consecutive lines then lie side
+    // by side in memory and share the cache lines a line's gather loads.
+    const int a1 = axis == 2 ? 1 : 2, a2 = axis == 0 ? 1 : 0;
     // The lines along an axis are independent: each thread takes whole lines.
 #pragma omp parallel
     {

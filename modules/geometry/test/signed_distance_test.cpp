@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <random>
 
 #include "organfit/geometry/mask_ops.h"
 
@@ -65,6 +66,42 @@ TEST(SignedDistance, BeyondTheGridAddsTheDistanceToIt) {
   EXPECT_NEAR(d.at(edge + 7.0 * axis, &gradient), d.at(edge) + 7.0, 1e-9);
   EXPECT_NEAR(gradient.dot(axis), 1.0, 1e-9);
   EXPECT_GT(d.at(edge), 2.0);  // the ball is well inside the grid
+}
+
+// gradient_bound: no two points of a ball differ by more than the bound times their
+// distance, within the grid and reaching beyond it; and the bound is no looser than it
+// must be (an unsmoothed distance's slope is about 1, the bound at most sqrt(3)).
+TEST(SignedDistance, GradientBoundHoldsBetweenAnyTwoPointsOfTheBall) {
+  const LabelVolume ball = rotated_ball();
+  for (const bool smooth : {false, true}) {
+    const SignedDistance d(ball, smooth);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(-1, 1);
+    double largest_ratio = 0;
+    for (const auto& [centre, radius] :
+         {std::pair{Eigen::Vector3d(2, -3, 1), 4.0}, std::pair{Eigen::Vector3d(9, 0, 0), 1.5},
+          std::pair{Eigen::Vector3d(12.5, 0, 3), 3.0}}) {
+      const double bound = d.gradient_bound(centre, radius);
+      ASSERT_TRUE(std::isfinite(bound));
+      EXPECT_LE(bound, std::sqrt(3.0) * (centre.norm() + radius > 12.9 ? std::sqrt(2.0) : 1.0));
+      for (int trial = 0; trial < 4000; ++trial) {
+        const Eigen::Vector3d a = centre + radius * Eigen::Vector3d(u(rng), u(rng), u(rng)) / 2;
+        // Far pairs, and near ones (0.01 mm apart) for the local slope.
+        const Eigen::Vector3d step(u(rng), u(rng), u(rng));
+        const Eigen::Vector3d b =
+            trial % 2
+                ? Eigen::Vector3d(a + 0.01 * step.normalized())
+                : Eigen::Vector3d(centre + radius * Eigen::Vector3d(u(rng), u(rng), u(rng)) / 2);
+        const double ratio = std::abs(d.at(a) - d.at(b)) / (a - b).norm();
+        EXPECT_LE(ratio, bound * (1 + 1e-9)) << a.transpose() << " / " << b.transpose();
+        largest_ratio = std::max(largest_ratio, ratio);
+      }
+    }
+    EXPECT_GT(largest_ratio, 0.9);  // the distance's own slope was seen
+  }
+  // Without a boundary (an empty mask) nothing is bounded.
+  LabelVolume empty(ball.geometry);
+  EXPECT_FALSE(std::isfinite(SignedDistance(empty, false).gradient_bound({0, 0, 0}, 1.0)));
 }
 
 }  // namespace

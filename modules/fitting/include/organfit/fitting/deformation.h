@@ -60,6 +60,12 @@ class Deformation {
   /// volume (1 where phi keeps volume).
   double volume_ratio(const Eigen::Vector3d& q_mm) const;
 
+  /// How phi^-1 stretches distances over today's points in `box` (mm): |phi^-1(p) -
+  /// phi^-1(q)| <= stretch |p - q| + slack_mm. The global map's inverse bound over the box
+  /// grown by u's largest size, times 1 + u's largest gradient (trilinear: its Frobenius
+  /// norm is largest at a cell's corner, from the cell's edge differences).
+  StretchBound pull_back_stretch(const geometry::Aabb& box) const;
+
   /// Over the lattice's cells (trilinear gradient at each cell's centre): the smallest
   /// and largest det(grad phi); a value <= 0 means phi folds (not invertible) there.
   double min_volume_ratio() const;
@@ -87,6 +93,8 @@ class Deformation {
   Eigen::Vector3i n_ = Eigen::Vector3i::Zero();
   std::vector<Eigen::Vector3f> values_;  // u (mm)
   double min_det_ = 1, max_det_ = 1;     // of det(grad phi^-1) over the lattice's cells
+  double largest_u_mm_ = 0;              // |u| over the nodes
+  double largest_grad_u_ = 0;            // a bound on |grad u| (Frobenius) over the lattice
   long long fitted_nodes_ = 0, harmonic_nodes_ = 0;
   /// Solves the Laplace equation for u at the nodes not `fitted` (values_ there), matching
   /// the fitted ones and zero on the lattice's faces; returns how many nodes it solved.

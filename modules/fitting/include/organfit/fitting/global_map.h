@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "organfit/fitting/surface_samples.h"
+#include "organfit/geometry/image_geometry.h"
 
 namespace organfit::fitting {
 
@@ -65,8 +66,21 @@ struct ShearFields {
   /// those below 1e-6 are left out.
   void bumps(int a, const Eigen::Vector3d& q, std::vector<std::pair<int, double>>& out) const;
   double field(int a, const Eigen::Vector3d& q) const;  ///< f_a at q (mm)
+  /// A bound on |grad f_a| (mm per mm) over the points of `box` (mm; only its extent
+  /// along the other two axes counts): the gradient, all bumps counted, sampled over the
+  /// box and raised by what it can grow between samples.
+  double largest_gradient(int a, const geometry::Aabb& box) const;
   Eigen::Vector3d apply(const Eigen::Vector3d& q) const;
   Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
+};
+
+/// How far apart a map can put two points: |f(p) - f(q)| <= stretch |p - q| + slack_mm
+/// for p, q in a given box. `stretch` bounds the largest singular value of f's Jacobian
+/// there; `slack_mm` what the computed f may differ from that smooth map (the Gaussian
+/// bumps below 1e-6 that ShearFields leaves out).
+struct StretchBound {
+  double stretch = 1;
+  double slack_mm = 0;
 };
 
 /// The global map: affine (det 1), then quadratic shears, then smooth shear fields.
@@ -91,6 +105,12 @@ struct GlobalMap {
   Eigen::Vector3d inverse(const Eigen::Vector3d& q, const Eigen::Matrix3d& a_inverse) const {
     return a_inverse * (shears.inverse(fields.inverse(q)) - affine.t);
   }
+  /// A bound on how the inverse stretches distances over `box` (mm), from each part's
+  /// largest gradient there: the fields' from their largest weight, the shears' from the
+  /// box's extent about their centre (grown by the fields' largest move), the affine
+  /// part's from its smallest singular value. Loose (a product of the parts' bounds) but
+  /// never below the truth.
+  StretchBound inverse_stretch(const geometry::Aabb& box) const;
 };
 
 /// The surface samples moved by `map`: points mapped, normals turned by the inverse

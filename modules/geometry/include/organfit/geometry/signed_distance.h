@@ -21,6 +21,10 @@ class SignedDistance {
   /// mask takes the union of two slices at their midplane).
   explicit SignedDistance(const LabelVolume& mask, bool smooth = true);
 
+  /// This distance smoothed, as the constructor smooths it (the same values as
+  /// SignedDistance(mask, true) from an unsmoothed one, without its two transforms).
+  SignedDistance smoothed() const;
+
   /// Value at `p_mm` (mm), trilinear between voxel centres; beyond the grid, the value
   /// at the nearest point of the grid plus the distance to it. `gradient` (unit-free,
   /// about 1 in length near the boundary), when given, is the interpolant's gradient.
@@ -29,13 +33,24 @@ class SignedDistance {
   /// Value at voxel centre (i, j, k), clamped to the grid.
   double at_voxel(int i, int j, int k) const;
 
+  /// A bound on |grad at()| (unit-free: mm per mm) over the ball of `radius_mm` about
+  /// `p_mm`: at() changes by at most this times the distance between two points of the
+  /// ball. Within the grid it is the interpolant's largest gradient (on a cell the squared
+  /// gradient is convex along each axis, so its largest value is at a corner, where the
+  /// partials are the cell's edge differences over the spacings); a ball reaching beyond
+  /// the grid adds the distance term's unit slope in quadrature. Infinite for a mask
+  /// without boundary.
+  double gradient_bound(const Eigen::Vector3d& p_mm, double radius_mm) const;
+
   const ImageGeometry& geometry() const { return geometry_; }
 
  private:
   void smooth();
+  void find_gradient_bound();
   ImageGeometry geometry_;
   Eigen::Matrix3d to_index_;  ///< physical offset -> index offset
   std::vector<double> values_;
+  double gradient_bound_ = 0;  ///< the interpolant's largest |gradient| within the grid
 };
 
 }  // namespace organfit::geometry
