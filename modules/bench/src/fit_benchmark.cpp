@@ -333,8 +333,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   for (const auto& shape : shapes) {
     const config::Scene base = config::parse_scene("scene:\n  seed: 1\n" + shape.yaml,
                                                    o.out / "bench.yaml", pipeline::scene_schema());
-    const pipeline::ModelStageResult model =
-        pipeline::run_model_stage(base, shape.organ ? &*shape.organ : nullptr);
+    const pipeline::ModelStageResult model = pipeline::run_model_stage(
+        pipeline::model_stage_options_from(base), shape.organ ? &*shape.organ : nullptr);
     fitting::organ_body(
         model);  // makes the planning organ's cache, which every case's clone shares
     const double rho = model.model->radius_mm();

@@ -465,13 +465,21 @@ int Scene::line_of(const std::string& s, const std::string& n) const {
   return sl == section_lines_.end() ? 1 : sl->second;
 }
 
-void Scene::fail(const std::string& s, const std::string& n, const std::string& reason) const {
+KeyRef Scene::key(const std::string& s, const std::string& n) const {
   if (const auto it = entries_.find(s + "." + n);
       it != entries_.end() && !it->second.set_on_command_line.empty())
-    throw InputError(fmt::format("--set {}: {}", echo(it->second.set_on_command_line), reason));
+    return KeyRef(fmt::format("--set {}", echo(it->second.set_on_command_line)));
   // An empty key: the rule is about the whole section.
-  throw InputError(fmt::format("{}:{}: {}{}{}: {}", file_.string(), line_of(s, n), s,
-                               n.empty() ? "" : ".", n, reason));
+  return KeyRef(
+      fmt::format("{}:{}: {}{}{}", file_.string(), line_of(s, n), s, n.empty() ? "" : ".", n));
+}
+
+void Scene::fail(const std::string& s, const std::string& n, const std::string& reason) const {
+  key(s, n).fail(reason);
+}
+
+void KeyRef::fail(const std::string& reason) const {
+  throw InputError(prefix_.empty() ? reason : prefix_ + ": " + reason);
 }
 
 std::string Scene::resolved_yaml() const {

@@ -162,10 +162,23 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
   return j;
 }
 
-FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult model,
+FitStageOptions fit_stage_options_from(const config::Scene& scene) {
+  FitStageOptions o;
+  o.method = scene.text("fit", "method");
+  o.measure_truth = scene.flag("fit", "measure_truth");
+  if (o.method == "paper")
+    o.paper = paper_fit_options_from(scene);
+  else
+    o.spread = spread_fit_options_from(scene);
+  return o;
+}
+
+FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult model,
                              const PointsStageResult& pts) {
   FitStageResult out;
-  const std::string method = scene.text("fit", "method");
+  const std::string& method = options.method;
+  const fitting::OrganFitOptions& common =
+      method == "paper" ? options.paper.fit : options.spread.fit;
   const auto& points = pts.points;
   const double rho = model.model->radius_mm();
   const double truth_voxel = evaluation::kTruthVoxelMm;
@@ -173,7 +186,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult model,
   // then the loop's.
   Progress preparing("fit: preparing", 6);
   std::optional<Progress> progress;
-  const long long max_steps = scene.integer("fit", "max_steps");
+  const long long max_steps = common.max_steps;
   fitting::FitObserver observer;
   observer.preparing = [&](int step, int, const std::string& done) {
     preparing.update(step, done);
@@ -189,10 +202,9 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult model,
   nlohmann::json summary = std::move(model.summary);
   fitting::FittedOrgan fitted;
   try {
-    fitted = method == "paper" ? fitting::fit_paper(std::move(model), points,
-                                                    paper_fit_options_from(scene), observer)
-                               : fitting::fit_spread(std::move(model), points,
-                                                     spread_fit_options_from(scene), observer);
+    fitted = method == "paper"
+                 ? fitting::fit_paper(std::move(model), points, options.paper, observer)
+                 : fitting::fit_spread(std::move(model), points, options.spread, observer);
   } catch (const fitting::ModelBrokeError& e) {
     throw TargetNotMetError(std::string("fit: the model did not hold together: ") + e.what());
   } catch (const std::invalid_argument& e) {
@@ -205,8 +217,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult model,
         "fit.spread.max_global_stretch, or a bend beyond {} of its size, "
         "fit.spread.global_max_shear); check that they belong to this organ and are in the same "
         "patient coordinates",
-        scene.number("fit.spread", "max_global_stretch"),
-        scene.number("fit.spread", "global_max_shear")));
+        options.spread.global.max_stretch, options.spread.global.max_shear_mm));
   if (fitted.report.pieces > 1)
     spdlog::warn(
         "fit: the local stage tore the organ into {} pieces; the global stage's organ is kept",
@@ -225,7 +236,7 @@ FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult model,
   const UncertaintyOnSurface on_surface =
       uncertainty_on_surface(out.model.shape, phi, *report.uncertainty);
   out.fit_summary["uncertainty"] = on_surface.summary;
-  if (pts.truth && scene.flag("fit", "measure_truth")) {
+  if (pts.truth && options.measure_truth) {
     spdlog::info("fit: done in {} steps; measuring it against the known deformation ({} mm grid)",
                  report.fit.steps, truth_voxel);
     Stopwatch truth_clock;

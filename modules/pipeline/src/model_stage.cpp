@@ -67,13 +67,27 @@ ModelSettings model_settings_from_json(const nlohmann::json& j, const std::strin
   return s;
 }
 
-ModelStageResult run_model_stage(const config::Scene& scene, const geometry::Shape* organ) {
-  ModelSettings settings = model_settings_from(scene);
+ModelStageOptions model_stage_options_from(const config::Scene& scene) {
+  ModelStageOptions o;
+  o.settings = model_settings_from(scene);
+  o.particles = scene.integer("model", "particles");
+  if (scene.has_section("body")) {
+    o.body_shape = scene.text("body", "shape");
+    o.body_size_mm = scene.vec3("body", "size_mm");
+    o.body_centre_mm = scene.vec3("body", "centre_mm");
+  }
+  o.radius_key = scene.key("model", "radius_mm");
+  o.body_size_key = scene.key("body", "size_mm");
+  return o;
+}
+
+ModelStageResult run_model_stage(const ModelStageOptions& options, const geometry::Shape* organ) {
+  ModelSettings settings = options.settings;
   const geometry::Shape shape =
-      organ ? *organ
-            : geometry::make_shape(scene.text("body", "shape"), scene.vec3("body", "size_mm"),
-                                   scene.vec3("body", "centre_mm"));
-  if (const long long count = scene.integer("model", "particles"); count > 0) {
+      organ
+          ? *organ
+          : geometry::make_shape(options.body_shape, options.body_size_mm, options.body_centre_mm);
+  if (const long long count = options.particles; count > 0) {
     settings.radius_mm = radius_for_count(settings, shape, count);
     spdlog::info("model: radius {:.4f} mm for about {} particles", settings.radius_mm, count);
   }
@@ -84,10 +98,10 @@ ModelStageResult run_model_stage(const config::Scene& scene, const geometry::Sha
   particles::Positions x = particles::fcc_lattice_points(
       shape.bounds(), centre, spacing, [&](const Eigen::Vector3d& p) { return shape.inside(p); });
   if (x.cols() < 2) {
-    scene.fail(organ ? "model" : "body", organ ? "radius_mm" : "size_mm",
-               fmt::format("the body holds {} particle(s) at radius {} mm: make it larger or the "
-                           "particles smaller",
-                           x.cols(), 0.5 * cp.r0_mm));
+    (organ ? options.radius_key : options.body_size_key)
+        .fail(fmt::format("the body holds {} particle(s) at radius {} mm: make it larger or the "
+                          "particles smaller",
+                          x.cols(), 0.5 * cp.r0_mm));
   }
   ModelStageResult result;
   result.settings = settings;

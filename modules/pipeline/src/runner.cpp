@@ -231,7 +231,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   };
   if (scene.has_section("model")) {
     Stopwatch clock;
-    model = run_model_stage(scene, organ ? &*organ : nullptr);
+    model = run_model_stage(model_stage_options_from(scene), organ ? &*organ : nullptr);
     record_stage("model", clock.elapsed_s());
     run["model"] = model->summary;
     spdlog::info("model: {} particles, relaxed in {} steps ({:.2f} s), skeleton {:.2f} s",
@@ -306,7 +306,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     Stopwatch clock;
     FitStageResult fit;
     try {
-      fit = run_fit_stage(scene, std::move(*model), *points);
+      fit = run_fit_stage(fit_stage_options_from(scene), std::move(*model), *points);
     } catch (const particles::StabilityError& e) {
       throw TargetNotMetError(std::string("fit: the simulation could not continue stably: ") +
                               e.what());

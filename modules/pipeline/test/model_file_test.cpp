@@ -28,7 +28,7 @@ class ModelFile : public ::testing::Test {
         "scene:\n  seed: 4\n" + body + "model:\n  radius_mm: 2.0\n  skeleton_stiffness: 0.3\n",
         dir_ / "s.yaml", scene_schema());
     check_scene_rules(scene);
-    return run_model_stage(scene);
+    return run_model_stage(model_stage_options_from(scene));
   }
   std::string error_of(const std::string& content) {
     std::ofstream(dir_ / "bad.json") << content;
@@ -142,7 +142,7 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
   const config::Scene scene =
       config::parse_scene("organ:\n  roi: X\n  rtstruct: rt.dcm\nmodel:\n  radius_mm: 2.0\n",
                           dir_ / "s.yaml", scene_schema());
-  const ModelStageResult m = run_model_stage(scene, &organ);
+  const ModelStageResult m = run_model_stage(model_stage_options_from(scene), &organ);
   save_model(dir_ / "m.json", m, "X", OrganLook{}, std::nullopt, nlohmann::json::object());
   const SavedModel back = load_model(dir_ / "m.json");
   ASSERT_TRUE(back.model.shape.mask);

@@ -96,7 +96,7 @@ TEST(ModelStage, ParticlesSetTheRadiusFromTheBodysVolume) {
     for (int count : {800, 6000}) {
       const config::Scene scene =
           parse(fmt::format("body:\n{}model:\n  particles: {}\n  skeleton: false\n", body, count));
-      const ModelStageResult r = run_model_stage(scene);
+      const ModelStageResult r = run_model_stage(model_stage_options_from(scene));
       EXPECT_NEAR(r.state.size(), count, 0.05 * count) << body << count;
       EXPECT_NEAR(r.summary["radius_mm"].get<double>(), r.settings.radius_mm, 1e-12);
     }
@@ -112,7 +112,7 @@ TEST(ModelStage, ParticlesSetTheRadiusFromTheBodysVolume) {
 TEST(ModelStage, FillsAndRelaxesTheBodyIntoOneComponent) {
   const config::Scene scene =
       parse("body:\n  shape: box\n  size_mm: [60, 48, 36]\nmodel:\n  radius_mm: 1.5\n");
-  const ModelStageResult r = run_model_stage(scene);
+  const ModelStageResult r = run_model_stage(model_stage_options_from(scene));
   EXPECT_EQ(r.summary["particles"].get<int>(), r.state.size());
   EXPECT_GT(r.state.size(), 100);
   EXPECT_EQ(r.summary["components"].get<int>(), 1);
@@ -131,7 +131,7 @@ TEST(ModelStage, FillsAndRelaxesTheBodyIntoOneComponent) {
 TEST(ModelStage, ABodyTooSmallForOneParticleIsABadInputNamingTheKey) {
   const config::Scene scene = parse("body:\n  size_mm: [1, 1, 1]\nmodel:\n  radius_mm: 5\n");
   try {
-    run_model_stage(scene);
+    run_model_stage(model_stage_options_from(scene));
     FAIL();
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("/s.yaml:2: body.size_mm:"), std::string::npos)

@@ -7,11 +7,27 @@
 #include <map>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "organfit/config/schema.h"
 
 namespace organfit::config {
+
+/// Where a key's value came from, kept with an option read from it so that an error found
+/// later (a file that cannot be read, a value the data cannot take) names the key as a
+/// scene error does: "file:line: section.name: reason", or "--set section.name=value:
+/// reason". Default: no key (the reason alone).
+class KeyRef {
+ public:
+  KeyRef() = default;
+  explicit KeyRef(std::string prefix) : prefix_(std::move(prefix)) {}
+  /// Throws InputError "<where>: reason".
+  [[noreturn]] void fail(const std::string& reason) const;
+
+ private:
+  std::string prefix_;
+};
 
 class Scene {
  public:
@@ -50,6 +66,8 @@ class Scene {
   /// Throws InputError "file:line: section.name: reason" (for cross-key rules).
   [[noreturn]] void fail(const std::string& section, const std::string& name,
                          const std::string& reason) const;
+  /// The key, to fail on later as fail() does.
+  KeyRef key(const std::string& section, const std::string& name) const;
 
   /// The fully resolved scene as YAML: every key of each present section, with
   /// defaults filled in and the unit and doc as comments.

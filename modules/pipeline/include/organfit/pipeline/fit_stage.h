@@ -62,11 +62,20 @@ fitting::SpreadFitOptions spread_fit_options_from(const config::Scene& scene);
 /// run.json's "fit" (without its "uncertainty", which the stage adds).
 nlohmann::json fit_summary(const fitting::FitReport& report);
 
-/// Fits `model` (moved in) to the points by fit.method, measures the truth when the
-/// points were made on a known one (fit.measure_truth), and returns the fitted model.
+/// The fit stage's settings: the method and its options, and whether to measure the truth.
+struct FitStageOptions {
+  std::string method = "spread";     ///< fit.method: "paper" or "spread"
+  fitting::PaperFitOptions paper;    ///< used when method is "paper"
+  fitting::SpreadFitOptions spread;  ///< used when method is "spread"
+  bool measure_truth = true;         ///< fit.measure_truth: against the points' known deformation
+};
+FitStageOptions fit_stage_options_from(const config::Scene& scene);
+
+/// Fits `model` (moved in) to the points by options.method, measures the truth when the
+/// points were made on a known one (options.measure_truth), and returns the fitted model.
 /// Throws InputError on bad points and TargetNotMetError when the points ask for an
 /// implausible change of the whole organ or the model does not hold together.
-FitStageResult run_fit_stage(const config::Scene& scene, ModelStageResult model,
+FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult model,
                              const PointsStageResult& points);
 
 /// What a user must be told of a fit that ran: the organ's volume changed by more than 1%
