@@ -17,30 +17,40 @@ dicom::CtReadOptions ct_options_from(const config::Scene& scene) {
   return o;
 }
 
-CtStageResult run_ct_stage(const config::Scene& scene, const fs::path& staging,
+CtStageOptions ct_stage_options_from(const config::Scene& scene) {
+  CtStageOptions o;
+  o.read = ct_options_from(scene);
+  if (scene.has_section("ct")) {
+    if (scene.is_given("ct", "node"))
+      o.pull = ct_pull_options_from(scene);
+    else
+      o.folder = scene.path("ct", "folder");
+  }
+  return o;
+}
+
+CtStageResult run_ct_stage(const CtStageOptions& options, const fs::path& staging,
                            const fs::path& out_dir, const fs::path& phantom_ct,
                            const fs::path& phantom_home) {
   CtStageResult r;
   Stopwatch clock;
-  dicom::CtReadOptions o = ct_options_from(scene);
+  dicom::CtReadOptions o = options.read;
   r.folder = phantom_ct;
   r.home = phantom_home;
-  if (scene.has_section("ct")) {
-    if (scene.is_given("ct", "node")) {
-      r.folder = staging / "cache" / "ct";
-      r.home = out_dir / "cache" / "ct";
-      r.pulled = pull_ct(scene, r.folder);
-      o.series_instance_uid = r.pulled->series_uid;
-      r.pull_wall_s = clock.elapsed_s();
-      r.pull_peak_memory_mib = peak_memory_mib();
-      spdlog::info("ct: {} objects pulled from {} in {:.2f} s (C-FIND {:.2f} s, C-GET {:.2f} s)",
-                   r.pulled->files.size(), scene.text("ct", "node"), r.pull_wall_s,
-                   r.pulled->find_s, r.pulled->get_s);
-      clock.restart();
-    } else {
-      r.folder = scene.path("ct", "folder");
-      r.home = r.folder;
-    }
+  if (options.pull) {
+    r.folder = staging / "cache" / "ct";
+    r.home = out_dir / "cache" / "ct";
+    r.pulled = pull_ct(*options.pull, r.folder);
+    o.series_instance_uid = r.pulled->series_uid;
+    r.pull_wall_s = clock.elapsed_s();
+    r.pull_peak_memory_mib = peak_memory_mib();
+    spdlog::info("ct: {} objects pulled from {} in {:.2f} s (C-FIND {:.2f} s, C-GET {:.2f} s)",
+                 r.pulled->files.size(), options.pull->node, r.pull_wall_s, r.pulled->find_s,
+                 r.pulled->get_s);
+    clock.restart();
+  } else if (options.folder) {
+    r.folder = *options.folder;
+    r.home = r.folder;
   }
   r.ct = dicom::read_ct_series(r.folder, o);
   r.read_wall_s = clock.elapsed_s();

@@ -17,11 +17,11 @@ namespace {
 
 /// Runs a network call; a node's failure becomes an error naming the scene's key.
 template <typename F>
-auto naming_key(const config::Scene& scene, const char* section, const char* key, F&& call) {
+auto naming_key(const config::KeyRef& key, F&& call) {
   try {
     return call();
   } catch (const Error& e) {  // a node's failure, or its answer not usable
-    scene.fail(section, key, e.what());
+    key.fail(e.what());
   }
 }
 
@@ -44,29 +44,37 @@ nlohmann::json PulledSeries::summary() const {
           {"get_s", get_s}};
 }
 
-PulledSeries pull_ct(const config::Scene& scene, const fs::path& folder) {
-  const dicomnet::Node node = dicomnet::parse_node(scene.text("ct", "node"), "ct.node");
-  const dicomnet::NetworkOptions options = network_options(scene);
-  dicomnet::SeriesQuery query;
-  query.patient_id = scene.text("ct", "patient_id");
-  query.study_uid = scene.text("ct", "study_uid");
-  query.series_uid = scene.text("ct", "series_uid");
-  query.modality = "CT";
+CtPullOptions ct_pull_options_from(const config::Scene& scene) {
+  CtPullOptions o;
+  o.node = scene.text("ct", "node");
+  o.network = network_options(scene);
+  o.query.patient_id = scene.text("ct", "patient_id");
+  o.query.study_uid = scene.text("ct", "study_uid");
+  o.query.series_uid = scene.text("ct", "series_uid");
+  o.query.modality = "CT";
+  o.node_key = scene.key("ct", "node");
+  o.choice_key = scene.key("ct", scene.is_given("ct", "series_uid")  ? "series_uid"
+                                 : scene.is_given("ct", "study_uid") ? "study_uid"
+                                                                     : "patient_id");
+  return o;
+}
+
+PulledSeries pull_ct(const CtPullOptions& o, const fs::path& folder) {
+  const dicomnet::Node node = dicomnet::parse_node(o.node, "ct.node");
+  const dicomnet::NetworkOptions& options = o.network;
+  const dicomnet::SeriesQuery& query = o.query;
   PulledSeries pulled;
   Stopwatch clock;
-  const char* key = scene.is_given("ct", "series_uid")  ? "series_uid"
-                    : scene.is_given("ct", "study_uid") ? "study_uid"
-                                                        : "patient_id";
   const auto found =
-      naming_key(scene, "ct", "node", [&] { return dicomnet::find_series(node, options, query); });
-  const dicomnet::SeriesEntry series = naming_key(scene, "ct", key, [&] {
+      naming_key(o.node_key, [&] { return dicomnet::find_series(node, options, query); });
+  const dicomnet::SeriesEntry series = naming_key(o.choice_key, [&] {
     return dicomnet::choose_series(found, query, node.text() + " holds", "ct.series_uid");
   });
   pulled.find_s = clock.elapsed_s();
   clock.restart();
   pulled.study_uid = series.study_uid;
   pulled.series_uid = series.series_uid;
-  pulled.files = naming_key(scene, "ct", "node", [&] {
+  pulled.files = naming_key(o.node_key, [&] {
     return dicomnet::retrieve_series(node, options, series.study_uid, series.series_uid, folder)
         .files;
   });
@@ -74,32 +82,42 @@ PulledSeries pull_ct(const config::Scene& scene, const fs::path& folder) {
   return pulled;
 }
 
-PulledSeries pull_structure_set(const config::Scene& scene, const std::string& study_uid,
+StructureSetPullOptions structure_set_pull_options_from(const config::Scene& scene) {
+  StructureSetPullOptions o;
+  o.node = scene.text("organ", "node");
+  o.network = network_options(scene);
+  o.roi = scene.text("organ", "roi");
+  o.series_uid = scene.text("organ", "series_uid");
+  o.node_key = scene.key("organ", "node");
+  o.choice_key = scene.key("organ", scene.is_given("organ", "series_uid") ? "series_uid" : "node");
+  return o;
+}
+
+PulledSeries pull_structure_set(const StructureSetPullOptions& o, const std::string& study_uid,
                                 const fs::path& folder) {
-  const dicomnet::Node node = dicomnet::parse_node(scene.text("organ", "node"), "organ.node");
-  const dicomnet::NetworkOptions options = network_options(scene);
-  const std::string roi = scene.text("organ", "roi");
+  const dicomnet::Node node = dicomnet::parse_node(o.node, "organ.node");
+  const dicomnet::NetworkOptions& options = o.network;
+  const std::string& roi = o.roi;
   dicomnet::SeriesQuery query;
   query.study_uid = study_uid;
-  query.series_uid = scene.text("organ", "series_uid");
+  query.series_uid = o.series_uid;
   query.modality = "RTSTRUCT";
   PulledSeries pulled;
   Stopwatch clock;
-  std::vector<dicomnet::SeriesEntry> found = naming_key(
-      scene, "organ", "node", [&] { return dicomnet::find_series(node, options, query); });
+  std::vector<dicomnet::SeriesEntry> found =
+      naming_key(o.node_key, [&] { return dicomnet::find_series(node, options, query); });
   pulled.find_s = clock.elapsed_s();
   clock.restart();
   // Each candidate series, retrieved: a structure set is one small object.
   auto retrieve = [&](const dicomnet::SeriesEntry& s) {
-    auto files = naming_key(scene, "organ", "node", [&] {
+    auto files = naming_key(o.node_key, [&] {
       return dicomnet::retrieve_series(node, options, s.study_uid, s.series_uid,
                                        folder / s.series_uid)
           .files;
     });
     if (files.size() != 1)
-      scene.fail("organ", "node",
-                 fmt::format("{}: the structure set series {} holds {} objects, not one",
-                             node.text(), s.series_uid, files.size()));
+      o.node_key.fail(fmt::format("{}: the structure set series {} holds {} objects, not one",
+                                  node.text(), s.series_uid, files.size()));
     return files.front();
   };
   // Several structure sets in the study (an earlier fit sent back, a colleague's): the
@@ -124,8 +142,7 @@ PulledSeries pull_structure_set(const config::Scene& scene, const std::string& s
     if (!holding.empty()) found = holding;
     query.modality = holding.empty() ? "RTSTRUCT" : "RTSTRUCT (with ROI '" + echo(roi) + "')";
   }
-  const char* key = scene.is_given("organ", "series_uid") ? "series_uid" : "node";
-  const dicomnet::SeriesEntry series = naming_key(scene, "organ", key, [&] {
+  const dicomnet::SeriesEntry series = naming_key(o.choice_key, [&] {
     return dicomnet::choose_series(found, query, node.text() + " holds (in the CT's study)",
                                    "organ.series_uid");
   });
@@ -139,7 +156,7 @@ PulledSeries pull_structure_set(const config::Scene& scene, const std::string& s
 nlohmann::json send_exported(const config::Scene& scene, const std::vector<fs::path>& files) {
   const dicomnet::Node node =
       dicomnet::parse_node(scene.text("export", "send_to"), "export.send_to");
-  const dicomnet::StoredFiles stored = naming_key(scene, "export", "send_to", [&] {
+  const dicomnet::StoredFiles stored = naming_key(scene.key("export", "send_to"), [&] {
     return dicomnet::store_files(node, network_options(scene), files);
   });
   nlohmann::json names = nlohmann::json::array();

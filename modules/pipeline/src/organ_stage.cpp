@@ -15,36 +15,48 @@ segmentation::SeedOptions seed_options_from(const config::Scene& scene) {
   return keys::organ_seed().read(scene);
 }
 
-OrganStageResult run_organ_stage(const config::Scene& scene, const dicom::CtSeries& ct,
+OrganStageOptions organ_stage_options_from(const config::Scene& scene) {
+  OrganStageOptions o;
+  o.roi = scene.text("organ", "roi");
+  o.roi_key = scene.key("organ", "roi");
+  if (scene.text("organ", "source") == "seed") {
+    o.seed = seed_options_from(scene);
+    return o;
+  }
+  o.roi_number = static_cast<int>(scene.integer("organ", "roi_number"));
+  if (scene.is_given("organ", "node")) o.pull = structure_set_pull_options_from(scene);
+  return o;
+}
+
+OrganStageResult run_organ_stage(const OrganStageOptions& options, const dicom::CtSeries& ct,
                                  const fs::path& rtstruct_file, const fs::path& staging,
                                  const fs::path& out_dir) {
   OrganStageResult r;
-  const std::string roi = scene.text("organ", "roi");
+  const std::string& roi = options.roi;
   geometry::LabelVolume mask;
-  if (scene.text("organ", "source") == "seed") {
+  if (options.seed) {
     segmentation::SeededOrgan grown =
-        segmentation::segment_from_seed(ct.geometry, ct.hu, seed_options_from(scene));
+        segmentation::segment_from_seed(ct.geometry, ct.hu, *options.seed);
     r.warnings = grown.warnings;
     mask = std::move(grown.mask);
     r.summary = {{"roi", roi}, {"source", "seed"}, {"volume_cm3", mask.volume_mm3(1) / 1000.0}};
     spdlog::info("organ: '{}' grown from the seed, {:.2f} cm3", roi, mask.volume_mm3(1) / 1000.0);
   } else {
     r.rtstruct_file = rtstruct_file;
-    if (scene.is_given("organ", "node")) {
+    if (options.pull) {
       Stopwatch clock;
-      r.pulled =
-          pull_structure_set(scene, ct.patient.study_instance_uid, staging / "cache" / "rtstruct");
+      r.pulled = pull_structure_set(*options.pull, ct.patient.study_instance_uid,
+                                    staging / "cache" / "rtstruct");
       r.rtstruct_file = r.pulled->files.front();
       r.structure_set_home = out_dir / fs::relative(r.rtstruct_file, staging);
       r.pull_wall_s = clock.elapsed_s();
       r.pull_peak_memory_mib = peak_memory_mib();
-      spdlog::info("organ: the structure set pulled from {} in {:.2f} s",
-                   scene.text("organ", "node"), r.pull_wall_s);
+      spdlog::info("organ: the structure set pulled from {} in {:.2f} s", options.pull->node,
+                   r.pull_wall_s);
     }
     const fs::path& file = r.rtstruct_file;
-    dicom::RasterisedRoi imported =
-        dicom::rasterise_roi(dicom::read_rtstruct(file), roi, ct, file.string(),
-                             static_cast<int>(scene.integer("organ", "roi_number")));
+    dicom::RasterisedRoi imported = dicom::rasterise_roi(dicom::read_rtstruct(file), roi, ct,
+                                                         file.string(), options.roi_number);
     r.warnings = imported.warnings;
     r.summary = {{"roi", roi},
                  {"source", "rtstruct"},
@@ -57,7 +69,7 @@ OrganStageResult run_organ_stage(const config::Scene& scene, const dicom::CtSeri
     mask = std::move(imported.mask);
   }
   if (mask.count(1) == 0)
-    scene.fail("organ", "roi", "the organ '" + echo(roi) + "' covers no voxel of the CT");
+    options.roi_key.fail("the organ '" + echo(roi) + "' covers no voxel of the CT");
   r.shape =
       geometry::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(mask)));
   return r;

@@ -31,16 +31,10 @@ evaluation::Deformation deformation_about(evaluation::Deformation d, const geome
   return d;
 }
 
-namespace {
-evaluation::Deformation deformation_keys(const config::Scene& scene) {
+evaluation::Deformation true_deformation_from(const config::Scene& scene) {
   evaluation::Deformation d = keys::points_deformation().read(scene);
   d.twist_rad = scene.number("points", "twist_deg") * M_PI / 180;
   return d;
-}
-}  // namespace
-
-evaluation::Deformation deformation_from(const config::Scene& scene, const geometry::Shape& shape) {
-  return deformation_about(deformation_keys(scene), shape);
 }
 
 PointsOptions points_options_from(const config::Scene& scene) {
@@ -50,7 +44,7 @@ PointsOptions points_options_from(const config::Scene& scene) {
     o.file = scene.path("points", "file");
     return o;
   }
-  o.deformation = deformation_keys(scene);
+  o.deformation = true_deformation_from(scene);
   o.sampling = keys::points_sampling().read(scene);
   o.sampling.count = static_cast<int>(scene.integer("points", "count"));
   o.sampling.half_coverage = scene.text("points", "coverage") == "half";

@@ -161,7 +161,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   }
   std::optional<dicom::CtSeries> ct;
   if (scene.has_section("ct") || !ct_folder.empty()) {
-    CtStageResult read = run_ct_stage(scene, staging, out_dir, ct_folder, ct_home);
+    CtStageResult read =
+        run_ct_stage(ct_stage_options_from(scene), staging, out_dir, ct_folder, ct_home);
     if (read.pulled) {
       run["ct_pulled"] = read.pulled->summary();
       record_stage("ct_pull", read.pull_wall_s, read.pull_peak_memory_mib);
@@ -200,7 +201,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   }
   if (scene.has_section("organ") && ct) {
     Stopwatch clock;
-    OrganStageResult made = run_organ_stage(scene, *ct, rtstruct_file, staging, out_dir);
+    OrganStageResult made =
+        run_organ_stage(organ_stage_options_from(scene), *ct, rtstruct_file, staging, out_dir);
     if (made.pulled) {
       rtstruct_file = made.rtstruct_file;
       organ_structure_set = made.structure_set_home;
@@ -257,8 +259,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         anatomy = pelvis_tissue_classes(
             itkbridge::read_label_volume(phantom_rtstruct.parent_path() / "labels.nrrd"));
       UltrasoundStageResult us = run_ultrasound_stage(
-          scene, *model, ct ? &*ct : nullptr, organ && organ->mask ? organ->mask.get() : nullptr,
-          anatomy ? &*anatomy : nullptr);
+          ultrasound_stage_options_from(scene), *model, ct ? &*ct : nullptr,
+          organ && organ->mask ? organ->mask.get() : nullptr, anatomy ? &*anatomy : nullptr);
       record_stage("ultrasound", clock.elapsed_s());
       points = std::move(us.points);
       if (points->truth) measure_points_against_truth(*points, us.true_boundary_mm);

@@ -101,42 +101,70 @@ ultrasound::TissueAt deformed_anatomy(const geometry::LabelVolume& tissue,
   };
 }
 
-UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene,
+UltrasoundStageOptions ultrasound_stage_options_from(const config::Scene& scene) {
+  UltrasoundStageOptions o;
+  o.source = scene.text("ultrasound", "source");
+  o.registration = scene.matrix4("ultrasound", "registration");
+  o.source_key = scene.key("ultrasound", "source");
+  o.probe_axis_key = scene.key("ultrasound", "probe_axis");
+  if (o.source == "simulate") {
+    o.deformation = true_deformation_from(scene);
+    o.probe_offset_mm = scene.vec3("ultrasound", "probe_offset_mm");
+    o.probe_axis = scene.vec3("ultrasound", "probe_axis").normalized();
+    o.probe_lateral = scene.vec3("ultrasound", "probe_lateral").normalized();
+    o.simulator = keys::ultrasound_simulator().read(scene, tissue_class_simulator_options());
+    o.simulator.lateral_half_angle_deg = o.simulator.elevation_half_angle_deg =
+        scene.number("ultrasound", "half_angle_deg");
+    o.simulator.seed = static_cast<std::uint64_t>(scene.integer("scene", "seed"));
+  } else if (o.source == "volume") {
+    o.file = scene.path("ultrasound", "file");
+  } else {
+    o.calibration = scene.matrix4("ultrasound", "calibration");
+    o.file = scene.path("ultrasound", "file");
+    if (o.source == "sweep") {
+      if (scene.is_given("ultrasound", "tracker")) o.tracker = scene.path("ultrasound", "tracker");
+      o.transform = scene.text("ultrasound", "transform");
+    } else {
+      o.pixel_mm = scene.number("ultrasound", "pixel_mm");
+    }
+  }
+  o.boundary = keys::ultrasound_boundary().read(scene);
+  o.boundary.target_count = static_cast<int>(scene.integer("points", "count"));
+  return o;
+}
+
+UltrasoundStageResult run_ultrasound_stage(const UltrasoundStageOptions& options,
                                            const ModelStageResult& model, const dicom::CtSeries* ct,
                                            const geometry::LabelVolume* organ_mask,
                                            const geometry::LabelVolume* anatomy) {
   UltrasoundStageResult r;
   PointsStageResult& pts = r.points;
-  const Eigen::Matrix4d registration = scene.matrix4("ultrasound", "registration");
+  const Eigen::Matrix4d& registration = options.registration;
   ultrasound::TrackedSweep sweep;  // 2D sources
   geometry::ImageGeometry us_geometry;
   std::vector<float> intensity;
   std::vector<std::uint8_t> in_view;
   nlohmann::json summary;
-  const std::string source = scene.text("ultrasound", "source");
+  const std::string& source = options.source;
   if (source == "simulate") {
     if (!ct || !organ_mask)
-      scene.fail("ultrasound", "source",
-                 "simulating ultrasound needs the planning CT and the organ (ct/phantom, organ)");
+      options.source_key.fail(
+          "simulating ultrasound needs the planning CT and the organ (ct/phantom, organ)");
     Stopwatch clock;
-    const evaluation::Deformation d = deformation_from(scene, model.shape);
+    const evaluation::Deformation d = deformation_about(options.deformation, model.shape);
     const geometry::LabelVolume tissue =
         anatomy ? *anatomy : tissue_classes(ct->geometry, ct->hu, organ_mask);
     const ultrasound::TissueAt today = deformed_anatomy(tissue, ct->hu, model.shape, d);
     ultrasound::ProbePose probe;
-    probe.position_mm = model.shape.centre_mm + scene.vec3("ultrasound", "probe_offset_mm");
-    probe.axis = scene.vec3("ultrasound", "probe_axis").normalized();
-    probe.lateral = scene.vec3("ultrasound", "probe_lateral").normalized();
-    ultrasound::SimulatorOptions so =
-        keys::ultrasound_simulator().read(scene, tissue_class_simulator_options());
-    so.lateral_half_angle_deg = so.elevation_half_angle_deg =
-        scene.number("ultrasound", "half_angle_deg");
-    so.seed = static_cast<std::uint64_t>(scene.integer("scene", "seed"));
+    probe.position_mm = model.shape.centre_mm + options.probe_offset_mm;
+    probe.axis = options.probe_axis;
+    probe.lateral = options.probe_lateral;
+    const ultrasound::SimulatorOptions& so = options.simulator;
     ultrasound::SimulatedUltrasound sim;
     try {
       sim = ultrasound::simulate_bmode(today, probe, so);
     } catch (const std::invalid_argument& e) {
-      scene.fail("ultrasound", "probe_axis", e.what());
+      options.probe_axis_key.fail(e.what());
     }
     us_geometry = sim.geometry;
     intensity.assign(sim.bmode.begin(), sim.bmode.end());
@@ -156,21 +184,20 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene,
                {"bend_mm", d.bend_mm},
                {"simulate_wall_s", clock.elapsed_s()}};
   } else if (source == "volume") {
-    const auto image = itkbridge::read_scalar_image(scene.path("ultrasound", "file"));
+    const auto image = itkbridge::read_scalar_image(options.file);
     us_geometry = image.geometry;
     intensity = image.values;
     summary = {{"source", "volume"},
                {"volume_size", {us_geometry.size[0], us_geometry.size[1], us_geometry.size[2]}}};
   } else {
     // 2D frames: a tracked sweep, or DICOM frames placed by the calibration alone.
-    const Eigen::Matrix4d calibration = scene.matrix4("ultrasound", "calibration");
+    const Eigen::Matrix4d& calibration = options.calibration;
     if (source == "sweep") {
-      const auto video = ultrasound::read_sequence_metafile(scene.path("ultrasound", "file"));
+      const auto video = ultrasound::read_sequence_metafile(options.file);
       std::optional<ultrasound::SequenceMetafile> tracker;
-      if (scene.is_given("ultrasound", "tracker"))
-        tracker = ultrasound::read_sequence_metafile(scene.path("ultrasound", "tracker"), false);
+      if (options.tracker) tracker = ultrasound::read_sequence_metafile(*options.tracker, false);
       ultrasound::SweepOptions so;
-      so.transform = scene.text("ultrasound", "transform");
+      so.transform = options.transform;
       so.image_to_probe = calibration;
       so.tracker_to_ct = registration;
       sweep = ultrasound::assemble_sweep(video, tracker ? &*tracker : nullptr, so);
@@ -178,8 +205,7 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene,
                  {"frames", video.frames.size()},
                  {"frames_used", sweep.frames.size()}};
     } else {
-      const dicom::UsImage us = dicom::read_us_image(scene.path("ultrasound", "file"),
-                                                     scene.number("ultrasound", "pixel_mm"));
+      const dicom::UsImage us = dicom::read_us_image(options.file, options.pixel_mm);
       Eigen::Matrix4d scale = Eigen::Matrix4d::Identity();
       scale(0, 0) = us.pixel_mm_x, scale(1, 1) = us.pixel_mm_y;
       const size_t n = static_cast<size_t>(us.width) * us.height;
@@ -196,12 +222,11 @@ UltrasoundStageResult run_ultrasound_stage(const config::Scene& scene,
     }
   }
   Stopwatch clock;
-  ultrasound::BoundaryOptions bo = keys::ultrasound_boundary().read(scene);
+  ultrasound::BoundaryOptions bo = options.boundary;
   bo.centre_mm = model.shape.centre_mm;
   bo.r_max_mm = 0.5 * model.shape.size_mm.maxCoeff() + bo.band_mm;
   const geometry::Shape& prior = model.shape;
   bo.prior_inside = [&prior](const Eigen::Vector3d& p) { return prior.inside(p); };
-  bo.target_count = static_cast<int>(scene.integer("points", "count"));
   ultrasound::BoundaryResult found;
   try {
     if (!sweep.frames.empty()) {

@@ -23,10 +23,19 @@ struct CtStageResult {
   double pull_peak_memory_mib = 0;  ///< the process's peak once the pull was done
 };
 
+/// Where the CT comes from: a folder (ct.folder), a node (ct.node), or, with neither, the
+/// phantom the run made; and which series.
+struct CtStageOptions {
+  dicom::CtReadOptions read;
+  std::optional<std::filesystem::path> folder;  ///< ct.folder
+  std::optional<CtPullOptions> pull;            ///< ct.node
+};
+CtStageOptions ct_stage_options_from(const config::Scene& scene);
+
 /// Reads the CT. `staging`/`out_dir`: the run's staging folder and --out (a pulled
 /// series goes into staging/cache/ct, at home in out_dir/cache/ct); `phantom_ct`/
-/// `phantom_home`: the phantom's CT folder when the scene has no `ct` section.
-CtStageResult run_ct_stage(const config::Scene& scene, const std::filesystem::path& staging,
+/// `phantom_home`: the phantom's CT folder when the options name neither folder nor node.
+CtStageResult run_ct_stage(const CtStageOptions& options, const std::filesystem::path& staging,
                            const std::filesystem::path& out_dir,
                            const std::filesystem::path& phantom_ct,
                            const std::filesystem::path& phantom_home);

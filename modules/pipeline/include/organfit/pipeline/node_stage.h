@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "organfit/config/scene.h"
+#include "organfit/dicomnet/find_series.h"
 #include "organfit/dicomnet/node.h"
 
 namespace organfit::pipeline {
@@ -24,17 +25,38 @@ struct PulledSeries {
   nlohmann::json summary() const;
 };
 
-/// The CT series ct.node, ct.study_uid / ct.patient_id and ct.series_uid name, retrieved
-/// into `folder`. Errors (exit 2) name the scene's key: the node's failure, no CT
-/// series there, or several to choose from (listed).
-PulledSeries pull_ct(const config::Scene& scene, const std::filesystem::path& folder);
+/// What to pull the planning CT from: the node (ct.node), which series (ct.patient_id,
+/// ct.study_uid, ct.series_uid), and the keys a failure is named by.
+struct CtPullOptions {
+  std::string node;  ///< "AET@host:port"
+  dicomnet::NetworkOptions network;
+  dicomnet::SeriesQuery query;  ///< modality CT
+  config::KeyRef node_key;      ///< ct.node: the node failed
+  config::KeyRef choice_key;    ///< the most specific key given: no or several series
+};
+CtPullOptions ct_pull_options_from(const config::Scene& scene);
 
-/// The RT Structure Set organ.node holds in study `study_uid` (the CT's), retrieved into
-/// `folder`/<series UID>/: organ.series_uid's, or the study's only RTSTRUCT series, or
-/// the only one of several that holds ROI organ.roi (several: an error listing them).
-/// A structure set series must hold one object.
-PulledSeries pull_structure_set(const config::Scene& scene, const std::string& study_uid,
-                                const std::filesystem::path& folder);
+/// The CT series the options name, retrieved into `folder`. Errors (exit 2) name the
+/// scene's key: the node's failure, no CT series there, or several to choose from (listed).
+PulledSeries pull_ct(const CtPullOptions& options, const std::filesystem::path& folder);
+
+/// What to pull the structure set from: the node (organ.node), the series (organ.series_uid,
+/// or the one holding organ.roi), and the keys a failure is named by.
+struct StructureSetPullOptions {
+  std::string node;
+  dicomnet::NetworkOptions network;
+  std::string roi, series_uid;
+  config::KeyRef node_key;    ///< organ.node
+  config::KeyRef choice_key;  ///< organ.series_uid when given, else organ.node
+};
+StructureSetPullOptions structure_set_pull_options_from(const config::Scene& scene);
+
+/// The RT Structure Set the options name in study `study_uid` (the CT's), retrieved into
+/// `folder`/<series UID>/: the given series, or the study's only RTSTRUCT series, or the
+/// only one of several that holds the ROI (several: an error listing them). A structure
+/// set series must hold one object.
+PulledSeries pull_structure_set(const StructureSetPullOptions& options,
+                                const std::string& study_uid, const std::filesystem::path& folder);
 
 /// Sends `files` to export.send_to. Returns run.json's record of the send; a failure
 /// throws NodeError naming export.send_to.

@@ -32,10 +32,21 @@ struct OrganStageResult {
   std::filesystem::path rtstruct_file, structure_set_home;
 };
 
+/// The organ: its ROI's name and number, grown from a seed or imported (from a file, or
+/// pulled from a node), and the key an empty organ is blamed on.
+struct OrganStageOptions {
+  std::string roi;                                ///< organ.roi
+  int roi_number = 0;                             ///< organ.roi_number (0: by name)
+  std::optional<segmentation::SeedOptions> seed;  ///< organ.source: seed
+  std::optional<StructureSetPullOptions> pull;    ///< organ.node
+  config::KeyRef roi_key;                         ///< organ.roi
+};
+OrganStageOptions organ_stage_options_from(const config::Scene& scene);
+
 /// Makes the organ. `rtstruct_file`: the structure set to import from (the scene's or the
 /// phantom's; ignored for a seed or a pull); `staging`/`out_dir` as for the ct stage.
 /// Fails naming organ.roi when the organ covers no voxel.
-OrganStageResult run_organ_stage(const config::Scene& scene, const dicom::CtSeries& ct,
+OrganStageResult run_organ_stage(const OrganStageOptions& options, const dicom::CtSeries& ct,
                                  const std::filesystem::path& rtstruct_file,
                                  const std::filesystem::path& staging,
                                  const std::filesystem::path& out_dir);

@@ -50,9 +50,9 @@ PointsStageResult run_points_stage(const PointsOptions& options, const ModelStag
 /// `d` about the shape: centred on its centre, its half length along x the shape's x half size
 /// times the stretch.
 evaluation::Deformation deformation_about(evaluation::Deformation d, const geometry::Shape& shape);
-/// The true deformation the points section describes (evaluation::Deformation), about the
-/// shape's centre.
-evaluation::Deformation deformation_from(const config::Scene& scene, const geometry::Shape& shape);
+/// The true deformation the points section describes (evaluation::Deformation), not yet
+/// placed about a shape (deformation_about).
+evaluation::Deformation true_deformation_from(const config::Scene& scene);
 
 /// A box holding the deformed shape: its corners mapped, widened by the non-affine parts.
 geometry::Aabb deformed_bounds(const geometry::Shape& shape,
