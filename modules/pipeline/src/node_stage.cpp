@@ -153,12 +153,18 @@ PulledSeries pull_structure_set(const StructureSetPullOptions& o, const std::str
   return pulled;
 }
 
-nlohmann::json send_exported(const config::Scene& scene, const std::vector<fs::path>& files) {
-  const dicomnet::Node node =
-      dicomnet::parse_node(scene.text("export", "send_to"), "export.send_to");
-  const dicomnet::StoredFiles stored = naming_key(scene.key("export", "send_to"), [&] {
-    return dicomnet::store_files(node, network_options(scene), files);
-  });
+SendOptions send_options_from(const config::Scene& scene) {
+  SendOptions o;
+  o.node = scene.text("export", "send_to");
+  o.network = network_options(scene);
+  o.node_key = scene.key("export", "send_to");
+  return o;
+}
+
+nlohmann::json send_exported(const SendOptions& o, const std::vector<fs::path>& files) {
+  const dicomnet::Node node = dicomnet::parse_node(o.node, "export.send_to");
+  const dicomnet::StoredFiles stored =
+      naming_key(o.node_key, [&] { return dicomnet::store_files(node, o.network, files); });
   nlohmann::json names = nlohmann::json::array();
   for (const auto& f : files)
     names.push_back(f.filename().string());

@@ -459,7 +459,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         if (!scene.text("export", key).empty())
           dicom_files.push_back(staging / scene.text("export", key));
       try {
-        run["export"]["sent"] = send_exported(scene, dicom_files);
+        run["export"]["sent"] = send_exported(send_options_from(scene), dicom_files);
         spdlog::info("export: {} object(s) sent to {} in {:.2f} s", dicom_files.size(),
                      scene.text("export", "send_to"), clock.elapsed_s());
       } catch (const Error& e) {

@@ -58,9 +58,18 @@ StructureSetPullOptions structure_set_pull_options_from(const config::Scene& sce
 PulledSeries pull_structure_set(const StructureSetPullOptions& options,
                                 const std::string& study_uid, const std::filesystem::path& folder);
 
-/// Sends `files` to export.send_to. Returns run.json's record of the send; a failure
-/// throws NodeError naming export.send_to.
-nlohmann::json send_exported(const config::Scene& scene,
+/// Where the exported objects go: the node (export.send_to), and the key a failure is
+/// named by.
+struct SendOptions {
+  std::string node;
+  dicomnet::NetworkOptions network;
+  config::KeyRef node_key;  ///< export.send_to
+};
+SendOptions send_options_from(const config::Scene& scene);
+
+/// Sends `files` to the node. Returns run.json's record of the send; a failure throws
+/// naming export.send_to.
+nlohmann::json send_exported(const SendOptions& options,
                              const std::vector<std::filesystem::path>& files);
 
 }  // namespace organfit::pipeline
