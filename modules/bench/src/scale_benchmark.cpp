@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <fstream>
 #include <tuple>
 
@@ -52,20 +53,36 @@ std::vector<ScaleCase> all_cases() {
   };
 }
 
-/// The run.json of `organfit run scene --out folder`, run as a child process.
+/// The run.json of `organfit run scene --out folder`, run as a child process. The child's
+/// messages go to a file beside its folder, not to our stderr: stopped with us, it would
+/// report the stop too; otherwise they are passed on (its warnings), and its error, when it
+/// failed, becomes part of ours.
 nlohmann::json run_child(const fs::path& scene, const fs::path& folder, int threads) {
-  const std::string cmd = fmt::format(
-      "'{}' --quiet run '{}' --out '{}' --set scene.threads={} > /dev/null",
-      fs::read_symlink("/proc/self/exe").string(), scene.string(), folder.string(), threads);
+  const fs::path messages = folder.string() + ".stderr";
+  const std::string cmd =
+      fmt::format("'{}' --quiet run '{}' --out '{}' --set scene.threads={} > /dev/null 2> '{}'",
+                  fs::read_symlink("/proc/self/exe").string(), scene.string(), folder.string(),
+                  threads, messages.string());
   const int status = run_command(cmd);
   throw_if_interrupted();
+  std::string said, error;
+  {
+    std::ifstream text(messages);
+    for (std::string line; std::getline(text, line);) {
+      said += line + "\n";
+      if (line.rfind("organfit: error: ", 0) == 0) error = line.substr(17);
+    }
+  }
+  std::error_code ignored;
+  fs::remove(messages, ignored);
   // Exit 3 (ran, a target not met: e.g. the fit did not converge) still measures the run.
   const bool ran = WIFEXITED(status) && (WEXITSTATUS(status) == 0 || WEXITSTATUS(status) == 3);
   std::ifstream in(folder / "run.json");
   if (!ran || !in)
-    throw Error(
-        ExitCode::kInternal,
-        fmt::format("bench scale: the run of {} failed (wait status {})", scene.string(), status));
+    throw Error(ExitCode::kInternal,
+                fmt::format("bench scale: the run of {} failed (wait status {}){}", scene.string(),
+                            status, error.empty() ? "" : ": " + error));
+  std::fputs(said.c_str(), stderr);  // its warnings, and its error when a target was not met
   return nlohmann::json::parse(in);
 }
 
