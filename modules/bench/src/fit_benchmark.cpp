@@ -22,7 +22,6 @@
 #include "organfit/itkbridge/tps.h"
 #include "organfit/phantom/pelvis.h"
 #include "organfit/pipeline/fit_stage.h"
-#include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
@@ -35,9 +34,22 @@ namespace organfit::bench {
 namespace {
 
 struct ShapeCase {
-  std::string name, yaml;                ///< yaml: the body and model sections
+  std::string name;
+  pipeline::ModelStageOptions model;     ///< the radius, and the analytic body without an organ
   std::optional<geometry::Shape> organ;  ///< a mask shape (phantom prostate, real GTV)
 };
+
+/// A model of particles of `radius_mm` (the model's defaults otherwise, seed 1) filling
+/// an organ, or the analytic body `shape` of `size_mm` about the origin.
+pipeline::ModelStageOptions model_of(double radius_mm, const std::string& shape = "",
+                                     const Eigen::Vector3d& size_mm = Eigen::Vector3d::Ones()) {
+  pipeline::ModelStageOptions o;
+  o.settings.radius_mm = radius_mm;
+  o.settings.seed = 1;
+  o.body_shape = shape;
+  o.body_size_mm = size_mm;
+  return o;
+}
 
 /// The pelvis phantom's prostate (label mask on its CT grid).
 geometry::Shape phantom_prostate() {
@@ -259,9 +271,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   Stopwatch total;
 
   std::vector<ShapeCase> shapes = {
-      {"phantom_prostate", "body:\nmodel:\n  radius_mm: 1.92\n", phantom_prostate()},
-      {"cube", "body:\n  shape: box\n  size_mm: [30, 30, 30]\nmodel:\n  radius_mm: 1.75\n",
-       std::nullopt}};
+      {"phantom_prostate", model_of(1.92), phantom_prostate()},
+      {"cube", model_of(1.75, "box", Eigen::Vector3d(30, 30, 30)), std::nullopt}};
   std::vector<std::string> families = {"stretch", "bend", "twist", "indent", "push"};
   std::vector<double> magnitudes = {5, 10};
   std::vector<int> counts = {87};
@@ -273,22 +284,17 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
     shapes.erase(shapes.begin() + 1);  // the cube: no organ a probe presses
     for (const std::string sts : {"004", "002"})
       if (auto gtv = real_gtv(ORGANFIT_SHARED_DATA_DIR_STRING, "ct-sts-" + sts))
-        shapes.push_back(
-            {"real_gtv_sts" + sts, "body:\nmodel:\n  radius_mm: 3.0\n", std::move(gtv)});
+        shapes.push_back({"real_gtv_sts" + sts, model_of(3.0), std::move(gtv)});
     families = {"fem_probe", "fem_bladder"};
     magnitudes = {2, 5, 8, 12};
   } else if (o.sessions) {
     families = {"shift", "rotate", "stretch", "bend", "twist", "indent", "push"};
     magnitudes = {0, 0.5, 1, 2, 5};
   } else if (!o.quick) {
-    shapes.push_back({"egg",
-                      "body:\n  shape: egg\n  size_mm: [50, 40, 34]\nmodel:\n  radius_mm: 1.92\n",
-                      std::nullopt});
-    shapes.push_back({"lung",
-                      "body:\n  shape: lung\n  size_mm: [40, 30, 60]\nmodel:\n  radius_mm: 1.9\n",
-                      std::nullopt});
+    shapes.push_back({"egg", model_of(1.92, "egg", Eigen::Vector3d(50, 40, 34)), std::nullopt});
+    shapes.push_back({"lung", model_of(1.9, "lung", Eigen::Vector3d(40, 30, 60)), std::nullopt});
     if (auto gtv = real_gtv(ORGANFIT_SHARED_DATA_DIR_STRING))
-      shapes.push_back({"real_gtv_sts004", "body:\nmodel:\n  radius_mm: 3.0\n", std::move(gtv)});
+      shapes.push_back({"real_gtv_sts004", model_of(3.0), std::move(gtv)});
     magnitudes = {2, 5, 10, 15};
     counts = {20, 50, 87, 200};
     noises = {0, 0.5, 1.0};
@@ -331,10 +337,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
   int case_id = 0, cases_run = 0;
   nlohmann::json fem_meshes = nlohmann::json::array();  // the FEM solves (--fem)
   for (const auto& shape : shapes) {
-    const config::Scene base = config::parse_scene("scene:\n  seed: 1\n" + shape.yaml,
-                                                   o.out / "bench.yaml", pipeline::scene_schema());
-    const pipeline::ModelStageResult model = pipeline::run_model_stage(
-        pipeline::model_stage_options_from(base), shape.organ ? &*shape.organ : nullptr);
+    const pipeline::ModelStageResult model =
+        pipeline::run_model_stage(shape.model, shape.organ ? &*shape.organ : nullptr);
     fitting::organ_body(
         model);  // makes the planning organ's cache, which every case's clone shares
     const double rho = model.model->radius_mm();
