@@ -74,7 +74,9 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   const geometry::Aabb box =
       geometry::image_of_box(part, [](const Eigen::Vector3d& p) { return p; });
   const StretchBound bound = deformation_->pull_back_stretch(box);
-  const bool bounded = std::isfinite(bound.stretch) && std::isfinite(bound.slack_mm);
+  // d's gradient bound, found here on threads rather than by the first block that asks.
+  const bool bounded = std::isfinite(bound.stretch) && std::isfinite(bound.slack_mm) &&
+                       std::isfinite(distance_->gradient_bound());
   auto half_diagonal = [&grid](const Block& b) {
     Eigen::Vector3d extent;
     for (int d = 0; d < 3; ++d)
@@ -82,8 +84,7 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
     return 0.5 * extent.norm();  // the direction matrix is orthonormal
   };
   // Sets block b, or halves it; returns nothing, writes only b's voxels.
-  auto classify = [&](const Block& top, auto& self) -> void {
-    const Block& b = top;
+  auto classify = [&](const Block& b, auto& self) -> void {
     const Eigen::Vector3d centre = grid.index_to_physical(
         0.5 * Eigen::Vector3d(b.lo[0] + b.hi[0], b.lo[1] + b.hi[1], b.lo[2] + b.hi[2]));
     const Eigen::Vector3d y = pull_back(centre);

@@ -158,10 +158,14 @@ double shear_stretch(double g) {
 constexpr double kLeftOutBumps = 1e-4;
 }  // namespace
 
+double ShearFields::largest_weight(int a) const {
+  return weights.size() == 0 ? 0.0 : weights.segment(a * block(), block()).cwiseAbs().maxCoeff();
+}
+
 double ShearFields::largest_gradient(int a, const geometry::Aabb& box) const {
   if (empty()) return 0;
   const auto [b, c] = other_axes(a);
-  const double w = weights.segment(a * block(), block()).cwiseAbs().maxCoeff();
+  const double w = largest_weight(a);
   if (w == 0) return 0;
   const auto& sums = bump_sum_bounds();
   // |grad f_a| sampled at most delta = sigma / 8 apart over the box's projection, every
@@ -177,6 +181,7 @@ double ShearFields::largest_gradient(int a, const geometry::Aabb& box) const {
   if (1.0 * nb * nc > 1e6)  // a box far larger than the fields: the bound from the weights
     return std::sqrt(2.0) * w * sums[1] * sums[0] / sigma_mm;
   double largest = 0;
+#pragma omp parallel for collapse(2) reduction(max : largest) schedule(static)
   for (int jc = 0; jc < nc; ++jc)
     for (int jb = 0; jb < nb; ++jb) {
       const double ub = (box.min_mm[b] + (nb > 1 ? span_b * jb / (nb - 1) : 0) - origin_mm[b]) /
@@ -214,8 +219,7 @@ StretchBound GlobalMap::inverse_stretch(const geometry::Aabb& box) const {
   if (!fields.empty()) {
     const double sum0 = bump_sum_bounds()[0];
     for (int a = 2; a >= 0; --a) {
-      const double w =
-          fields.weights.segment(a * fields.block(), fields.block()).cwiseAbs().maxCoeff();
+      const double w = fields.largest_weight(a);
       stretch *= shear_stretch(fields.largest_gradient(a, geometry::Aabb{lo, hi}));
       const double move = w * (sum0 * sum0 + kLeftOutBumps);
       lo[a] -= move, hi[a] += move;

@@ -12,13 +12,6 @@
 
 namespace organfit::fitting {
 
-particles::Positions refill_mapped_body(const geometry::LabelVolume& reference, int count,
-                                        double a_nn_mm, const GlobalMap& map) {
-  if (count <= 0) return particles::Positions(3, 0);
-  return MappedBodySites(reference, geometry::SignedDistance(reference, false), a_nn_mm, map)
-      .fill(count);
-}
-
 MappedBodySites::MappedBodySites(const geometry::LabelVolume& reference,
                                  const geometry::SignedDistance& depth, double a_nn_mm,
                                  const GlobalMap& map)

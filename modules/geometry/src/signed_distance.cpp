@@ -24,40 +24,42 @@ SignedDistance::SignedDistance(const LabelVolume& mask, bool smooth_it)
   for (size_t v = 0; v < total; ++v)
     values_[v] = in[v] ? -(std::sqrt(to_out[v]) - h) : std::sqrt(to_in[v]) - h;
   if (smooth_it) smooth();
-  find_gradient_bound();
 }
 
 SignedDistance SignedDistance::smoothed() const {
   SignedDistance out = *this;
   out.smooth();
-  out.find_gradient_bound();
+  out.gradient_bound_ = std::make_shared<GradientBound>();  // other values, its own bound
   return out;
 }
 
-void SignedDistance::find_gradient_bound() {
-  // The largest gradient of the interpolant: at a cell's corner the partials are the
-  // differences along the cell's three edges; over the 8 cells of a voxel the largest is
-  // the largest difference along each axis, either side.
-  const ImageGeometry& g = geometry_;
-  double largest_sq = 0;
+double SignedDistance::gradient_bound() const {
+  std::call_once(gradient_bound_->found, [this] {
+    // At a cell's corner the partials are the differences along the cell's three edges;
+    // over the 8 cells of a voxel the largest is the largest difference along each axis,
+    // either side.
+    const ImageGeometry& g = geometry_;
+    double largest_sq = 0;
 #pragma omp parallel for reduction(max : largest_sq) schedule(static)
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i) {
-        const double v = at_voxel(i, j, k);
-        const double dx =
-            std::max(std::abs(at_voxel(i - 1, j, k) - v), std::abs(at_voxel(i + 1, j, k) - v)) /
-            g.spacing_mm[0];
-        const double dy =
-            std::max(std::abs(at_voxel(i, j - 1, k) - v), std::abs(at_voxel(i, j + 1, k) - v)) /
-            g.spacing_mm[1];
-        const double dz =
-            std::max(std::abs(at_voxel(i, j, k - 1) - v), std::abs(at_voxel(i, j, k + 1) - v)) /
-            g.spacing_mm[2];
-        const double sq = dx * dx + dy * dy + dz * dz;
-        largest_sq = std::max(largest_sq, std::isfinite(sq) ? sq : HUGE_VAL);
-      }
-  gradient_bound_ = std::sqrt(largest_sq);
+    for (int k = 0; k < g.size[2]; ++k)
+      for (int j = 0; j < g.size[1]; ++j)
+        for (int i = 0; i < g.size[0]; ++i) {
+          const double v = at_voxel(i, j, k);
+          const double dx =
+              std::max(std::abs(at_voxel(i - 1, j, k) - v), std::abs(at_voxel(i + 1, j, k) - v)) /
+              g.spacing_mm[0];
+          const double dy =
+              std::max(std::abs(at_voxel(i, j - 1, k) - v), std::abs(at_voxel(i, j + 1, k) - v)) /
+              g.spacing_mm[1];
+          const double dz =
+              std::max(std::abs(at_voxel(i, j, k - 1) - v), std::abs(at_voxel(i, j, k + 1) - v)) /
+              g.spacing_mm[2];
+          const double sq = dx * dx + dy * dy + dz * dz;
+          largest_sq = std::max(largest_sq, std::isfinite(sq) ? sq : HUGE_VAL);
+        }
+    gradient_bound_->value = std::sqrt(largest_sq);
+  });
+  return gradient_bound_->value;
 }
 
 double SignedDistance::gradient_bound(const Eigen::Vector3d& p_mm, double radius_mm) const {
@@ -66,9 +68,9 @@ double SignedDistance::gradient_bound(const Eigen::Vector3d& p_mm, double radius
   for (int c = 0; c < 3; ++c) {
     const double reach = radius_mm / g.spacing_mm[c];
     if (!(idx[c] - reach >= 0) || !(idx[c] + reach <= g.size[c] - 1))
-      return std::hypot(gradient_bound_, 1.0);
+      return std::hypot(gradient_bound(), 1.0);
   }
-  return gradient_bound_;
+  return gradient_bound();
 }
 
 void SignedDistance::smooth() {

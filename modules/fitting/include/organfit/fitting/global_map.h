@@ -66,6 +66,7 @@ struct ShearFields {
   /// those below 1e-6 are left out.
   void bumps(int a, const Eigen::Vector3d& q, std::vector<std::pair<int, double>>& out) const;
   double field(int a, const Eigen::Vector3d& q) const;  ///< f_a at q (mm)
+  double largest_weight(int a) const;                   ///< field a's largest |bump height| (mm)
   /// A bound on |grad f_a| (mm per mm) over the points of `box` (mm; only its extent
   /// along the other two axes counts): the gradient, all bumps counted, sampled over the
   /// box and raised by what it can grow between samples.

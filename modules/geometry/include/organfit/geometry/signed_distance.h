@@ -2,6 +2,8 @@
 // The signed distance to a mask's boundary (mm), sampled at the voxel centres and
 // interpolated trilinearly between them.
 #include <Eigen/Core>
+#include <memory>
+#include <mutex>
 #include <vector>
 
 #include "organfit/geometry/image_geometry.h"
@@ -33,24 +35,31 @@ class SignedDistance {
   /// Value at voxel centre (i, j, k), clamped to the grid.
   double at_voxel(int i, int j, int k) const;
 
-  /// A bound on |grad at()| (unit-free: mm per mm) over the ball of `radius_mm` about
-  /// `p_mm`: at() changes by at most this times the distance between two points of the
-  /// ball. Within the grid it is the interpolant's largest gradient (on a cell the squared
-  /// gradient is convex along each axis, so its largest value is at a corner, where the
-  /// partials are the cell's edge differences over the spacings); a ball reaching beyond
-  /// the grid adds the distance term's unit slope in quadrature. Infinite for a mask
-  /// without boundary.
+  /// The interpolant's largest |gradient| within the grid (unit-free: mm per mm): on a cell
+  /// the squared gradient is convex along each axis, so its largest value is at a corner,
+  /// where the partials are the cell's edge differences over the spacings. Infinite for a
+  /// mask without boundary. Found on the first call (a pass over the grid, on threads: make
+  /// that call outside a parallel region), then kept; copies of this distance share it.
+  double gradient_bound() const;
+  /// A bound on |grad at()| over the ball of `radius_mm` about `p_mm`: at() changes by at
+  /// most this times the distance between two points of the ball. gradient_bound() for a
+  /// ball within the grid; one reaching beyond it adds the distance term's unit slope in
+  /// quadrature.
   double gradient_bound(const Eigen::Vector3d& p_mm, double radius_mm) const;
 
   const ImageGeometry& geometry() const { return geometry_; }
 
  private:
   void smooth();
-  void find_gradient_bound();
   ImageGeometry geometry_;
   Eigen::Matrix3d to_index_;  ///< physical offset -> index offset
   std::vector<double> values_;
-  double gradient_bound_ = 0;  ///< the interpolant's largest |gradient| within the grid
+  /// gradient_bound(), found once on first use (most distances never need it).
+  struct GradientBound {
+    std::once_flag found;
+    double value = 0;
+  };
+  std::shared_ptr<GradientBound> gradient_bound_ = std::make_shared<GradientBound>();
 };
 
 }  // namespace organfit::geometry
