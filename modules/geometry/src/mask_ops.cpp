@@ -122,18 +122,81 @@ LabelVolume rasterize_balls(const Eigen::Matrix3Xd& centres, double radius_mm,
   return mask;
 }
 
+namespace {
+/// The voxels of g within `radius_mm` of a voxel of `set` (nonzero), 1, else 0: what a
+/// distance transform of `set` thresholded at radius_mm^2 gives, at a cost set by the
+/// set's surface rather than the grid's volume. The voxel of `set` nearest to a voxel
+/// outside it has a face neighbour outside it (the neighbour towards that voxel is
+/// nearer), so stamping a ball on the surface voxels alone reaches every voxel the
+/// transform does. Each offset's squared length is summed as the transform sums it,
+/// dz^2 + (dy^2 + dx^2), so that a voxel on the ball's rim falls the same way.
+std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
+                                           const ImageGeometry& g, double radius_mm) {
+  const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
+  const long long nxy = 1LL * nx * ny;
+  const double r2 = radius_mm * radius_mm;
+  int reach[3];
+  for (int d = 0; d < 3; ++d)
+    reach[d] = std::min(g.size[d], static_cast<int>(std::floor(radius_mm / g.spacing_mm[d])) + 1);
+  // The ball as runs along x: for each dz in [-reach_z, reach_z], the rows dy it meets and
+  // their half-width w (dx in [-w, w]; the squared length grows with |dx|).
+  struct Run {
+    int dy, w;
+  };
+  std::vector<std::vector<Run>> ball(2 * static_cast<size_t>(reach[2]) + 1);
+  for (int dz = -reach[2]; dz <= reach[2]; ++dz)
+    for (int dy = -reach[1]; dy <= reach[1]; ++dy) {
+      int w = -1;
+      for (int dx = 0; dx <= reach[0]; ++dx) {
+        const double x = dx * g.spacing_mm[0], y = dy * g.spacing_mm[1], z = dz * g.spacing_mm[2];
+        if (z * z + (y * y + x * x) <= r2) w = dx;
+      }
+      if (w >= 0) ball[static_cast<size_t>(dz + reach[2])].push_back({dy, w});
+    }
+  // The set's surface voxels (a face neighbour on the grid outside the set), by slice.
+  std::vector<std::vector<std::pair<int, int>>> surface(static_cast<size_t>(nz));
+  std::vector<std::uint8_t> out(set.size());
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const long long v = k * nxy + 1LL * j * nx + i;
+        if (!set[v]) continue;
+        out[v] = 1;
+        if ((i > 0 && !set[v - 1]) || (i + 1 < nx && !set[v + 1]) || (j > 0 && !set[v - nx]) ||
+            (j + 1 < ny && !set[v + nx]) || (k > 0 && !set[v - nxy]) ||
+            (k + 1 < nz && !set[v + nxy]))
+          surface[static_cast<size_t>(k)].push_back({i, j});
+      }
+      // Each thread writes whole slices of the result: no two write one voxel.
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int k = 0; k < nz; ++k)
+    for (int dz = -reach[2]; dz <= reach[2]; ++dz) {
+      const int from = k - dz;
+      if (from < 0 || from >= nz) continue;
+      const auto& runs = ball[static_cast<size_t>(dz + reach[2])];
+      std::uint8_t* slice = out.data() + k * nxy;
+      for (const auto& [i, j] : surface[static_cast<size_t>(from)])
+        for (const Run& run : runs) {
+          const int jj = j + run.dy;
+          if (jj < 0 || jj >= ny) continue;
+          const int lo = std::max(0, i - run.w), hi = std::min(nx - 1, i + run.w);
+          std::fill(slice + 1LL * jj * nx + lo, slice + 1LL * jj * nx + hi + 1, std::uint8_t{1});
+        }
+    }
+  return out;
+}
+}  // namespace
+
 void close_mask(LabelVolume& mask, double radius_mm) {
   if (radius_mm <= 0) return;
-  const double r2 = radius_mm * radius_mm;
-  std::vector<std::uint8_t> outside(mask.labels.size());
-  {  // one distance map at a time: 8 bytes a voxel each
-    const auto to_body = squared_distance_transform(mask.labels, mask.geometry);
-    for (size_t i = 0; i < outside.size(); ++i)
-      outside[i] = to_body[i] > r2;  // complement of dilation
-  }
-  const auto to_outside = squared_distance_transform(outside, mask.geometry);
-  for (size_t i = 0; i < outside.size(); ++i)
-    mask.labels[i] = to_outside[i] > r2;
+  std::vector<std::uint8_t> outside = within_radius_of(mask.labels, mask.geometry, radius_mm);
+  for (std::uint8_t& v : outside)
+    v = !v;  // complement of the dilation
+  const std::vector<std::uint8_t> near_outside =
+      within_radius_of(outside, mask.geometry, radius_mm);
+  for (size_t i = 0; i < near_outside.size(); ++i)
+    mask.labels[i] = !near_outside[i];
 }
 
 LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm,

@@ -10,8 +10,8 @@ bool Shape::inside(const Eigen::Vector3d& p) const {
   if (mask) return inside_interpolated(*mask, p);
   const Eigen::Vector3d semi = 0.5 * size_mm;
   const Eigen::Vector3d q = p - centre_mm;
-  if (kind == "box") return (q.cwiseAbs().array() <= semi.array()).all();
-  if (kind == "egg") {
+  if (kind == Kind::box) return (q.cwiseAbs().array() <= semi.array()).all();
+  if (kind == Kind::egg) {
     // Cross-section scale: 1 at +x end and at the middle, 0.7 at the -x tip.
     const double t = std::clamp(q.x() / semi.x(), -1.0, 1.0);
     const double taper = t < 0 ? 1.0 + 0.3 * t : 1.0;
@@ -19,28 +19,51 @@ bool Shape::inside(const Eigen::Vector3d& p) const {
     return q.cwiseQuotient(s).squaredNorm() <= 1.0;
   }
   const bool in_ellipsoid = q.cwiseQuotient(semi).squaredNorm() <= 1.0;
-  if (kind == "lung") {
+  if (kind == Kind::lung) {
     const Eigen::Vector3d notch(-semi.x() * 1.05, 0, -0.2 * semi.z());
     return in_ellipsoid && (q - notch).norm() > 0.55 * semi.x();
   }
   return in_ellipsoid;
 }
 
+const char* Shape::kind_name() const {
+  switch (kind) {
+    case Kind::box:
+      return "box";
+    case Kind::egg:
+      return "egg";
+    case Kind::lung:
+      return "lung";
+    case Kind::mask:
+      return "mask";
+    case Kind::ellipsoid:
+      break;
+  }
+  return "ellipsoid";
+}
+
 Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
                  const Eigen::Vector3d& centre_mm) {
-  if (kind != "ellipsoid" && kind != "box" && kind != "egg" && kind != "lung") {
-    throw std::invalid_argument("unknown shape '" + kind + "' (ellipsoid, box, egg, lung)");
-  }
-  if (!(size_mm.array() > 0).all()) throw std::invalid_argument("shape size must be > 0 mm");
   Shape shape;
-  shape.kind = kind, shape.size_mm = size_mm, shape.centre_mm = centre_mm;
+  if (kind == "ellipsoid")
+    shape.kind = Shape::Kind::ellipsoid;
+  else if (kind == "box")
+    shape.kind = Shape::Kind::box;
+  else if (kind == "egg")
+    shape.kind = Shape::Kind::egg;
+  else if (kind == "lung")
+    shape.kind = Shape::Kind::lung;
+  else
+    throw std::invalid_argument("unknown shape '" + kind + "' (ellipsoid, box, egg, lung)");
+  if (!(size_mm.array() > 0).all()) throw std::invalid_argument("shape size must be > 0 mm");
+  shape.size_mm = size_mm, shape.centre_mm = centre_mm;
   return shape;
 }
 
 Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask) {
   const auto& g = mask->geometry;
   Shape s;
-  s.kind = "mask";
+  s.kind = Shape::Kind::mask;
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo, sum = Eigen::Vector3d::Zero();
   long long n = 0;
   const Eigen::Vector3d half = 0.5 * (g.direction * g.spacing_mm).cwiseAbs();

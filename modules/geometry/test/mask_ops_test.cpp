@@ -130,6 +130,58 @@ TEST(MaskOps, ClosedBodyOnALargeGridEqualsClosingTheWholeGrid) {
             0);  // off the grid
 }
 
+// The closing by the definition: the voxels farther than r from every voxel farther than
+// r from the mask, both by the distance transform of the whole grid.
+std::vector<std::uint8_t> closing_by_distance_transforms(const LabelVolume& mask, double r) {
+  const double r2 = r * r;
+  const std::vector<double> to_body = squared_distance_transform(mask.labels, mask.geometry);
+  std::vector<std::uint8_t> outside(to_body.size());
+  for (size_t i = 0; i < outside.size(); ++i)
+    outside[i] = to_body[i] > r2;
+  const std::vector<double> to_outside = squared_distance_transform(outside, mask.geometry);
+  std::vector<std::uint8_t> closed(outside.size());
+  for (size_t i = 0; i < closed.size(); ++i)
+    closed[i] = to_outside[i] > r2;
+  return closed;
+}
+
+TEST(MaskOps, ClosingEqualsItsDefinitionByDistanceTransforms) {
+  // Random balls and noise voxels on anisotropic grids, radii on and off the spacing's
+  // multiples (rims exactly on a voxel centre included), bodies touching the grid's edge.
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  long long changed = 0;
+  for (int trial = 0; trial < 12; ++trial) {
+    ImageGeometry g;
+    g.size = {20 + trial, 17, 11 + trial % 4};
+    g.spacing_mm = trial % 3 == 0 ? Eigen::Vector3d(0.5, 0.5, 0.5)
+                                  : Eigen::Vector3d(0.4 + 0.1 * (trial % 4), 0.7, 1.3);
+    Eigen::Matrix3Xd c(3, 6 + trial);
+    const Eigen::Vector3d extent =
+        g.spacing_mm.cwiseProduct(Eigen::Vector3d(g.size[0], g.size[1], g.size[2]));
+    for (Eigen::Index k = 0; k < c.cols(); ++k)
+      c.col(k) = Eigen::Vector3d(u(rng), u(rng), u(rng)).cwiseProduct(extent);
+    LabelVolume mask = rasterize_balls(c, 0.6 + 0.2 * (trial % 5), g);
+    for (auto& v : mask.labels)
+      if (rng() % 53 == 0) v = 1;
+    const double r = trial % 3 == 0 ? 1.0 : 0.65 + 0.37 * (trial % 4);
+    const std::vector<std::uint8_t> expected = closing_by_distance_transforms(mask, r);
+    const std::vector<std::uint8_t> before = mask.labels;
+    close_mask(mask, r);
+    ASSERT_EQ(mask.labels, expected) << "trial " << trial;
+    for (size_t i = 0; i < before.size(); ++i)
+      changed += before[i] != mask.labels[i];
+  }
+  EXPECT_GT(changed, 100);  // the closings did fill gaps
+  LabelVolume empty(ImageGeometry{});
+  close_mask(empty, 1.0);
+  LabelVolume full;
+  full.geometry.size = {5, 4, 3};
+  full.labels.assign(60, 1);
+  close_mask(full, 1.0);
+  EXPECT_EQ(full.count(1), 60);
+}
+
 TEST(MaskOps, ClosingFillsTheGapsOfAPackingButNotItsOutline) {
   // A simple cubic packing of touching balls of radius 1 (spacing 2) over a 20 mm cube:
   // the union of balls is ~52% of the cube; closed, it is the cube to within a shell.

@@ -25,7 +25,7 @@ TEST(Shapes, AMaskShapeHasItsVoxelsBoundsAndCentroid) {
       for (int i = 1; i <= 4; ++i)
         mask->at(i, j, k) = 1;
   const Shape s = make_mask_shape(mask);
-  EXPECT_EQ(s.kind, "mask");
+  EXPECT_STREQ(s.kind_name(), "mask");
   // Voxel centres 1..4, 8..12, 6..9 mm; bounds half a voxel beyond them.
   EXPECT_TRUE(s.bounds().min_mm.isApprox(Eigen::Vector3d(0.5, 7, 4.5)));
   EXPECT_TRUE(s.bounds().max_mm.isApprox(Eigen::Vector3d(4.5, 13, 10.5)));

@@ -71,7 +71,7 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
                 {"interpreted_type", look.interpreted_type},
                 {"reference_volume_mm3", m.reference.volume_mm3(1)}};
   j["settings"] = to_json(m.settings);
-  nlohmann::json shape = {{"kind", m.shape.kind},
+  nlohmann::json shape = {{"kind", m.shape.kind_name()},
                           {"size_mm", vec(m.shape.size_mm)},
                           {"centre_mm", vec(m.shape.centre_mm)}};
   if (m.shape.mask) shape["mask"] = mask_to_json(*m.shape.mask);

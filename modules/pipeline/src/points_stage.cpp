@@ -87,7 +87,7 @@ PointsStageResult run_points_stage(const PointsOptions& o, const ModelStageResul
                {"twist_rad", d.twist_rad},
                {"indent_mm", d.indent_mm},
                {"push_mm", d.push_mm},
-               {"target_shape", r.truth_shape.kind},
+               {"target_shape", r.truth_shape.kind_name()},
                {"target_size_mm",
                 {r.truth_shape.size_mm.x(), r.truth_shape.size_mm.y(), r.truth_shape.size_mm.z()}}};
   return r;

@@ -11,13 +11,16 @@
 namespace organfit::geometry {
 
 struct Shape {
-  std::string kind;                                   ///< "ellipsoid", "box", "egg", "lung", "mask"
-  Eigen::Vector3d size_mm = Eigen::Vector3d::Ones();  ///< full extents (before the notch)
+  enum class Kind { ellipsoid, box, egg, lung, mask };
+  Kind kind = Kind::ellipsoid;
+  Eigen::Vector3d size_mm = Eigen::Vector3d::Ones();    ///< full extents (before the notch)
   Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();  ///< centre (a mask: its centroid)
   std::shared_ptr<const LabelVolume> mask;  ///< kind "mask": label 1 is inside (surface: the
                                             ///< 0.5 level of its trilinear interpolation)
   Aabb box;                                 ///< kind "mask": bounds of its voxels
   bool inside(const Eigen::Vector3d& p) const;
+  /// The kind's name, as make_shape takes it: "ellipsoid", "box", "egg", "lung", "mask".
+  const char* kind_name() const;
   Aabb bounds() const {
     return mask ? box : Aabb{centre_mm - 0.5 * size_mm, centre_mm + 0.5 * size_mm};
   }
