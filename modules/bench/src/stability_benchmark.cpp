@@ -8,8 +8,10 @@
 #include <random>
 #include <sstream>
 
-#include "organfit/pipeline/runner.h"
-#include "organfit/pipeline/scene_schema.h"
+#include "organfit/particles/integrator.h"
+#include "organfit/pipeline/fit_stage.h"
+#include "organfit/pipeline/model_stage.h"
+#include "organfit/pipeline/points_stage.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
@@ -41,12 +43,40 @@ void write_points(const fs::path& file, const std::vector<Eigen::Vector3d>& pts)
   write_file_atomically(file, csv);
 }
 
+/// A case: the model's options (the egg body of 50 x 40 x 34 mm at radius 1.92 mm unless
+/// it says otherwise) and where its points come from.
 struct Case {
   std::string name;
-  std::string body = "body:\n  shape: egg\n  size_mm: [50, 40, 34]\n";
-  std::string model = "model:\n  radius_mm: 1.92\n";
-  std::string points;  ///< the points section's body
+  pipeline::ModelStageOptions model;
+  pipeline::PointsOptions points;
 };
+
+pipeline::ModelStageOptions egg_model(double radius_mm = 1.92,
+                                      const Eigen::Vector3d& size_mm = {50, 40, 34}) {
+  pipeline::ModelStageOptions o;
+  o.settings.radius_mm = radius_mm;
+  o.body_shape = "egg";
+  o.body_size_mm = size_mm;
+  return o;
+}
+
+/// 87 points (0.5 mm noise) on the body stretched 1.15 and bent 2 mm, or `count` on it
+/// stretched `stretch` alone.
+pipeline::PointsOptions generated(int count = 87, double stretch = 1.15, double bend_mm = 2) {
+  pipeline::PointsOptions o;
+  o.deformation.stretch = stretch;
+  o.deformation.bend_mm = bend_mm;
+  o.sampling.count = count;
+  o.sampling.noise_mm = 0.5;
+  return o;
+}
+
+pipeline::PointsOptions from_file(const fs::path& file) {
+  pipeline::PointsOptions o;
+  o.source = "file";
+  o.file = file;
+  return o;
+}
 
 }  // namespace
 
@@ -77,37 +107,36 @@ nlohmann::json run_stability_benchmark(const StabilityBenchOptions& o) {
   write_points(dir / "duplicates.csv", dup);
   write_points(dir / "single.csv", {Eigen::Vector3d(28, 0, 0)});
 
-  const std::string generated = "  count: 87\n  noise_mm: 0.5\n  stretch: 1.15\n  bend_mm: 2\n";
-  std::vector<Case> cases = {
-      {"exponents_20_40", Case{}.body,
-       "model:\n  radius_mm: 1.92\n  exponent_m: 20\n  exponent_n: 40\n", generated},
-      {"time_step_at_limit", Case{}.body, "model:\n  radius_mm: 1.92\n  time_step_fraction: 0.9\n",
-       generated},
-      {"time_step_beyond_limit", Case{}.body,
-       "model:\n  radius_mm: 1.92\n  time_step_fraction: 1.5\n", generated},
-      {"points_10x_organ_away", Case{}.body, Case{}.model, "  source: file\n  file: far.csv\n"},
-      {"points_deep_inside", Case{}.body, Case{}.model,
-       "  source: file\n  file: deep_inside.csv\n"},
-      {"point_on_particle_centre", Case{}.body, Case{}.model,
-       "  source: file\n  file: on_particle_centre.csv\n"},
-      {"points_duplicated", Case{}.body, Case{}.model, "  source: file\n  file: duplicates.csv\n"},
-      {"one_point", Case{}.body, Case{}.model, "  source: file\n  file: single.csv\n"},
-      {"points_10000", Case{}.body, Case{}.model,
-       "  count: 10000\n  noise_mm: 0.5\n  stretch: 1.1\n"},
-      {"tiny_radius", "body:\n  shape: egg\n  size_mm: [10, 8, 6]\n", "model:\n  radius_mm: 0.3\n",
-       generated},
-      {"huge_radius", Case{}.body, "model:\n  radius_mm: 40\n", generated},
+  auto with = [](pipeline::ModelStageOptions m, auto&& change) {
+    change(m.settings);
+    return m;
+  };
+  const std::vector<Case> cases = {
+      {"exponents_20_40", with(egg_model(), [](auto& s) { s.exponent_m = 20, s.exponent_n = 40; }),
+       generated()},
+      {"time_step_at_limit", with(egg_model(), [](auto& s) { s.time_step_fraction = 0.9; }),
+       generated()},
+      {"time_step_beyond_limit", with(egg_model(), [](auto& s) { s.time_step_fraction = 1.5; }),
+       generated()},
+      {"points_10x_organ_away", egg_model(), from_file(dir / "far.csv")},
+      {"points_deep_inside", egg_model(), from_file(dir / "deep_inside.csv")},
+      {"point_on_particle_centre", egg_model(), from_file(dir / "on_particle_centre.csv")},
+      {"points_duplicated", egg_model(), from_file(dir / "duplicates.csv")},
+      {"one_point", egg_model(), from_file(dir / "single.csv")},
+      {"points_10000", egg_model(), generated(10000, 1.1, 0)},
+      {"tiny_radius", egg_model(0.3, {10, 8, 6}), generated()},
+      {"huge_radius", egg_model(40), generated()},
   };
   std::string csv =
       "case,method,outcome,reason,finite,components,max_kinetic_energy_per_particle,volume_change_"
       "pct,wall_s,pass\n";
   std::string md =
-      "# organfit bench stability\n\nEach row a scene run in full (`organfit run`), both fitting "
-      "methods.\n"
-      "Outcomes: converged (exit 0), stopped (exit 3: the fit did not meet its target and says "
-      "why),\n"
-      "refused (exit 2: bad input, named). A row passes when it ends in one of those and any model "
-      "it\n"
+      "# organfit bench stability\n\nEach row a case's model, points and fit stages called in "
+      "turn, both fitting methods.\n"
+      "Outcomes: converged, stopped (the fit did not meet its target and says why; `organfit run` "
+      "exits 3),\n"
+      "refused (bad input, named; exit 2). A row passes when it ends in one of those and any "
+      "model it\n"
       "produced is finite, in one piece, and its kinetic energy per particle stayed below 5 E0.\n\n"
       "| case | method | outcome | finite | components | max KE/particle (E0) | volume change (%) "
       "| wall (s) | pass |\n"
@@ -117,19 +146,21 @@ nlohmann::json run_stability_benchmark(const StabilityBenchOptions& o) {
   for (const auto& c : cases)
     for (const char* method : {"spread", "paper"}) {
       throw_if_interrupted();
-      const std::string text = fmt::format(
-          "scene:\n  name: {}-{}\n{}{}points:\n{}fit:\n  method: {}\n  max_wall_s: 20\n", c.name,
-          method, c.body, c.model, c.points, method);
-      const fs::path run_dir = dir / fmt::format("{}-{}", c.name, method);
       std::string outcome, reason;
       Stopwatch clock;
-      nlohmann::json run;
+      std::optional<pipeline::FitStageResult> fit;
       try {
-        const config::Scene scene =
-            config::parse_scene(text, dir / "case.yaml", pipeline::scene_schema());
-        pipeline::check_scene_rules(scene);
-        run = pipeline::run_scene(scene, run_dir);
-        outcome = "converged";
+        pipeline::ModelStageResult model = pipeline::run_model_stage(c.model);
+        const pipeline::PointsStageResult points = pipeline::run_points_stage(c.points, model);
+        pipeline::FitStageOptions options;
+        options.method = method;
+        options.paper.fit.max_wall_s = options.spread.fit.max_wall_s = 20;
+        options.measure_truth = false;  // how the run ends, not how close it comes
+        fit = pipeline::run_fit_stage(options, std::move(model), points);
+        outcome = fit->not_converged_message.empty() ? "converged" : "stopped";
+        reason = fit->not_converged_message;
+      } catch (const particles::StabilityError& e) {
+        outcome = "stopped", reason = e.what();
       } catch (const TargetNotMetError& e) {
         outcome = "stopped", reason = e.what();
       } catch (const InputError& e) {
@@ -138,25 +169,15 @@ nlohmann::json run_stability_benchmark(const StabilityBenchOptions& o) {
         outcome = "refused", reason = e.what();
       }
       const double wall = clock.elapsed_s();
-      if (run.is_null() && fs::exists(run_dir / "run.json")) {
-        std::ifstream in(run_dir / "run.json");
-        run = nlohmann::json::parse(in);
-      }
       bool finite = true;
       int components = 1;
       double max_ke = 0, volume = 0;
-      if (run.contains("fit")) {
-        finite = run["fit"].value("finite", true);
-        components = run["fit"].value("components", 1);
-        volume = run["fit"].value("volume_change_pct", 0.0);
-        std::ifstream h(run_dir / "history.csv");
-        std::string line;
-        std::getline(h, line);
-        while (std::getline(h, line)) {
-          const auto comma = line.rfind(',');
-          if (comma != std::string::npos)
-            max_ke = std::max(max_ke, std::atof(line.c_str() + comma + 1));
-        }
+      if (fit) {
+        finite = fit->report.finite;
+        components = fit->report.components;
+        volume = fit->fit_summary["volume_change_pct"].get<double>();
+        for (const fitting::HistoryRow& h : fit->report.fit.history)
+          max_ke = std::max(max_ke, h.kinetic_energy_per_particle);
       }
       const bool pass = finite && components == 1 && max_ke < 5.0 && std::isfinite(volume);
       all_pass = all_pass && pass;
