@@ -14,6 +14,7 @@
 namespace organfit::fitting {
 namespace {
 
+using detail::fit_flow;
 using detail::fit_shear_fields;
 using detail::fit_to_distance;
 using detail::mapped_distance;
@@ -27,8 +28,8 @@ bool within_stretch(const Eigen::Matrix3d& a, const AffineFitOptions& o) {
   return sv[0] <= o.max_stretch && sv[2] >= 1.0 / o.max_stretch;
 }
 
-/// Stretches within bounds, and neither the quadratic shears nor the shear fields moving
-/// any surface sample by more than max_shear_mm x the body's size. Each has its own
+/// Stretches within bounds, and none of the quadratic shears, the shear fields and the flow
+/// moving any surface sample by more than max_shear_mm x the body's size. Each has its own
 /// bound: a 38-degree twist of the 30 mm cube moves its corners 14 mm by the shears, and
 /// the fields' dent on top of that was refused when they shared one.
 bool plausible(const GlobalMap& map, const MappedSamples& mapped, const SurfaceSamples& surface,
@@ -37,7 +38,7 @@ bool plausible(const GlobalMap& map, const MappedSamples& mapped, const SurfaceS
       (surface.points.rowwise().maxCoeff() - surface.points.rowwise().minCoeff()).norm();
   const LargestMoves moves = largest_moves_of(mapped);
   return within_stretch(map.affine.a, o) && moves.shears_mm <= o.max_shear_mm * size &&
-         moves.fields_mm <= o.max_shear_mm * size;
+         moves.fields_mm <= o.max_shear_mm * size && moves.flow_mm <= o.max_shear_mm * size;
 }
 
 /// Robust RMS (mm) of the points' distances to the tangent planes of their nearest mapped
@@ -221,18 +222,24 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   std::vector<const GlobalMap*> all = candidates;
   std::vector<size_t> starts = {chosen};
   if (least_of_all != chosen) starts.push_back(least_of_all);
-  for (const size_t c : starts) {
-    double dof = 0;
-    GlobalMap f = fit_shear_fields(*candidates[c], *distance, mapped[c].full, points, o, dof);
-    const MappedSamples m = map_samples(f, surface);
-    if (f.fields.empty() || !plausible(f, m, surface, o)) continue;
-    f.rms_after_mm = f.affine.rms_after_mm = nearest_sample_rms(m, points, o.outlier_mads);
-    const double inflation = static_cast<double>(points.size()) /
-                             std::max(1.0, static_cast<double>(points.size()) - dof);
-    rms.push_back(truncated_rms(f, *distance, points, cap_mm) * std::sqrt(inflation));
-    change.push_back(shape_change_of(m.full, surface.points));
-    refined.push_back(std::move(f));
-  }
+  // With flow_sigma_mm, an incompressible flow on the same starts too, a candidate beside
+  // the fields (not on by default: docs/decisions.md).
+  for (const size_t c : starts)
+    for (const bool as_flow : {false, true}) {
+      if (as_flow && !(o.flow_sigma_mm > 0)) continue;
+      double dof = 0;
+      GlobalMap f =
+          as_flow ? fit_flow(*candidates[c], *distance, mapped[c].full, points, o, dof)
+                  : fit_shear_fields(*candidates[c], *distance, mapped[c].full, points, o, dof);
+      const MappedSamples m = map_samples(f, surface);
+      if ((as_flow ? f.flow.empty() : f.fields.empty()) || !plausible(f, m, surface, o)) continue;
+      f.rms_after_mm = f.affine.rms_after_mm = nearest_sample_rms(m, points, o.outlier_mads);
+      const double inflation = static_cast<double>(points.size()) /
+                               std::max(1.0, static_cast<double>(points.size()) - dof);
+      rms.push_back(truncated_rms(f, *distance, points, cap_mm) * std::sqrt(inflation));
+      change.push_back(shape_change_of(m.full, surface.points));
+      refined.push_back(std::move(f));
+    }
   for (const GlobalMap& f : refined)
     all.push_back(&f);
   GlobalMap out = *all[least_change_of_equally_good(rms, change)];

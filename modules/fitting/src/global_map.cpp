@@ -120,6 +120,195 @@ Eigen::Vector3d ShearFields::inverse(const Eigen::Vector3d& q) const {
   return u;
 }
 
+namespace {
+/// The uniform cubic B-spline and its first two derivatives at t.
+double bspline(double t) {
+  t = std::abs(t);
+  return t < 1 ? (4 - 6 * t * t + 3 * t * t * t) / 6 : t < 2 ? (2 - t) * (2 - t) * (2 - t) / 6 : 0;
+}
+double bspline_slope(double t) {
+  const double a = std::abs(t);
+  return a < 1 ? -2 * t + 1.5 * t * a : a < 2 ? (t > 0 ? -1 : 1) * (2 - a) * (2 - a) / 2 : 0;
+}
+}  // namespace
+
+namespace {
+/// The B-spline's values and slopes along each axis at the 4 nodes about a point, nodes
+/// first[a] + i (zero for nodes beyond the grid).
+struct NodeWeights {
+  int first[3];
+  double value[3][4], slope[3][4];
+};
+bool node_weights(const IncompressibleFlow& f, const Eigen::Vector3d& q, NodeWeights& w) {
+  const Eigen::Vector3d u = (q - f.origin_mm) / f.sigma_mm;
+  if (!u.allFinite()) return false;
+  for (int a = 0; a < 3; ++a) {
+    w.first[a] = static_cast<int>(std::floor(u(a))) - 1;
+    for (int i = 0; i < 4; ++i) {
+      const int node = w.first[a] + i;
+      const bool on = node >= 0 && node < f.count(a);
+      w.value[a][i] = on ? bspline(u(a) - node) : 0;
+      w.slope[a][i] = on ? bspline_slope(u(a) - node) : 0;
+    }
+  }
+  return true;
+}
+}  // namespace
+
+IncompressibleFlow IncompressibleFlow::over(const Eigen::Vector3d& box_min_mm,
+                                            const Eigen::Vector3d& box_max_mm, double sigma_mm) {
+  IncompressibleFlow f;
+  f.sigma_mm = sigma_mm;
+  if (!(sigma_mm > 0)) return f;
+  for (int a = 0; a < 3; ++a) {  // centred on the box, two spacings beyond it
+    const double span = box_max_mm(a) - box_min_mm(a) + 4 * sigma_mm;
+    f.count(a) = 1 + static_cast<int>(std::ceil(std::max(0.0, span) / sigma_mm));
+    f.origin_mm(a) = 0.5 * (box_min_mm(a) + box_max_mm(a)) - 0.5 * (f.count(a) - 1) * sigma_mm;
+  }
+  f.potentials = Eigen::VectorXd::Zero(3 * f.count.prod());
+  return f;
+}
+
+void IncompressibleFlow::basis_gradients(const Eigen::Vector3d& q,
+                                         std::vector<std::pair<int, Eigen::Vector3d>>& out) const {
+  out.clear();
+  if (!(sigma_mm > 0) || potentials.size() == 0) return;
+  NodeWeights nw;
+  if (!node_weights(*this, q, nw)) return;
+  const auto& [first, value, slope] = nw;
+  for (int k = 0; k < 4; ++k)
+    for (int j = 0; j < 4; ++j)
+      for (int i = 0; i < 4; ++i) {
+        const double bx = value[0][i], by = value[1][j], bz = value[2][k];
+        const Eigen::Vector3d g(slope[0][i] * by * bz, bx * slope[1][j] * bz,
+                                bx * by * slope[2][k]);
+        if (g.isZero(0)) continue;
+        out.emplace_back(first[0] + i + count(0) * (first[1] + j + count(1) * (first[2] + k)), g);
+      }
+}
+
+Eigen::Vector3d IncompressibleFlow::velocity(const Eigen::Vector3d& q) const {
+  // sum_n g_n x a_n over the 4 x 4 x 4 nodes about q, g_n = (B'BB, BB'B, BBB'), summed along
+  // x first (no list: it is called 16 times for each point the flow moves).
+  Eigen::Vector3d v = Eigen::Vector3d::Zero();
+  if (!(sigma_mm > 0) || potentials.size() == 0) return v;
+  NodeWeights nw;
+  if (!node_weights(*this, q, nw)) return v;
+  const auto& [first, value, slope] = nw;
+  const double* a = potentials.data();
+  for (int k = 0; k < 4; ++k) {
+    if (value[2][k] == 0 && slope[2][k] == 0) continue;
+    for (int j = 0; j < 4; ++j) {
+      if (value[1][j] == 0 && slope[1][j] == 0) continue;
+      // Along x: s = sum B'_i a_i, w = sum B_i a_i (each a 3-vector).
+      Eigen::Vector3d s = Eigen::Vector3d::Zero(), w = Eigen::Vector3d::Zero();
+      const long long row =
+          3LL * (first[0] + count(0) * (first[1] + j + count(1) * (first[2] + k)));
+      for (int i = 0; i < 4; ++i) {
+        if (value[0][i] == 0 && slope[0][i] == 0) continue;
+        const Eigen::Vector3d an(a[row + 3 * i], a[row + 3 * i + 1], a[row + 3 * i + 2]);
+        s += slope[0][i] * an, w += value[0][i] * an;
+      }
+      // g x a summed: (B'_x B_y B_z, B_x B'_y B_z, B_x B_y B'_z) x a.
+      const double by = value[1][j], dy = slope[1][j], bz = value[2][k], dz = slope[2][k];
+      const Eigen::Vector3d gx = by * bz * s, gy = dy * bz * w, gz = by * dz * w;
+      // sum (e_x c_x + e_y c_y + e_z c_z) x a, each part a cross product with a unit axis.
+      v += Eigen::Vector3d(0, -gx.z(), gx.y()) + Eigen::Vector3d(gy.z(), 0, -gy.x()) +
+           Eigen::Vector3d(-gz.y(), gz.x(), 0);
+    }
+  }
+  return v;
+}
+
+namespace {
+/// The flow of `sign` x v over unit time from q, RK4 in kSteps steps.
+Eigen::Vector3d integrate(const IncompressibleFlow& f, Eigen::Vector3d q, double sign) {
+  const double h = sign / IncompressibleFlow::kSteps;
+  for (int s = 0; s < IncompressibleFlow::kSteps; ++s) {
+    const Eigen::Vector3d k1 = f.velocity(q), k2 = f.velocity(q + 0.5 * h * k1),
+                          k3 = f.velocity(q + 0.5 * h * k2), k4 = f.velocity(q + h * k3);
+    q += h / 6 * (k1 + 2 * k2 + 2 * k3 + k4);
+  }
+  return q;
+}
+}  // namespace
+
+Eigen::Vector3d IncompressibleFlow::apply(const Eigen::Vector3d& q) const {
+  return empty() ? q : integrate(*this, q, 1);
+}
+
+Eigen::Vector3d IncompressibleFlow::inverse(const Eigen::Vector3d& q) const {
+  return empty() ? q : integrate(*this, q, -1);
+}
+
+namespace {
+/// The largest |first difference| of each potential component along each axis, and of
+/// each second difference (j, l), over the nodes and their neighbours beyond the grid (zero
+/// there). A derivative of a B-spline expansion is the expansion of the differences in
+/// lower B-splines, non-negative and summing to one, so d_j psi_c is at most m1[j][c] and
+/// d_j d_l psi_c at most m2[j][l][c] / sigma everywhere (psi = sigma sum_n a_n B).
+struct PotentialDifferences {
+  double m1[3][3] = {}, m2[3][3][3] = {};
+};
+PotentialDifferences potential_differences(const IncompressibleFlow& f) {
+  PotentialDifferences d;
+  const Eigen::Vector3i n = f.count;
+  auto at = [&](int i, int j, int k, int c) {
+    if (i < 0 || j < 0 || k < 0 || i >= n(0) || j >= n(1) || k >= n(2)) return 0.0;
+    return f.potentials(3 * (i + n(0) * (j + n(1) * k)) + c);
+  };
+  for (int k = -1; k <= n(2); ++k)
+    for (int j = -1; j <= n(1); ++j)
+      for (int i = -1; i <= n(0); ++i)
+        for (int c = 0; c < 3; ++c) {
+          const int at0[3] = {i, j, k};
+          auto shifted = [&](int ax, int by, int ax2 = 0, int by2 = 0) {
+            int p[3] = {at0[0], at0[1], at0[2]};
+            p[ax] += by, p[ax2] += by2;
+            return at(p[0], p[1], p[2], c);
+          };
+          const double a = at(i, j, k, c);
+          for (int x = 0; x < 3; ++x) {
+            d.m1[x][c] = std::max(d.m1[x][c], std::abs(shifted(x, 1) - a));
+            const double second = shifted(x, 1) - 2 * a + shifted(x, -1);
+            d.m2[x][x][c] = std::max(d.m2[x][x][c], std::abs(second));
+            for (int y = x + 1; y < 3; ++y) {
+              const double mixed = shifted(x, 1, y, 1) - shifted(x, 1) - shifted(y, 1) + a;
+              d.m2[x][y][c] = d.m2[y][x][c] = std::max(d.m2[x][y][c], std::abs(mixed));
+            }
+          }
+        }
+  return d;
+}
+}  // namespace
+
+double IncompressibleFlow::largest_speed_mm() const {
+  // v = curl psi: v_i = d_j psi_k - d_k psi_j ((i, j, k) cyclic).
+  if (empty()) return 0;
+  const PotentialDifferences d = potential_differences(*this);
+  double sq = 0;
+  for (int i = 0; i < 3; ++i) {
+    const int j = (i + 1) % 3, k = (i + 2) % 3;
+    sq += (d.m1[j][k] + d.m1[k][j]) * (d.m1[j][k] + d.m1[k][j]);
+  }
+  return std::sqrt(sq);
+}
+
+double IncompressibleFlow::largest_velocity_gradient() const {
+  // d_l v_i = d_l d_j psi_k - d_l d_k psi_j; the spectral norm at most the Frobenius one.
+  if (empty()) return 0;
+  const PotentialDifferences d = potential_differences(*this);
+  double sq = 0;
+  for (int i = 0; i < 3; ++i) {
+    const int j = (i + 1) % 3, k = (i + 2) % 3;
+    for (int l = 0; l < 3; ++l) {
+      const double b = d.m2[l][j][k] + d.m2[l][k][j];
+      sq += b * b;
+    }
+  }
+  return std::sqrt(sq) / sigma_mm;
+}
+
 Eigen::Vector3d GlobalMap::inverse(const Eigen::Vector3d& q) const {
   return inverse(q, affine.a.inverse());
 }
@@ -214,6 +403,14 @@ StretchBound GlobalMap::inverse_stretch(const geometry::Aabb& box) const {
   StretchBound out;
   Eigen::Vector3d lo = box.min_mm, hi = box.max_mm;
   double stretch = 1, slack = 0;
+  // The flow, undone first: RK4's step on a field whose gradient is at most L stretches by
+  // at most 1 + hL + ... + (hL)^4 / 24 <= exp(hL), the whole flow by exp(L); it moves a
+  // point by at most the largest speed.
+  if (!flow.empty()) {
+    stretch *= std::exp(flow.largest_velocity_gradient());
+    const double move = flow.largest_speed_mm();
+    lo.array() -= move, hi.array() += move;
+  }
   // The fields, undone z, y, x: each step q_a -= f_a(q_b, q_c) is a shear, Jacobian I - e_a
   // grad f_a^T (shear_stretch), and moves q_a by at most |f_a|.
   if (!fields.empty()) {

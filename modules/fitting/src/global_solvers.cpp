@@ -498,20 +498,24 @@ class RidgeSystem {
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
 };
 
-GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distance,
-                           const Eigen::Matrix3Xd& mapped_surface,
-                           const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
-                           double& effective_dof) {
+namespace {
+/// A part of the map that is linear, to first order, in its parameters (the shear fields'
+/// heights, the flow's potentials), fitted with the rest held: robust Gauss-Newton on the
+/// points' mapped_distance, Geman-McClure weights of scale distance_scale_mm, the
+/// parameters pulled towards none by `lambda` (ridge; solved in the points' space when
+/// they outnumber the points). `parameters(g)` is the part's vector in map g; `row(g, p, d,
+/// jac_row)` writes point p's row of d r / d parameters (d: its MappedDistance).
+template <class Parameters, class Row>
+GlobalMap fit_linearised_part(GlobalMap map, const geometry::SignedDistance& distance,
+                              const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
+                              double lambda, Parameters&& parameters, Row&& row,
+                              double& effective_dof) {
   effective_dof = 0;
   const int m = static_cast<int>(points.size());
-  map.fields = ShearFields::over(mapped_surface.rowwise().minCoeff(),
-                                 mapped_surface.rowwise().maxCoeff(), o.field_sigma_mm);
-  const int n = static_cast<int>(map.fields.weights.size());
+  const int n = static_cast<int>(parameters(map).size());
   if (n == 0 || m == 0) return map;
   using VecX = Eigen::VectorXd;
   const double c2 = o.distance_scale_mm * o.distance_scale_mm;
-  const double lambda = std::max(o.field_stiffness, 1e-9);  // > 0: more heights than points
-  std::vector<std::pair<int, double>> near;
   auto residuals = [&](const GlobalMap& g, VecX& r, Eigen::MatrixXd* jac) {
     const Eigen::Matrix3d b = g.affine.a.inverse();
     r.resize(m);
@@ -519,16 +523,11 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
     for (int k = 0; k < m; ++k) {
       const MappedDistance d = mapped_distance(g, b, distance, points[k].p_mm);
       r(k) = d.r;
-      if (!jac) continue;
-      for (int a = 0; a < 3; ++a) {
-        g.fields.bumps(a, points[k].p_mm, near);
-        for (const auto& [index, value] : near)
-          (*jac)(k, index) = -d.gp(a) * value / d.nu;
-      }
+      if (jac) row(g, points[k].p_mm, d, jac->row(k));
     }
   };
   auto objective = [&](const GlobalMap& g, const VecX& r) {
-    return 0.5 * geman_mcclure(points, r, c2) + 0.5 * lambda * g.fields.weights.squaredNorm();
+    return 0.5 * geman_mcclure(points, r, c2) + 0.5 * lambda * parameters(g).squaredNorm();
   };
   VecX r;
   Eigen::MatrixXd jac;
@@ -536,17 +535,85 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
       map, r, jac, points, c2, o.iterations,
       [&](const GlobalMap& g, const VecX& w) -> VecX {
         return -RidgeSystem(jac, w, lambda)
-                    .solve(jac.transpose() * w.cwiseProduct(r) + lambda * g.fields.weights);
+                    .solve(jac.transpose() * w.cwiseProduct(r) + lambda * parameters(g));
       },
-      [](const GlobalMap& g, const VecX& step, double alpha) {
+      [&](const GlobalMap& g, const VecX& step, double alpha) {
         std::optional<GlobalMap> moved = g;
-        moved->fields.weights += alpha * step;
+        parameters(*moved) += alpha * step;
         return moved;
       },
       residuals, objective);
   const VecX w = geman_mcclure_weights(points, r, c2);
   effective_dof = RidgeSystem(jac, w, lambda).effective_dof();
   return map;
+}
+/// The flow's pull per potential^2 over the fields' per height^2 that gives both the same
+/// prior: the mean variance of a component of v = sum_n g_n x a_n with independent a_n of
+/// unit variance, (2/3) sum_n |g_n|^2, averaged over a cell (3 (int B'^2)(int B^2)^2), over
+/// that of a field, sum_j bump_j^2 (int exp(-t^2) dt squared: pi). Without it the same
+/// stiffness held the flow ten times harder than the fields.
+double flow_prior_scale() {
+  static const double scale = [] {
+    double b2 = 0, d2 = 0;  // int B^2, int B'^2 by the midpoint rule over [-2, 2]
+    const int n = 4000;
+    for (int i = 0; i < n; ++i) {
+      const double t = -2 + 4.0 * (i + 0.5) / n, a = std::abs(t);
+      const double b =
+          a < 1 ? (4 - 6 * t * t + 3 * a * a * a) / 6 : (2 - a) * (2 - a) * (2 - a) / 6;
+      const double d = a < 1 ? -2 * t + 1.5 * t * a : (t > 0 ? -1 : 1) * (2 - a) * (2 - a) / 2;
+      b2 += b * b * 4.0 / n, d2 += d * d * 4.0 / n;
+    }
+    return (2.0 / 3.0) * 3 * d2 * b2 * b2 / M_PI;
+  }();
+  return scale;
+}
+}  // namespace
+
+GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distance,
+                           const Eigen::Matrix3Xd& mapped_surface,
+                           const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
+                           double& effective_dof) {
+  map.fields = ShearFields::over(mapped_surface.rowwise().minCoeff(),
+                                 mapped_surface.rowwise().maxCoeff(), o.field_sigma_mm);
+  std::vector<std::pair<int, double>> near;
+  return fit_linearised_part(
+      std::move(map), distance, points, o, std::max(o.field_stiffness, 1e-9),
+      [](auto& g) -> auto& { return g.fields.weights; },
+      [&](const GlobalMap& g, const Eigen::Vector3d& p, const MappedDistance& d, auto jac_row) {
+        for (int a = 0; a < 3; ++a) {  // field a's bumps move p along a
+          g.fields.bumps(a, p, near);
+          for (const auto& [index, value] : near)
+            jac_row(index) = -d.gp(a) * value / d.nu;
+        }
+      },
+      effective_dof);
+}
+
+GlobalMap fit_flow(GlobalMap map, const geometry::SignedDistance& distance,
+                   const Eigen::Matrix3Xd& mapped_surface,
+                   const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
+                   double& effective_dof) {
+  map.flow = IncompressibleFlow::over(mapped_surface.rowwise().minCoeff(),
+                                      mapped_surface.rowwise().maxCoeff(), o.flow_sigma_mm);
+  // Its Jacobian is dense here: three potentials per node of a 3D grid (41k on a 2 L
+  // lung) by the points; beyond 5e7 entries (400 MB) the flow is left out.
+  if (static_cast<double>(points.size()) * static_cast<double>(map.flow.potentials.size()) > 5e7) {
+    map.flow = IncompressibleFlow{};
+    effective_dof = 0;
+    return map;
+  }
+  std::vector<std::pair<int, Eigen::Vector3d>> near;
+  // d r / d a_n = -(gp x g_n) / nu: the flow's inverse moves p by -v(p) to first order,
+  // and v(p) = sum_n g_n x a_n.
+  return fit_linearised_part(
+      std::move(map), distance, points, o, std::max(o.field_stiffness, 1e-9) * flow_prior_scale(),
+      [](auto& g) -> auto& { return g.flow.potentials; },
+      [&](const GlobalMap& g, const Eigen::Vector3d& p, const MappedDistance& d, auto jac_row) {
+        g.flow.basis_gradients(p, near);
+        for (const auto& [node, gradient] : near)
+          jac_row.template segment<3>(3 * node) = -d.gp.cross(gradient).transpose() / d.nu;
+      },
+      effective_dof);
 }
 
 }  // namespace detail

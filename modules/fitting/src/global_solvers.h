@@ -56,6 +56,13 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
                            const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
                            double& effective_dof);
 
+/// An incompressible flow on top of `map` (all its other parts held), fitted as the shear
+/// fields are (the same weights, stiffness and first-order Jacobian, v at the point itself).
+/// Left out (an empty flow) when its dense Jacobian would exceed 5e7 entries (400 MB).
+GlobalMap fit_flow(GlobalMap map, const geometry::SignedDistance& distance,
+                   const Eigen::Matrix3Xd& mapped_surface,
+                   const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
+                   double& effective_dof);
 /// Distance (mm) of point p to the surface mapped by `map`, to first order:
 /// D(q) / |grad_p D(q)|, q = M^-1 p, with the shears' Jacobian left out of the
 /// normalisation (they are small). `b` is map.affine.a's inverse.

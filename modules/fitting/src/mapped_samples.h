@@ -9,20 +9,23 @@
 
 namespace organfit::fitting {
 
-/// A map's images of the surface samples: after its affine part, and in full. Each
+/// A map's images of the surface samples: after its affine part, its shears, its fields,
+/// and in full (after its flow). Each
 /// candidate's samples are mapped once for the three questions asked of it (plausible,
 /// point_to_plane_rms, shape change).
 struct MappedSamples {
-  Eigen::Matrix3Xd affine, sheared, full;  ///< mm
+  Eigen::Matrix3Xd affine, sheared, fielded, full;  ///< mm
 };
 
 inline MappedSamples map_samples(const GlobalMap& map, const SurfaceSamples& surface) {
   const Eigen::Index n = surface.points.cols();
-  MappedSamples m{Eigen::Matrix3Xd(3, n), Eigen::Matrix3Xd(3, n), Eigen::Matrix3Xd(3, n)};
+  MappedSamples m{Eigen::Matrix3Xd(3, n), Eigen::Matrix3Xd(3, n), Eigen::Matrix3Xd(3, n),
+                  Eigen::Matrix3Xd(3, n)};
   for (Eigen::Index j = 0; j < n; ++j) {
     m.affine.col(j) = map.affine.a * surface.points.col(j) + map.affine.t;
     m.sheared.col(j) = map.shears.apply(m.affine.col(j));
-    m.full.col(j) = map.fields.apply(m.sheared.col(j));
+    m.fielded.col(j) = map.fields.apply(m.sheared.col(j));
+    m.full.col(j) = map.flow.apply(m.fielded.col(j));
   }
   return m;
 }
@@ -39,7 +42,8 @@ inline LargestMoves largest_moves_of(const MappedSamples& mapped) {
   auto largest_move = [](const Eigen::Matrix3Xd& to, const Eigen::Matrix3Xd& from) {
     return to.cols() > 0 ? (to - from).colwise().norm().maxCoeff() : 0.0;
   };
-  return {largest_move(mapped.sheared, mapped.affine), largest_move(mapped.full, mapped.sheared)};
+  return {largest_move(mapped.sheared, mapped.affine), largest_move(mapped.fielded, mapped.sheared),
+          largest_move(mapped.full, mapped.fielded)};
 }
 
 }  // namespace organfit::fitting

@@ -112,7 +112,7 @@ TEST(EmbeddedBody, AppliesTheGlobalMapsInverse) {
 
 // on_grid sets blocks far from the surface without evaluating their voxels: the labels
 // are exactly those of evaluating inside() at every voxel, on a rotated, anisotropic grid,
-// under a global map with shears and fields and a local push the particles carry.
+// under a global map with shears, fields and a flow and a local push the particles carry.
 TEST(EmbeddedBody, OnGridIsEveryVoxelsInsideTest) {
   const auto mask = ellipsoid_mask(Eigen::Vector3d(3, -2, 5));
   const particles::Positions x0 = fill(*mask);
@@ -127,6 +127,9 @@ TEST(EmbeddedBody, OnGridIsEveryVoxelsInsideTest) {
   std::normal_distribution<double> g(0.0, 0.6);
   for (Eigen::Index i = 0; i < map.fields.weights.size(); ++i)
     map.fields.weights(i) = g(rng);
+  map.flow = IncompressibleFlow::over({-20, -18, -8}, {26, 14, 18}, 10.0);
+  for (Eigen::Index i = 0; i < map.flow.potentials.size(); ++i)
+    map.flow.potentials(i) = g(rng);
   particles::Positions placed(3, x0.cols()), current(3, x0.cols());
   for (Eigen::Index i = 0; i < x0.cols(); ++i) {
     placed.col(i) = map.apply(x0.col(i));
@@ -147,6 +150,7 @@ TEST(EmbeddedBody, OnGridIsEveryVoxelsInsideTest) {
                                 2;
   const geometry::LabelVolume labels = body.on_grid(grid);
   long long inside = 0, differ = 0;
+#pragma omp parallel for reduction(+ : inside, differ) schedule(dynamic, 1)
   for (int k = 0; k < grid.size[2]; ++k)
     for (int j = 0; j < grid.size[1]; ++j)
       for (int i = 0; i < grid.size[0]; ++i) {

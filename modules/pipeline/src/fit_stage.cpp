@@ -152,6 +152,8 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
         {"shear_fields_sigma_mm", map.fields.empty() ? 0.0 : map.fields.sigma_mm},
         {"shears_largest_move_mm", g.moves.shears_mm},
         {"shear_fields_largest_move_mm", g.moves.fields_mm},
+        {"flow_sigma_mm", map.flow.empty() ? 0.0 : map.flow.sigma_mm},
+        {"flow_largest_move_mm", g.moves.flow_mm},
         {"found_by", map.found_by},
         {"shape_change_mm", g.shape_change_mm},
         {"refill_passes", g.refill_passes},

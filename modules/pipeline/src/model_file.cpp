@@ -102,13 +102,24 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
         {"global_shear_fields",
          map.fields.empty()
              ? nlohmann::json(nullptr)
+             : nlohmann::json{{"sigma_mm", map.fields.sigma_mm},
+                              {"origin_mm", vec(map.fields.origin_mm)},
+                              {"count",
+                               {map.fields.count.x(), map.fields.count.y(), map.fields.count.z()}},
+                              {"weights_mm",
+                               std::vector<double>(
+                                   map.fields.weights.data(),
+                                   map.fields.weights.data() + map.fields.weights.size())}}},
+        {"global_flow",
+         map.flow.empty()
+             ? nlohmann::json(nullptr)
              : nlohmann::json{
-                   {"sigma_mm", map.fields.sigma_mm},
-                   {"origin_mm", vec(map.fields.origin_mm)},
-                   {"count", {map.fields.count.x(), map.fields.count.y(), map.fields.count.z()}},
-                   {"weights_mm",
-                    std::vector<double>(map.fields.weights.data(),
-                                        map.fields.weights.data() + map.fields.weights.size())}}}};
+                   {"sigma_mm", map.flow.sigma_mm},
+                   {"origin_mm", vec(map.flow.origin_mm)},
+                   {"count", {map.flow.count.x(), map.flow.count.y(), map.flow.count.z()}},
+                   {"potentials_mm", std::vector<double>(map.flow.potentials.data(),
+                                                         map.flow.potentials.data() +
+                                                             map.flow.potentials.size())}}}};
   } else {
     j["embedding"] = nullptr;
   }
@@ -212,29 +223,53 @@ SavedModel load_model(const fs::path& file) {
       m.global_map.shears.c.setZero();
       m.global_map.shears.c.head(static_cast<Eigen::Index>(c.size())) =
           Eigen::Map<const Eigen::VectorXd>(c.data(), static_cast<Eigen::Index>(c.size()));
-      // Shear fields (fitting::ShearFields): absent in models written before them.
-      if (e.contains("global_shear_fields") && !e.at("global_shear_fields").is_null()) {
-        const auto& f = e.at("global_shear_fields");
-        fitting::ShearFields fields;
-        fields.sigma_mm = f.at("sigma_mm").get<double>();
-        fields.origin_mm = read_vec(f.at("origin_mm"));
+      // A part of the map on a grid (the shear fields, the flow; absent in models written
+      // before it): its spacing, first node, counts and numbers (`values`, size_of(counts)
+      // of them), checked, then fill(sigma, origin, counts, numbers).
+      auto read_grid_part = [&](const char* key, const char* values, auto&& size_of, auto&& fill) {
+        if (!e.contains(key) || e.at(key).is_null()) return;  // absent in older models
+        const std::string name = std::string("embedding.") + key;
+        const auto& f = e.at(key);
+        const double sigma = f.at("sigma_mm").get<double>();
+        const Eigen::Vector3d origin = read_vec(f.at("origin_mm"));
         const auto count = f.at("count").get<std::vector<int>>();
-        const auto weights = f.at("weights_mm").get<std::vector<double>>();
-        if (count.size() != 3 || !(fields.sigma_mm > 0) || !fields.origin_mm.allFinite())
-          fail("embedding.global_shear_fields needs sigma_mm > 0, origin_mm and 3 counts");
+        const auto numbers = f.at(values).get<std::vector<double>>();
+        if (count.size() != 3 || !(sigma > 0) || !origin.allFinite())
+          fail(name + " needs sigma_mm > 0, origin_mm and 3 counts");
+        Eigen::Vector3i n;
         for (int axis = 0; axis < 3; ++axis) {
           if (count[axis] < 1 || count[axis] > 1000)
-            fail("embedding.global_shear_fields.count must be 1 to 1000 along each axis");
-          fields.count(axis) = count[axis];
+            fail(name + ".count must be 1 to 1000 along each axis");
+          n(axis) = count[axis];
         }
-        if (weights.size() != static_cast<size_t>(3 * fields.block()))
-          fail(fmt::format("embedding.global_shear_fields.weights_mm needs {} numbers, has {}",
-                           3 * fields.block(), weights.size()));
-        fields.weights = Eigen::Map<const Eigen::VectorXd>(
-            weights.data(), static_cast<Eigen::Index>(weights.size()));
-        if (!fields.weights.allFinite()) fail("embedding.global_shear_fields: not finite");
-        m.global_map.fields = std::move(fields);
-      }
+        const long long expected = size_of(n);
+        if (static_cast<long long>(numbers.size()) != expected)
+          fail(fmt::format("{}.{} needs {} numbers, has {}", name, values, expected,
+                           numbers.size()));
+        const Eigen::Map<const Eigen::VectorXd> v(numbers.data(),
+                                                  static_cast<Eigen::Index>(numbers.size()));
+        if (!v.allFinite()) fail(name + ": not finite");
+        fill(sigma, origin, n, v);
+      };
+      read_grid_part(
+          "global_shear_fields", "weights_mm",
+          [](const Eigen::Vector3i& n) {
+            fitting::ShearFields f;
+            f.count = n;
+            return 3LL * f.block();
+          },
+          [&](double sigma, const Eigen::Vector3d& origin, const Eigen::Vector3i& n,
+              const Eigen::VectorXd& v) {
+            fitting::ShearFields& f = m.global_map.fields;
+            f.sigma_mm = sigma, f.origin_mm = origin, f.count = n, f.weights = v;
+          });
+      read_grid_part(
+          "global_flow", "potentials_mm", [](const Eigen::Vector3i& n) { return 3LL * n.prod(); },
+          [&](double sigma, const Eigen::Vector3d& origin, const Eigen::Vector3i& n,
+              const Eigen::VectorXd& v) {
+            fitting::IncompressibleFlow& f = m.global_map.flow;
+            f.sigma_mm = sigma, f.origin_mm = origin, f.count = n, f.potentials = v;
+          });
       if (!m.placed.allFinite() || !m.global_map.affine.a.allFinite() ||
           !m.global_map.shears.c.allFinite() ||
           std::abs(m.global_map.affine.a.determinant() - 1) > 1e-6)

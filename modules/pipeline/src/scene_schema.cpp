@@ -68,14 +68,17 @@ const config::Binding<fitting::AffineFitOptions>& fit_spread_global() {
                   "refuse points that ask the whole organ to stretch more than this (or less "
                   "than its inverse)")
           .number("global_max_shear", &O::max_shear_mm, "", 0.0, 10.0,
-                  "... or whose shears, or shear fields, move the surface by more than this x "
-                  "the body's size",
+                  "... or whose shears, shear fields or flow move the surface by more than this "
+                  "x the body's size",
                   true)
           .number("global_shear_field_mm", &O::field_sigma_mm, "mm", 0.0, 100.0,
                   "width and spacing of the smooth shear fields the global map may add (0 = "
                   "none)")
           .number("global_field_stiffness", &O::field_stiffness, "", 0.0, 100.0,
                   "pull of the fields' heights towards none (a prior sd of 0.5 mm / sqrt(this))")
+          .number("global_flow_mm", &O::flow_sigma_mm, "mm", 0.0, 100.0,
+                  "node spacing of an incompressible flow the global map may add, for changes "
+                  "of shape no shear makes (a cube into a lung; 0 = none)")
           .integer("global_iterations", &O::iterations, 1, 1000,
                    "iterations of the global map's robust fit")
           .number("global_outlier_mads", &O::outlier_mads, "", 0.0, 100.0,

@@ -83,6 +83,9 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   m.global_map.fields = fitting::ShearFields::over({-18, -15, -13}, {18, 15, 13}, 8.0);
   for (Eigen::Index i = 0; i < m.global_map.fields.weights.size(); ++i)
     m.global_map.fields.weights(i) = 0.5 * std::sin(0.7 * static_cast<double>(i));  // mm
+  m.global_map.flow = fitting::IncompressibleFlow::over({-18, -15, -13}, {18, 15, 13}, 10.0);
+  for (Eigen::Index i = 0; i < m.global_map.flow.potentials.size(); ++i)
+    m.global_map.flow.potentials(i) = 0.8 * std::cos(0.3 * static_cast<double>(i));  // mm
   m.placed = m.state.x;
   for (Eigen::Index i = 0; i < m.placed.cols(); ++i)
     m.placed.col(i) = m.global_map.apply(m.state.x.col(i));
@@ -91,6 +94,8 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   save_model(dir_ / "fitted.json", m, "Prostate", OrganLook{}, std::nullopt, {});
   SavedModel back = load_model(dir_ / "fitted.json");
   EXPECT_EQ(back.model.global_map.fields.weights, m.global_map.fields.weights);
+  EXPECT_EQ(back.model.global_map.flow.potentials, m.global_map.flow.potentials);
+  EXPECT_EQ(back.model.global_map.flow.count, m.global_map.flow.count);
   EXPECT_EQ(back.model.global_map.shears.c, m.global_map.shears.c);
   const fitting::EmbeddedBody a = organ_body(m), b = organ_body(back.model);
   for (const Eigen::Vector3d& q :
@@ -105,6 +110,12 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   nlohmann::json j = nlohmann::json::parse(std::ifstream(dir_ / "fitted.json"));
   j["embedding"]["global_shear_fields"]["weights_mm"].erase(0);
   EXPECT_NE(error_of(j.dump()).find("bad.json: embedding.global_shear_fields.weights_mm needs"),
+            std::string::npos)
+      << error_of(j.dump());
+  // Likewise a flow's potentials.
+  j = nlohmann::json::parse(std::ifstream(dir_ / "fitted.json"));
+  j["embedding"]["global_flow"]["potentials_mm"].erase(0);
+  EXPECT_NE(error_of(j.dump()).find("bad.json: embedding.global_flow.potentials_mm needs"),
             std::string::npos)
       << error_of(j.dump());
   // Models written before the last two shears have nine coefficients: they load, the

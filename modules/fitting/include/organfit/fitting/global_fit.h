@@ -57,6 +57,11 @@ struct AffineFitOptions {
   /// pull of the fields' heights towards none, sum_k w_k r_k^2 + this x |heights|^2 (mm^2
   /// per mm^2): a Gaussian prior on each height of 0.5 mm noise / sqrt(this).
   double field_stiffness = 0.3;
+  /// IncompressibleFlow's node spacing (mm; 0: none): with it, the flow fitted on the same
+  /// starts as the fields, at their stiffness matched to the flow (the same prior variance of
+  /// a point's move), is a candidate too. For changes of shape no shear can make (a cube
+  /// into a lung); off by default, since on sessions' changes it was chosen and did worse.
+  double flow_sigma_mm = 0.0;
   double max_stretch = 1.5;  ///< a map stretching by more (or by less than 1/this) is refused
   /// ... and one whose quadratic shears, or whose shear fields, move any sample by more
   /// than this x the body's size (each on its own)
@@ -117,7 +122,8 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
 ///    square raised by m / (m - k) for their k effective parameters (the trace of the
 ///    linearised fit's hat matrix: what they lower it by chance), and the choice above is
 ///    made again. Without the raise, fields fitted to the noise of 20 points put every
-///    other fit out of the window.
+///    other fit out of the window. With flow_sigma_mm > 0, an IncompressibleFlow fitted
+///    likewise on the same two maps joins them too.
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
                          const AffineFitOptions& options,
                          const geometry::SignedDistance* distance = nullptr);

@@ -1,7 +1,8 @@
 #pragma once
-// The global map of our fit (docs/method.md): x -> fields(shears(a x + t)), an affine
-// part with det(a) = 1, quadratic shears, smooth shear fields. Each part keeps volume
-// exactly (Jacobian determinant 1) and inverts exactly; global_fit.h fits it.
+// The global map of our fit (docs/method.md): x -> flow(fields(shears(a x + t))), an affine
+// part with det(a) = 1, quadratic shears, smooth shear fields and, where a scene asks for
+// it, an incompressible flow. Each part keeps volume (exactly; the flow to its RK4's error)
+// and inverts (likewise); global_fit.h fits it.
 #include <Eigen/Core>
 #include <utility>
 #include <vector>
@@ -75,6 +76,40 @@ struct ShearFields {
   Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
 };
 
+/// A smooth incompressible flow on top of the shear fields: the map is the flow over unit
+/// time of the velocity v = curl psi, psi(x) = sigma sum_n a_n B((x - c_n) / sigma), B the
+/// tensor cubic B-spline, its nodes c_n on a cubic grid of spacing sigma (mm) over the body's
+/// box, a_n (mm) three per node. v is divergence-free, so its flow keeps volume (to the
+/// RK4 integration's error, kSteps steps; the inverse is the flow backwards). Where a shear
+/// field moves a whole line of the body with a dent, the flow moves the tissue about a
+/// change and no further (a dent, the bulge beside it), and it can round a cube into an
+/// ellipsoid, which no shear can (the incompressible stationary velocity fields of
+/// registration: Mansi et al., iLogDemons, 2011).
+struct IncompressibleFlow {
+  static constexpr int kSteps = 4;
+  double sigma_mm = 0;  ///< node spacing and the B-spline's scale (0: no flow)
+  Eigen::Vector3d origin_mm = Eigen::Vector3d::Zero();  ///< node (0, 0, 0)
+  Eigen::Vector3i count = Eigen::Vector3i::Zero();      ///< nodes along each axis
+  /// a_n (mm): node (i, j, k)'s three at 3 (i + count_x (j + count_y k)) + component
+  Eigen::VectorXd potentials;
+
+  /// Nodes over `box` widened by two spacings (the B-spline's reach), all potentials zero.
+  static IncompressibleFlow over(const Eigen::Vector3d& box_min_mm,
+                                 const Eigen::Vector3d& box_max_mm, double sigma_mm);
+  bool empty() const { return sigma_mm <= 0 || potentials.size() == 0 || potentials.isZero(0); }
+  /// grad(B-spline of node n) at q (per sigma: v = sum_n gradient_n x a_n) for the up to 64
+  /// nodes whose support holds q.
+  void basis_gradients(const Eigen::Vector3d& q,
+                       std::vector<std::pair<int, Eigen::Vector3d>>& out) const;
+  Eigen::Vector3d velocity(const Eigen::Vector3d& q) const;  ///< mm per unit time
+  Eigen::Vector3d apply(const Eigen::Vector3d& q) const;
+  Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
+  /// Bounds over all space: |v| (mm) and the spectral norm of grad v (per unit time), from
+  /// the largest first and second differences of the potentials between nodes.
+  double largest_speed_mm() const;
+  double largest_velocity_gradient() const;
+};
+
 /// How far apart a map can put two points: |f(p) - f(q)| <= stretch |p - q| + slack_mm
 /// for p, q in a given box. `stretch` bounds the largest singular value of f's Jacobian
 /// there; `slack_mm` what the computed f may differ from that smooth map (the Gaussian
@@ -84,12 +119,13 @@ struct StretchBound {
   double slack_mm = 0;
 };
 
-/// The global map: affine (det 1), then quadratic shears, then smooth shear fields.
-/// Volume-preserving.
+/// The global map: affine (det 1), then quadratic shears, then smooth shear fields, then
+/// the flow. Volume-preserving.
 struct GlobalMap {
   AffineFit affine;
   QuadraticShears shears;
   ShearFields fields;
+  IncompressibleFlow flow;
   double rms_after_mm = 0;      ///< point-to-surface over the kept points
   bool refused = false;         ///< no plausible map: the identity instead
   bool shears_dropped = false;  ///< the shears were implausible: the affine part alone
@@ -98,13 +134,13 @@ struct GlobalMap {
   /// ("none": not fitted); with shear fields on top of it when `fields` is not empty
   const char* found_by = "none";
   Eigen::Vector3d apply(const Eigen::Vector3d& p) const {
-    return fields.apply(shears.apply(affine.a * p + affine.t));
+    return flow.apply(fields.apply(shears.apply(affine.a * p + affine.t)));
   }
   Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
   /// The same with affine.a's inverse at hand (`a_inverse`), for callers that invert
   /// many points through one map.
   Eigen::Vector3d inverse(const Eigen::Vector3d& q, const Eigen::Matrix3d& a_inverse) const {
-    return a_inverse * (shears.inverse(fields.inverse(q)) - affine.t);
+    return a_inverse * (shears.inverse(fields.inverse(flow.inverse(q))) - affine.t);
   }
   /// A bound on how the inverse stretches distances over `box` (mm), from each part's
   /// largest gradient there: the fields' from their largest weight, the shears' from the
@@ -123,11 +159,12 @@ SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface);
 /// translation).
 double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface);
 
-/// How far (mm) the quadratic shears, and the shear fields, each move any of the surface
-/// samples at most: the shears from the affine image, the fields from the sheared one.
-/// Each is bounded by max_shear_mm x the body's size for a map to be plausible.
+/// How far (mm) the quadratic shears, the shear fields and the flow each move any of the
+/// surface samples at most: the shears from the affine image, the fields from the sheared
+/// one, the flow from the fields'. Each is bounded by max_shear_mm x the body's size for a
+/// map to be plausible.
 struct LargestMoves {
-  double shears_mm = 0, fields_mm = 0;
+  double shears_mm = 0, fields_mm = 0, flow_mm = 0;
 };
 LargestMoves largest_moves(const GlobalMap& map, const SurfaceSamples& surface);
 
