@@ -18,10 +18,8 @@
 //    D = max(2 h, 2 max|u|) beyond the particles. A harmonic field has no interior
 //    extremum: |u| stays within the particles' moves.
 // So far from the organ phi is the global map alone. Not the identity: the global map's
-// bend is volume-preserving only as an exact shear, and decaying it to the identity
-// (tried: the whole displacement harmonic beyond 2 h, zero at twice its largest value)
-// folded 18 voxels of the phantom's CT and stretched others 380-fold under a 10 mm bend,
-// where the global map alone keeps det(grad phi) within 0.95 to 1.07 on the whole CT.
+// bend is volume-preserving only as an exact shear, and decaying it to the identity folds
+// the CT far from the organ (docs/decisions.md).
 // The price: far from the organ the field is the global map's extrapolation, which grows
 // with the distance (docs/outputs.md).
 // u is held on a lattice of h/4 (nodes over the particles' box widened by D) and

@@ -95,8 +95,8 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
 /// a 1.3x stretch at most and leave 3 to 4.5 mm of surface error. Its pulls are on the
 /// change of shape (a, the shears) and on the displacement of the body's centre, as hard
 /// per mm^2 as on a's entries: the organ stays where the reference has it unless the
-/// points insist (freed, a stretch seen from one side was taken for a shift: that cube
-/// seen by 20 to 87 points, MSD 0.3-0.5 -> 1.1-3.8 mm); the fits by closest samples leave
+/// points insist (freed, a stretch seen from one side is taken for a shift); the fits by
+/// closest samples leave
 /// the translation free, and a real shift is found by them. The fit from the identity is
 /// made twice: each step solved freely and the map then rescaled to det 1 (which takes
 /// back part of any stretch: stiffer along the stretch), and each step solved on the
