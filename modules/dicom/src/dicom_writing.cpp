@@ -23,6 +23,16 @@ void put(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const gd
   ds.Replace(de);
 }
 
+void put_derived_object_header(gdcm::DataSet& ds, const PatientStudy& patient,
+                               const std::string& date, const std::string& time) {
+  using V = gdcm::VR;
+  put(ds, 0x0008, 0x0005, V::CS,
+      patient.specific_character_set.empty() ? "ISO_IR 192" : patient.specific_character_set);
+  put(ds, 0x0008, 0x0012, V::DA, date);
+  put(ds, 0x0008, 0x0013, V::TM, time);
+  put_patient_study(ds, patient);  // Patient, General Study: verbatim
+}
+
 void put_patient_study(gdcm::DataSet& ds, const PatientStudy& p) {
   using V = gdcm::VR;
   put(ds, 0x0008, 0x0020, V::DA, p.study_date);

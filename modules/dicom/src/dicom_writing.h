@@ -36,6 +36,12 @@ void put(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element, const gd
 /// must agree with its study: see rtstruct_writer.cpp). Shared by the CT and RTSTRUCT writers.
 void put_patient_study(gdcm::DataSet& ds, const PatientStudy& patient);
 
+/// The header an object organfit derives from a CT carries: the specific character set
+/// (the CT's, else UTF-8), the instance's creation date and time, and put_patient_study.
+/// Shared by the RTSTRUCT and registration writers.
+void put_derived_object_header(gdcm::DataSet& ds, const PatientStudy& patient,
+                               const std::string& date, const std::string& time);
+
 /// An item of undefined length, ready for a nested data set.
 gdcm::Item new_item();
 

@@ -37,11 +37,7 @@ void write_rtstruct(const fs::path& file, const CtSeries& ct, const std::vector<
   gdcm::DataSet& ds = writer.GetFile().GetDataSet();
   using V = gdcm::VR;
   // SOP Common, Patient, General Study, RT Series, General Equipment.
-  put(ds, 0x0008, 0x0005, V::CS,
-      ct.patient.specific_character_set.empty() ? "ISO_IR 192" : ct.patient.specific_character_set);
-  put(ds, 0x0008, 0x0012, V::DA, date);
-  put(ds, 0x0008, 0x0013, V::TM, time);
-  detail::put_patient_study(ds, ct.patient);  // Patient, General Study: verbatim
+  detail::put_derived_object_header(ds, ct.patient, date, time);
   put(ds, 0x0008, 0x0016, V::UI, kRtstructClass);
   put(ds, 0x0008, 0x0018, V::UI, sop_uid);
   put(ds, 0x0008, 0x0060, V::CS, "RTSTRUCT");
