@@ -1,14 +1,16 @@
 #include "organfit/bench/ct_benchmark.h"
 
 #include <fmt/format.h>
+#include <omp.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cstdlib>
 
+#include "organfit/pipeline/ct_stage.h"
+#include "organfit/pipeline/model_stage.h"
+#include "organfit/pipeline/organ_stage.h"
 #include "organfit/pipeline/phantom_stage.h"
-#include "organfit/pipeline/runner.h"
-#include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
 #include "organfit/support/resources.h"
@@ -45,29 +47,46 @@ nlohmann::json run_ct_benchmark(const CtBenchOptions& o) {
     synth_s = clock.elapsed_s();
     ct = work / "phantom" / "ct";
   }
-  const std::string scene_text = fmt::format(
-      "scene:\n  name: bench-ct\n  threads: {}\nct:\n  folder: '{}'\norgan:\n  source: seed\n  "
-      "roi: organ\n"
-      "  seed_mm: [{}, {}, {}]\n  hu_low: {}\n  hu_high: {}\nmodel:\n  radius_mm: {}\n",
-      o.threads, fs::absolute(ct).string(), o.seed_mm[0], o.seed_mm[1], o.seed_mm[2],
-      o.hu_window[0], o.hu_window[1], o.radius_mm);
-  const config::Scene scene =
-      config::parse_scene(scene_text, work / "bench-ct.yaml", pipeline::scene_schema());
-  pipeline::check_scene_rules(scene);
-  const nlohmann::json run = pipeline::run_scene(scene, work / "out");
-
+  if (o.threads > 0) omp_set_num_threads(o.threads);
+  // The stages a planning run calls, in turn: read the CT, grow the organ, fill and relax
+  // its model (a folder read needs neither staging nor --out: the work folder stands in).
   nlohmann::json stages = nlohmann::json::object();
   double total = 0;
-  for (const auto& st : run["stages"]) {
-    stages[st["name"].get<std::string>()] = st["wall_s"];
-    total += st["wall_s"].get<double>();
-  }
-  const auto& m = run["model"];
+  auto timed = [&](const char* stage, auto&& call) {
+    Stopwatch clock;
+    auto result = call();
+    stages[stage] = clock.elapsed_s();
+    total += clock.elapsed_s();
+    throw_if_interrupted();
+    return result;
+  };
+  pipeline::CtStageOptions ct_options;
+  ct_options.folder = fs::absolute(ct);
+  const pipeline::CtStageResult read = timed(
+      "ct", [&] { return pipeline::run_ct_stage(ct_options, work / "staging", work, {}, {}); });
+  pipeline::OrganStageOptions organ_options;
+  organ_options.roi = "organ";
+  organ_options.seed.emplace();
+  organ_options.seed->seed_mm = Eigen::Vector3d(o.seed_mm[0], o.seed_mm[1], o.seed_mm[2]);
+  organ_options.seed->hu_low = o.hu_window[0], organ_options.seed->hu_high = o.hu_window[1];
+  const pipeline::OrganStageResult organ = timed("organ", [&] {
+    return pipeline::run_organ_stage(organ_options, read.ct, {}, work / "staging", work);
+  });
+  pipeline::ModelStageOptions model_options;
+  model_options.settings.radius_mm = o.radius_mm;
+  const pipeline::ModelStageResult model =
+      timed("model", [&] { return pipeline::run_model_stage(model_options, &organ.shape); });
+  const auto& g = read.ct.geometry;
+  const nlohmann::json ct_summary = {
+      {"slices", g.size[2]},
+      {"size", {g.size[0], g.size[1], g.size[2]}},
+      {"spacing_mm", {g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z()}}};
+  const nlohmann::json& m = model.summary;
   return {{"benchmark", "ct"},
-          {"ct", run["ct"]},
+          {"ct", ct_summary},
           {"phantom_made_s", synth_s},
-          {"threads", run["threads"]},
-          {"organ_volume_cm3", run["organ"]["volume_cm3"]},
+          {"threads", omp_get_max_threads()},
+          {"organ_volume_cm3", organ.summary["volume_cm3"]},
           {"particles", m["particles"]},
           {"skeleton_nodes", m["skeleton_nodes"]},
           {"skeleton_from", m["skeleton_from"]},
