@@ -130,9 +130,7 @@ double bspline_slope(double t) {
   const double a = std::abs(t);
   return a < 1 ? -2 * t + 1.5 * t * a : a < 2 ? (t > 0 ? -1 : 1) * (2 - a) * (2 - a) / 2 : 0;
 }
-}  // namespace
 
-namespace {
 /// The B-spline's values and slopes along each axis at the 4 nodes about a point, nodes
 /// first[a] + i (zero for nodes beyond the grid).
 struct NodeWeights {
@@ -233,12 +231,14 @@ Eigen::Vector3d integrate(const IncompressibleFlow& f, Eigen::Vector3d q, double
 }
 }  // namespace
 
+// Without a grid the identity; all-zero potentials integrate to q exactly, so the points
+// a map moves are not each charged a scan of the potentials (empty()).
 Eigen::Vector3d IncompressibleFlow::apply(const Eigen::Vector3d& q) const {
-  return empty() ? q : integrate(*this, q, 1);
+  return sigma_mm > 0 && potentials.size() > 0 ? integrate(*this, q, 1) : q;
 }
 
 Eigen::Vector3d IncompressibleFlow::inverse(const Eigen::Vector3d& q) const {
-  return empty() ? q : integrate(*this, q, -1);
+  return sigma_mm > 0 && potentials.size() > 0 ? integrate(*this, q, -1) : q;
 }
 
 namespace {
@@ -282,31 +282,38 @@ PotentialDifferences potential_differences(const IncompressibleFlow& f) {
 }
 }  // namespace
 
-double IncompressibleFlow::largest_speed_mm() const {
-  // v = curl psi: v_i = d_j psi_k - d_k psi_j ((i, j, k) cyclic).
-  if (empty()) return 0;
+IncompressibleFlow::Bounds IncompressibleFlow::bounds() const {
+  if (empty()) return {};
   const PotentialDifferences d = potential_differences(*this);
-  double sq = 0;
-  for (int i = 0; i < 3; ++i) {
-    const int j = (i + 1) % 3, k = (i + 2) % 3;
-    sq += (d.m1[j][k] + d.m1[k][j]) * (d.m1[j][k] + d.m1[k][j]);
-  }
-  return std::sqrt(sq);
-}
-
-double IncompressibleFlow::largest_velocity_gradient() const {
+  // v = curl psi: v_i = d_j psi_k - d_k psi_j ((i, j, k) cyclic), and its gradient
   // d_l v_i = d_l d_j psi_k - d_l d_k psi_j; the spectral norm at most the Frobenius one.
-  if (empty()) return 0;
-  const PotentialDifferences d = potential_differences(*this);
-  double sq = 0;
+  double speed_sq = 0, gradient_sq = 0;
   for (int i = 0; i < 3; ++i) {
     const int j = (i + 1) % 3, k = (i + 2) % 3;
+    speed_sq += (d.m1[j][k] + d.m1[k][j]) * (d.m1[j][k] + d.m1[k][j]);
     for (int l = 0; l < 3; ++l) {
       const double b = d.m2[l][j][k] + d.m2[l][k][j];
-      sq += b * b;
+      gradient_sq += b * b;
     }
   }
-  return std::sqrt(sq) / sigma_mm;
+  return {std::sqrt(speed_sq), std::sqrt(gradient_sq) / sigma_mm};
+}
+
+double IncompressibleFlow::stiffness_per_field_stiffness() {
+  // A component of v = sum_n g_n x a_n, the a_n independent of unit variance, has variance
+  // (2/3) sum_n |g_n|^2, averaged over a cell 3 (int B'^2)(int B^2)^2; a field's move has
+  // sum_j bump_j^2 per unit height variance, (int exp(-t^2) dt)^2 = pi. Without this ratio
+  // the same stiffness held the flow ten times harder than the fields.
+  static const double scale = [] {
+    double b2 = 0, d2 = 0;  // int B^2, int B'^2 by the midpoint rule over [-2, 2]
+    const int n = 4000;
+    for (int i = 0; i < n; ++i) {
+      const double t = -2 + 4.0 * (i + 0.5) / n, b = bspline(t), d = bspline_slope(t);
+      b2 += b * b * 4.0 / n, d2 += d * d * 4.0 / n;
+    }
+    return (2.0 / 3.0) * 3 * d2 * b2 * b2 / M_PI;
+  }();
+  return scale;
 }
 
 Eigen::Vector3d GlobalMap::inverse(const Eigen::Vector3d& q) const {
@@ -407,9 +414,9 @@ StretchBound GlobalMap::inverse_stretch(const geometry::Aabb& box) const {
   // at most 1 + hL + ... + (hL)^4 / 24 <= exp(hL), the whole flow by exp(L); it moves a
   // point by at most the largest speed.
   if (!flow.empty()) {
-    stretch *= std::exp(flow.largest_velocity_gradient());
-    const double move = flow.largest_speed_mm();
-    lo.array() -= move, hi.array() += move;
+    const IncompressibleFlow::Bounds b = flow.bounds();
+    stretch *= std::exp(b.velocity_gradient);
+    lo.array() -= b.speed_mm, hi.array() += b.speed_mm;
   }
   // The fields, undone z, y, x: each step q_a -= f_a(q_b, q_c) is a shear, Jacobian I - e_a
   // grad f_a^T (shear_stretch), and moves q_a by at most |f_a|.

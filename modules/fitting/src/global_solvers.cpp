@@ -547,26 +547,6 @@ GlobalMap fit_linearised_part(GlobalMap map, const geometry::SignedDistance& dis
   effective_dof = RidgeSystem(jac, w, lambda).effective_dof();
   return map;
 }
-/// The flow's pull per potential^2 over the fields' per height^2 that gives both the same
-/// prior: the mean variance of a component of v = sum_n g_n x a_n with independent a_n of
-/// unit variance, (2/3) sum_n |g_n|^2, averaged over a cell (3 (int B'^2)(int B^2)^2), over
-/// that of a field, sum_j bump_j^2 (int exp(-t^2) dt squared: pi). Without it the same
-/// stiffness held the flow ten times harder than the fields.
-double flow_prior_scale() {
-  static const double scale = [] {
-    double b2 = 0, d2 = 0;  // int B^2, int B'^2 by the midpoint rule over [-2, 2]
-    const int n = 4000;
-    for (int i = 0; i < n; ++i) {
-      const double t = -2 + 4.0 * (i + 0.5) / n, a = std::abs(t);
-      const double b =
-          a < 1 ? (4 - 6 * t * t + 3 * a * a * a) / 6 : (2 - a) * (2 - a) * (2 - a) / 6;
-      const double d = a < 1 ? -2 * t + 1.5 * t * a : (t > 0 ? -1 : 1) * (2 - a) * (2 - a) / 2;
-      b2 += b * b * 4.0 / n, d2 += d * d * 4.0 / n;
-    }
-    return (2.0 / 3.0) * 3 * d2 * b2 * b2 / M_PI;
-  }();
-  return scale;
-}
 }  // namespace
 
 GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distance,
@@ -606,7 +586,8 @@ GlobalMap fit_flow(GlobalMap map, const geometry::SignedDistance& distance,
   // d r / d a_n = -(gp x g_n) / nu: the flow's inverse moves p by -v(p) to first order,
   // and v(p) = sum_n g_n x a_n.
   return fit_linearised_part(
-      std::move(map), distance, points, o, std::max(o.field_stiffness, 1e-9) * flow_prior_scale(),
+      std::move(map), distance, points, o,
+      std::max(o.field_stiffness, 1e-9) * IncompressibleFlow::stiffness_per_field_stiffness(),
       [](auto& g) -> auto& { return g.flow.potentials; },
       [&](const GlobalMap& g, const Eigen::Vector3d& p, const MappedDistance& d, auto jac_row) {
         g.flow.basis_gradients(p, near);

@@ -10,9 +10,8 @@
 namespace organfit::fitting {
 
 /// A map's images of the surface samples: after its affine part, its shears, its fields,
-/// and in full (after its flow). Each
-/// candidate's samples are mapped once for the three questions asked of it (plausible,
-/// point_to_plane_rms, shape change).
+/// and in full (after its flow). Each candidate's samples are mapped once for the three
+/// questions asked of it (plausible, point_to_plane_rms, shape change).
 struct MappedSamples {
   Eigen::Matrix3Xd affine, sheared, fielded, full;  ///< mm
 };

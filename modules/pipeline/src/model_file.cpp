@@ -232,43 +232,44 @@ SavedModel load_model(const fs::path& file) {
         const auto& f = e.at(key);
         const double sigma = f.at("sigma_mm").get<double>();
         const Eigen::Vector3d origin = read_vec(f.at("origin_mm"));
-        const auto count = f.at("count").get<std::vector<int>>();
+        const auto given = f.at("count").get<std::vector<int>>();
         const auto numbers = f.at(values).get<std::vector<double>>();
-        if (count.size() != 3 || !(sigma > 0) || !origin.allFinite())
+        if (given.size() != 3 || !(sigma > 0) || !origin.allFinite())
           fail(name + " needs sigma_mm > 0, origin_mm and 3 counts");
-        Eigen::Vector3i n;
+        Eigen::Vector3i counts;
         for (int axis = 0; axis < 3; ++axis) {
-          if (count[axis] < 1 || count[axis] > 1000)
+          if (given[axis] < 1 || given[axis] > 1000)
             fail(name + ".count must be 1 to 1000 along each axis");
-          n(axis) = count[axis];
+          counts(axis) = given[axis];
         }
-        const long long expected = size_of(n);
+        const long long expected = size_of(counts);
         if (static_cast<long long>(numbers.size()) != expected)
           fail(fmt::format("{}.{} needs {} numbers, has {}", name, values, expected,
                            numbers.size()));
         const Eigen::Map<const Eigen::VectorXd> v(numbers.data(),
                                                   static_cast<Eigen::Index>(numbers.size()));
         if (!v.allFinite()) fail(name + ": not finite");
-        fill(sigma, origin, n, v);
+        fill(sigma, origin, counts, v);
       };
       read_grid_part(
           "global_shear_fields", "weights_mm",
-          [](const Eigen::Vector3i& n) {
+          [](const Eigen::Vector3i& counts) {
             fitting::ShearFields f;
-            f.count = n;
+            f.count = counts;
             return 3LL * f.block();
           },
-          [&](double sigma, const Eigen::Vector3d& origin, const Eigen::Vector3i& n,
+          [&](double sigma, const Eigen::Vector3d& origin, const Eigen::Vector3i& counts,
               const Eigen::VectorXd& v) {
             fitting::ShearFields& f = m.global_map.fields;
-            f.sigma_mm = sigma, f.origin_mm = origin, f.count = n, f.weights = v;
+            f.sigma_mm = sigma, f.origin_mm = origin, f.count = counts, f.weights = v;
           });
       read_grid_part(
-          "global_flow", "potentials_mm", [](const Eigen::Vector3i& n) { return 3LL * n.prod(); },
-          [&](double sigma, const Eigen::Vector3d& origin, const Eigen::Vector3i& n,
+          "global_flow", "potentials_mm",
+          [](const Eigen::Vector3i& counts) { return 3LL * counts.prod(); },
+          [&](double sigma, const Eigen::Vector3d& origin, const Eigen::Vector3i& counts,
               const Eigen::VectorXd& v) {
             fitting::IncompressibleFlow& f = m.global_map.flow;
-            f.sigma_mm = sigma, f.origin_mm = origin, f.count = n, f.potentials = v;
+            f.sigma_mm = sigma, f.origin_mm = origin, f.count = counts, f.potentials = v;
           });
       if (!m.placed.allFinite() || !m.global_map.affine.a.allFinite() ||
           !m.global_map.shears.c.allFinite() ||

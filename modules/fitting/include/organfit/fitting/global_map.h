@@ -104,10 +104,16 @@ struct IncompressibleFlow {
   Eigen::Vector3d velocity(const Eigen::Vector3d& q) const;  ///< mm per unit time
   Eigen::Vector3d apply(const Eigen::Vector3d& q) const;
   Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
-  /// Bounds over all space: |v| (mm) and the spectral norm of grad v (per unit time), from
-  /// the largest first and second differences of the potentials between nodes.
-  double largest_speed_mm() const;
-  double largest_velocity_gradient() const;
+  /// Bounds over all space, from the largest first and second differences of the
+  /// potentials between nodes (one pass over them).
+  struct Bounds {
+    double speed_mm = 0;           ///< |v|
+    double velocity_gradient = 0;  ///< the spectral norm of grad v, per unit time
+  };
+  Bounds bounds() const;
+  /// The pull per potential^2 that gives the potentials the prior ShearFields' heights have
+  /// at a pull of one per height^2: the same mean variance of a point's move.
+  static double stiffness_per_field_stiffness();
 };
 
 /// How far apart a map can put two points: |f(p) - f(q)| <= stretch |p - q| + slack_mm
