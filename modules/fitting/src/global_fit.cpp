@@ -205,7 +205,7 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     return chosen;
   };
   const size_t chosen = least_change_of_equally_good(rms, change);
-  if (!distance || !(o.field_sigma_mm > 0)) {
+  if (!distance || (!(o.field_sigma_mm > 0) && !(o.flow_sigma_mm > 0))) {
     GlobalMap out = *candidates[chosen];
     out.shears_dropped = shears_dropped;
     return out;
@@ -226,7 +226,7 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   // the fields (not on by default: docs/decisions.md).
   for (const size_t c : starts)
     for (const bool as_flow : {false, true}) {
-      if (as_flow && !(o.flow_sigma_mm > 0)) continue;
+      if (!((as_flow ? o.flow_sigma_mm : o.field_sigma_mm) > 0)) continue;
       double dof = 0;
       GlobalMap f =
           as_flow ? fit_flow(*candidates[c], *distance, mapped[c].full, points, o, dof)

@@ -122,8 +122,8 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
 ///    square raised by m / (m - k) for their k effective parameters (the trace of the
 ///    linearised fit's hat matrix: what they lower it by chance), and the choice above is
 ///    made again. Without the raise, fields fitted to the noise of 20 points put every
-///    other fit out of the window. With flow_sigma_mm > 0, an IncompressibleFlow fitted
-///    likewise on the same two maps joins them too.
+///    other fit out of the window. With `distance` and flow_sigma_mm > 0 (the fields on or
+///    off), an IncompressibleFlow fitted likewise on the same two maps joins them too.
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
                          const AffineFitOptions& options,
                          const geometry::SignedDistance* distance = nullptr);
