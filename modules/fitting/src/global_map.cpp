@@ -132,12 +132,13 @@ double bspline_slope(double t) {
 }
 
 /// The B-spline's values and slopes along each axis at the 4 nodes about a point, nodes
-/// first[a] + i (zero for nodes beyond the grid).
+/// first[a] + i (zero for nodes beyond the grid); false without a grid or a finite point.
 struct NodeWeights {
   int first[3];
   double value[3][4], slope[3][4];
 };
 bool node_weights(const IncompressibleFlow& f, const Eigen::Vector3d& q, NodeWeights& w) {
+  if (!(f.sigma_mm > 0) || f.potentials.size() == 0) return false;  // no grid
   const Eigen::Vector3d u = (q - f.origin_mm) / f.sigma_mm;
   if (!u.allFinite()) return false;
   for (int a = 0; a < 3; ++a) {
@@ -170,7 +171,6 @@ IncompressibleFlow IncompressibleFlow::over(const Eigen::Vector3d& box_min_mm,
 void IncompressibleFlow::basis_gradients(const Eigen::Vector3d& q,
                                          std::vector<std::pair<int, Eigen::Vector3d>>& out) const {
   out.clear();
-  if (!(sigma_mm > 0) || potentials.size() == 0) return;
   NodeWeights nw;
   if (!node_weights(*this, q, nw)) return;
   const auto& [first, value, slope] = nw;
@@ -189,7 +189,6 @@ Eigen::Vector3d IncompressibleFlow::velocity(const Eigen::Vector3d& q) const {
   // sum_n g_n x a_n over the 4 x 4 x 4 nodes about q, g_n = (B'BB, BB'B, BBB'), summed along
   // x first (no list: it is called 16 times for each point the flow moves).
   Eigen::Vector3d v = Eigen::Vector3d::Zero();
-  if (!(sigma_mm > 0) || potentials.size() == 0) return v;
   NodeWeights nw;
   if (!node_weights(*this, q, nw)) return v;
   const auto& [first, value, slope] = nw;
