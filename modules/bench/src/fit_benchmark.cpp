@@ -413,12 +413,11 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
               pts.points = evaluation::sample_deformed_surface(model.shape, d, so);
               const auto inside = evaluation::deformed_inside(model.shape, d);
               const geometry::Aabb bounds = pipeline::deformed_bounds(model.shape, d);
+              // The true organ, sampled once for every body of the case compared with it.
+              evaluation::KnownBody truth(inside, bounds, voxel);
               // The organ left as it was: what do-no-harm compares with.
               const double msd_undeformed =
-                  evaluation::compare_with_body(
-                      carried(fitting::GlobalMap{}, model.state.x, model.state.x), inside, bounds,
-                      voxel)
-                      .msd_mm;
+                  truth.compare(carried(fitting::GlobalMap{}, model.state.x, model.state.x)).msd_mm;
               Eigen::Matrix3Xd xs(3, static_cast<Eigen::Index>(pts.points.size()));
               for (size_t i = 0; i < pts.points.size(); ++i)
                 xs.col(static_cast<Eigen::Index>(i)) = pts.points[i].p_mm;
@@ -479,10 +478,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                     particles::Positions x(3, model.state.x.cols());
                     for (Eigen::Index j = 0; j < x.cols(); ++j)
                       x.col(j) = f(model.state.x.col(j));
-                    return evaluation::compare_with_body(
-                               carried(fitting::GlobalMap{}, model.state.x, x), inside, bounds,
-                               voxel)
-                        .msd_mm;
+                    return truth.compare(carried(fitting::GlobalMap{}, model.state.x, x)).msd_mm;
                   };
                   evaluation::PointMap map;
                   if (method == "icp" || method == "cpd") {
@@ -572,11 +568,10 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                 if (placed.cols() != moved.cols())
                   placed = moved, global_map = fitting::GlobalMap{};
                 const fitting::EmbeddedBody organ = carried(global_map, placed, moved);
-                const auto cmp = evaluation::compare_with_body(organ, inside, bounds, voxel);
+                const auto cmp = truth.compare(organ);
                 if (method == "spread" && placed.cols() == moved.cols()) {
                   const fitting::EmbeddedBody global_only = carried(global_map, placed, placed);
-                  row.msd_global_mm =
-                      evaluation::compare_with_body(global_only, inside, bounds, voxel).msd_mm;
+                  row.msd_global_mm = truth.compare(global_only).msd_mm;
                   row.global_fit = std::string(global_map.found_by) +
                                    (global_map.fields.empty() ? "" : " + shear fields");
                   if (std::isfinite(global_wall_s))
@@ -585,7 +580,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
                 }
                 row.msd_mm = cmp.msd_mm, row.hd95_mm = cmp.hd95_mm, row.dice = cmp.dice;
                 row.volume_change_pct = 100 * (cmp.volume_a_mm3 / v0_embedded - 1);
-                const auto balls = evaluation::compare_with_body(moved, rho, inside, bounds, voxel);
+                const auto balls = truth.compare(moved, rho);
                 row.msd_balls_mm = balls.msd_mm;
                 row.volume_change_balls_pct =
                     100 * (geometry::particle_body_volume_mm3(moved, rho, voxel, rho) / v0 - 1);

@@ -171,45 +171,143 @@ std::vector<fitting::AttractivePoint> sample_deformed_surface(const geometry::Sh
   return points;
 }
 
+KnownBody::KnownBody(std::function<bool(const Eigen::Vector3d&)> inside,
+                     const geometry::Aabb& bounds, double voxel_mm)
+    : inside_(std::move(inside)), bounds_(bounds), voxel_mm_(voxel_mm) {
+  if (!(voxel_mm > 0) || !std::isfinite(voxel_mm))
+    throw std::invalid_argument("known body: voxel size must be > 0 mm");
+  if (!bounds.min_mm.allFinite() || !bounds.max_mm.allFinite())
+    throw std::invalid_argument("known body: bounds must be finite");
+  cover(lattice_covering(bounds_, 2 * voxel_mm_));
+}
+
+void KnownBody::measure_sampled() {
+  inside_voxels_ = 0;
+  for (const auto l : sampled_.labels)
+    inside_voxels_ += l != 0;
+  surface_ = std::make_unique<geometry::MaskSurface>(sampled_);
+}
+
+geometry::ImageGeometry KnownBody::lattice_covering(const geometry::Aabb& box,
+                                                    double margin_mm) const {
+  // The lattice's phase: the fractional parts of the golden ratio's multiples, so that
+  // its centres meet neither the centres nor the midpoints of a scanner's grid (those
+  // lie on round millimetres): a mask's inside test is exactly 0.5 there, and a lattice
+  // on them measured a CT mask's surface half a voxel out.
+  static const Eigen::Vector3d phase(0.6180339887498949, 0.2360679774997898, 0.8541019662496847);
+  geometry::ImageGeometry g;
+  g.spacing_mm = Eigen::Vector3d::Constant(voxel_mm_);
+  for (int d = 0; d < 3; ++d) {
+    const double lo = std::floor((box.min_mm[d] - margin_mm) / voxel_mm_ - phase[d]);
+    const double hi = std::ceil((box.max_mm[d] + margin_mm) / voxel_mm_ - phase[d]);
+    g.origin_mm[d] = (lo + phase[d]) * voxel_mm_;
+    g.size[d] = static_cast<int>(hi - lo) + 1;
+  }
+  return g;
+}
+
 namespace {
-/// Compares a body on a grid (label 1) with a body given by its inside test, sampled at
-/// the same grid's voxel centres (from several threads: the test must be thread-safe).
-geometry::SurfaceComparison compare_mask_with_body(
-    const geometry::LabelVolume& body, const std::function<bool(const Eigen::Vector3d&)>& inside) {
-  const geometry::ImageGeometry& g = body.geometry;
-  geometry::LabelVolume truth(g);
-#pragma omp parallel for schedule(dynamic, 1) collapse(2)
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        truth.at(i, j, k) = inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
-  return geometry::compare_masks(body, truth);
+/// Where lattice part `g`'s voxel (0, 0, 0) lies in part `of` (both on one lattice).
+Eigen::Vector3i offset_in(const geometry::ImageGeometry& g, const geometry::ImageGeometry& of) {
+  return ((g.origin_mm - of.origin_mm) / g.spacing_mm.x()).array().round().cast<int>();
+}
+
+bool covers(const geometry::ImageGeometry& of, const geometry::ImageGeometry& g) {
+  const Eigen::Vector3i o = offset_in(g, of);
+  for (int d = 0; d < 3; ++d)
+    if (o[d] < 0 || o[d] + g.size[d] > of.size[d]) return false;
+  return true;
 }
 }  // namespace
+
+void KnownBody::cover(const geometry::ImageGeometry& g) {
+  const bool first = sampled_.labels.empty();
+  if (!first && covers(sampled_.geometry, g)) return;
+  geometry::ImageGeometry u = g;
+  if (!first) {  // the union of what is sampled and g
+    const geometry::ImageGeometry& s = sampled_.geometry;
+    const Eigen::Vector3d hi =
+        (s.origin_mm +
+         s.spacing_mm.cwiseProduct(Eigen::Vector3d(s.size[0] - 1, s.size[1] - 1, s.size[2] - 1)))
+            .cwiseMax(g.origin_mm + g.spacing_mm.cwiseProduct(Eigen::Vector3d(
+                                        g.size[0] - 1, g.size[1] - 1, g.size[2] - 1)));
+    u = lattice_covering({s.origin_mm.cwiseMin(g.origin_mm), hi}, 0);
+  }
+  geometry::LabelVolume next(u);
+  long long found = 0;  // inside voxels among the new ones
+  const Eigen::Vector3i o = first ? Eigen::Vector3i::Zero() : offset_in(sampled_.geometry, u);
+  const std::array<int, 3> old = first ? std::array<int, 3>{0, 0, 0} : sampled_.geometry.size;
+#pragma omp parallel for schedule(dynamic, 1) collapse(2) reduction(+ : found)
+  for (int k = 0; k < u.size[2]; ++k)
+    for (int j = 0; j < u.size[1]; ++j)
+      for (int i = 0; i < u.size[0]; ++i) {
+        const int a = i - o.x(), b = j - o.y(), c = k - o.z();
+        if (a >= 0 && b >= 0 && c >= 0 && a < old[0] && b < old[1] && c < old[2]) {
+          next.at(i, j, k) = sampled_.at(a, b, c);
+        } else {
+          const bool in = inside_(u.index_to_physical(Eigen::Vector3d(i, j, k)));
+          next.at(i, j, k) = in;
+          found += in;
+        }
+      }
+  sampled_ = std::move(next);
+  // The body's voxel count and surface: from the first part (it covers `bounds`), again
+  // only if a later part found the body beyond them (an inside test looser than its
+  // bounds: measured right, at the cost of a second surface).
+  if (first || found > 0) measure_sampled();
+}
+
+geometry::SurfaceComparison KnownBody::compare_on(const geometry::LabelVolume& body) {
+  const geometry::ImageGeometry& g = body.geometry;
+  cover(g);
+  const Eigen::Vector3i o = offset_in(g, sampled_.geometry);
+  long long na = 0, inter = 0;
+#pragma omp parallel for collapse(2) reduction(+ : na, inter)
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        if (!body.at(i, j, k)) continue;
+        ++na;
+        inter += sampled_.at(i + o.x(), j + o.y(), k + o.z()) != 0;
+      }
+  geometry::SurfaceComparison r;
+  geometry::surface_distances(geometry::MaskSurface(body), *surface_, r);
+  const double vox = g.voxel_volume_mm3();
+  r.volume_a_mm3 = static_cast<double>(na) * vox;
+  r.volume_b_mm3 = static_cast<double>(inside_voxels_) * vox;
+  r.dice = na + inside_voxels_ > 0 ? 2.0 * inter / static_cast<double>(na + inside_voxels_) : 1.0;
+  return r;
+}
+
+geometry::SurfaceComparison KnownBody::compare(const fitting::EmbeddedBody& organ) {
+  geometry::Aabb box = organ.bounds();
+  box.min_mm = box.min_mm.cwiseMin(bounds_.min_mm);
+  box.max_mm = box.max_mm.cwiseMax(bounds_.max_mm);
+  return compare_on(organ.on_grid(lattice_covering(box, 2 * voxel_mm_)));
+}
+
+geometry::SurfaceComparison KnownBody::compare(const Eigen::Matrix3Xd& particles,
+                                               double radius_mm) {
+  geometry::Aabb box = bounds_;
+  if (particles.cols() > 0) {
+    box.min_mm = box.min_mm.cwiseMin(particles.rowwise().minCoeff());
+    box.max_mm = box.max_mm.cwiseMax(particles.rowwise().maxCoeff());
+  }
+  return compare_on(geometry::closed_body_on_grid(
+      particles, radius_mm, radius_mm, lattice_covering(box, 2 * radius_mm + 2 * voxel_mm_)));
+}
 
 geometry::SurfaceComparison compare_with_body(
     const Eigen::Matrix3Xd& particles, double radius_mm,
     const std::function<bool(const Eigen::Vector3d&)>& inside, const geometry::Aabb& body_bounds,
     double voxel_mm) {
-  geometry::Aabb box = body_bounds;
-  if (particles.cols() > 0) {
-    box.min_mm = box.min_mm.cwiseMin(particles.rowwise().minCoeff());
-    box.max_mm = box.max_mm.cwiseMax(particles.rowwise().maxCoeff());
-  }
-  const geometry::ImageGeometry g =
-      geometry::grid_covering(box, voxel_mm, 2 * radius_mm + 2 * voxel_mm);
-  return compare_mask_with_body(geometry::closed_body_on_grid(particles, radius_mm, radius_mm, g),
-                                inside);
+  return KnownBody(inside, body_bounds, voxel_mm).compare(particles, radius_mm);
 }
 
 geometry::SurfaceComparison compare_with_body(
     const fitting::EmbeddedBody& organ, const std::function<bool(const Eigen::Vector3d&)>& inside,
     const geometry::Aabb& body_bounds, double voxel_mm) {
-  geometry::Aabb box = organ.bounds();
-  box.min_mm = box.min_mm.cwiseMin(body_bounds.min_mm);
-  box.max_mm = box.max_mm.cwiseMax(body_bounds.max_mm);
-  return compare_mask_with_body(organ.on_grid(geometry::grid_covering(box, voxel_mm, 2 * voxel_mm)),
-                                inside);
+  return KnownBody(inside, body_bounds, voxel_mm).compare(organ);
 }
 
 }  // namespace organfit::evaluation

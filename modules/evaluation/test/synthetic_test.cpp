@@ -152,5 +152,76 @@ TEST(Sampling, PointsLieOnTheDeformedSurfaceWithinTheNoise) {
   EXPECT_EQ(a[17].p_mm, b[17].p_mm);  // deterministic for a seed
 }
 
+// The truth of a case against a ball of known radius: the surfaces are concentric
+// spheres 2 mm apart, the volumes and Dice analytic (to the 0.5 mm lattice's sampling).
+TEST(KnownBody, MeasuresConcentricSpheresAnalytically) {
+  const Eigen::Vector3d c(3.3, -7.1, 12.9);
+  auto sphere = [c](const Eigen::Vector3d& p) { return (p - c).norm() <= 10.0; };
+  KnownBody truth(sphere, {c.array() - 10.0, c.array() + 10.0}, 0.5);
+  Eigen::Matrix3Xd one(3, 1);
+  one.col(0) = c;
+  const geometry::SurfaceComparison r = truth.compare(one, 8.0);
+  const double pi = std::acos(-1.0);
+  EXPECT_NEAR(r.volume_b_mm3, 4.0 / 3.0 * pi * 1000.0, 0.01 * 4.0 / 3.0 * pi * 1000.0);
+  EXPECT_NEAR(r.volume_a_mm3, 4.0 / 3.0 * pi * 512.0, 0.01 * 4.0 / 3.0 * pi * 512.0);
+  EXPECT_NEAR(r.dice, 2.0 * 512.0 / 1512.0, 0.01);
+  EXPECT_NEAR(r.msd_mm, 2.0, 0.25);  // each surface voxel within half a voxel diagonal
+  EXPECT_NEAR(r.hd95_mm, 2.0, 0.5);
+}
+
+// A body's measure depends neither on what was compared before (the sampled part grown
+// by a far body) nor on bounds that miss part of the truth (measured again as it grows),
+// and equals the comparison of the two masks on the lattice part it is made on.
+TEST(KnownBody, AMeasureDoesNotDependOnWhatWasComparedBefore) {
+  const Shape s = make_shape("egg", {30, 24, 20}, {1, 2, 3});
+  Deformation d;
+  d.stretch = 1.1, d.bend_mm = 2, d.centre_mm = {1, 2, 3}, d.half_length_mm = 15;
+  const auto inside = deformed_inside(s, d);
+  const geometry::Aabb bounds{Eigen::Vector3d(-25, -20, -15), Eigen::Vector3d(27, 24, 21)};
+  Eigen::Matrix3Xd body(3, 3), far(3, 1);
+  body << -8, 0, 8, 2, 2, 2, 3, 3, 3;
+  far << 80, 2, 3;
+  KnownBody fresh(inside, bounds, 0.5);
+  const geometry::SurfaceComparison a = fresh.compare(body, 6.0);
+  KnownBody grown(inside, bounds, 0.5);
+  grown.compare(far, 6.0);
+  EXPECT_GT(grown.sampled_voxels(), fresh.sampled_voxels());
+  const geometry::SurfaceComparison b = grown.compare(body, 6.0);
+  EXPECT_NEAR(a.msd_mm, b.msd_mm, 1e-12);
+  EXPECT_NEAR(a.hd95_mm, b.hd95_mm, 1e-12);
+  EXPECT_EQ(a.dice, b.dice);
+  EXPECT_EQ(a.volume_b_mm3, b.volume_b_mm3);
+  // Bounds that cut the truth's +x end off: the truth is measured again where found.
+  KnownBody loose(inside, {bounds.min_mm, Eigen::Vector3d(5, 24, 21)}, 0.5);
+  const geometry::SurfaceComparison c = loose.compare(body, 6.0);
+  EXPECT_NEAR(a.msd_mm, c.msd_mm, 1e-12);
+  EXPECT_EQ(a.dice, c.dice);
+  EXPECT_EQ(a.volume_b_mm3, c.volume_b_mm3);
+  // The same as both masks compared on the lattice part that holds them.
+  const geometry::ImageGeometry g =
+      fresh.lattice_covering({bounds.min_mm.cwiseMin(body.rowwise().minCoeff()),
+                              bounds.max_mm.cwiseMax(body.rowwise().maxCoeff())},
+                             2 * 6.0 + 2 * 0.5);
+  geometry::LabelVolume t(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        t.at(i, j, k) = inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  const geometry::SurfaceComparison m =
+      geometry::compare_masks(geometry::closed_body_on_grid(body, 6.0, 6.0, g), t);
+  EXPECT_NEAR(a.msd_mm, m.msd_mm, 1e-9);
+  EXPECT_NEAR(a.hd95_mm, m.hd95_mm, 1e-9);
+  EXPECT_EQ(a.dice, m.dice);
+  EXPECT_EQ(a.volume_a_mm3, m.volume_a_mm3);
+  // Its centres miss round millimetres (a scanner grid's centres and midpoints).
+  for (int axis = 0; axis < 3; ++axis) {
+    const double f = g.origin_mm[axis] / 0.5 - std::floor(g.origin_mm[axis] / 0.5);
+    EXPECT_GT(std::min(f, 1 - f), 0.1);
+  }
+  EXPECT_GT(a.dice, 0.3);
+  EXPECT_LT(a.dice, 1.0);
+  EXPECT_NEAR(a.volume_b_mm3, shape_volume_mm3(s, 0.5), 0.02 * shape_volume_mm3(s, 0.5));
+}
+
 }  // namespace
 }  // namespace organfit::evaluation

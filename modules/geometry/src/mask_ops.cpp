@@ -249,42 +249,51 @@ std::vector<std::uint8_t> surface_of(const LabelVolume& mask) {
   return s;
 }
 
-namespace {
-/// The surface voxels' linear indices, ascending, and their centres in index space
-/// scaled by the spacing (mm): the distance transform's metric, direction ignored.
-struct SurfaceVoxels {
+MaskSurface::MaskSurface(const LabelVolume& mask) {
+  const ImageGeometry& g = mask.geometry;
+  const std::vector<std::uint8_t> surface = surface_of(mask);
   std::vector<long long> index;
-  Eigen::Matrix3Xd at_mm;
-};
-
-SurfaceVoxels surface_voxels(const std::vector<std::uint8_t>& surface, const ImageGeometry& g) {
-  SurfaceVoxels s;
   for (size_t i = 0; i < surface.size(); ++i)
-    if (surface[i]) s.index.push_back(static_cast<long long>(i));
-  s.at_mm.resize(3, static_cast<Eigen::Index>(s.index.size()));
+    if (surface[i]) index.push_back(static_cast<long long>(i));
+  points_.resize(3, static_cast<Eigen::Index>(index.size()));
   const long long nx = g.size[0], nxy = nx * g.size[1];
-  for (size_t k = 0; k < s.index.size(); ++k) {
-    const long long v = s.index[k];
-    s.at_mm.col(static_cast<Eigen::Index>(k)) =
-        Eigen::Vector3d(static_cast<double>(v % nx), static_cast<double>((v / nx) % g.size[1]),
-                        static_cast<double>(v / nxy))
-            .cwiseProduct(g.spacing_mm);
+  for (size_t k = 0; k < index.size(); ++k) {
+    const long long v = index[k];
+    points_.col(static_cast<Eigen::Index>(k)) =
+        g.origin_mm + Eigen::Vector3d(static_cast<double>(v % nx),
+                                      static_cast<double>((v / nx) % g.size[1]),
+                                      static_cast<double>(v / nxy))
+                          .cwiseProduct(g.spacing_mm);
   }
-  return s;
+  search_ = std::make_unique<SampleGrid>(points_);
 }
 
-/// Distance (mm) from each of `from`'s voxels to the nearest of `to`'s (infinity when
-/// `to` has none): the same values as a distance transform of `to`, read at `from`.
-std::vector<double> distances_to(const SurfaceVoxels& from, const SurfaceVoxels& to) {
-  std::vector<double> d(from.index.size());
-  const SampleGrid nearest(to.at_mm);
+MaskSurface::~MaskSurface() = default;
+MaskSurface::MaskSurface(MaskSurface&&) noexcept = default;
+MaskSurface& MaskSurface::operator=(MaskSurface&&) noexcept = default;
+
+std::vector<double> MaskSurface::distances_from(const Eigen::Matrix3Xd& q) const {
+  std::vector<double> d(static_cast<size_t>(q.cols()));
 #pragma omp parallel for schedule(dynamic, 256)
   for (long long k = 0; k < static_cast<long long>(d.size()); ++k)
     d[static_cast<size_t>(k)] =
-        std::sqrt(nearest.nearest(from.at_mm.col(static_cast<Eigen::Index>(k))).second);
+        std::sqrt(search_->nearest(q.col(static_cast<Eigen::Index>(k))).second);
   return d;
 }
-}  // namespace
+
+void surface_distances(const MaskSurface& a, const MaskSurface& b, SurfaceComparison& out) {
+  std::vector<double> dist = b.distances_from(a.points_mm());
+  const std::vector<double> b_to_a = a.distances_from(b.points_mm());
+  dist.insert(dist.end(), b_to_a.begin(), b_to_a.end());
+  if (dist.empty()) return;
+  double sum = 0;
+  for (double d : dist)
+    sum += d;
+  out.msd_mm = sum / static_cast<double>(dist.size());
+  const size_t k = static_cast<size_t>(std::ceil(0.95 * dist.size())) - 1;
+  std::nth_element(dist.begin(), dist.begin() + k, dist.end());
+  out.hd95_mm = dist[k];
+}
 
 SurfaceComparison compare_masks(const LabelVolume& a, const LabelVolume& b) {
   if (a.geometry.size != b.geometry.size) throw std::invalid_argument("compare: different grids");
@@ -292,16 +301,9 @@ SurfaceComparison compare_masks(const LabelVolume& a, const LabelVolume& b) {
   // Surface distances by nearest-voxel queries among the surface voxels alone: the
   // values a distance transform of the whole grid gives, at a cost set by the surfaces'
   // areas rather than the grid's volume.
-  const auto sa = surface_of(a), sb = surface_of(b);
-  const SurfaceVoxels va = surface_voxels(sa, a.geometry), vb = surface_voxels(sb, b.geometry);
-  const std::vector<double> a_to_b = distances_to(va, vb), b_to_a = distances_to(vb, va);
-  std::vector<double> dist;
-  dist.reserve(a_to_b.size() + b_to_a.size());
+  surface_distances(MaskSurface(a), MaskSurface(b), r);
   long long inter = 0, na = 0, nb = 0;
-  size_t ka = 0, kb = 0;
-  for (size_t i = 0; i < sa.size(); ++i) {
-    if (sa[i]) dist.push_back(a_to_b[ka++]);
-    if (sb[i]) dist.push_back(b_to_a[kb++]);
+  for (size_t i = 0; i < a.labels.size(); ++i) {
     na += a.labels[i] != 0;
     nb += b.labels[i] != 0;
     inter += a.labels[i] != 0 && b.labels[i] != 0;
@@ -310,15 +312,6 @@ SurfaceComparison compare_masks(const LabelVolume& a, const LabelVolume& b) {
   r.volume_a_mm3 = na * vox;
   r.volume_b_mm3 = nb * vox;
   r.dice = na + nb > 0 ? 2.0 * inter / static_cast<double>(na + nb) : 1.0;
-  if (!dist.empty()) {
-    double sum = 0;
-    for (double d : dist)
-      sum += d;
-    r.msd_mm = sum / static_cast<double>(dist.size());
-    const size_t k = static_cast<size_t>(std::ceil(0.95 * dist.size())) - 1;
-    std::nth_element(dist.begin(), dist.begin() + k, dist.end());
-    r.hd95_mm = dist[k];
-  }
   return r;
 }
 

@@ -250,19 +250,16 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
         out.model.shape.bounds(), truth_voxel);
     throw_if_interrupted();
     truth_progress.update(1, "the model before the fit against its shape");
-    const auto undeformed = evaluation::compare_with_body(
-        organ_before, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
-        deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
+    // The known deformed organ, sampled once for the three bodies compared with it.
+    evaluation::KnownBody truth(evaluation::deformed_inside(pts.truth_shape, *pts.truth),
+                                deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
+    const auto undeformed = truth.compare(organ_before);
     throw_if_interrupted();
     truth_progress.update(2, "the organ left undeformed");
-    const auto fitted_organ = evaluation::compare_with_body(
-        organ_after, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
-        deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
+    const auto fitted_organ = truth.compare(organ_after);
     throw_if_interrupted();
     truth_progress.update(3, "the fitted organ");
-    const auto fitted_balls = evaluation::compare_with_body(
-        state.x, rho, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
-        deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
+    const auto fitted_balls = truth.compare(state.x, rho);
     truth_progress.update(4, "the fitted particles' balls");
     truth_progress.finish();
     const double denom = undeformed.msd_mm - floor.msd_mm;

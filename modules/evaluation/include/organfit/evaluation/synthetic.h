@@ -94,17 +94,53 @@ std::function<bool(const Eigen::Vector3d&)> deformed_inside(const geometry::Shap
 /// rest was 0.44 mm from itself (its faces flip a whole layer of voxels).
 inline constexpr double kTruthVoxelMm = 0.5;
 
+/// A body known by its inside test (a synthetic case's truth), sampled on a lattice of
+/// cubic voxels of `voxel_mm` fixed in space (centres at (n + f) voxel_mm on each patient
+/// axis, f an irrational phase) and compared with other bodies on it (mask_ops.h has the
+/// definitions). The lattice does not move with a compared body's box, so a measure
+/// does not change with the phase of the samples, and the truth is sampled once for all
+/// the bodies compared with it: the organ left as it was, the fitted organ, the
+/// particles' balls, each baseline's. The sampled part grows to what the bodies reach
+/// (only the new voxels sampled). `inside` is called from several threads; `bounds` (mm)
+/// should hold the body (where it does not, the body is measured again as it grows).
+/// One compare at a time (not thread-safe).
+class KnownBody {
+ public:
+  KnownBody(std::function<bool(const Eigen::Vector3d&)> inside, const geometry::Aabb& bounds,
+            double voxel_mm);
+  /// With the organ a model carries (fitting/embedded_body.h) on the lattice, over its
+  /// box and this body's with a margin of 2 voxels (volume_a_mm3: the organ's).
+  geometry::SurfaceComparison compare(const fitting::EmbeddedBody& organ);
+  /// With the closed body of a particle set (balls of `radius_mm` closed by the same),
+  /// over a box with a margin of 2 radii and 2 voxels.
+  geometry::SurfaceComparison compare(const Eigen::Matrix3Xd& particles, double radius_mm);
+  double voxel_mm() const { return voxel_mm_; }
+  long long sampled_voxels() const { return sampled_.geometry.voxel_count(); }
+  /// The part of the lattice covering `box` grown by `margin_mm` (what a compare uses).
+  geometry::ImageGeometry lattice_covering(const geometry::Aabb& box, double margin_mm) const;
+
+ private:
+  void cover(const geometry::ImageGeometry& g);  // samples the voxels of g not yet sampled
+  void measure_sampled();                        // the inside voxels' count and surface
+  geometry::SurfaceComparison compare_on(const geometry::LabelVolume& body);
+
+  std::function<bool(const Eigen::Vector3d&)> inside_;
+  geometry::Aabb bounds_;
+  double voxel_mm_;
+  geometry::LabelVolume sampled_;  // label 1 inside, on the part of the lattice sampled
+  long long inside_voxels_ = 0;    // all of them lie within bounds_
+  std::unique_ptr<geometry::MaskSurface> surface_;  // the same on any lattice part covering bounds_
+};
+
 /// Compares the closed body of a particle set (balls of `radius_mm`, closed by the same)
-/// with a body given by its inside test, on a grid of `voxel_mm` covering both
-/// (mask_ops.h has the definitions). `inside` is called from several threads.
+/// with a body given by its inside test: KnownBody's compare, for one body.
 geometry::SurfaceComparison compare_with_body(
     const Eigen::Matrix3Xd& particles, double radius_mm,
     const std::function<bool(const Eigen::Vector3d&)>& inside, const geometry::Aabb& body_bounds,
     double voxel_mm);
 
 /// Compares the organ a model carries (fitting/embedded_body.h) with a body given by its
-/// inside test, on a grid of `voxel_mm` covering both with a margin of 2 voxels
-/// (volume_a_mm3: the organ's volume on that grid). `inside` is called from several threads.
+/// inside test: KnownBody's compare, for one body.
 geometry::SurfaceComparison compare_with_body(
     const fitting::EmbeddedBody& organ, const std::function<bool(const Eigen::Vector3d&)>& inside,
     const geometry::Aabb& body_bounds, double voxel_mm);

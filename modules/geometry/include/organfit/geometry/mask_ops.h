@@ -15,6 +15,7 @@
 //  * Dice: 2 |A and B| / (|A| + |B|) on the common grid.
 #include <Eigen/Core>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "organfit/geometry/image_geometry.h"
@@ -59,6 +60,32 @@ struct SurfaceComparison {
   double dice = 0;
   double volume_a_mm3 = 0, volume_b_mm3 = 0;
 };
+
+class SampleGrid;
+
+/// A mask's surface voxels made ready for distance queries: their centres (mm, 3 x N,
+/// ascending linear index; origin + index * spacing, the grid's axes taken as the
+/// patient's as the distance transform takes them) and a search grid over them. Made
+/// once for a mask that is compared with several others.
+class MaskSurface {
+ public:
+  explicit MaskSurface(const LabelVolume& mask);
+  ~MaskSurface();
+  MaskSurface(MaskSurface&&) noexcept;
+  MaskSurface& operator=(MaskSurface&&) noexcept;
+  const Eigen::Matrix3Xd& points_mm() const { return points_; }
+  /// Distance (mm) from each of `q`'s columns to the nearest surface voxel centre
+  /// (infinity when the mask has none).
+  std::vector<double> distances_from(const Eigen::Matrix3Xd& q) const;
+
+ private:
+  Eigen::Matrix3Xd points_;
+  std::unique_ptr<SampleGrid> search_;
+};
+
+/// MSD and HD95 between two surfaces (the definitions above: the pooled distances of
+/// each one's surface voxels to the other's), written into `out`.
+void surface_distances(const MaskSurface& a, const MaskSurface& b, SurfaceComparison& out);
 
 /// Compares two masks on the same grid.
 SurfaceComparison compare_masks(const LabelVolume& a, const LabelVolume& b);
