@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "organfit/geometry/sample_grid.h"
 #include "organfit/particles/neighbour_list.h"
 
 namespace organfit::fitting {
@@ -73,6 +74,57 @@ std::pair<int, double> nearest_surface_particle(const particles::Positions& x,
   return best;
 }
 
+SkinIndex::SkinIndex(const particles::Positions& x, const std::vector<int>& candidates,
+                     const SurfaceFeet* feet)
+    : x_(x), candidates_(candidates), feet_(feet && !feet->empty() ? feet : nullptr) {
+  const auto n = static_cast<Eigen::Index>(candidates.size());
+  at_mm_.resize(3, n);
+  for (Eigen::Index j = 0; j < n; ++j)
+    at_mm_.col(j) = x.col(candidates[static_cast<size_t>(j)]);
+  centres_ = std::make_unique<geometry::SampleGrid>(at_mm_);
+  if (feet_) {
+    foot_at_mm_.resize(3, n);
+    for (Eigen::Index j = 0; j < n; ++j) {
+      const int i = candidates[static_cast<size_t>(j)];
+      foot_at_mm_.col(j) = x.col(i) + feet_->offset_mm.col(i);
+    }
+    feet_grid_ = std::make_unique<geometry::SampleGrid>(foot_at_mm_);
+  }
+}
+
+SkinIndex::~SkinIndex() = default;
+
+std::pair<int, double> SkinIndex::nearest_particle(const Eigen::Vector3d& p_mm) const {
+  const auto [j, d2] = centres_->nearest(p_mm);
+  return {j < 0 ? -1 : candidates_[static_cast<size_t>(j)], d2};
+}
+
+std::pair<int, double> SkinIndex::nearest_surface_particle(const Eigen::Vector3d& p_mm,
+                                                           double radius_mm) const {
+  if (!feet_) {
+    // The least |p - x_i| - radius is the nearest centre's.
+    const auto [i, d2] = nearest_particle(p_mm);
+    if (i < 0) return {-1, std::numeric_limits<double>::infinity()};
+    return {i, (x_.col(i) - p_mm).norm() - radius_mm};
+  }
+  // The path through a foot is no shorter than the distance to the foot.
+  const auto [j, path] = feet_grid_->least(p_mm, [&](int k) {
+    const int i = candidates_[static_cast<size_t>(k)];
+    return (foot_at_mm_.col(k) - p_mm).norm() + feet_->offset_mm.col(i).norm();
+  });
+  if (j < 0) return {-1, std::numeric_limits<double>::infinity()};
+  const int i = candidates_[static_cast<size_t>(j)];
+  return {i, feet_->normal.col(i).dot(p_mm - x_.col(i) - feet_->offset_mm.col(i))};
+}
+
+void SkinIndex::within(const Eigen::Vector3d& centre_mm, double radius_mm,
+                       std::vector<int>& out) const {
+  out.clear();
+  centres_->within(centre_mm, radius_mm, out);  // ascending position in candidates
+  for (int& j : out)
+    j = candidates_[static_cast<size_t>(j)];
+}
+
 double default_outlier_distance(const particles::Positions& x) {
   return x.cols() > 0 ? 0.5 * (x.rowwise().maxCoeff() - x.rowwise().minCoeff()).norm() : 0.0;
 }
@@ -130,12 +182,13 @@ void PaperAttractiveForce::assign(const particles::Positions& x) {
   // Default outlier distance: half the model's diameter.
   const double outlier =
       params_.outlier_distance_mm > 0 ? params_.outlier_distance_mm : default_outlier_distance(x);
+  const SkinIndex index(x, skin);
   for (size_t k = 0; k < points_.size(); ++k) {
     PointStatus& st = status_[k];
     st = PointStatus{};
     influence_[k].clear();
     const Eigen::Vector3d& p = points_[k].p_mm;
-    const auto [epicentre, d2] = nearest_particle(x, skin, p);
+    const auto [epicentre, d2] = index.nearest_particle(p);
     st.epicentre = epicentre;
     if (st.epicentre < 0) continue;
     st.d_min_mm = std::sqrt(d2);
@@ -151,9 +204,7 @@ void PaperAttractiveForce::assign(const particles::Positions& x) {
     const double radius = std::min(
         params_.influence_radius_max_r0 * r0_,
         params_.influence_radius_min_r0 * r0_ + params_.influence_growth * (st.d_min_mm - rho_));
-    const Eigen::Vector3d e = x.col(st.epicentre);
-    for (int i : skin)
-      if ((x.col(i) - e).squaredNorm() <= radius * radius) influence_[k].push_back(i);
+    index.within(x.col(st.epicentre), radius, influence_[k]);
     st.influence_count = static_cast<int>(influence_[k].size());
     const int w = w_[st.epicentre];
     st.f_max_k = points_[k].confidence * 0.5 * w * f_max_;

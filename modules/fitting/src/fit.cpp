@@ -13,18 +13,22 @@ std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
                                    double radius_mm, const std::vector<PointStatus>* status,
                                    const SurfaceFeet* feet) {
   std::vector<double> out(points.size(), std::numeric_limits<double>::infinity());
-  for (size_t k = 0; k < points.size(); ++k) {
-    if (status && k < status->size() && (*status)[k].rejected) {
-      out[k] = std::numeric_limits<double>::quiet_NaN();
+  const SkinIndex index(x, skin, feet);
+  const bool on_feet = feet && !feet->empty();
+#pragma omp parallel for schedule(dynamic, 64)
+  for (long long k = 0; k < static_cast<long long>(points.size()); ++k) {
+    const auto at = static_cast<size_t>(k);
+    if (status && at < status->size() && (*status)[at].rejected) {
+      out[at] = std::numeric_limits<double>::quiet_NaN();
       continue;
     }
-    if (!feet || feet->empty()) {
-      const double d2 = nearest_particle(x, skin, points[k].p_mm).second;
-      if (std::isfinite(d2)) out[k] = std::abs(std::sqrt(d2) - radius_mm);
+    if (!on_feet) {
+      const double d2 = index.nearest_particle(points[at].p_mm).second;
+      if (std::isfinite(d2)) out[at] = std::abs(std::sqrt(d2) - radius_mm);
       continue;
     }
-    const double gap = nearest_surface_particle(x, skin, points[k].p_mm, *feet, radius_mm).second;
-    if (std::isfinite(gap)) out[k] = std::abs(gap);
+    const double gap = index.nearest_surface_particle(points[at].p_mm, radius_mm).second;
+    if (std::isfinite(gap)) out[at] = std::abs(gap);
   }
   return out;
 }

@@ -48,12 +48,14 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
       params_.outlier_distance_mm > 0 ? params_.outlier_distance_mm : default_outlier_distance(x);
   const double sigma = params_.patch_sigma_r0 * r0_, radius = params_.patch_radius_r0 * r0_;
   gap_.assign(points_.size(), 0.0);
+  const SkinIndex index(x, skin, &feet_);
+  std::vector<int> near;
   for (size_t k = 0; k < points_.size(); ++k) {
     PointStatus& st = status_[k];
     st = PointStatus{};
     patch_[k].clear();
     // Epicentre: the skin particle whose surface is nearest the point.
-    const auto [epicentre, gap] = nearest_surface_particle(x, skin, points_[k].p_mm, feet_, rho_);
+    const auto [epicentre, gap] = index.nearest_surface_particle(points_[k].p_mm, rho_);
     st.epicentre = epicentre;
     if (st.epicentre < 0) continue;
     gap_[k] = gap;
@@ -64,10 +66,10 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
       continue;
     }
     const Eigen::Vector3d e = x.col(st.epicentre);
-    for (int i : skin) {
+    index.within(e, radius, near);
+    for (int i : near) {
       const double d2 = (x.col(i) - e).squaredNorm();
-      if (d2 <= radius * radius)
-        patch_[k].push_back({i, points_[k].confidence * std::exp(-d2 / (2 * sigma * sigma))});
+      patch_[k].push_back({i, points_[k].confidence * std::exp(-d2 / (2 * sigma * sigma))});
     }
     st.influence_count = static_cast<int>(patch_[k].size());
   }

@@ -6,6 +6,7 @@
 
 #include <Eigen/Geometry>
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -235,6 +236,53 @@ TEST(NearestSurfaceParticle, ReadsAPointOnTheSurfaceBesideTheFootAsOnIt) {
   under.normal = feet.normal;
   EXPECT_EQ(nearest_surface_particle(stacked, {1, 0}, Eigen::Vector3d(1, 0, 0.2), under, 1.5).first,
             0);
+}
+
+// The skin index answers as the scans define it, ties included: random particles (some at
+// the same place, some sharing a foot), a random subset as candidates in shuffled order,
+// queries near and far.
+TEST(SkinIndex, AnswersAsTheScansIncludingTies) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-20, 20), off(-2, 2);
+  const int n = 600;
+  particles::Positions x(3, n);
+  SurfaceFeet feet;
+  feet.offset_mm.resize(3, n);
+  feet.normal.resize(3, n);
+  for (int i = 0; i < n; ++i) {
+    x.col(i) = Eigen::Vector3d(u(rng), u(rng), u(rng));
+    feet.offset_mm.col(i) = Eigen::Vector3d(off(rng), off(rng), off(rng));
+    feet.normal.col(i) = feet.offset_mm.col(i).normalized();
+  }
+  for (int i = 0; i < 40; ++i) {  // ties: the same centre, the same foot and offset
+    x.col(n - 1 - i) = x.col(i);
+    feet.offset_mm.col(n - 1 - i) = feet.offset_mm.col(i);
+  }
+  std::vector<int> candidates;
+  for (int i = 0; i < n; ++i)
+    if (i % 3 != 1) candidates.push_back(i);
+  std::shuffle(candidates.begin(), candidates.end(), rng);
+  const SkinIndex with_feet(x, candidates, &feet), balls(x, candidates);
+  std::vector<int> near;
+  for (int q = 0; q < 400; ++q) {
+    const Eigen::Vector3d p =
+        q < 40 ? Eigen::Vector3d(x.col(q)) : Eigen::Vector3d(3 * u(rng), u(rng), u(rng));
+    EXPECT_EQ(with_feet.nearest_particle(p), nearest_particle(x, candidates, p));
+    EXPECT_EQ(with_feet.nearest_surface_particle(p, 1.5),
+              nearest_surface_particle(x, candidates, p, feet, 1.5));
+    EXPECT_EQ(balls.nearest_surface_particle(p, 1.5),
+              nearest_surface_particle(x, candidates, p, {}, 1.5));
+    const double radius = 0.5 + 0.05 * q;
+    balls.within(p, radius, near);
+    std::vector<int> scan;
+    for (int i : candidates)
+      if ((x.col(i) - p).squaredNorm() <= radius * radius) scan.push_back(i);
+    EXPECT_EQ(near, scan);
+  }
+  const std::vector<int> none;
+  EXPECT_EQ(SkinIndex(x, none).nearest_particle(Eigen::Vector3d::Zero()).first, -1);
+  EXPECT_EQ(SkinIndex(x, none, &feet).nearest_surface_particle(Eigen::Vector3d::Zero(), 1).first,
+            -1);
 }
 
 TEST(SpreadAttractiveForce, PullsTheEpicentreAlongItsNormalByItsGapToThePoint) {

@@ -2,11 +2,16 @@
 // Attractive points (ultrasound data) and the paper's force towards them (s.3.2-3.3,
 // eq. 5-6; METHOD.md s.5 and s.8).
 #include <Eigen/Core>
+#include <memory>
 #include <utility>
 #include <vector>
 
 #include "organfit/fitting/skin.h"
 #include "organfit/particles/model.h"
+
+namespace organfit::geometry {
+class SampleGrid;
+}
 
 namespace organfit::fitting {
 
@@ -60,6 +65,34 @@ std::pair<int, double> nearest_surface_particle(const particles::Positions& x,
                                                 const std::vector<int>& candidates,
                                                 const Eigen::Vector3d& p_mm,
                                                 const SurfaceFeet& feet, double radius_mm);
+
+/// The skin particles (`candidates` of x, and their feet when given) bucketed for the
+/// queries of many points (geometry::SampleGrid): the same answers as the scans above,
+/// ties included, at a cost set by the particles near each point rather than by the whole
+/// skin (a 10,000-point fit of a million particles asked 10^9 distances a row by scans).
+/// Holds references to x, candidates and feet: they must outlive it, unchanged.
+class SkinIndex {
+ public:
+  SkinIndex(const particles::Positions& x, const std::vector<int>& candidates,
+            const SurfaceFeet* feet = nullptr);
+  ~SkinIndex();
+  /// As nearest_particle(x, candidates, p_mm).
+  std::pair<int, double> nearest_particle(const Eigen::Vector3d& p_mm) const;
+  /// As nearest_surface_particle(x, candidates, p_mm, feet, radius_mm), feet as given here.
+  std::pair<int, double> nearest_surface_particle(const Eigen::Vector3d& p_mm,
+                                                  double radius_mm) const;
+  /// The candidates within `radius_mm` of `centre_mm` (squared distance at most radius^2),
+  /// in the order of `candidates`; replaces `out`.
+  void within(const Eigen::Vector3d& centre_mm, double radius_mm, std::vector<int>& out) const;
+
+ private:
+  const particles::Positions& x_;
+  const std::vector<int>& candidates_;
+  const SurfaceFeet* feet_;
+  Eigen::Matrix3Xd at_mm_, foot_at_mm_;  // the candidates' centres and feet
+  std::unique_ptr<geometry::SampleGrid> centres_, feet_grid_;
+  mutable std::vector<int> scratch_;
+};
 
 /// Points farther than this from the skin are outliers unless a distance is given:
 /// half the model's diameter (mm).

@@ -47,10 +47,58 @@ class SampleGrid {
     std::pair<int, double> best = none;
     if (s_.cols() == 0) return best;
     const double reach2 = reach_mm * reach_mm;
+    walk(
+        q,
+        [&](int j) {
+          const double d2 = (s_.col(j) - q).squaredNorm();
+          if (d2 < best.second || (d2 == best.second && j < best.first)) best = {j, d2};
+        },
+        [&](double margin) { return std::min(best.second, reach2) <= margin * margin; });
+    return best.second <= reach2 ? best : none;
+  }
+
+  /// The sample of least `cost(j)` and that cost, for a cost no less than the sample's
+  /// distance to q (mm; the search stops where the unsearched samples are farther than
+  /// the best cost). Exact; ties go to the lower index. {-1, inf} when there are none.
+  template <class Cost>
+  std::pair<int, double> least(const Eigen::Vector3d& q, Cost&& cost) const {
+    std::pair<int, double> best{-1, std::numeric_limits<double>::infinity()};
+    if (s_.cols() == 0) return best;
+    walk(
+        q,
+        [&](int j) {
+          const double c = cost(j);
+          if (c < best.second || (c == best.second && j < best.first)) best = {j, c};
+        },
+        [&](double margin) { return best.second <= margin; });
+    return best;
+  }
+
+  /// Appends to `out` the samples within `radius_mm` of q (squared distance at most
+  /// radius^2), in ascending index.
+  void within(const Eigen::Vector3d& q, double radius_mm, std::vector<int>& out) const {
+    if (s_.cols() == 0) return;
+    const size_t first = out.size();
+    const double r2 = radius_mm * radius_mm;
+    walk(
+        q,
+        [&](int j) {
+          if ((s_.col(j) - q).squaredNorm() <= r2) out.push_back(j);
+        },
+        [&](double margin) { return margin > radius_mm; });
+    std::sort(out.begin() + static_cast<long>(first), out.end());
+  }
+
+ private:
+  /// Visits the samples shell by shell of cells about q's (clamped) cell: Chebyshev
+  /// distance 0, 1, ... After each shell, `done(margin)` is asked with q's distance (mm)
+  /// to the cells not yet searched, a lower bound on every unvisited sample's distance
+  /// to q; the walk ends when it says so or when every cell is searched.
+  template <class Visit, class Done>
+  void walk(const Eigen::Vector3d& q, Visit&& visit, Done&& done) const {
     const Eigen::Vector3i c = cell_of(q);
     for (int r = 0;; ++r) {
-      // Shell r: the cells at Chebyshev distance r from q's (clamped) cell.
-      Eigen::Vector3i lo = (c.array() - r).max(0), hi = (c.array() + r).min(dim_.array() - 1);
+      const Eigen::Vector3i lo = (c.array() - r).max(0), hi = (c.array() + r).min(dim_.array() - 1);
       for (int z = lo.z(); z <= hi.z(); ++z)
         for (int y = lo.y(); y <= hi.y(); ++y)
           for (int x = lo.x(); x <= hi.x(); ++x) {
@@ -58,16 +106,10 @@ class SampleGrid {
               continue;
             const int cell = linear(Eigen::Vector3i(x, y, z));
             for (int k = start_[static_cast<size_t>(cell)];
-                 k < start_[static_cast<size_t>(cell) + 1]; ++k) {
-              const int j = order_[static_cast<size_t>(k)];
-              const double d2 = (s_.col(j) - q).squaredNorm();
-              if (d2 < best.second || (d2 == best.second && j < best.first)) best = {j, d2};
-            }
+                 k < start_[static_cast<size_t>(cell) + 1]; ++k)
+              visit(order_[static_cast<size_t>(k)]);
           }
-      const bool all = (lo.array() == 0).all() && (hi.array() == dim_.array() - 1).all();
-      if (all) return best.second <= reach2 ? best : none;
-      // Every sample not yet seen lies outside the block of cells searched; q's distance
-      // to that outside is a lower bound on its distance to them.
+      if ((lo.array() == 0).all() && (hi.array() == dim_.array() - 1).all()) return;
       const Eigen::Vector3d block_lo = lo_ + h_ * lo.cast<double>(),
                             block_hi = lo_ + h_ * (hi.array() + 1).matrix().cast<double>();
       double margin = std::numeric_limits<double>::infinity();
@@ -75,12 +117,10 @@ class SampleGrid {
         if (lo[a] > 0) margin = std::min(margin, q[a] - block_lo[a]);
         if (hi[a] < dim_[a] - 1) margin = std::min(margin, block_hi[a] - q[a]);
       }
-      if (margin > 0 && std::min(best.second, reach2) <= margin * margin)
-        return best.second <= reach2 ? best : none;
+      if (margin > 0 && done(margin)) return;
     }
   }
 
- private:
   Eigen::Vector3i cell_of(const Eigen::Vector3d& q) const {
     Eigen::Vector3i c;
     for (int a = 0; a < 3; ++a)
