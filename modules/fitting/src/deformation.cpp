@@ -8,6 +8,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "lattice_laplace.h"
+
 namespace organfit::fitting {
 namespace {
 constexpr double kMaxExtentMm = 2000;     // larger than any organ: grids over it are not made
@@ -129,62 +131,6 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& s
   return out;
 }
 
-/// Conjugate gradients for the discrete Laplace equation on the free nodes (7-point
-/// stencil, diagonal 6): `neighbours` holds each free node's 6 neighbours (free index, or
-/// -1 for a fixed one, whose value is in `rhs`). The three components are three
-/// independent iterations (each its own step lengths and stop, |r| <= 1e-5 |b|) run in
-/// the same passes over the nodes: the solve is bound by memory traffic, and the
-/// neighbour lists are then read once an iteration instead of three times. Solves in
-/// place from the start in x (3 x free nodes, mm).
-void solve_laplace(const std::vector<std::array<int, 6>>& neighbours, const Eigen::Matrix3Xd& rhs,
-                   Eigen::Matrix3Xd& x) {
-  const Eigen::Index n = rhs.cols();
-  // out = A v, and v . (A v) per component.
-  auto apply = [&](const Eigen::Matrix3Xd& v, Eigen::Matrix3Xd& out) {
-    double s0 = 0, s1 = 0, s2 = 0;
-#pragma omp parallel for schedule(static) reduction(+ : s0, s1, s2)
-    for (Eigen::Index i = 0; i < n; ++i) {
-      Eigen::Vector3d s = 6 * v.col(i);
-      for (int nb : neighbours[static_cast<size_t>(i)])
-        if (nb >= 0) s -= v.col(nb);
-      out.col(i) = s;
-      s0 += v(0, i) * s(0), s1 += v(1, i) * s(1), s2 += v(2, i) * s(2);
-    }
-    return Eigen::Vector3d(s0, s1, s2);
-  };
-  Eigen::Matrix3Xd ap(3, n);
-  apply(x, ap);
-  Eigen::Matrix3Xd r = rhs - ap;
-  Eigen::Matrix3Xd p = r;
-  Eigen::Vector3d rr = r.rowwise().squaredNorm();
-  const Eigen::Vector3d stop =
-      1e-10 * rhs.rowwise().squaredNorm().cwiseMax(Eigen::Vector3d::Constant(1e-30));
-  for (int it = 0; it < 5000; ++it) {
-    const Eigen::Array3d active = (rr.array() > stop.array()).cast<double>();
-    if (!active.any()) break;
-    const Eigen::Vector3d pap = apply(p, ap);
-    const Eigen::Vector3d alpha =
-        (active > 0).select(rr.array() / pap.array(), Eigen::Array3d::Zero()).matrix();
-    double q0 = 0, q1 = 0, q2 = 0;
-#pragma omp parallel for schedule(static) reduction(+ : q0, q1, q2)
-    for (Eigen::Index i = 0; i < n; ++i) {
-      x.col(i) += alpha.cwiseProduct(p.col(i));
-      r.col(i) -= alpha.cwiseProduct(ap.col(i));
-      q0 += r(0, i) * r(0, i), q1 += r(1, i) * r(1, i), q2 += r(2, i) * r(2, i);
-    }
-    const Eigen::Vector3d rr_next(q0, q1, q2);
-    // A component that has stopped keeps its direction (its step stays zero).
-    const Eigen::Array3d beta = (active > 0).select(rr_next.array() / rr.array(), 1.0);
-    const Eigen::Array3d keep = 1.0 - active;
-    rr = (active > 0).select(rr_next.array(), rr.array()).matrix();
-#pragma omp parallel for schedule(static)
-    for (Eigen::Index i = 0; i < n; ++i)
-      p.col(i) =
-          (active * r.col(i).array() + beta * p.col(i).array() * active + keep * p.col(i).array())
-              .matrix();
-  }
-}
-
 }  // namespace
 
 Deformation::Deformation() = default;
@@ -293,38 +239,23 @@ double Deformation::max_volume_ratio() const {
 }
 
 long long Deformation::solve_harmonic_part(const std::vector<std::uint8_t>& fitted) {
-  auto index = [&](int i, int j, int k) { return i + 1LL * n_[0] * (j + 1LL * n_[1] * k); };
-  const long long nodes = 1LL * n_[0] * n_[1] * n_[2];
-  std::vector<int> free_index(static_cast<size_t>(nodes), -1);
-  std::vector<long long> free_nodes;
-  for (int k = 1; k + 1 < n_[2]; ++k)
-    for (int j = 1; j + 1 < n_[1]; ++j)
-      for (int i = 1; i + 1 < n_[0]; ++i) {
-        const long long v = index(i, j, k);
-        if (fitted[static_cast<size_t>(v)]) continue;
-        free_index[static_cast<size_t>(v)] = static_cast<int>(free_nodes.size());
-        free_nodes.push_back(v);
-      }
-  const size_t nf = free_nodes.size();
+  const detail::LatticeFreeNodes lattice = detail::lattice_free_nodes(n_, fitted);
+  const size_t nf = lattice.free_nodes.size();
   if (nf == 0) return 0;
-  std::vector<std::array<int, 6>> neighbours(nf);
   Eigen::Matrix3Xd rhs = Eigen::Matrix3Xd::Zero(3, static_cast<Eigen::Index>(nf));
   const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
-  for (size_t f = 0; f < nf; ++f) {
-    const long long v = free_nodes[f];
-    for (int d = 0; d < 3; ++d)
-      for (int side = 0; side < 2; ++side) {
-        const long long w = v + (side ? step[d] : -step[d]);
-        const int fi = free_index[static_cast<size_t>(w)];
-        neighbours[f][static_cast<size_t>(2 * d + side)] = fi;
-        if (fi < 0)  // 0 on a face
-          rhs.col(static_cast<Eigen::Index>(f)) += values_[static_cast<size_t>(w)].cast<double>();
-      }
-  }
-  Eigen::Matrix3Xd x = Eigen::Matrix3Xd::Zero(3, static_cast<Eigen::Index>(nf));
-  solve_laplace(neighbours, rhs, x);
   for (size_t f = 0; f < nf; ++f)
-    values_[static_cast<size_t>(free_nodes[f])] = x.col(static_cast<Eigen::Index>(f)).cast<float>();
+    for (int d = 0; d < 3; ++d)
+      for (int side = 0; side < 2; ++side)
+        if (lattice.neighbours[f][static_cast<size_t>(2 * d + side)] < 0)  // 0 on a face
+          rhs.col(static_cast<Eigen::Index>(f)) +=
+              values_[static_cast<size_t>(lattice.free_nodes[f] + (side ? step[d] : -step[d]))]
+                  .cast<double>();
+  Eigen::Matrix3Xd x = Eigen::Matrix3Xd::Zero(3, static_cast<Eigen::Index>(nf));
+  detail::solve_lattice_laplace(lattice, rhs, x);
+  for (size_t f = 0; f < nf; ++f)
+    values_[static_cast<size_t>(lattice.free_nodes[f])] =
+        x.col(static_cast<Eigen::Index>(f)).cast<float>();
   return static_cast<long long>(nf);
 }
 
