@@ -14,17 +14,11 @@ std::vector<double> data_residuals(const std::vector<AttractivePoint>& points,
                                    const SurfaceFeet* feet) {
   std::vector<double> out(points.size(), std::numeric_limits<double>::infinity());
   const SkinIndex index(x, skin, feet);
-  const bool on_feet = feet && !feet->empty();
 #pragma omp parallel for schedule(dynamic, 64)
   for (long long k = 0; k < static_cast<long long>(points.size()); ++k) {
     const auto at = static_cast<size_t>(k);
     if (status && at < status->size() && (*status)[at].rejected) {
       out[at] = std::numeric_limits<double>::quiet_NaN();
-      continue;
-    }
-    if (!on_feet) {
-      const double d2 = index.nearest_particle(points[at].p_mm).second;
-      if (std::isfinite(d2)) out[at] = std::abs(std::sqrt(d2) - radius_mm);
       continue;
     }
     const double gap = index.nearest_surface_particle(points[at].p_mm, radius_mm).second;

@@ -36,6 +36,14 @@ namespace {
 
 using Field = Eigen::Matrix3Xd;  // three components per free node
 
+/// The stencil at free node i: 6 v_i - its free neighbours' v.
+inline Eigen::Vector3d stencil(const LatticeFreeNodes& l, const Field& v, Eigen::Index i) {
+  Eigen::Vector3d s = 6 * v.col(i);
+  for (int nb : l.neighbours[static_cast<size_t>(i)])
+    if (nb >= 0) s -= v.col(nb);
+  return s;
+}
+
 /// out = scale (6 v - the free neighbours' v); returns v . out per component.
 Eigen::Vector3d apply(const LatticeFreeNodes& l, double scale, const Field& v, Field& out) {
   const auto n = static_cast<Eigen::Index>(l.free_nodes.size());
@@ -43,78 +51,21 @@ Eigen::Vector3d apply(const LatticeFreeNodes& l, double scale, const Field& v, F
   double s0 = 0, s1 = 0, s2 = 0;
 #pragma omp parallel for schedule(static) reduction(+ : s0, s1, s2)
   for (Eigen::Index i = 0; i < n; ++i) {
-    Eigen::Vector3d s = 6 * v.col(i);
-    for (int nb : l.neighbours[static_cast<size_t>(i)])
-      if (nb >= 0) s -= v.col(nb);
-    s *= scale;
+    const Eigen::Vector3d s = scale * stencil(l, v, i);
     out.col(i) = s;
     s0 += v(0, i) * s(0), s1 += v(1, i) * s(1), s2 += v(2, i) * s(2);
   }
   return {s0, s1, s2};
 }
 
-/// Conjugate gradients for the discrete Laplace equation on the free nodes (7-point
-/// stencil, diagonal 6): `neighbours` holds each free node's 6 neighbours (free index, or
-/// -1 for a fixed one, whose value is in `rhs`). The three components are three
-/// independent iterations (each its own step lengths and stop, |r| <= 1e-5 |b|) run in
-/// the same passes over the nodes: the solve is bound by memory traffic, and the
-/// neighbour lists are then read once an iteration instead of three times. Solves in
-/// place from the start in x (3 x free nodes, mm).
-void conjugate_gradients(const std::vector<std::array<int, 6>>& neighbours,
-                         const Eigen::Matrix3Xd& rhs, Eigen::Matrix3Xd& x) {
-  const Eigen::Index n = rhs.cols();
-  // out = A v, and v . (A v) per component.
-  auto apply = [&](const Eigen::Matrix3Xd& v, Eigen::Matrix3Xd& out) {
-    double s0 = 0, s1 = 0, s2 = 0;
-#pragma omp parallel for schedule(static) reduction(+ : s0, s1, s2)
-    for (Eigen::Index i = 0; i < n; ++i) {
-      Eigen::Vector3d s = 6 * v.col(i);
-      for (int nb : neighbours[static_cast<size_t>(i)])
-        if (nb >= 0) s -= v.col(nb);
-      out.col(i) = s;
-      s0 += v(0, i) * s(0), s1 += v(1, i) * s(1), s2 += v(2, i) * s(2);
-    }
-    return Eigen::Vector3d(s0, s1, s2);
-  };
-  Eigen::Matrix3Xd ap(3, n);
-  apply(x, ap);
-  Eigen::Matrix3Xd r = rhs - ap;
-  Eigen::Matrix3Xd p = r;
-  Eigen::Vector3d rr = r.rowwise().squaredNorm();
-  const Eigen::Vector3d stop =
-      1e-10 * rhs.rowwise().squaredNorm().cwiseMax(Eigen::Vector3d::Constant(1e-30));
-  for (int it = 0; it < 5000; ++it) {
-    const Eigen::Array3d active = (rr.array() > stop.array()).cast<double>();
-    if (!active.any()) break;
-    const Eigen::Vector3d pap = apply(p, ap);
-    const Eigen::Vector3d alpha =
-        (active > 0).select(rr.array() / pap.array(), Eigen::Array3d::Zero()).matrix();
-    double q0 = 0, q1 = 0, q2 = 0;
-#pragma omp parallel for schedule(static) reduction(+ : q0, q1, q2)
-    for (Eigen::Index i = 0; i < n; ++i) {
-      x.col(i) += alpha.cwiseProduct(p.col(i));
-      r.col(i) -= alpha.cwiseProduct(ap.col(i));
-      q0 += r(0, i) * r(0, i), q1 += r(1, i) * r(1, i), q2 += r(2, i) * r(2, i);
-    }
-    const Eigen::Vector3d rr_next(q0, q1, q2);
-    // A component that has stopped keeps its direction (its step stays zero).
-    const Eigen::Array3d beta = (active > 0).select(rr_next.array() / rr.array(), 1.0);
-    const Eigen::Array3d keep = 1.0 - active;
-    rr = (active > 0).select(rr_next.array(), rr.array()).matrix();
-#pragma omp parallel for schedule(static)
-    for (Eigen::Index i = 0; i < n; ++i)
-      p.col(i) =
-          (active * r.col(i).array() + beta * p.col(i).array() * active + keep * p.col(i).array())
-              .matrix();
-  }
+/// The node counts of the next coarser lattice: its node I is the fine node 2I.
+Eigen::Vector3i coarser_dims(const Eigen::Vector3i& dims) {
+  return (dims.array() - 1) / 2 + 1;
 }
 
-/// The next coarser lattice: its node I is the fine node 2I, free where that one is
-/// (off the coarse faces).
+/// The next coarser lattice: free where the fine node 2I is (off the coarse faces).
 LatticeFreeNodes coarser(const LatticeFreeNodes& fine) {
-  Eigen::Vector3i dc;
-  for (int d = 0; d < 3; ++d)
-    dc[d] = (fine.dims[d] - 1) / 2 + 1;
+  const Eigen::Vector3i dc = coarser_dims(fine.dims);
   const long long nx = fine.dims[0], nxy = nx * fine.dims[1];
   std::vector<std::uint8_t> held(static_cast<size_t>(1LL * dc[0] * dc[1] * dc[2]), 1);
   for (int k = 1; k + 1 < dc[2]; ++k)
@@ -154,10 +105,7 @@ class Multigrid {
   explicit Multigrid(const LatticeFreeNodes& finest) : finest_(finest) {
     const LatticeFreeNodes* at = &finest;
     while (at->free_nodes.size() > kCoarsest) {
-      Eigen::Vector3i dc;
-      for (int d = 0; d < 3; ++d)
-        dc[d] = (at->dims[d] - 1) / 2 + 1;
-      if (dc.minCoeff() < 3) break;  // no interior left to coarsen to
+      if (coarser_dims(at->dims).minCoeff() < 3) break;  // no interior left to coarsen to
       coarse_.push_back(std::make_unique<LatticeFreeNodes>(coarser(*at)));
       at = coarse_.back().get();
       if (at->free_nodes.empty()) {
@@ -206,10 +154,7 @@ class Multigrid {
     out.resize(3, n);
 #pragma omp parallel for schedule(static)
     for (Eigen::Index i = 0; i < n; ++i) {
-      Eigen::Vector3d ae = 6 * e.col(i);
-      for (int nb : l.neighbours[static_cast<size_t>(i)])
-        if (nb >= 0) ae -= e.col(nb);
-      const Eigen::Vector3d r = f.col(i) - s * ae;
+      const Eigen::Vector3d r = f.col(i) - s * stencil(l, e, i);
       out.col(i) = residual ? r : Eigen::Vector3d(e.col(i) + step * r);
     }
   }
@@ -294,44 +239,57 @@ class Multigrid {
   mutable std::vector<Field> e_, t_, f_;
 };
 
+/// Conjugate gradients for the three components at once: three independent iterations
+/// (each its own step lengths and stop, |r| <= 1e-5 |rhs|) sharing the passes over the
+/// nodes, preconditioned by `precondition(r, z)` (z = M^-1 r). In place from the start in
+/// x. Returns the iterations taken, or -1 after `most` of them or where the iteration
+/// stops being positive definite (a preconditioner that does not serve).
+template <class Precondition>
+int conjugate_gradients(const LatticeFreeNodes& lattice, const Field& rhs, Field& x, int most,
+                        Precondition&& precondition) {
+  const auto n = static_cast<Eigen::Index>(lattice.free_nodes.size());
+  Field ap(3, n), z(3, n);
+  apply(lattice, 1.0, x, ap);
+  Field r = rhs - ap;
+  precondition(r, z);
+  Field p = z;
+  Eigen::Vector3d rz = r.cwiseProduct(z).rowwise().sum();
+  const Eigen::Vector3d stop =
+      1e-10 * rhs.rowwise().squaredNorm().cwiseMax(Eigen::Vector3d::Constant(1e-30));
+  for (int it = 0; it < most; ++it) {
+    const Eigen::Array3d active = (r.rowwise().squaredNorm().array() > stop.array()).cast<double>();
+    if (!active.any()) return it;
+    const Eigen::Vector3d pap = apply(lattice, 1.0, p, ap);
+    if ((active > 0 && (pap.array() <= 0 || rz.array() <= 0)).any()) return -1;
+    // A component that has stopped takes no step.
+    const Eigen::Array3d alpha = (active > 0).select(rz.array() / pap.array(), 0.0);
+    x += alpha.matrix().asDiagonal() * p;
+    r -= alpha.matrix().asDiagonal() * ap;
+    precondition(r, z);
+    const Eigen::Vector3d rz_next = r.cwiseProduct(z).rowwise().sum();
+    const Eigen::Array3d beta = (active > 0).select(rz_next.array() / rz.array(), 0.0);
+    rz = rz_next;
+    p = z + beta.matrix().asDiagonal() * p;
+  }
+  return -1;
+}
+
 }  // namespace
 
 int solve_lattice_laplace(const LatticeFreeNodes& lattice, const Eigen::Matrix3Xd& rhs,
                           Eigen::Matrix3Xd& x) {
-  // Preconditioned, a few tens at most; beyond, the fallback below.
-  constexpr int kMostIterations = 200;
-  const auto n = static_cast<Eigen::Index>(lattice.free_nodes.size());
-  if (n == 0) return 0;
+  if (lattice.free_nodes.empty()) return 0;
+  // Preconditioned, a few tens at most (9 on a 2 L lung's lattice).
+  constexpr int kMostPreconditioned = 200;
   const Multigrid mg(lattice);
-  Field ap(3, n), z(3, n);
-  apply(lattice, 1.0, x, ap);
-  Field r = rhs - ap;
-  mg.precondition(r, z);
-  Field p = z;
-  Eigen::Vector3d rz = (r.cwiseProduct(z)).rowwise().sum();
-  const Eigen::Vector3d stop =
-      1e-10 * rhs.rowwise().squaredNorm().cwiseMax(Eigen::Vector3d::Constant(1e-30));
-  int it = 0;
-  for (; it < kMostIterations; ++it) {
-    const Eigen::Array3d active = (r.rowwise().squaredNorm().array() > stop.array()).cast<double>();
-    if (!active.any()) return it;
-    const Eigen::Vector3d pap = apply(lattice, 1.0, p, ap);
-    if ((active > 0 && (pap.array() <= 0 || rz.array() <= 0)).any()) break;  // not positive
-    const Eigen::Array3d alpha =
-        (active > 0 && pap.array() > 0).select(rz.array() / pap.array(), Eigen::Array3d::Zero());
-    x += alpha.matrix().asDiagonal() * p;
-    r -= alpha.matrix().asDiagonal() * ap;
-    mg.precondition(r, z);
-    const Eigen::Vector3d rz_next = (r.cwiseProduct(z)).rowwise().sum();
-    const Eigen::Array3d beta =
-        (active > 0 && rz.array() != 0).select(rz_next.array() / rz.array(), 0.0);
-    rz = rz_next;
-    p = z + beta.matrix().asDiagonal() * p;
-  }
+  const int taken = conjugate_gradients(lattice, rhs, x, kMostPreconditioned,
+                                        [&mg](const Field& r, Field& z) { mg.precondition(r, z); });
+  if (taken >= 0) return taken;
   // The preconditioner did not serve (not positive on this lattice, or too slow): plain
   // conjugate gradients from where it got.
-  conjugate_gradients(lattice.neighbours, rhs, x);
-  return it;
+  const int plain =
+      conjugate_gradients(lattice, rhs, x, 5000, [](const Field& r, Field& z) { z = r; });
+  return kMostPreconditioned + std::max(plain, 0);
 }
 
 }  // namespace organfit::fitting::detail

@@ -91,7 +91,6 @@ class SkinIndex {
   const SurfaceFeet* feet_;
   Eigen::Matrix3Xd at_mm_, foot_at_mm_;  // the candidates' centres and feet
   std::unique_ptr<geometry::SampleGrid> centres_, feet_grid_;
-  mutable std::vector<int> scratch_;
 };
 
 /// Points farther than this from the skin are outliers unless a distance is given:
