@@ -182,9 +182,12 @@ KnownBody::KnownBody(std::function<bool(const Eigen::Vector3d&)> inside,
 }
 
 void KnownBody::measure_sampled() {
-  inside_voxels_ = 0;
-  for (const auto l : sampled_.labels)
-    inside_voxels_ += l != 0;
+  long long count = 0;
+  const long long n = static_cast<long long>(sampled_.labels.size());
+#pragma omp parallel for reduction(+ : count) schedule(static)
+  for (long long v = 0; v < n; ++v)
+    count += sampled_.labels[static_cast<size_t>(v)] != 0;
+  inside_voxels_ = count;
   surface_ = std::make_unique<geometry::MaskSurface>(sampled_);
 }
 

@@ -310,15 +310,21 @@ TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
   const geometry::SampleGrid grid(s.points);
   std::mt19937 rng(5);
   std::normal_distribution<double> g(0.0, 1.0);
-  for (double scale : {0.0, 0.5, 2.6, 40.0}) {
-    for (int q = 0; q < 200; ++q) {
-      const Eigen::Vector3d d = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
-      const Eigen::Vector3d p = scale == 0.0 ? Eigen::Vector3d(s.points.col(q)) : scale * 25.0 * d;
-      Eigen::Index j;
-      const double d2 = (s.points.colwise() - p).colwise().squaredNorm().minCoeff(&j);
-      const auto [k, e2] = grid.nearest(p);
-      EXPECT_EQ(k, j) << p.transpose();
-      EXPECT_DOUBLE_EQ(e2, d2);
+  // The default cells, cells of 0.7 mm (a few samples each), and cells so small that
+  // the 64-a-sample cap sets them.
+  for (double cell_mm : {0.0, 0.7, 1e-3}) {
+    const geometry::SampleGrid sized(s.points, cell_mm);
+    for (double scale : {0.0, 0.5, 2.6, 40.0}) {
+      for (int q = 0; q < 200; ++q) {
+        const Eigen::Vector3d d = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
+        const Eigen::Vector3d p =
+            scale == 0.0 ? Eigen::Vector3d(s.points.col(q)) : scale * 25.0 * d;
+        Eigen::Index j;
+        const double d2 = (s.points.colwise() - p).colwise().squaredNorm().minCoeff(&j);
+        const auto [k, e2] = sized.nearest(p);
+        EXPECT_EQ(k, j) << p.transpose() << " cell " << cell_mm;
+        EXPECT_DOUBLE_EQ(e2, d2);
+      }
     }
   }
   EXPECT_EQ(grid.nearest(s.points.col(7)).first, 7);
@@ -388,6 +394,41 @@ TEST(GlobalFit, ImplausibleShearsFallBackToTheAffinePart) {
 // The shears' move is measured from the affine image, the fields' from the sheared one:
 // x += 0.01 u_y^2 about the centre moves the sample at u_y = 20 mm by 4 mm, whatever the
 // translation; a field of one bump of height 1.5 mm moves the sample on its centre by 1.5.
+// A field's bumps are the Gaussians exp(-d^2 / (2 sigma^2)) of q's distance d to their
+// centres over the other two axes (1 on a centre), and the field is their weighted sum.
+TEST(ShearFields, BumpsAreGaussiansAndTheFieldTheirWeightedSum) {
+  ShearFields f = ShearFields::over({-40, -30, -20}, {40, 30, 20}, 8.0);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> weight(-2, 2), coordinate(-60, 60);
+  for (Eigen::Index k = 0; k < f.weights.size(); ++k)
+    f.weights(k) = weight(rng);
+  std::vector<std::pair<int, double>> near;
+  for (int trial = 0; trial < 300; ++trial) {
+    Eigen::Vector3d q(coordinate(rng), coordinate(rng), coordinate(rng));
+    if (trial == 0) q = f.origin_mm + 8.0 * Eigen::Vector3d(3, 2, 1);  // on a centre
+    for (int a = 0; a < 3; ++a) {
+      const int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;
+      f.bumps(a, q, near);
+      double sum = 0;
+      bool on_a_centre = false;
+      for (const auto& [index, value] : near) {
+        const int local = index - a * f.block();
+        const double cb = f.origin_mm(b) + 8.0 * (local % f.count(b));
+        const double cc = f.origin_mm(c) + 8.0 * (local / f.count(b));
+        const double d2 = (q(b) - cb) * (q(b) - cb) + (q(c) - cc) * (q(c) - cc);
+        EXPECT_NEAR(value, std::exp(-d2 / 128.0), 1e-14 * std::max(1.0, value)) << a;
+        EXPECT_GE(value, 1e-6);
+        on_a_centre |= value == 1.0;
+        sum += f.weights(index) * value;
+      }
+      if (trial == 0) {
+        EXPECT_TRUE(on_a_centre) << a;
+      }
+      EXPECT_NEAR(f.field(a, q), sum, 1e-12) << a;
+    }
+  }
+}
+
 TEST(LargestMoves, MeasureTheShearsAndTheFieldsEachFromWhatTheyMove) {
   SurfaceSamples samples;
   samples.points.resize(3, 3);

@@ -1,5 +1,9 @@
 #include "organfit/geometry/mask_ops.h"
 
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -103,21 +107,34 @@ LabelVolume rasterize_balls(const Eigen::Matrix3Xd& centres, double radius_mm,
                             const ImageGeometry& g) {
   LabelVolume mask(g);
   const double r2 = radius_mm * radius_mm;
-  for (Eigen::Index c = 0; c < centres.cols(); ++c) {
-    // Index range of the ball (the direction is orthonormal: reach = radius / spacing).
-    const Eigen::Vector3d idx = g.physical_to_index(centres.col(c));
-    int lo[3], hi[3];
-    for (int d = 0; d < 3; ++d) {
-      const double reach = radius_mm / g.spacing_mm[d];
-      lo[d] = std::max(0, static_cast<int>(std::ceil(idx[d] - reach)));
-      hi[d] = std::min(g.size[d] - 1, static_cast<int>(std::floor(idx[d] + reach)));
+  // Each thread owns a run of slices and draws the part of every ball that falls in it:
+  // no voxel is written by two threads.
+#pragma omp parallel
+  {
+#ifdef _OPENMP
+    const int threads = omp_get_num_threads(), me = omp_get_thread_num();
+#else
+    const int threads = 1, me = 0;
+#endif
+    const int k_lo = static_cast<int>(1LL * g.size[2] * me / threads);
+    const int k_hi = static_cast<int>(1LL * g.size[2] * (me + 1) / threads) - 1;
+    for (Eigen::Index c = 0; c < centres.cols(); ++c) {
+      // Index range of the ball (the direction is orthonormal: reach = radius / spacing).
+      const Eigen::Vector3d idx = g.physical_to_index(centres.col(c));
+      int lo[3], hi[3];
+      for (int d = 0; d < 3; ++d) {
+        const double reach = radius_mm / g.spacing_mm[d];
+        lo[d] = std::max(0, static_cast<int>(std::ceil(idx[d] - reach)));
+        hi[d] = std::min(g.size[d] - 1, static_cast<int>(std::floor(idx[d] + reach)));
+      }
+      lo[2] = std::max(lo[2], k_lo), hi[2] = std::min(hi[2], k_hi);
+      for (int k = lo[2]; k <= hi[2]; ++k)
+        for (int j = lo[1]; j <= hi[1]; ++j)
+          for (int i = lo[0]; i <= hi[0]; ++i) {
+            const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
+            if ((p - centres.col(c)).squaredNorm() <= r2) mask.at(i, j, k) = 1;
+          }
     }
-    for (int k = lo[2]; k <= hi[2]; ++k)
-      for (int j = lo[1]; j <= hi[1]; ++j)
-        for (int i = lo[0]; i <= hi[0]; ++i) {
-          const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
-          if ((p - centres.col(c)).squaredNorm() <= r2) mask.at(i, j, k) = 1;
-        }
   }
   return mask;
 }
@@ -225,47 +242,60 @@ LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_m
   sub.origin_mm = grid.index_to_physical(Eigen::Vector3d(lo[0], lo[1], lo[2]));
   LabelVolume part = rasterize_balls(centres, radius_mm, sub);
   close_mask(part, closing_mm);
+#pragma omp parallel for schedule(static)
   for (int k = 0; k < sub.size[2]; ++k)
     for (int j = 0; j < sub.size[1]; ++j)
-      for (int i = 0; i < sub.size[0]; ++i)
-        out.at(lo[0] + i, lo[1] + j, lo[2] + k) = part.at(i, j, k);
+      std::copy_n(&part.at(0, j, k), sub.size[0], &out.at(lo[0], lo[1] + j, lo[2] + k));
   return out;
 }
+
+namespace {
+/// Whether voxel (i, j, k), inside the mask, has a face neighbour outside it or lies on
+/// the grid's edge.
+bool on_surface(const LabelVolume& mask, int i, int j, int k) {
+  const auto& g = mask.geometry;
+  return i == 0 || j == 0 || k == 0 || i == g.size[0] - 1 || j == g.size[1] - 1 ||
+         k == g.size[2] - 1 || !mask.at(i - 1, j, k) || !mask.at(i + 1, j, k) ||
+         !mask.at(i, j - 1, k) || !mask.at(i, j + 1, k) || !mask.at(i, j, k - 1) ||
+         !mask.at(i, j, k + 1);
+}
+}  // namespace
 
 std::vector<std::uint8_t> surface_of(const LabelVolume& mask) {
   const auto& g = mask.geometry;
   std::vector<std::uint8_t> s(mask.labels.size(), 0);
+#pragma omp parallel for schedule(static)
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i) {
-        if (!mask.at(i, j, k)) continue;
-        const bool edge = i == 0 || j == 0 || k == 0 || i == g.size[0] - 1 || j == g.size[1] - 1 ||
-                          k == g.size[2] - 1;
-        if (edge || !mask.at(i - 1, j, k) || !mask.at(i + 1, j, k) || !mask.at(i, j - 1, k) ||
-            !mask.at(i, j + 1, k) || !mask.at(i, j, k - 1) || !mask.at(i, j, k + 1)) {
-          s[g.linear_index(i, j, k)] = 1;
-        }
-      }
+      for (int i = 0; i < g.size[0]; ++i)
+        if (mask.at(i, j, k) && on_surface(mask, i, j, k)) s[g.linear_index(i, j, k)] = 1;
   return s;
 }
 
 MaskSurface::MaskSurface(const LabelVolume& mask) {
   const ImageGeometry& g = mask.geometry;
-  const std::vector<std::uint8_t> surface = surface_of(mask);
-  std::vector<long long> index;
-  for (size_t i = 0; i < surface.size(); ++i)
-    if (surface[i]) index.push_back(static_cast<long long>(i));
-  points_.resize(3, static_cast<Eigen::Index>(index.size()));
-  const long long nx = g.size[0], nxy = nx * g.size[1];
-  for (size_t k = 0; k < index.size(); ++k) {
-    const long long v = index[k];
-    points_.col(static_cast<Eigen::Index>(k)) =
-        g.origin_mm + Eigen::Vector3d(static_cast<double>(v % nx),
-                                      static_cast<double>((v / nx) % g.size[1]),
-                                      static_cast<double>(v / nxy))
-                          .cwiseProduct(g.spacing_mm);
-  }
-  search_ = std::make_unique<SampleGrid>(points_);
+  // Each slice's surface voxels on a thread, then the slices in order: the voxels come
+  // in the grid's order, as one pass would give them.
+  std::vector<std::vector<Eigen::Vector3d>> slices(static_cast<size_t>(g.size[2]));
+#pragma omp parallel for schedule(dynamic, 4)
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        if (mask.at(i, j, k) && on_surface(mask, i, j, k))
+          slices[static_cast<size_t>(k)].push_back(
+              g.origin_mm + Eigen::Vector3d(i, j, k).cwiseProduct(g.spacing_mm));
+  size_t count = 0;
+  for (const auto& s : slices)
+    count += s.size();
+  points_.resize(3, static_cast<Eigen::Index>(count));
+  Eigen::Index c = 0;
+  for (const auto& s : slices)
+    for (const Eigen::Vector3d& p : s)
+      points_.col(c++) = p;
+  // Cells of two voxels: the queries (the other surface's voxels) lie mostly within a
+  // few voxels of this surface, and a cell then holds a handful of its voxels (cbrt(S)
+  // cells a side held some 70 of a lung's 320,000).
+  search_ = std::make_unique<SampleGrid>(points_, 2 * g.spacing_mm.maxCoeff());
 }
 
 MaskSurface::~MaskSurface() = default;

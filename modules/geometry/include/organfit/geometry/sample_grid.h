@@ -10,17 +10,25 @@
 
 namespace organfit::geometry {
 
-/// Nearest-sample queries among surface samples, bucketed on a grid of about cbrt(S)
-/// cells a side: exact (ties go to the lower index, as a scan would), and O(points x a
-/// few cells) instead of O(points x samples): the fits ask it every iteration.
+/// Nearest-sample queries among surface samples, bucketed on a grid of cubic cells:
+/// exact (ties go to the lower index, as a scan would), and O(points x a few cells)
+/// instead of O(points x samples): the fits ask it every iteration. By default about
+/// cbrt(S) cells a side; a caller whose queries lie near dense samples (a surface's
+/// voxels against another's) asks for smaller cells, fewer samples a cell.
 class SampleGrid {
  public:
-  explicit SampleGrid(const Eigen::Matrix3Xd& samples) : s_(samples) {
+  /// `cell_mm` > 0: cells of that size (mm), or larger where that would make more than
+  /// 64 cells a sample; otherwise about cbrt(S) a side.
+  explicit SampleGrid(const Eigen::Matrix3Xd& samples, double cell_mm = 0) : s_(samples) {
     const Eigen::Index n = s_.cols();
     if (n == 0) return;
     lo_ = s_.rowwise().minCoeff();
     const Eigen::Vector3d extent = s_.rowwise().maxCoeff() - lo_;
     h_ = std::max(extent.maxCoeff() / std::max(1.0, std::cbrt(static_cast<double>(n))), 1e-6);
+    if (cell_mm > 0) {
+      const Eigen::Vector3d e = extent.array() + cell_mm;
+      h_ = std::max({cell_mm, std::cbrt(e.prod() / (64.0 * static_cast<double>(n))), 1e-6});
+    }
     for (int c = 0; c < 3; ++c)
       dim_[c] = std::min(1024, static_cast<int>(extent[c] / h_) + 1);
     start_.assign(static_cast<size_t>(dim_[0]) * dim_[1] * dim_[2] + 1, 0);
