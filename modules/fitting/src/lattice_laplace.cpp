@@ -130,10 +130,10 @@ class Multigrid {
     e_.resize(coarse_.size() + 1), t_.resize(coarse_.size() + 1), f_.resize(coarse_.size() + 1);
   }
 
-  /// z = M^-1 r. Not thread-safe (it works in the hierarchy's buffers).
-  void precondition(const Field& r, Field& z) const {
+  /// M^-1 r, in the hierarchy's buffer (valid until the next call). Not thread-safe.
+  const Field& precondition(const Field& r) const {
     cycle(0, r);
-    z = e_[0];
+    return e_[0];
   }
 
  private:
@@ -241,19 +241,20 @@ class Multigrid {
 
 /// Conjugate gradients for the three components at once: three independent iterations
 /// (each its own step lengths and stop, |r| <= 1e-5 |rhs|) sharing the passes over the
-/// nodes, preconditioned by `precondition(r, z)` (z = M^-1 r). In place from the start in
-/// x. Returns the iterations taken, or -1 after `most` of them or where the iteration
-/// stops being positive definite (a preconditioner that does not serve).
+/// nodes, preconditioned by `precondition(r)` (M^-1 r, a reference valid until its next
+/// call: no buffer of its own here). In place from the start in x. Returns the iterations
+/// taken, or -1 after `most` of them or where the iteration stops being positive definite
+/// (a preconditioner that does not serve).
 template <class Precondition>
 int conjugate_gradients(const LatticeFreeNodes& lattice, const Field& rhs, Field& x, int most,
                         Precondition&& precondition) {
   const auto n = static_cast<Eigen::Index>(lattice.free_nodes.size());
-  Field ap(3, n), z(3, n);
+  Field ap(3, n);
   apply(lattice, 1.0, x, ap);
   Field r = rhs - ap;
-  precondition(r, z);
-  Field p = z;
-  Eigen::Vector3d rz = r.cwiseProduct(z).rowwise().sum();
+  const Field* z = &precondition(r);
+  Field p = *z;
+  Eigen::Vector3d rz = r.cwiseProduct(*z).rowwise().sum();
   const Eigen::Vector3d stop =
       1e-10 * rhs.rowwise().squaredNorm().cwiseMax(Eigen::Vector3d::Constant(1e-30));
   for (int it = 0; it < most; ++it) {
@@ -265,11 +266,11 @@ int conjugate_gradients(const LatticeFreeNodes& lattice, const Field& rhs, Field
     const Eigen::Array3d alpha = (active > 0).select(rz.array() / pap.array(), 0.0);
     x += alpha.matrix().asDiagonal() * p;
     r -= alpha.matrix().asDiagonal() * ap;
-    precondition(r, z);
-    const Eigen::Vector3d rz_next = r.cwiseProduct(z).rowwise().sum();
+    z = &precondition(r);
+    const Eigen::Vector3d rz_next = r.cwiseProduct(*z).rowwise().sum();
     const Eigen::Array3d beta = (active > 0).select(rz_next.array() / rz.array(), 0.0);
     rz = rz_next;
-    p = z + beta.matrix().asDiagonal() * p;
+    p = *z + beta.matrix().asDiagonal() * p;
   }
   return -1;
 }
@@ -282,13 +283,14 @@ int solve_lattice_laplace(const LatticeFreeNodes& lattice, const Eigen::Matrix3X
   // Preconditioned, a few tens at most (9 on a 2 L lung's lattice).
   constexpr int kMostPreconditioned = 200;
   const Multigrid mg(lattice);
-  const int taken = conjugate_gradients(lattice, rhs, x, kMostPreconditioned,
-                                        [&mg](const Field& r, Field& z) { mg.precondition(r, z); });
+  const int taken =
+      conjugate_gradients(lattice, rhs, x, kMostPreconditioned,
+                          [&mg](const Field& r) -> const Field& { return mg.precondition(r); });
   if (taken >= 0) return taken;
   // The preconditioner did not serve (not positive on this lattice, or too slow): plain
   // conjugate gradients from where it got.
   const int plain =
-      conjugate_gradients(lattice, rhs, x, 5000, [](const Field& r, Field& z) { z = r; });
+      conjugate_gradients(lattice, rhs, x, 5000, [](const Field& r) -> const Field& { return r; });
   return kMostPreconditioned + std::max(plain, 0);
 }
 
