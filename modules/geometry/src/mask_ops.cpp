@@ -61,8 +61,9 @@ std::vector<double> squared_distance_transform(const std::vector<std::uint8_t>& 
   const size_t total = static_cast<size_t>(g.voxel_count());
   if (feature.size() != total) throw std::invalid_argument("distance transform: size mismatch");
   std::vector<double> d(total);
-  for (size_t i = 0; i < total; ++i)
-    d[i] = feature[i] ? 0.0 : kInf;
+#pragma omp parallel for schedule(static)
+  for (long long i = 0; i < static_cast<long long>(total); ++i)
+    d[static_cast<size_t>(i)] = feature[static_cast<size_t>(i)] ? 0.0 : kInf;
   const int dims[3] = {nx, ny, nz};
   const long long strides[3] = {1, nx, 1LL * nx * ny};
   for (int axis = 0; axis < 3; ++axis) {

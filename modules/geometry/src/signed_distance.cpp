@@ -15,17 +15,20 @@ SignedDistance::SignedDistance(const LabelVolume& mask, bool smooth_it)
   // One feature buffer (the inside, then the outside) and one transform beside values_:
   // two grids of doubles at a time, not three (a million-particle body's reference has
   // 80M voxels, 640 MB a grid).
-  const size_t total = mask.labels.size();
-  std::vector<std::uint8_t> feature(total);
-  for (size_t v = 0; v < total; ++v)
+  const long long total = static_cast<long long>(mask.labels.size());
+  std::vector<std::uint8_t> feature(mask.labels.size());
+#pragma omp parallel for schedule(static)
+  for (long long v = 0; v < total; ++v)
     feature[v] = mask.labels[v] != 0;
   values_ = squared_distance_transform(feature, geometry_);  // to the inside, squared
-  for (size_t v = 0; v < total; ++v)
+#pragma omp parallel for schedule(static)
+  for (long long v = 0; v < total; ++v)
     feature[v] = !feature[v];
   const std::vector<double> to_out = squared_distance_transform(feature, geometry_);
   const double h = 0.5 * geometry_.spacing_mm.minCoeff();
   // An empty mask (or a full one) has no boundary: the transform's infinity stays.
-  for (size_t v = 0; v < total; ++v)
+#pragma omp parallel for schedule(static)
+  for (long long v = 0; v < total; ++v)
     values_[v] = feature[v] ? std::sqrt(values_[v]) - h : -(std::sqrt(to_out[v]) - h);
   if (smooth_it) smooth();
 }
@@ -86,6 +89,7 @@ void SignedDistance::smooth() {
   std::vector<double> out(values_.size());
   const double weight[5] = {1 / 16.0, 4 / 16.0, 6 / 16.0, 4 / 16.0, 1 / 16.0};
   for (int axis = 0; axis < 3; ++axis) {
+#pragma omp parallel for schedule(static)
     for (int k = 0; k < g.size[2]; ++k)
       for (int j = 0; j < g.size[1]; ++j)
         for (int i = 0; i < g.size[0]; ++i) {

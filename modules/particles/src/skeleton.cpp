@@ -193,13 +193,23 @@ SkeletonForce::SkeletonForce(const Skeleton& skeleton, const Positions& rest,
   const int n = static_cast<int>(rest.cols());
   const int nodes = skeleton.node_count();
   clusters_.assign(nodes, {});
-  std::vector<int> count(n, 0);
+  // Particle i belongs to the nodes within overlap_mm of its nearest node's distance, in
+  // ascending node order: the nodes bucketed, the candidates a little beyond that reach,
+  // each kept by the same test on |node - x_i| a scan of every node makes.
   std::vector<std::vector<int>> member_of(n);
-  for (int i = 0; i < n; ++i) {
-    const Eigen::VectorXd d = (skeleton.nodes_mm.colwise() - rest.col(i)).colwise().norm();
-    const double nearest = d.minCoeff();
-    for (int k = 0; k < nodes; ++k) {
-      if (d[k] <= nearest + params.overlap_mm) member_of[i].push_back(k);
+  const geometry::SampleGrid grid(skeleton.nodes_mm);
+#pragma omp parallel
+  {
+    std::vector<int> near;
+#pragma omp for schedule(static)
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector3d x = rest.col(i);
+      const double nearest = (skeleton.nodes_mm.col(grid.nearest(x).first) - x).norm();
+      const double reach = nearest + params.overlap_mm;
+      near.clear();
+      grid.within(x, reach * (1 + 1e-12) + 1e-12, near);
+      for (int k : near)
+        if ((skeleton.nodes_mm.col(k) - x).norm() <= reach) member_of[i].push_back(k);
     }
   }
   std::set<std::pair<int, int>> edges;
