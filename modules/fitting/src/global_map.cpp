@@ -501,6 +501,7 @@ SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface) 
   out.points.resize(3, surface.points.cols());
   out.normals.resize(3, surface.points.cols());
   const double h = 1e-3;  // mm: the shears' second derivatives are ~1/100 mm^-1
+#pragma omp parallel for schedule(static)
   for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
     const Eigen::Vector3d s = surface.points.col(j);
     Eigen::Matrix3d jacobian;

@@ -20,6 +20,7 @@ inline MappedSamples map_samples(const GlobalMap& map, const SurfaceSamples& sur
   const Eigen::Index n = surface.points.cols();
   MappedSamples m{Eigen::Matrix3Xd(3, n), Eigen::Matrix3Xd(3, n), Eigen::Matrix3Xd(3, n),
                   Eigen::Matrix3Xd(3, n)};
+#pragma omp parallel for schedule(static)
   for (Eigen::Index j = 0; j < n; ++j) {
     m.affine.col(j) = map.affine.a * surface.points.col(j) + map.affine.t;
     m.sheared.col(j) = map.shears.apply(m.affine.col(j));

@@ -55,7 +55,12 @@ SurfaceSamples reference_surface(const geometry::LabelVolume& reference,
   const geometry::ImageGeometry& g = reference.geometry;
   auto sd = [&](int i, int j, int k) { return distance.at_voxel(i, j, k); };
   const std::vector<std::uint8_t> boundary = geometry::surface_of(reference);
-  std::vector<Eigen::Vector3d> pts, nrm;
+  // Each slice's samples on a thread, then the slices in order: the grid's order.
+  struct Slice {
+    std::vector<Eigen::Vector3d> pts, nrm;
+  };
+  std::vector<Slice> slices(static_cast<size_t>(g.size[2]));
+#pragma omp parallel for schedule(dynamic, 4)
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
       for (int i = 0; i < g.size[0]; ++i) {
@@ -67,14 +72,20 @@ SurfaceSamples reference_surface(const geometry::LabelVolume& reference,
         if (grad.norm() < 1e-9) continue;
         grad = g.direction * grad;
         const Eigen::Vector3d n = grad.normalized();
-        pts.push_back(g.index_to_physical(Eigen::Vector3d(i, j, k)) - sd(i, j, k) * n);
-        nrm.push_back(n);
+        Slice& slice = slices[static_cast<size_t>(k)];
+        slice.pts.push_back(g.index_to_physical(Eigen::Vector3d(i, j, k)) - sd(i, j, k) * n);
+        slice.nrm.push_back(n);
       }
+  Eigen::Index count = 0;
+  for (const Slice& slice : slices)
+    count += static_cast<Eigen::Index>(slice.pts.size());
   SurfaceSamples s;
-  s.points.resize(3, static_cast<Eigen::Index>(pts.size()));
-  s.normals.resize(3, static_cast<Eigen::Index>(pts.size()));
-  for (size_t q = 0; q < pts.size(); ++q)
-    s.points.col(q) = pts[q], s.normals.col(q) = nrm[q];
+  s.points.resize(3, count);
+  s.normals.resize(3, count);
+  Eigen::Index q = 0;
+  for (const Slice& slice : slices)
+    for (size_t m = 0; m < slice.pts.size(); ++m, ++q)
+      s.points.col(q) = slice.pts[m], s.normals.col(q) = slice.nrm[m];
   return s;
 }
 
