@@ -178,10 +178,29 @@ KnownBody::KnownBody(std::function<bool(const Eigen::Vector3d&)> inside,
     throw std::invalid_argument("known body: voxel size must be > 0 mm");
   if (!bounds.min_mm.allFinite() || !bounds.max_mm.allFinite())
     throw std::invalid_argument("known body: bounds must be finite");
-  cover(lattice_covering(bounds_, 2 * voxel_mm_));
-}
-
-void KnownBody::measure_sampled() {
+  // The sampled part grows until no inside voxel lies on its faces: a connected truth is
+  // then whole within it, whatever its stated bounds missed, and outside it is outside.
+  constexpr double kMostVoxels = 1e9;
+  geometry::ImageGeometry part = lattice_covering(bounds_, 2 * voxel_mm_);
+  for (;;) {
+    cover(part);
+    const geometry::ImageGeometry& s = sampled_.geometry;
+    const std::array<std::array<bool, 2>, 3> touched = faces_touched();
+    geometry::Aabb grown{s.origin_mm,
+                         s.origin_mm + s.spacing_mm.cwiseProduct(Eigen::Vector3d(
+                                           s.size[0] - 1, s.size[1] - 1, s.size[2] - 1))};
+    bool any = false;
+    for (size_t d = 0; d < 3; ++d) {
+      const double step = std::max(8.0, 0.25 * s.size[d]) * voxel_mm_;
+      if (touched[d][0]) grown.min_mm[static_cast<Eigen::Index>(d)] -= step, any = true;
+      if (touched[d][1]) grown.max_mm[static_cast<Eigen::Index>(d)] += step, any = true;
+    }
+    if (!any) break;
+    part = lattice_covering(grown, 0);
+    if (1.0 * part.size[0] * part.size[1] * part.size[2] > kMostVoxels)
+      throw std::invalid_argument(
+          "known body: the truth reaches past 1e9 voxels of its lattice (is it bounded?)");
+  }
   long long count = 0;
   const long long n = static_cast<long long>(sampled_.labels.size());
 #pragma omp parallel for reduction(+ : count) schedule(static)
@@ -215,17 +234,35 @@ Eigen::Vector3i offset_in(const geometry::ImageGeometry& g, const geometry::Imag
   return ((g.origin_mm - of.origin_mm) / g.spacing_mm.x()).array().round().cast<int>();
 }
 
-bool covers(const geometry::ImageGeometry& of, const geometry::ImageGeometry& g) {
-  const Eigen::Vector3i o = offset_in(g, of);
-  for (int d = 0; d < 3; ++d)
-    if (o[d] < 0 || o[d] + g.size[d] > of.size[d]) return false;
-  return true;
+/// Voxel (i, j, k) of `of` shifted by o, 0 where that falls outside it.
+std::uint8_t label_at(const geometry::LabelVolume& of, int i, int j, int k) {
+  const auto& n = of.geometry.size;
+  return i >= 0 && j >= 0 && k >= 0 && i < n[0] && j < n[1] && k < n[2] ? of.at(i, j, k) : 0;
 }
 }  // namespace
 
+std::array<std::array<bool, 2>, 3> KnownBody::faces_touched() const {
+  const geometry::ImageGeometry& g = sampled_.geometry;
+  std::array<std::array<bool, 2>, 3> touched{};
+  for (int d = 0; d < 3; ++d) {
+    const int a = (d + 1) % 3, b = (d + 2) % 3;
+    for (int side = 0; side < 2; ++side) {
+      bool found = false;
+#pragma omp parallel for collapse(2) reduction(|| : found)
+      for (int v = 0; v < g.size[b]; ++v)
+        for (int u = 0; u < g.size[a]; ++u) {
+          int idx[3];
+          idx[d] = side ? g.size[d] - 1 : 0, idx[a] = u, idx[b] = v;
+          found = found || sampled_.at(idx[0], idx[1], idx[2]) != 0;
+        }
+      touched[static_cast<size_t>(d)][static_cast<size_t>(side)] = found;
+    }
+  }
+  return touched;
+}
+
 void KnownBody::cover(const geometry::ImageGeometry& g) {
   const bool first = sampled_.labels.empty();
-  if (!first && covers(sampled_.geometry, g)) return;
   geometry::ImageGeometry u = g;
   if (!first) {  // the union of what is sampled and g
     const geometry::ImageGeometry& s = sampled_.geometry;
@@ -237,32 +274,44 @@ void KnownBody::cover(const geometry::ImageGeometry& g) {
     u = lattice_covering({s.origin_mm.cwiseMin(g.origin_mm), hi}, 0);
   }
   geometry::LabelVolume next(u);
-  long long found = 0;  // inside voxels among the new ones
   const Eigen::Vector3i o = first ? Eigen::Vector3i::Zero() : offset_in(sampled_.geometry, u);
   const std::array<int, 3> old = first ? std::array<int, 3>{0, 0, 0} : sampled_.geometry.size;
-#pragma omp parallel for schedule(dynamic, 1) collapse(2) reduction(+ : found)
+#pragma omp parallel for schedule(dynamic, 1) collapse(2)
   for (int k = 0; k < u.size[2]; ++k)
     for (int j = 0; j < u.size[1]; ++j)
       for (int i = 0; i < u.size[0]; ++i) {
         const int a = i - o.x(), b = j - o.y(), c = k - o.z();
-        if (a >= 0 && b >= 0 && c >= 0 && a < old[0] && b < old[1] && c < old[2]) {
-          next.at(i, j, k) = sampled_.at(a, b, c);
-        } else {
-          const bool in = inside_(u.index_to_physical(Eigen::Vector3d(i, j, k)));
-          next.at(i, j, k) = in;
-          found += in;
-        }
+        next.at(i, j, k) = a >= 0 && b >= 0 && c >= 0 && a < old[0] && b < old[1] && c < old[2]
+                               ? sampled_.at(a, b, c)
+                               : inside_(u.index_to_physical(Eigen::Vector3d(i, j, k)));
       }
   sampled_ = std::move(next);
-  // The body's voxel count and surface: from the first part (it covers `bounds`), again
-  // only if a later part found the body beyond them (an inside test looser than its
-  // bounds: measured right, at the cost of a second surface).
-  if (first || found > 0) measure_sampled();
 }
 
-geometry::SurfaceComparison KnownBody::compare_on(const geometry::LabelVolume& body) {
+geometry::LabelVolume KnownBody::cropped(const geometry::LabelVolume& whole) const {
+  const geometry::IndexRange r = whole.range(1);
+  const geometry::ImageGeometry& w = whole.geometry;
+  const Eigen::Vector3d lo = w.index_to_physical(Eigen::Vector3d(r.lo[0], r.lo[1], r.lo[2]));
+  const Eigen::Vector3d hi = w.index_to_physical(Eigen::Vector3d(r.hi[0], r.hi[1], r.hi[2]));
+  geometry::LabelVolume part(lattice_covering(
+      r.empty() ? geometry::Aabb{w.origin_mm, w.origin_mm} : geometry::Aabb{lo, hi},
+      2 * voxel_mm_));
+  const geometry::ImageGeometry& g = part.geometry;
+  const Eigen::Vector3i o = offset_in(g, w);
+#pragma omp parallel for collapse(2) schedule(static)
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        part.at(i, j, k) = label_at(whole, i + o.x(), j + o.y(), k + o.z());
+  return part;
+}
+
+geometry::SurfaceComparison KnownBody::compare_on(const geometry::LabelVolume& whole) {
+  // On the lattice's part about the body's inside voxels, 2 voxels wide: its surface is
+  // that on any larger part (no inside voxel on the edge), and the truth, whole within the
+  // sampled part, is outside wherever that part does not reach: nothing more is sampled.
+  const geometry::LabelVolume body = cropped(whole);
   const geometry::ImageGeometry& g = body.geometry;
-  cover(g);
   const Eigen::Vector3i o = offset_in(g, sampled_.geometry);
   long long na = 0, inter = 0;
 #pragma omp parallel for collapse(2) reduction(+ : na, inter)
@@ -271,7 +320,7 @@ geometry::SurfaceComparison KnownBody::compare_on(const geometry::LabelVolume& b
       for (int i = 0; i < g.size[0]; ++i) {
         if (!body.at(i, j, k)) continue;
         ++na;
-        inter += sampled_.at(i + o.x(), j + o.y(), k + o.z()) != 0;
+        inter += label_at(sampled_, i + o.x(), j + o.y(), k + o.z()) != 0;
       }
   geometry::SurfaceComparison r;
   geometry::surface_distances(geometry::MaskSurface(body), *surface_, r);
@@ -283,19 +332,14 @@ geometry::SurfaceComparison KnownBody::compare_on(const geometry::LabelVolume& b
 }
 
 geometry::SurfaceComparison KnownBody::compare(const fitting::EmbeddedBody& organ) {
-  geometry::Aabb box = organ.bounds();
-  box.min_mm = box.min_mm.cwiseMin(bounds_.min_mm);
-  box.max_mm = box.max_mm.cwiseMax(bounds_.max_mm);
-  return compare_on(organ.on_grid(lattice_covering(box, 2 * voxel_mm_)));
+  return compare_on(organ.on_grid(lattice_covering(organ.bounds(), 2 * voxel_mm_)));
 }
 
 geometry::SurfaceComparison KnownBody::compare(const Eigen::Matrix3Xd& particles,
                                                double radius_mm) {
-  geometry::Aabb box = bounds_;
-  if (particles.cols() > 0) {
-    box.min_mm = box.min_mm.cwiseMin(particles.rowwise().minCoeff());
-    box.max_mm = box.max_mm.cwiseMax(particles.rowwise().maxCoeff());
-  }
+  const geometry::Aabb box = particles.cols() > 0 ? geometry::Aabb{particles.rowwise().minCoeff(),
+                                                                   particles.rowwise().maxCoeff()}
+                                                  : bounds_;
   return compare_on(geometry::closed_body_on_grid(
       particles, radius_mm, radius_mm, lattice_covering(box, 2 * radius_mm + 2 * voxel_mm_)));
 }

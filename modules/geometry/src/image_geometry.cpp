@@ -43,16 +43,19 @@ long long LabelVolume::count(std::uint8_t label) const {
 
 IndexRange LabelVolume::range(std::uint8_t label) const {
   const ImageGeometry& g = geometry;
-  IndexRange r;
-  r.lo = g.size;
+  int lo0 = g.size[0], lo1 = g.size[1], lo2 = g.size[2], hi0 = -1, hi1 = -1, hi2 = -1;
+#pragma omp parallel for schedule(static) reduction(min                            \
+                                                    : lo0, lo1, lo2) reduction(max \
+                                                                               : hi0, hi1, hi2)
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
       for (int i = 0; i < g.size[0]; ++i)
         if (at(i, j, k) == label) {
-          const int idx[3] = {i, j, k};
-          for (size_t d = 0; d < 3; ++d)
-            r.lo[d] = std::min(r.lo[d], idx[d]), r.hi[d] = std::max(r.hi[d], idx[d]);
+          lo0 = std::min(lo0, i), lo1 = std::min(lo1, j), lo2 = std::min(lo2, k);
+          hi0 = std::max(hi0, i), hi1 = std::max(hi1, j), hi2 = std::max(hi2, k);
         }
+  IndexRange r;
+  r.lo = {lo0, lo1, lo2}, r.hi = {hi0, hi1, hi2};
   return r;
 }
 

@@ -3,6 +3,7 @@
 // deformations with exact inverses, points sampled on the deformed surface, and the
 // fitted model's surface compared with the true one.
 #include <Eigen/Core>
+#include <array>
 #include <functional>
 #include <memory>
 #include <random>
@@ -98,18 +99,21 @@ inline constexpr double kTruthVoxelMm = 0.5;
 /// cubic voxels of `voxel_mm` fixed in space (centres at (n + f) voxel_mm on each patient
 /// axis, f an irrational phase) and compared with other bodies on it (mask_ops.h has the
 /// definitions). The lattice does not move with a compared body's box, so a measure
-/// does not change with the phase of the samples, and the truth is sampled once for all
-/// the bodies compared with it: the organ left as it was, the fitted organ, the
-/// particles' balls, each baseline's. The sampled part grows to what the bodies reach
-/// (only the new voxels sampled). `inside` is called from several threads; `bounds` (mm)
-/// should hold the body (where it does not, the body is measured again as it grows).
-/// One compare at a time (not thread-safe).
+/// does not change with the phase of the samples, and the truth is sampled once, when
+/// made, for all the bodies compared with it: the organ left as it was, the fitted organ,
+/// the particles' balls, each baseline's. It is sampled over `bounds` (mm) and beyond,
+/// grown until none of its inside voxels lies on the sampled part's faces: a connected
+/// body is then whole within the sampled part whatever `bounds` missed (a part wholly
+/// beyond them and apart from the rest would be missed). Each body compared is cropped to
+/// its inside voxels and 2 voxels about them. `inside` is called from several threads.
+/// One compare at a time (not thread-safe). Throws std::invalid_argument for a voxel <= 0,
+/// bounds not finite, or a body that reaches past 1e9 voxels.
 class KnownBody {
  public:
   KnownBody(std::function<bool(const Eigen::Vector3d&)> inside, const geometry::Aabb& bounds,
             double voxel_mm);
   /// With the organ a model carries (fitting/embedded_body.h) on the lattice, over its
-  /// box and this body's with a margin of 2 voxels (volume_a_mm3: the organ's).
+  /// box with a margin of 2 voxels (volume_a_mm3: the organ's).
   geometry::SurfaceComparison compare(const fitting::EmbeddedBody& organ);
   /// With the closed body of a particle set (balls of `radius_mm` closed by the same),
   /// over a box with a margin of 2 radii and 2 voxels.
@@ -121,15 +125,18 @@ class KnownBody {
 
  private:
   void cover(const geometry::ImageGeometry& g);  // samples the voxels of g not yet sampled
-  void measure_sampled();                        // the inside voxels' count and surface
+  // Whether an inside voxel lies on the sampled part's low and high face, each axis.
+  std::array<std::array<bool, 2>, 3> faces_touched() const;
+  // The part of `whole` (a body on a part of the lattice) about its voxels of label 1, 2
+  // voxels wide; 0 where it reaches beyond `whole`.
+  geometry::LabelVolume cropped(const geometry::LabelVolume& whole) const;
   geometry::SurfaceComparison compare_on(const geometry::LabelVolume& body);
-
   std::function<bool(const Eigen::Vector3d&)> inside_;
   geometry::Aabb bounds_;
   double voxel_mm_;
   geometry::LabelVolume sampled_;  // label 1 inside, on the part of the lattice sampled
-  long long inside_voxels_ = 0;    // all of them lie within bounds_
-  std::unique_ptr<geometry::MaskSurface> surface_;  // the same on any lattice part covering bounds_
+  long long inside_voxels_ = 0;
+  std::unique_ptr<geometry::MaskSurface> surface_;  // the sampled part's inside voxels'
 };
 
 /// Compares the closed body of a particle set (balls of `radius_mm`, closed by the same)
