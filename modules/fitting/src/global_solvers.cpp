@@ -1,11 +1,14 @@
 #include "global_solvers.h"
 
+#include <omp.h>
+
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numeric>
 #include <optional>
+#include <vector>
 
 #include "organfit/fitting/robust.h"
 #include "organfit/geometry/sample_grid.h"
@@ -463,40 +466,68 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
   return ends;
 }
 
-/// The ridge system (J^T W J + lambda I) of a fit with more unknowns (n, J's columns) than
-/// points (m, its rows) or fewer, factored in the smaller space: with fewer points (a
-/// GTV's fields have ~500 heights for 20 to 87 points) by Woodbury's identity,
-/// (lambda I + J^T W J)^-1 = (I - J^T W (lambda I + J J^T W)^-1 J) / lambda: m^3, not n^3;
-/// with more (10,000 points), never an m x m matrix.
-class RidgeSystem {
- public:
-  RidgeSystem(const Eigen::MatrixXd& jac, const Eigen::VectorXd& w, double lambda)
-      : jac_(jac), w_(w), lambda_(lambda), in_points_(jac.rows() < jac.cols()) {
-    Eigen::MatrixXd s = in_points_ ? Eigen::MatrixXd(jac * jac.transpose() * w.asDiagonal())
-                                   : Eigen::MatrixXd(jac.transpose() * w.asDiagonal() * jac);
+RidgeSystem::RidgeSystem(const Eigen::MatrixXd& jac, const Eigen::VectorXd& w, double lambda)
+    : jac_(jac), w_(w), lambda_(lambda), in_points_(jac.rows() < jac.cols()) {
+  if (in_points_) {
+    Eigen::MatrixXd s = jac * jac.transpose() * w.asDiagonal();
     s.diagonal().array() += lambda;
     lu_.compute(s);
+  } else {
+    llt_.compute(normal_matrix(jac, w, lambda));
   }
-  /// (J^T W J + lambda I)^-1 g
-  Eigen::VectorXd solve(const Eigen::VectorXd& g) const {
-    if (!in_points_) return lu_.solve(g);
-    return (g - jac_.transpose() * w_.cwiseProduct(lu_.solve(jac_ * g))) / lambda_;
-  }
-  /// The effective number of unknowns, tr(J (J^T W J + lambda I)^-1 J^T W): the size of
-  /// the factored space less lambda tr(S^-1), S the matrix factored (either way).
-  double effective_dof() const {
+}
+
+Eigen::VectorXd RidgeSystem::solve(const Eigen::VectorXd& g) const {
+  if (!in_points_) return llt_.solve(g);
+  return (g - jac_.transpose() * w_.cwiseProduct(lu_.solve(jac_ * g))) / lambda_;
+}
+
+double RidgeSystem::effective_dof() const {
+  if (in_points_) {
     const Eigen::Index size = lu_.rows();
     return static_cast<double>(size) -
            lambda_ * lu_.solve(Eigen::MatrixXd::Identity(size, size)).trace();
   }
+  // tr(S^-1) = |L^-1|_F^2 for S = L L^T.
+  const Eigen::Index size = llt_.rows();
+  Eigen::MatrixXd inverse_l = Eigen::MatrixXd::Identity(size, size);
+  llt_.matrixL().solveInPlace(inverse_l);
+  return static_cast<double>(size) - lambda_ * inverse_l.squaredNorm();
+}
 
- private:
-  const Eigen::MatrixXd& jac_;
-  const Eigen::VectorXd& w_;
-  double lambda_;
-  bool in_points_;
-  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
-};
+Eigen::MatrixXd RidgeSystem::normal_matrix(const Eigen::MatrixXd& jac, const Eigen::VectorXd& w,
+                                           double lambda) {
+  // Each thread sums its own rows; the parts are added in thread order afterwards, so the
+  // sum is the same from run to run.
+  const Eigen::Index m = jac.rows(), n = jac.cols();
+  std::vector<Eigen::MatrixXd> parts;
+#pragma omp parallel
+  {
+#pragma omp single
+    parts.assign(static_cast<size_t>(omp_get_num_threads()), Eigen::MatrixXd::Zero(n, n));
+    Eigen::MatrixXd& part = parts[static_cast<size_t>(omp_get_thread_num())];
+    std::vector<Eigen::Index> at;
+    std::vector<double> value;
+#pragma omp for schedule(static)
+    for (Eigen::Index k = 0; k < m; ++k) {
+      if (w(k) == 0) continue;
+      at.clear(), value.clear();
+      for (Eigen::Index c = 0; c < n; ++c)
+        if (jac(k, c) != 0) at.push_back(c), value.push_back(jac(k, c));
+      for (size_t b = 0; b < at.size(); ++b) {  // the lower triangle, column by column
+        const double wb = w(k) * value[b];
+        double* column = part.col(at[b]).data();
+        for (size_t a = b; a < at.size(); ++a)
+          column[at[a]] += wb * value[a];
+      }
+    }
+  }
+  Eigen::MatrixXd s = std::move(parts[0]);
+  for (size_t t = 1; t < parts.size(); ++t)
+    s += parts[t];
+  s.diagonal().array() += lambda;
+  return s;  // its lower triangle: what Cholesky reads
+}
 
 namespace {
 /// A part of the map that is linear, to first order, in its parameters (the shear fields'

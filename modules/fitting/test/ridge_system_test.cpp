@@ -1,0 +1,51 @@
+// The global stage's ridge system (src/global_solvers.h): (J^T W J + lambda I)^-1 g and
+// its effective number of unknowns, factored in the points' space (fewer points than
+// unknowns) or the unknowns' space (more), against the same system solved directly.
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <random>
+
+#include "../src/global_solvers.h"
+
+namespace organfit::fitting::detail {
+namespace {
+
+struct Case {
+  Eigen::MatrixXd jac;
+  Eigen::VectorXd w, g;
+};
+
+// J sparse as the fields' rows are (each point touches a few unknowns), some weights
+// zero (outliers).
+Case make_case(int m, int n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> value(-2, 2), unit(0, 1);
+  Case c{Eigen::MatrixXd::Zero(m, n), Eigen::VectorXd(m), Eigen::VectorXd(n)};
+  for (int k = 0; k < m; ++k) {
+    for (int j = 0; j < n; ++j)
+      if (unit(rng) < 0.2) c.jac(k, j) = value(rng);
+    c.w(k) = unit(rng) < 0.1 ? 0.0 : unit(rng);
+  }
+  for (int j = 0; j < n; ++j)
+    c.g(j) = value(rng);
+  return c;
+}
+
+TEST(RidgeSystem, SolvesAsTheDirectSystemInEitherSpace) {
+  const double lambda = 0.3;
+  for (const auto& [m, n] : {std::pair{40, 120}, std::pair{300, 90}}) {  // both spaces
+    const Case c = make_case(m, n, static_cast<unsigned>(m));
+    const Eigen::MatrixXd s =
+        c.jac.transpose() * c.w.asDiagonal() * c.jac + lambda * Eigen::MatrixXd::Identity(n, n);
+    const Eigen::VectorXd expected = s.fullPivLu().solve(c.g);
+    const RidgeSystem system(c.jac, c.w, lambda);
+    EXPECT_LT((system.solve(c.g) - expected).norm(), 1e-10 * expected.norm()) << m << " x " << n;
+    const double dof = (c.jac * s.inverse() * c.jac.transpose() * c.w.asDiagonal()).trace();
+    EXPECT_NEAR(system.effective_dof(), dof, 1e-9 * n) << m << " x " << n;
+    EXPECT_GT(dof, 1.0);
+  }
+}
+
+}  // namespace
+}  // namespace organfit::fitting::detail
