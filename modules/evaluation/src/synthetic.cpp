@@ -234,7 +234,7 @@ Eigen::Vector3i offset_in(const geometry::ImageGeometry& g, const geometry::Imag
   return ((g.origin_mm - of.origin_mm) / g.spacing_mm.x()).array().round().cast<int>();
 }
 
-/// Voxel (i, j, k) of `of` shifted by o, 0 where that falls outside it.
+/// Voxel (i, j, k) of `of`, 0 where that lies outside it.
 std::uint8_t label_at(const geometry::LabelVolume& of, int i, int j, int k) {
   const auto& n = of.geometry.size;
   return i >= 0 && j >= 0 && k >= 0 && i < n[0] && j < n[1] && k < n[2] ? of.at(i, j, k) : 0;

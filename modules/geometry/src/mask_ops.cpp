@@ -1,8 +1,6 @@
 #include "organfit/geometry/mask_ops.h"
 
-#ifdef _OPENMP
 #include <omp.h>
-#endif
 
 #include <algorithm>
 #include <cmath>
@@ -112,11 +110,7 @@ LabelVolume rasterize_balls(const Eigen::Matrix3Xd& centres, double radius_mm,
   // no voxel is written by two threads.
 #pragma omp parallel
   {
-#ifdef _OPENMP
     const int threads = omp_get_num_threads(), me = omp_get_thread_num();
-#else
-    const int threads = 1, me = 0;
-#endif
     const int k_lo = static_cast<int>(1LL * g.size[2] * me / threads);
     const int k_hi = static_cast<int>(1LL * g.size[2] * (me + 1) / threads) - 1;
     for (Eigen::Index c = 0; c < centres.cols(); ++c) {
