@@ -105,12 +105,18 @@ void watchdog(sigset_t signals) {
       g_ending = true;
       for (auto it = g_partial.rbegin(); it != g_partial.rend(); ++it) {
         std::error_code ec;
+        const std::filesystem::path& path = it->second.path;
         if (it->second.only_if_empty) {
-          if (std::filesystem::is_empty(it->second.path, ec))
-            std::filesystem::remove(it->second.path, ec);
-        } else {
-          std::filesystem::remove_all(it->second.path, ec);
+          if (std::filesystem::is_empty(path, ec)) std::filesystem::remove(path, ec);
+          continue;
         }
+        // Moved aside first, then removed: the run's thread may still be writing into it
+        // (a file made between remove_all's listing and its last rmdir left the folder
+        // behind), and a path it opens after the move no longer leads there.
+        std::filesystem::path aside = path;
+        aside += ".removing";
+        std::filesystem::rename(path, aside, ec);
+        std::filesystem::remove_all(ec ? path : aside, ec);
       }
       const std::string line = "organfit: error: " + stop_message() + "\n";
       (void)!::write(2, line.data(), line.size());
