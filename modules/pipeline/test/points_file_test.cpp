@@ -86,7 +86,7 @@ TEST_F(PointsFile, RefusesWhatNoPatientHasNamingTheRow) {
 
 TEST_F(PointsFile, ReadsTheCtItDeclaresWithItsPointsInOnePass) {
   const PointsCt ct{"1.2.3.4", "1.2.3.5"};
-  for (const std::string& ends : {"\n", "\r\n", "\r"}) {
+  for (const std::string ends : {"\n", "\r\n", "\r"}) {
     std::string text = points_ct_comment(ct) + "x,y,z\n1,2,3\n# a note: not a declaration\n";
     for (size_t at = text.find('\n'); at != std::string::npos;
          at = text.find('\n', at + ends.size()))
