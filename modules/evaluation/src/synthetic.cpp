@@ -186,9 +186,7 @@ KnownBody::KnownBody(std::function<bool(const Eigen::Vector3d&)> inside,
     cover(part);
     const geometry::ImageGeometry& s = sampled_.geometry;
     const std::array<std::array<bool, 2>, 3> touched = faces_touched();
-    geometry::Aabb grown{s.origin_mm,
-                         s.origin_mm + s.spacing_mm.cwiseProduct(Eigen::Vector3d(
-                                           s.size[0] - 1, s.size[1] - 1, s.size[2] - 1))};
+    geometry::Aabb grown = s.bounds_mm();
     bool any = false;
     for (size_t d = 0; d < 3; ++d) {
       const double step = std::max(8.0, 0.25 * s.size[d]) * voxel_mm_;
@@ -201,12 +199,7 @@ KnownBody::KnownBody(std::function<bool(const Eigen::Vector3d&)> inside,
       throw std::invalid_argument(
           "known body: the truth reaches past 1e9 voxels of its lattice (is it bounded?)");
   }
-  long long count = 0;
-  const long long n = static_cast<long long>(sampled_.labels.size());
-#pragma omp parallel for reduction(+ : count) schedule(static)
-  for (long long v = 0; v < n; ++v)
-    count += sampled_.labels[static_cast<size_t>(v)] != 0;
-  inside_voxels_ = count;
+  inside_voxels_ = sampled_.count(1);
   surface_ = std::make_unique<geometry::MaskSurface>(sampled_);
 }
 
@@ -265,13 +258,8 @@ void KnownBody::cover(const geometry::ImageGeometry& g) {
   const bool first = sampled_.labels.empty();
   geometry::ImageGeometry u = g;
   if (!first) {  // the union of what is sampled and g
-    const geometry::ImageGeometry& s = sampled_.geometry;
-    const Eigen::Vector3d hi =
-        (s.origin_mm +
-         s.spacing_mm.cwiseProduct(Eigen::Vector3d(s.size[0] - 1, s.size[1] - 1, s.size[2] - 1)))
-            .cwiseMax(g.origin_mm + g.spacing_mm.cwiseProduct(Eigen::Vector3d(
-                                        g.size[0] - 1, g.size[1] - 1, g.size[2] - 1)));
-    u = lattice_covering({s.origin_mm.cwiseMin(g.origin_mm), hi}, 0);
+    const geometry::Aabb s = sampled_.geometry.bounds_mm(), b = g.bounds_mm();
+    u = lattice_covering({s.min_mm.cwiseMin(b.min_mm), s.max_mm.cwiseMax(b.max_mm)}, 0);
   }
   geometry::LabelVolume next(u);
   const Eigen::Vector3i o = first ? Eigen::Vector3i::Zero() : offset_in(sampled_.geometry, u);

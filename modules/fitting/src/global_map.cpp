@@ -78,8 +78,11 @@ void gaussian_row(double t0, int n, double* g) {
     g[k] = g[k + 1] * factor;
 }
 
+/// A bump below this (of unit height) is left out of a field.
+constexpr double kLeastBump = 1e-6;
+
 /// The bumps of field `a` of `f` about q: the centres within 5.3 sigmas of q's other two
-/// coordinates (exp(-5.3^2 / 2) < 1e-6), rows i0..i1 along axis b, columns j0..j1 along c,
+/// coordinates (exp(-5.3^2 / 2) < kLeastBump), rows i0..i1 along axis b, columns j0..j1 along c,
 /// bump (i, j)'s value along_b[i - i0] * along_c[j - j0] and weight index first + i +
 /// stride * j. Empty (i0 > i1) without a grid.
 struct BumpWindow {
@@ -106,15 +109,15 @@ struct BumpWindow {
   }
 };
 
-/// Calls visit(index, value) for each bump of field `a` of `f` at q at least 1e-6, in a
-/// fixed order.
+/// Calls visit(index, value) for each bump of field `a` of `f` at q at least kLeastBump,
+/// in a fixed order.
 template <class Visit>
 void for_each_bump(const ShearFields& f, int a, const Eigen::Vector3d& q, Visit&& visit) {
   const BumpWindow w(f, a, q);
   for (int j = w.j0; j <= w.j1; ++j)
     for (int i = w.i0; i <= w.i1; ++i) {
       const double e = w.along_b[i - w.i0] * w.along_c[j - w.j0];
-      if (e >= 1e-6) visit(w.first + i + w.stride * j, e);
+      if (e >= kLeastBump) visit(w.first + i + w.stride * j, e);
     }
 }
 }  // namespace
@@ -126,19 +129,19 @@ void ShearFields::bumps(int a, const Eigen::Vector3d& q,
 }
 
 double ShearFields::field(int a, const Eigen::Vector3d& q) const {
-  // Summed as visited, without a list: it is called for every lattice site of a re-fill
-  // and every voxel an evaluation asks about.
-  // The bumps for_each_bump visits, a column at a time: along a column the values are
-  // unimodal, so those at least 1e-6 are a run, summed as one dot product.
+  // The bumps for_each_bump visits, without a list (it is called for every lattice site of
+  // a re-fill and every voxel an evaluation asks about) and a column at a time: along a
+  // column the values are unimodal, so those at least kLeastBump are a run, summed as one
+  // dot product.
   double f = 0;
   if (weights.size() == 0) return f;
   const BumpWindow w(*this, a, q);
   for (int j = w.j0; j <= w.j1; ++j) {
     const double c = w.along_c[j - w.j0];
     int lo = w.i0, hi = w.i1;
-    while (lo <= hi && w.along_b[lo - w.i0] * c < 1e-6)
+    while (lo <= hi && w.along_b[lo - w.i0] * c < kLeastBump)
       ++lo;
-    while (hi >= lo && w.along_b[hi - w.i0] * c < 1e-6)
+    while (hi >= lo && w.along_b[hi - w.i0] * c < kLeastBump)
       --hi;
     const double* weight = weights.data() + w.first + w.stride * j;
     double sum = 0;

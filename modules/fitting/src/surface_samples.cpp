@@ -54,38 +54,24 @@ SurfaceSamples reference_surface(const geometry::LabelVolume& reference,
                                  const geometry::SignedDistance& distance, int stride) {
   const geometry::ImageGeometry& g = reference.geometry;
   auto sd = [&](int i, int j, int k) { return distance.at_voxel(i, j, k); };
-  const std::vector<std::uint8_t> boundary = geometry::surface_of(reference);
-  // Each slice's samples on a thread, then the slices in order: the grid's order.
-  struct Slice {
-    std::vector<Eigen::Vector3d> pts, nrm;
-  };
-  std::vector<Slice> slices(static_cast<size_t>(g.size[2]));
-#pragma omp parallel for schedule(dynamic, 4)
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i) {
-        const auto v = static_cast<std::uint64_t>(g.linear_index(i, j, k));
-        if (!boundary[v] || !kept_one_in(stride, v)) continue;
-        Eigen::Vector3d grad((sd(i + 1, j, k) - sd(i - 1, j, k)) / (2 * g.spacing_mm.x()),
-                             (sd(i, j + 1, k) - sd(i, j - 1, k)) / (2 * g.spacing_mm.y()),
-                             (sd(i, j, k + 1) - sd(i, j, k - 1)) / (2 * g.spacing_mm.z()));
-        if (grad.norm() < 1e-9) continue;
-        grad = g.direction * grad;
-        const Eigen::Vector3d n = grad.normalized();
-        Slice& slice = slices[static_cast<size_t>(k)];
-        slice.pts.push_back(g.index_to_physical(Eigen::Vector3d(i, j, k)) - sd(i, j, k) * n);
-        slice.nrm.push_back(n);
-      }
-  Eigen::Index count = 0;
-  for (const Slice& slice : slices)
-    count += static_cast<Eigen::Index>(slice.pts.size());
+  std::vector<Eigen::Vector3d> pts, nrm;
+  for (const Eigen::Vector3i& voxel : geometry::surface_voxels(reference)) {
+    const int i = voxel.x(), j = voxel.y(), k = voxel.z();
+    if (!kept_one_in(stride, static_cast<std::uint64_t>(g.linear_index(i, j, k)))) continue;
+    Eigen::Vector3d grad((sd(i + 1, j, k) - sd(i - 1, j, k)) / (2 * g.spacing_mm.x()),
+                         (sd(i, j + 1, k) - sd(i, j - 1, k)) / (2 * g.spacing_mm.y()),
+                         (sd(i, j, k + 1) - sd(i, j, k - 1)) / (2 * g.spacing_mm.z()));
+    if (grad.norm() < 1e-9) continue;
+    grad = g.direction * grad;
+    const Eigen::Vector3d n = grad.normalized();
+    pts.push_back(g.index_to_physical(voxel.cast<double>()) - sd(i, j, k) * n);
+    nrm.push_back(n);
+  }
   SurfaceSamples s;
-  s.points.resize(3, count);
-  s.normals.resize(3, count);
-  Eigen::Index q = 0;
-  for (const Slice& slice : slices)
-    for (size_t m = 0; m < slice.pts.size(); ++m, ++q)
-      s.points.col(q) = slice.pts[m], s.normals.col(q) = slice.nrm[m];
+  s.points.resize(3, static_cast<Eigen::Index>(pts.size()));
+  s.normals.resize(3, static_cast<Eigen::Index>(pts.size()));
+  for (size_t q = 0; q < pts.size(); ++q)
+    s.points.col(q) = pts[q], s.normals.col(q) = nrm[q];
   return s;
 }
 

@@ -267,26 +267,30 @@ std::vector<std::uint8_t> surface_of(const LabelVolume& mask) {
   return s;
 }
 
-MaskSurface::MaskSurface(const LabelVolume& mask) {
+std::vector<Eigen::Vector3i> surface_voxels(const LabelVolume& mask) {
   const ImageGeometry& g = mask.geometry;
-  // Each slice's surface voxels on a thread, then the slices in order: the voxels come
-  // in the grid's order, as one pass would give them.
-  std::vector<std::vector<Eigen::Vector3d>> slices(static_cast<size_t>(g.size[2]));
+  // Each slice's voxels on a thread, then the slices in order: the grid's order, as one
+  // pass would give them.
+  std::vector<std::vector<Eigen::Vector3i>> slices(static_cast<size_t>(g.size[2]));
 #pragma omp parallel for schedule(dynamic, 4)
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
       for (int i = 0; i < g.size[0]; ++i)
         if (mask.at(i, j, k) && on_surface(mask, i, j, k))
-          slices[static_cast<size_t>(k)].push_back(
-              g.origin_mm + Eigen::Vector3d(i, j, k).cwiseProduct(g.spacing_mm));
-  size_t count = 0;
-  for (const auto& s : slices)
-    count += s.size();
-  points_.resize(3, static_cast<Eigen::Index>(count));
-  Eigen::Index c = 0;
-  for (const auto& s : slices)
-    for (const Eigen::Vector3d& p : s)
-      points_.col(c++) = p;
+          slices[static_cast<size_t>(k)].emplace_back(i, j, k);
+  std::vector<Eigen::Vector3i> out;
+  for (const auto& slice : slices)
+    out.insert(out.end(), slice.begin(), slice.end());
+  return out;
+}
+
+MaskSurface::MaskSurface(const LabelVolume& mask) {
+  const ImageGeometry& g = mask.geometry;
+  const std::vector<Eigen::Vector3i> voxels = surface_voxels(mask);
+  points_.resize(3, static_cast<Eigen::Index>(voxels.size()));
+  for (size_t v = 0; v < voxels.size(); ++v)
+    points_.col(static_cast<Eigen::Index>(v)) =
+        g.origin_mm + voxels[v].cast<double>().cwiseProduct(g.spacing_mm);
   // Cells of two voxels: the queries (the other surface's voxels) lie mostly within a
   // few voxels of this surface, and a cell then holds a handful of its voxels (cbrt(S)
   // cells a side held some 70 of a lung's 320,000).

@@ -54,6 +54,10 @@ bool inside_interpolated(const LabelVolume& mask, const Eigen::Vector3d& p_mm);
 /// The surface voxels of a mask (label != 0 with a face neighbour outside or off-grid).
 std::vector<std::uint8_t> surface_of(const LabelVolume& mask);
 
+/// The same voxels listed: their indices (i, j, k) in the grid's order (i fastest),
+/// found a slice per thread.
+std::vector<Eigen::Vector3i> surface_voxels(const LabelVolume& mask);
+
 struct SurfaceComparison {
   double msd_mm = 0;   ///< symmetric mean surface distance
   double hd95_mm = 0;  ///< symmetric 95th-percentile Hausdorff distance
