@@ -18,6 +18,12 @@ double volume_voxel_mm(double rho, double organ_volume_mm3) {
   return std::max(0.5 * rho, std::cbrt(organ_volume_mm3 / 8e6));
 }
 
+double p95_tolerance_mm(double radius_mm, double mean_tolerance_mm) {
+  // Half-normal residuals |n|, n ~ N(0, s^2): mean s sqrt(2 / pi), 95th percentile 1.96 s.
+  constexpr double kP95OverMean = 1.959964 / 0.7978846;
+  return std::max(radius_mm, kP95OverMean * mean_tolerance_mm);
+}
+
 namespace {
 
 double body_volume(const particles::Positions& x, double rho, double voxel_mm) {
@@ -87,7 +93,9 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
 
   FitOptions fo;
   fo.residual_mean_tolerance_mm = std::hypot(common.residual_tolerance_mm, residual_floor);
-  fo.residual_max_tolerance_mm = common.residual_max_tolerance_mm;
+  fo.residual_max_tolerance_mm = common.residual_max_tolerance_mm > 0
+                                      ? common.residual_max_tolerance_mm
+                                      : p95_tolerance_mm(rho, fo.residual_mean_tolerance_mm);
   fo.kinetic_tolerance = common.kinetic_tolerance;
   fo.max_steps = common.max_steps;
   fo.max_wall_s = common.max_wall_s;
@@ -95,6 +103,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   fo.volume = [&](const particles::Positions& x) { return body_volume(x, rho, volume_voxel); };
   fo.volume_every_rows = 1;
   report.residual_tolerance_mm = fo.residual_mean_tolerance_mm;
+  report.residual_p95_tolerance_mm = fo.residual_max_tolerance_mm;
 
   particles::ForceTerm* data_term = nullptr;
   std::function<const std::vector<int>&(const particles::Positions&)> skin_of;

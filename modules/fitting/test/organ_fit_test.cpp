@@ -6,19 +6,22 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <random>
+#include <vector>
 
 #include "organfit/particles/lattice_fill.h"
 
 namespace organfit::fitting {
 namespace {
 
-/// An ellipsoid of 36 x 28 x 24 mm filled at rho = 1.85 mm (about 1,200 particles) with
+/// An ellipsoid of 36 x 28 x 24 mm filled at rho (mm; 1.85: about 1,200 particles) with
 /// the scene's default model settings, not relaxed (the lattice is at its equilibrium).
-OrganModel ellipsoid_model() {
+OrganModel ellipsoid_model(double rho_mm = 1.85) {
   OrganModel m;
   ModelSettings& s = m.settings;
-  s.radius_mm = 1.85, s.cohesion_energy = 1, s.exponent_m = 6, s.exponent_n = 12;
+  s.radius_mm = rho_mm, s.cohesion_energy = 1, s.exponent_m = 6, s.exponent_n = 12;
   s.cutoff_r0 = 2.5, s.floor_r0 = 0.5, s.mass = 1, s.damping_ratio = 0.5;
   s.neighbour_skin_r0 = 0.3, s.time_step_fraction = 0.1;
   s.skeleton = false, s.skeleton_stiffness = 0.2, s.skeleton_node_spacing_r0 = 3;
@@ -104,6 +107,41 @@ TEST(FitSpread, RefusesAStretchBeyondThePlausibleAndReturnsTheModelAsItCame) {
   EXPECT_FALSE(fitted.after.has_value());
   EXPECT_EQ(fitted.model.state.x, planning.state.x);
   EXPECT_EQ(fitted.model.model->terms().size(), planning.model->terms().size());
+}
+
+// Residuals of mean m that are a noise's are half-normal: 95th percentile 2.46 m.
+TEST(P95Tolerance, IsTheRadiusOrTheNoisesOwn95thPercentileWhicheverIsLarger) {
+  EXPECT_DOUBLE_EQ(p95_tolerance_mm(1.85, 0.5), 1.85);
+  EXPECT_NEAR(p95_tolerance_mm(0.75, 0.5), 0.5 * 1.959964 * std::sqrt(M_PI / 2), 1e-6);
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> noise(0.0, 0.5);
+  std::vector<double> r(200000);
+  for (double& v : r)
+    v = std::abs(noise(rng));
+  double mean = 0;
+  for (double v : r)
+    mean += v / static_cast<double>(r.size());
+  std::nth_element(r.begin(), r.begin() + 190000, r.end());
+  EXPECT_NEAR(p95_tolerance_mm(0, mean), r[190000], 0.01 * r[190000]);
+}
+
+// Small particles, noisy points: 95% of the residuals within rho (0.7 mm) is more than
+// points of 0.5 mm noise can give (their own 95th percentile is 0.98 mm); the tolerance
+// is the noise's, and the fit converges.
+TEST(FitSpread, ConvergesOnPointsNoisierThanTheParticleRadius) {
+  const OrganModel planning = ellipsoid_model(0.7);
+  std::vector<AttractivePoint> points = stretched_surface(1.05, 400);
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> noise(0.0, 0.5);
+  for (auto& p : points)
+    p.p_mm += p.p_mm.normalized() * noise(rng);
+  const FittedOrgan fitted = fit_spread(copy_model(planning), points, default_spread_options());
+  const FitReport& r = fitted.report;
+  EXPECT_DOUBLE_EQ(r.residual_p95_tolerance_mm, p95_tolerance_mm(0.7, r.residual_tolerance_mm));
+  EXPECT_GT(r.residual_p95_tolerance_mm, 0.7 * 1.5);
+  EXPECT_TRUE(r.fit.converged) << r.fit.stop_reason << ", p95 " << r.fit.residual_p95_mm;
+  EXPECT_LE(r.fit.residual_p95_mm, r.residual_p95_tolerance_mm);
+  EXPECT_GT(r.fit.residual_p95_mm, 0.7);  // beyond rho: the old criterion could not be met
 }
 
 TEST(FitPaper, RejectsBadPointsBeforeAnything) {

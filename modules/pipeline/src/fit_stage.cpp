@@ -117,6 +117,7 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
                       {"residual_mean_mm", r.fit.residual_mean_mm},
                       {"residual_floor_mm", r.residual_floor_mm},
                       {"residual_tolerance_mm", r.residual_tolerance_mm},
+                      {"residual_p95_tolerance_mm", r.residual_p95_tolerance_mm},
                       {"residual_max_mm", r.fit.residual_max_mm},
                       {"residual_p95_mm", r.fit.residual_p95_mm},
                       {"volume_before_mm3", r.volume_before_mm3},
@@ -302,18 +303,18 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
     for (size_t k = 0; k < report.fit.residuals_mm.size(); ++k)
       worst.push_back({report.fit.residuals_mm[k], static_cast<int>(k)});
     std::sort(worst.rbegin(), worst.rend());
+    const double far_mm = report.residual_p95_tolerance_mm;
     int far = 0;
     for (const auto& [r, k] : worst)
-      far += r > rho;
+      far += r > far_mm;
     std::string list;
     for (size_t w = 0; w < std::min<size_t>(5, worst.size()); ++w)
       list += fmt::format("{}#{} ({:.2f} mm)", w ? ", " : "", worst[w].second, worst[w].first);
     out.not_converged_message = fmt::format(
-        "fit did not converge ({}): mean residual {:.2f} mm (tolerance {:.2f}), {} of {} points "
-        "farther than "
-        "{:.2f} mm; worst: {}",
-        report.fit.stop_reason, report.fit.residual_mean_mm, report.residual_tolerance_mm, far,
-        points.size(), rho, list);
+        "fit did not converge ({}): mean residual {:.2f} mm (tolerance {:.2f}), 95th percentile "
+        "{:.2f} mm (tolerance {:.2f}: {} of {} points farther); worst: {}",
+        report.fit.stop_reason, report.fit.residual_mean_mm, report.residual_tolerance_mm,
+        report.fit.residual_p95_mm, far_mm, far, points.size(), list);
   }
   if (out.deformation_folds)
     out.not_converged_message =

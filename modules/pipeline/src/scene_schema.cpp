@@ -22,7 +22,8 @@ const config::Binding<fitting::OrganFitOptions>& fit() {
           .number("residual_tolerance_mm", &O::residual_tolerance_mm, "mm", 0.0, none,
                   "converged when the mean data residual is at most this", true)
           .number("residual_max_tolerance_mm", &O::residual_max_tolerance_mm, "mm", 0.0, none,
-                  "... and the 95th percentile at most this (0 = the particle radius)")
+                  "... and the 95th percentile at most this (0 = the particle radius, or 2.46 x "
+                  "the mean's tolerance where larger: what points of that noise give)")
           .integer("max_steps", &O::max_steps, 1, 100000000, "step budget")
           .number("max_wall_s", &O::max_wall_s, "s", 0.0, none, "wall-time budget", true)
           .integer("record_every", &O::record_every, 1, 100000, "steps between history rows")
