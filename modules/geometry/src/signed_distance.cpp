@@ -84,24 +84,38 @@ void SignedDistance::smooth() {
   // Binomial 1-4-6-4-1 along each axis (a Gaussian of one voxel), ends clamped: it leaves
   // a linear field unchanged and takes the voxel steps out of a slanted boundary.
   const ImageGeometry& g = geometry_;
-  if (std::any_of(values_.begin(), values_.end(), [](double v) { return !std::isfinite(v); }))
-    return;  // no boundary: nothing to smooth
+  const long long total = static_cast<long long>(values_.size());
+  bool finite = true;
+#pragma omp parallel for schedule(static) reduction(&& : finite)
+  for (long long v = 0; v < total; ++v)
+    finite = finite && std::isfinite(values_[static_cast<size_t>(v)]);
+  if (!finite) return;  // no boundary: nothing to smooth
   std::vector<double> out(values_.size());
   const double weight[5] = {1 / 16.0, 4 / 16.0, 6 / 16.0, 4 / 16.0, 1 / 16.0};
+  const long long stride[3] = {1, g.size[0], 1LL * g.size[0] * g.size[1]};
   for (int axis = 0; axis < 3; ++axis) {
-#pragma omp parallel for schedule(static)
+    const int n = g.size[axis];
+    const long long s = stride[axis];
+    const double* in = values_.data();
+#pragma omp parallel for schedule(static) collapse(2)
     for (int k = 0; k < g.size[2]; ++k)
-      for (int j = 0; j < g.size[1]; ++j)
+      for (int j = 0; j < g.size[1]; ++j) {
+        const long long row = g.linear_index(0, j, k);
+        const int at_jk[3] = {0, j, k};
         for (int i = 0; i < g.size[0]; ++i) {
+          const long long v = row + i;
+          const int t = axis == 0 ? i : at_jk[axis];  // the voxel's place along the axis
           double sum = 0;
-          for (int o = -2; o <= 2; ++o) {
-            int idx[3] = {i, j, k};
-            idx[axis] = std::clamp(idx[axis] + o, 0, g.size[axis] - 1);
-            sum += weight[o + 2] *
-                   values_[static_cast<size_t>(g.linear_index(idx[0], idx[1], idx[2]))];
+          if (t >= 2 && t + 2 < n) {  // inside: no end to clamp at
+            for (int o = -2; o <= 2; ++o)
+              sum += weight[o + 2] * in[v + o * s];
+          } else {
+            for (int o = -2; o <= 2; ++o)
+              sum += weight[o + 2] * in[v + (std::clamp(t + o, 0, n - 1) - t) * s];
           }
-          out[static_cast<size_t>(g.linear_index(i, j, k))] = sum;
+          out[static_cast<size_t>(v)] = sum;
         }
+      }
     values_.swap(out);
   }
 }
@@ -128,11 +142,16 @@ double SignedDistance::at(const Eigen::Vector3d& p_mm, Eigen::Vector3d* gradient
     base[c] = std::min(static_cast<int>(std::floor(inside[c])), std::max(0, g.size[c] - 2));
     f[c] = inside[c] - base[c];
   }
+  // The cell's corners: base + 0 or 1 along each axis, the same voxel along an axis of
+  // one voxel (as at_voxel's clamping would give).
+  const long long step[3] = {g.size[0] > 1 ? 1 : 0, g.size[1] > 1 ? g.size[0] : 0,
+                             g.size[2] > 1 ? 1LL * g.size[0] * g.size[1] : 0};
+  const double* corner0 = values_.data() + g.linear_index(base[0], base[1], base[2]);
   double value = 0;
   Eigen::Vector3d d_index = Eigen::Vector3d::Zero();  // d value / d index
   for (int corner = 0; corner < 8; ++corner) {
     const int di = corner & 1, dj = (corner >> 1) & 1, dk = (corner >> 2) & 1;
-    const double v = at_voxel(base[0] + di, base[1] + dj, base[2] + dk);
+    const double v = corner0[di * step[0] + dj * step[1] + dk * step[2]];
     const double wx = di ? f[0] : 1 - f[0], wy = dj ? f[1] : 1 - f[1], wz = dk ? f[2] : 1 - f[2];
     value += wx * wy * wz * v;
     d_index[0] += (di ? 1 : -1) * wy * wz * v;
