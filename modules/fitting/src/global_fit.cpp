@@ -52,11 +52,14 @@ double point_to_plane_rms(const GlobalMap& map, const MappedSamples& mapped,
   const Eigen::Matrix3Xd& moved = mapped.full;
   const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
   std::vector<double> r(points.size()), w;
-  const geometry::SampleGrid grid(moved);
-  for (size_t k = 0; k < points.size(); ++k) {
-    const int j = grid.nearest(points[k].p_mm).first;
-    r[k] = std::abs(
-        (normal_map * surface.normals.col(j)).normalized().dot(points[k].p_mm - moved.col(j)));
+  const geometry::SampleGrid grid(moved, geometry::SampleGrid::surface_cell_mm(moved));
+  const auto m = static_cast<long long>(points.size());
+#pragma omp parallel for schedule(static)
+  for (long long k = 0; k < m; ++k) {
+    const Eigen::Vector3d& p = points[static_cast<size_t>(k)].p_mm;
+    const int j = grid.nearest(p).first;
+    r[static_cast<size_t>(k)] =
+        std::abs((normal_map * surface.normals.col(j)).normalized().dot(p - moved.col(j)));
   }
   return robust_weights(r, points, mads, w);
 }

@@ -5,6 +5,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <numeric>
 #include <optional>
@@ -125,10 +126,12 @@ double robust_weights(const std::vector<double>& r, const std::vector<Attractive
 
 double nearest_sample_rms(const MappedSamples& mapped, const std::vector<AttractivePoint>& points,
                           double mads) {
-  const geometry::SampleGrid grid(mapped.full);  // holds a reference to the samples
+  const geometry::SampleGrid grid(mapped.full, geometry::SampleGrid::surface_cell_mm(mapped.full));
   std::vector<double> r(points.size()), w;
-  for (size_t k = 0; k < points.size(); ++k)
-    r[k] = std::sqrt(grid.nearest(points[k].p_mm).second);
+  const auto m = static_cast<long long>(points.size());
+#pragma omp parallel for schedule(static)
+  for (long long k = 0; k < m; ++k)
+    r[static_cast<size_t>(k)] = std::sqrt(grid.nearest(points[static_cast<size_t>(k)].p_mm).second);
   return robust_weights(r, points, mads, w);
 }
 
@@ -175,7 +178,8 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
   std::vector<double> r(m), w(m);
   auto correspond = [&](const Eigen::Matrix3d& a, const Eigen::Vector3d& t) {
     const Eigen::Matrix3Xd moved = (a * surface.points).colwise() + t;
-    const geometry::SampleGrid grid(moved);
+    const geometry::SampleGrid grid(moved, geometry::SampleGrid::surface_cell_mm(moved));
+#pragma omp parallel for schedule(static)
     for (int k = 0; k < m; ++k) {
       const auto [j, d2] = grid.nearest(p.col(k));
       r[k] = std::sqrt(d2);
@@ -315,9 +319,11 @@ std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& su
                  lambda_c = lambda_c_final * schedule.factor();
     const Eigen::Matrix3Xd affine_img = (map.affine.a * surface.points).colwise() + map.affine.t;
     Eigen::Matrix3Xd moved(3, affine_img.cols());
+#pragma omp parallel for schedule(static)
     for (Eigen::Index j = 0; j < affine_img.cols(); ++j)
       moved.col(j) = map.shears.apply(affine_img.col(j));
-    const geometry::SampleGrid grid(moved);
+    const geometry::SampleGrid grid(moved, geometry::SampleGrid::surface_cell_mm(moved));
+#pragma omp parallel for schedule(static)
     for (int k = 0; k < m; ++k) {
       const auto [j, d2] = grid.nearest(p.col(k));
       r[k] = std::sqrt(d2);
@@ -410,6 +416,7 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
     const Eigen::Matrix3d b = g.affine.a.inverse();
     r.resize(m);
     if (jac) jac->resize(m, n);
+#pragma omp parallel for schedule(static)
     for (int k = 0; k < m; ++k) {
       const auto [rk, q, gp, nu] = mapped_distance(g, b, distance, points[k].p_mm);
       r(k) = rk;
@@ -466,14 +473,15 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
   return ends;
 }
 
-RidgeSystem::RidgeSystem(const Eigen::MatrixXd& jac, const Eigen::VectorXd& w, double lambda)
+RidgeSystem::RidgeSystem(const Eigen::MatrixXd& jac, const Eigen::VectorXd& w, double lambda,
+                         const std::vector<int>* row_order)
     : jac_(jac), w_(w), lambda_(lambda), in_points_(jac.rows() < jac.cols()) {
   if (in_points_) {
     Eigen::MatrixXd s = jac * jac.transpose() * w.asDiagonal();
     s.diagonal().array() += lambda;
     lu_.compute(s);
   } else {
-    llt_.compute(normal_matrix(jac, w, lambda));
+    llt_.compute(normal_matrix(jac, w, lambda, row_order));
   }
 }
 
@@ -496,30 +504,106 @@ double RidgeSystem::effective_dof() const {
 }
 
 Eigen::MatrixXd RidgeSystem::normal_matrix(const Eigen::MatrixXd& jac, const Eigen::VectorXd& w,
-                                           double lambda) {
-  // Each thread sums its own rows; the parts are added in thread order afterwards, so the
-  // sum is the same from run to run.
+                                           double lambda, const std::vector<int>* row_order) {
+  // Row by row, J^T W J is a rank-one update per point over its nonzeros (a fifth of a
+  // lung's 1,596 heights): 25,000 entries of an n x n matrix read and written per point,
+  // bound by memory. Rows taken in groups instead, the consecutive ones (in row_order)
+  // whose nonzeros' union stays within 1.5 times the largest row's: a group's block
+  // G^T W G is one dense product over that union, added to the matrix once.
   const Eigen::Index m = jac.rows(), n = jac.cols();
+  std::vector<int> rows;
+  if (row_order) {
+    for (int k : *row_order)
+      if (w(k) != 0) rows.push_back(k);
+  } else {
+    for (Eigen::Index k = 0; k < m; ++k)
+      if (w(k) != 0) rows.push_back(static_cast<int>(k));
+  }
+  // Each row's nonzeros (column, value), read down J's columns (contiguous), a run of
+  // rows per thread.
+  std::vector<std::vector<std::pair<int, double>>> by_row(static_cast<size_t>(m));
+#pragma omp parallel
+  {
+    const int threads = omp_get_num_threads(), me = omp_get_thread_num();
+    const Eigen::Index lo = m * me / threads, hi = m * (me + 1) / threads;
+    for (Eigen::Index c = 0; c < n; ++c) {
+      const double* column = jac.col(c).data();
+      for (Eigen::Index k = lo; k < hi; ++k)
+        if (column[k] != 0) by_row[static_cast<size_t>(k)].push_back({static_cast<int>(c), column[k]});
+    }
+  }
+  std::vector<std::vector<std::pair<int, double>>> nonzeros(rows.size());
+  for (size_t r = 0; r < rows.size(); ++r)
+    nonzeros[r] = std::move(by_row[static_cast<size_t>(rows[r])]);
+  // Groups: [starts[g], starts[g + 1]) of `rows`.
+  constexpr size_t kMostRows = 64;
+  constexpr double kUnionOverRow = 1.5;
+  std::vector<size_t> starts;
+  {
+    std::vector<char> in_union(static_cast<size_t>(n), 0);
+    std::vector<int> members;
+    size_t largest = 0;
+    for (size_t r = 0; r < rows.size(); ++r) {
+      const auto& nz = nonzeros[r];
+      size_t added = 0;
+      for (const auto& [c, value] : nz)
+        added += !in_union[static_cast<size_t>(c)];
+      const size_t larger = std::max(largest, nz.size());
+      const bool fits = !starts.empty() && r - starts.back() < kMostRows &&
+                        static_cast<double>(members.size() + added) <= kUnionOverRow * larger;
+      if (!fits) {
+        for (int c : members)
+          in_union[static_cast<size_t>(c)] = 0;
+        members.clear(), largest = 0;
+        starts.push_back(r);
+      }
+      for (const auto& [c, value] : nz)
+        if (!in_union[static_cast<size_t>(c)]) in_union[static_cast<size_t>(c)] = 1, members.push_back(c);
+      largest = std::max(largest, nz.size());
+    }
+    starts.push_back(rows.size());
+  }
+  const auto groups = static_cast<long long>(starts.size()) - 1;
+  // Each thread sums its own groups; the parts are added in thread order afterwards, so
+  // the sum is the same from run to run.
   std::vector<Eigen::MatrixXd> parts;
 #pragma omp parallel
   {
 #pragma omp single
     parts.assign(static_cast<size_t>(omp_get_num_threads()), Eigen::MatrixXd::Zero(n, n));
     Eigen::MatrixXd& part = parts[static_cast<size_t>(omp_get_thread_num())];
-    std::vector<Eigen::Index> at;
-    std::vector<double> value;
+    std::vector<int> local(static_cast<size_t>(n), -1), columns;
+    Eigen::MatrixXd g, gw, block;
 #pragma omp for schedule(static)
-    for (Eigen::Index k = 0; k < m; ++k) {
-      if (w(k) == 0) continue;
-      at.clear(), value.clear();
-      for (Eigen::Index c = 0; c < n; ++c)
-        if (jac(k, c) != 0) at.push_back(c), value.push_back(jac(k, c));
-      for (size_t b = 0; b < at.size(); ++b) {  // the lower triangle, column by column
-        const double wb = w(k) * value[b];
-        double* column = part.col(at[b]).data();
-        for (size_t a = b; a < at.size(); ++a)
-          column[at[a]] += wb * value[a];
+    for (long long group = 0; group < groups; ++group) {
+      const size_t first = starts[static_cast<size_t>(group)];
+      const size_t last = starts[static_cast<size_t>(group) + 1];
+      columns.clear();
+      for (size_t r = first; r < last; ++r)
+        for (const auto& [c, value] : nonzeros[r])
+          if (local[static_cast<size_t>(c)] < 0)
+            local[static_cast<size_t>(c)] = 0, columns.push_back(c);
+      std::sort(columns.begin(), columns.end());  // the block's lower triangle is the matrix's
+      const auto u = static_cast<Eigen::Index>(columns.size());
+      for (Eigen::Index a = 0; a < u; ++a)
+        local[static_cast<size_t>(columns[static_cast<size_t>(a)])] = static_cast<int>(a);
+      const auto height = static_cast<Eigen::Index>(last - first);
+      g.setZero(height, u);
+      for (size_t r = first; r < last; ++r)
+        for (const auto& [c, value] : nonzeros[r])
+          g(static_cast<Eigen::Index>(r - first), local[static_cast<size_t>(c)]) = value;
+      gw = g;
+      for (size_t r = first; r < last; ++r)
+        gw.row(static_cast<Eigen::Index>(r - first)) *= w(rows[r]);
+      block.setZero(u, u);
+      block.triangularView<Eigen::Lower>() += g.transpose() * gw;
+      for (Eigen::Index b = 0; b < u; ++b) {
+        double* column = part.col(columns[static_cast<size_t>(b)]).data();
+        for (Eigen::Index a = b; a < u; ++a)
+          column[columns[static_cast<size_t>(a)]] += block(a, b);
       }
+      for (int c : columns)
+        local[static_cast<size_t>(c)] = -1;
     }
   }
   Eigen::MatrixXd s = std::move(parts[0]);
@@ -529,13 +613,43 @@ Eigen::MatrixXd RidgeSystem::normal_matrix(const Eigen::MatrixXd& jac, const Eig
   return s;  // its lower triangle: what Cholesky reads
 }
 
+std::vector<int> spatial_order(const std::vector<AttractivePoint>& points) {
+  std::vector<int> order(points.size());
+  if (points.empty()) return order;
+  Eigen::Vector3d lo = points[0].p_mm;
+  for (const auto& p : points)
+    lo = lo.cwiseMin(p.p_mm);
+  // 21 bits a coordinate: 1 mm cells over 2 km.
+  auto spread = [](std::uint64_t v) {
+    v &= 0x1fffff;
+    v = (v | v << 32) & 0x1f00000000ffffULL;
+    v = (v | v << 16) & 0x1f0000ff0000ffULL;
+    v = (v | v << 8) & 0x100f00f00f00f00fULL;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+    v = (v | v << 2) & 0x1249249249249249ULL;
+    return v;
+  };
+  std::vector<std::uint64_t> code(points.size());
+  for (size_t k = 0; k < points.size(); ++k) {
+    const Eigen::Vector3d c = (points[k].p_mm - lo).cwiseMax(0.0).cwiseMin(2e6);
+    code[k] = spread(static_cast<std::uint64_t>(c.x())) |
+              spread(static_cast<std::uint64_t>(c.y())) << 1 |
+              spread(static_cast<std::uint64_t>(c.z())) << 2;
+    order[k] = static_cast<int>(k);
+  }
+  std::stable_sort(order.begin(), order.end(),
+                   [&code](int a, int b) { return code[static_cast<size_t>(a)] < code[static_cast<size_t>(b)]; });
+  return order;
+}
+
 namespace {
 /// A part of the map that is linear, to first order, in its parameters (the shear fields'
 /// heights, the flow's potentials), fitted with the rest held: robust Gauss-Newton on the
 /// points' mapped_distance, Geman-McClure weights of scale distance_scale_mm, the
 /// parameters pulled towards none by `lambda` (ridge; solved in the points' space when
 /// they outnumber the points). `parameters(g)` is the part's vector in map g; `row(g, p, d,
-/// jac_row)` writes point p's row of d r / d parameters (d: its MappedDistance).
+/// jac_row)` writes point p's row of d r / d parameters (d: its MappedDistance); rows are
+/// made on threads, so `row` keeps no state between calls.
 template <class Parameters, class Row>
 GlobalMap fit_linearised_part(GlobalMap map, const geometry::SignedDistance& distance,
                               const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
@@ -551,6 +665,7 @@ GlobalMap fit_linearised_part(GlobalMap map, const geometry::SignedDistance& dis
     const Eigen::Matrix3d b = g.affine.a.inverse();
     r.resize(m);
     if (jac) jac->setZero(m, n);
+#pragma omp parallel for schedule(static)
     for (int k = 0; k < m; ++k) {
       const MappedDistance d = mapped_distance(g, b, distance, points[k].p_mm);
       r(k) = d.r;
@@ -560,12 +675,13 @@ GlobalMap fit_linearised_part(GlobalMap map, const geometry::SignedDistance& dis
   auto objective = [&](const GlobalMap& g, const VecX& r) {
     return 0.5 * geman_mcclure(points, r, c2) + 0.5 * lambda * parameters(g).squaredNorm();
   };
+  const std::vector<int> order = spatial_order(points);
   VecX r;
   Eigen::MatrixXd jac;
   robust_gauss_newton(
       map, r, jac, points, c2, o.iterations,
       [&](const GlobalMap& g, const VecX& w) -> VecX {
-        return -RidgeSystem(jac, w, lambda)
+        return -RidgeSystem(jac, w, lambda, &order)
                     .solve(jac.transpose() * w.cwiseProduct(r) + lambda * parameters(g));
       },
       [&](const GlobalMap& g, const VecX& step, double alpha) {
@@ -575,7 +691,7 @@ GlobalMap fit_linearised_part(GlobalMap map, const geometry::SignedDistance& dis
       },
       residuals, objective);
   const VecX w = geman_mcclure_weights(points, r, c2);
-  effective_dof = RidgeSystem(jac, w, lambda).effective_dof();
+  effective_dof = RidgeSystem(jac, w, lambda, &order).effective_dof();
   return map;
 }
 }  // namespace
@@ -586,11 +702,11 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
                            double& effective_dof) {
   map.fields = ShearFields::over(mapped_surface.rowwise().minCoeff(),
                                  mapped_surface.rowwise().maxCoeff(), o.field_sigma_mm);
-  std::vector<std::pair<int, double>> near;
   return fit_linearised_part(
       std::move(map), distance, points, o, std::max(o.field_stiffness, 1e-9),
       [](auto& g) -> auto& { return g.fields.weights; },
       [&](const GlobalMap& g, const Eigen::Vector3d& p, const MappedDistance& d, auto jac_row) {
+        std::vector<std::pair<int, double>> near;  // a point's own: rows on threads
         for (int a = 0; a < 3; ++a) {  // field a's bumps move p along a
           g.fields.bumps(a, p, near);
           for (const auto& [index, value] : near)
@@ -613,7 +729,6 @@ GlobalMap fit_flow(GlobalMap map, const geometry::SignedDistance& distance,
     effective_dof = 0;
     return map;
   }
-  std::vector<std::pair<int, Eigen::Vector3d>> near;
   // d r / d a_n = -(gp x g_n) / nu: the flow's inverse moves p by -v(p) to first order,
   // and v(p) = sum_n g_n x a_n.
   return fit_linearised_part(
@@ -621,6 +736,7 @@ GlobalMap fit_flow(GlobalMap map, const geometry::SignedDistance& distance,
       std::max(o.field_stiffness, 1e-9) * IncompressibleFlow::stiffness_per_field_stiffness(),
       [](auto& g) -> auto& { return g.flow.potentials; },
       [&](const GlobalMap& g, const Eigen::Vector3d& p, const MappedDistance& d, auto jac_row) {
+        std::vector<std::pair<int, Eigen::Vector3d>> near;  // a point's own: rows on threads
         g.flow.basis_gradients(p, near);
         for (const auto& [node, gradient] : near)
           jac_row.template segment<3>(3 * node) = -d.gp.cross(gradient).transpose() / d.nu;

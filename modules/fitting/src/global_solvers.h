@@ -22,10 +22,13 @@ namespace organfit::fitting::detail {
 /// over each row's nonzeros alone (a point touches the bumps within 5.3 sigmas of it, a
 /// fifth of a lung's 1,767 heights: the dense product took 31 GFLOP a step), and the
 /// symmetric positive definite matrix is factored by Cholesky. Holds references to J and
-/// w (m x n and m, w >= 0; lambda > 0).
+/// w (m x n and m, w >= 0; lambda > 0). `row_order` (optional): the rows in an order in
+/// which neighbours share most of their nonzeros (points sorted in space: spatial_order);
+/// it only sets how the sum is grouped, not what it is.
 class RidgeSystem {
  public:
-  RidgeSystem(const Eigen::MatrixXd& jac, const Eigen::VectorXd& w, double lambda);
+  RidgeSystem(const Eigen::MatrixXd& jac, const Eigen::VectorXd& w, double lambda,
+              const std::vector<int>* row_order = nullptr);
   /// (J^T W J + lambda I)^-1 g
   Eigen::VectorXd solve(const Eigen::VectorXd& g) const;
   /// The effective number of unknowns, tr(J (J^T W J + lambda I)^-1 J^T W): the size of
@@ -33,9 +36,9 @@ class RidgeSystem {
   double effective_dof() const;
 
  private:
-  /// J^T W J + lambda I from each row's nonzeros, on threads; its lower triangle.
+  /// J^T W J + lambda I from the rows' nonzeros, on threads; its lower triangle.
   static Eigen::MatrixXd normal_matrix(const Eigen::MatrixXd& jac, const Eigen::VectorXd& w,
-                                       double lambda);
+                                       double lambda, const std::vector<int>* row_order);
   const Eigen::MatrixXd& jac_;
   const Eigen::VectorXd& w_;
   double lambda_;
@@ -43,6 +46,10 @@ class RidgeSystem {
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;  // in the points' space
   Eigen::LLT<Eigen::MatrixXd> llt_;          // in the unknowns' space
 };
+
+/// The points' indices in Z order (Morton order of their 1 mm cells): consecutive indices
+/// lie close in space at every scale, so their rows of a local basis share their nonzeros.
+std::vector<int> spatial_order(const std::vector<AttractivePoint>& points);
 
 /// Weights by the outlier rule (robust.h, on the residuals r): outliers get none, the
 /// others their confidence. Returns the RMS of the kept residuals.

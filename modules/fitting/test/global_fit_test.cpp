@@ -310,9 +310,16 @@ TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
   const geometry::SampleGrid grid(s.points);
   std::mt19937 rng(5);
   std::normal_distribution<double> g(0.0, 1.0);
-  // The default cells, cells of 0.7 mm (a few samples each), and cells so small that
-  // the 64-a-sample cap sets them.
-  for (double cell_mm : {0.0, 0.7, 1e-3}) {
+  // The default cells, cells of 0.7 mm (a few samples each), cells so small that the
+  // 64-a-sample cap sets them, and the surface's own (about 4 samples an occupied cell:
+  // smaller than the default's, larger than the samples' spacing).
+  const double surface_cell = geometry::SampleGrid::surface_cell_mm(s.points);
+  const double default_cell =
+      (s.points.rowwise().maxCoeff() - s.points.rowwise().minCoeff()).maxCoeff() /
+      std::cbrt(static_cast<double>(s.points.cols()));
+  EXPECT_LT(surface_cell, default_cell);
+  EXPECT_GT(surface_cell, 0.3);
+  for (double cell_mm : {0.0, 0.7, 1e-3, surface_cell}) {
     const geometry::SampleGrid sized(s.points, cell_mm);
     for (double scale : {0.0, 0.5, 2.6, 40.0}) {
       for (int q = 0; q < 200; ++q) {

@@ -13,8 +13,10 @@ namespace organfit::geometry {
 /// Nearest-sample queries among surface samples, bucketed on a grid of cubic cells:
 /// exact (ties go to the lower index, as a scan would), and O(points x a few cells)
 /// instead of O(points x samples): the fits ask it every iteration. By default about
-/// cbrt(S) cells a side; a caller whose queries lie near dense samples (a surface's
-/// voxels against another's) asks for smaller cells, fewer samples a cell.
+/// cbrt(S) cells a side (a query deep inside a surface searches few rings of them); a
+/// caller whose queries lie near dense samples (a surface's voxels against another's,
+/// points near the surface they are fitted to) asks for smaller cells, fewer samples a
+/// cell (surface_cell_mm).
 class SampleGrid {
  public:
   /// `cell_mm` > 0: cells of that size (mm), or larger where that would make more than
@@ -45,6 +47,32 @@ class SampleGrid {
     for (Eigen::Index j = 0; j < n; ++j)  // by cell, ascending index within a cell
       order_[static_cast<size_t>(fill[static_cast<size_t>(cell[static_cast<size_t>(j)])]++)] =
           static_cast<int>(j);
+  }
+
+  /// A cell size (mm) for queries near samples on a surface: about 4 samples an occupied
+  /// cell. The default cells hold about cbrt(S) each there (a surface fills few of them),
+  /// a few hundred tested a query; a surface's count a cell goes as the cell's area.
+  static double surface_cell_mm(const Eigen::Matrix3Xd& samples) {
+    const Eigen::Index n = samples.cols();
+    if (n == 0) return 1;
+    const Eigen::Vector3d lo = samples.rowwise().minCoeff();
+    const Eigen::Vector3d extent = samples.rowwise().maxCoeff() - lo;
+    const double h = std::max(extent.maxCoeff() / std::max(1.0, std::cbrt(static_cast<double>(n))), 1e-6);
+    Eigen::Vector3i dim;
+    for (int c = 0; c < 3; ++c)
+      dim[c] = std::min(1024, static_cast<int>(extent[c] / h) + 1);
+    std::vector<char> occupied(static_cast<size_t>(dim[0]) * dim[1] * dim[2], 0);
+    long long count = 0;
+    for (Eigen::Index j = 0; j < n; ++j) {
+      size_t cell = 0;
+      for (int c = 2; c >= 0; --c)
+        cell = cell * static_cast<size_t>(dim[c]) +
+               static_cast<size_t>(std::min(dim[c] - 1, static_cast<int>((samples(c, j) - lo[c]) / h)));
+      count += !occupied[cell];
+      occupied[cell] = 1;
+    }
+    const double per_cell = static_cast<double>(n) / static_cast<double>(count);
+    return per_cell > 4 ? h * std::sqrt(4 / per_cell) : h;
   }
 
   /// The nearest sample to q and the squared distance (mm^2), searched within `reach_mm`
