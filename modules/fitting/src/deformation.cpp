@@ -101,7 +101,9 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& s
               static_cast<size_t>(cc.x() + b.dims.x() * (cc.y() + b.dims.y() * cc.z()));
           for (int k = b.start[cell]; k < b.start[cell + 1]; ++k) {
             const Eigen::Vector3d d = sorted.current.col(k) - q;
-            const double s = d.squaredNorm() / h2;
+            const double d2 = d.squaredNorm();
+            if (d2 >= h2) continue;  // beyond h (without a division: most candidates are)
+            const double s = d2 / h2;
             if (s >= 1) continue;
             const double w = (1 - s) * (1 - s) * (1 - s);
             const Eigen::Vector4d phi(1, d.x() / h, d.y() / h, d.z() / h);

@@ -65,7 +65,7 @@ FitResult run_fit(
   double v0 = 0;
   if (o.volume) {
     const auto t0 = Clock::now();
-    v0 = o.volume(state.x);
+    v0 = o.volume_at_start_mm3 > 0 ? o.volume_at_start_mm3 : o.volume(state.x);
     instrument_s += std::chrono::duration<double>(Clock::now() - t0).count();
   }
   double best_mean = std::numeric_limits<double>::infinity();
@@ -81,9 +81,11 @@ FitResult run_fit(
     h.residual_p95_mm = summary.p95_mm;
     h.kinetic_energy_per_particle = integ.kinetic_energy(state) / n;
     h.volume_change_pct = std::numeric_limits<double>::quiet_NaN();
+    result.volume_at_end_mm3 = std::numeric_limits<double>::quiet_NaN();
     if (o.volume && row % std::max(1, o.volume_every_rows) == 0) {
       const auto t0 = Clock::now();
-      h.volume_change_pct = 100.0 * (o.volume(state.x) - v0) / v0;
+      result.volume_at_end_mm3 = row == 0 ? v0 : o.volume(state.x);  // row 0: the start
+      h.volume_change_pct = 100.0 * (result.volume_at_end_mm3 - v0) / v0;
       instrument_s += std::chrono::duration<double>(Clock::now() - t0).count();
     }
     h.wall_s = now_s();

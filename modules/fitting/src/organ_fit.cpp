@@ -102,6 +102,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   fo.record_every = common.record_every;
   fo.volume = [&](const particles::Positions& x) { return body_volume(x, rho, volume_voxel); };
   fo.volume_every_rows = 1;
+  fo.volume_at_start_mm3 = v0;  // the paper's fit starts from the model as it came
   report.residual_tolerance_mm = fo.residual_mean_tolerance_mm;
   report.residual_p95_tolerance_mm = fo.residual_max_tolerance_mm;
 
@@ -153,6 +154,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
       state = particles::State(sites.fill(count));
       particles::relax(m, state, opt, 300, common.kinetic_tolerance);
       const double v = body_volume(state.x, rho, volume_voxel);
+      fo.volume_at_start_mm3 = v;  // the fit starts from the settled body
       settled_change_pct = 100.0 * (v - v0) / v0;
       if (std::abs(settled_change_pct) <= 0.25) break;
       count = static_cast<int>(std::lround(count * v0 / v));
@@ -226,7 +228,10 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   }
   report.pieces = pieces;
 
-  const double v1 = body_volume(state.x, rho, volume_voxel);
+  // The fit stopped right after a row that measured it, unless the local stage was undone.
+  const double v1 = pieces == 1 && std::isfinite(report.fit.volume_at_end_mm3)
+                        ? report.fit.volume_at_end_mm3
+                        : body_volume(state.x, rho, volume_voxel);
   try {
     out.after.emplace(organ_body(model));
   } catch (const std::invalid_argument& e) {  // particles flung apart: not an input error

@@ -63,5 +63,47 @@ TEST(RunFit, OneFarPointDoesNotKeepAFitFromConverging) {
   EXPECT_NEAR(s.residual_p95_mm, 1.5 * rho, 1e-12);
 }
 
+TEST(RunFit, MeasuresTheVolumeOnlyOfStatesItHasNotBeenGiven) {
+  // Particles with no force on them, points 1 mm beyond their surface (the fit runs to
+  // its step budget); "volume" the sum of x (mm), its calls counted. Given the start's,
+  // the first row (the start) is not measured again, and the last row's measure is the
+  // state the fit ends in.
+  const double rho = 2.0;
+  particles::Positions x(3, 10);
+  for (int i = 0; i < 10; ++i)
+    x.col(i) = Eigen::Vector3d(10.0 * i + 10, 0, 0);
+  particles::Model model(10, 1.0, rho);
+  std::vector<AttractivePoint> points;
+  for (int i = 0; i < 10; ++i)
+    points.push_back({x.col(i) + Eigen::Vector3d(rho + 1, 0, 0), 1.0});
+  std::vector<int> all(10);
+  std::iota(all.begin(), all.end(), 0);
+  particles::IntegratorOptions io;
+  io.time_step_s = 1e-3;
+  int calls = 0;
+  FitOptions fo;
+  fo.record_every = 5;
+  fo.max_steps = 20;
+  fo.volume_every_rows = 1;
+  fo.volume = [&calls](const particles::Positions& p) { return ++calls, p.row(0).sum(); };
+  fo.volume_at_start_mm3 = x.row(0).sum();
+  particles::State state(x);
+  const FitResult r = run_fit(
+      model, state, io, points,
+      [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr, fo);
+  ASSERT_EQ(r.history.size(), 5u);  // steps 0, 5, 10, 15, 20
+  EXPECT_EQ(calls, 4);
+  EXPECT_EQ(r.history[0].volume_change_pct, 0.0);
+  EXPECT_DOUBLE_EQ(r.volume_at_end_mm3, state.x.row(0).sum());
+  // Not given: the start is measured once (the first row's change is still 0).
+  calls = 0;
+  fo.volume_at_start_mm3 = 0;
+  particles::State again(x);
+  run_fit(model, again, io, points,
+          [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr,
+          fo);
+  EXPECT_EQ(calls, 5);
+}
+
 }  // namespace
 }  // namespace organfit::fitting

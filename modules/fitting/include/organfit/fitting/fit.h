@@ -2,6 +2,7 @@
 // The fit loop: integrate the model under the data forces until the points are reached
 // and the model has settled, or progress stalls, or a budget runs out.
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -40,6 +41,9 @@ struct FitOptions {
   /// Volume of the model (mm^3) for the history; empty: not recorded.
   std::function<double(const particles::Positions&)> volume;
   int volume_every_rows = 5;
+  /// volume() of the state passed in, when the caller has it (0: measured here). The
+  /// first row is that state too: its change is 0 without measuring it again.
+  double volume_at_start_mm3 = 0;
   /// The organ's surface as each particle sees it, for the residuals; empty: the balls'
   /// (see data_residuals).
   SurfaceFeet surface_feet;
@@ -62,6 +66,9 @@ struct FitResult {
   double residual_mean_mm = 0, residual_max_mm = 0, residual_p95_mm = 0;
   std::vector<double> residuals_mm;
   std::vector<HistoryRow> history;
+  /// volume() of the state as it ends when the last row measured it (the fit stops right
+  /// after a row), else NaN.
+  double volume_at_end_mm3 = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// Runs the fit. `data_term` must already be in `model`; `skin_of` returns the current
