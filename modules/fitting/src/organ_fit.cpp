@@ -206,13 +206,13 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   report.fit = run_fit(m, state, opt, points, skin_of, status, fo, observer.row, after_row);
   if (report.global) report.fit.wall_s += report.global->wall_s;
 
-  // A local stage that tears the organ apart is undone: the organ the global stage made
-  // (placed: one piece, its volume kept) is what is kept, and the fit reports it did not
-  // converge. Seen on a 10 x 8 x 6 mm organ of 0.3 mm particles under 0.5 mm noise
-  // (`organfit bench stability`, tiny_radius): 32 particles pulled off its end.
-  int pieces = 1;
-  if (spread && state.size() > 0 &&
-      (pieces = particles::connected_components(state.x, 1.5 * law.r0())) > 1) {
+  // A local stage that tears the organ apart, or folds it (det(grad phi) <= 0 somewhere),
+  // is undone: the organ the global stage made (placed: one piece, its volume kept, phi
+  // the global map) is what is kept, and the fit reports it did not converge. Seen on a
+  // 10 x 8 x 6 mm organ of 0.3 mm particles under 0.5 mm noise (`organfit bench
+  // stability`, tiny_radius): 32 particles pulled off its end, or, stopped before that, a
+  // fold.
+  auto undo_local_stage = [&](const std::string& why) {
     state = particles::State(placed);
     SkinDetector skin(skin_voxel, rho);
     skin.update(state.x);
@@ -223,20 +223,32 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     report.fit.residual_max_mm = kept.max_mm;
     report.fit.residual_p95_mm = kept.p95_mm;
     report.fit.converged = false;
-    report.fit.stop_reason = "the local stage tore the organ into " + std::to_string(pieces) +
-                             " pieces; the global stage's organ kept";
-  }
+    report.fit.stop_reason = why + "; the global stage's organ kept";
+  };
+  int pieces = 1;
+  if (spread && state.size() > 0 &&
+      (pieces = particles::connected_components(state.x, 1.5 * law.r0())) > 1)
+    undo_local_stage("the local stage tore the organ into " + std::to_string(pieces) + " pieces");
   report.pieces = pieces;
+  auto make_organ_after = [&] {
+    try {
+      out.after.emplace(organ_body(model));
+    } catch (const std::invalid_argument& e) {  // particles flung apart: not an input error
+      throw ModelBrokeError(e.what());
+    }
+  };
+  make_organ_after();
+  if (spread && pieces == 1 && out.after->deformation().folds()) {
+    undo_local_stage("the local stage folded the organ (det(grad phi) <= 0)");
+    report.local_stage_folded = true;
+    make_organ_after();
+  }
+  const bool undone = pieces > 1 || report.local_stage_folded;
 
   // The fit stopped right after a row that measured it, unless the local stage was undone.
-  const double v1 = pieces == 1 && std::isfinite(report.fit.volume_at_end_mm3)
+  const double v1 = !undone && std::isfinite(report.fit.volume_at_end_mm3)
                         ? report.fit.volume_at_end_mm3
                         : body_volume(state.x, rho, volume_voxel);
-  try {
-    out.after.emplace(organ_body(model));
-  } catch (const std::invalid_argument& e) {  // particles flung apart: not an input error
-    throw ModelBrokeError(e.what());
-  }
   // The organ's volume change from the deformation's Jacobian over the fitted organ
   // (EmbeddedBody::volume_ratio: the grid's sampling cancels); the voxel count beside it.
   const geometry::LabelVolume organ_after_grid =

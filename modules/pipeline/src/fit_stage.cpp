@@ -113,7 +113,7 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
                       {"instrument_wall_s", r.fit.instrument_wall_s},
                       {"converged", r.fit.converged},
                       {"stop_reason", r.fit.stop_reason},
-                      {"local_stage_undone", r.pieces > 1},
+                      {"local_stage_undone", r.pieces > 1 || r.local_stage_folded},
                       {"residual_mean_mm", r.fit.residual_mean_mm},
                       {"residual_floor_mm", r.residual_floor_mm},
                       {"residual_tolerance_mm", r.residual_tolerance_mm},
@@ -225,6 +225,10 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
     spdlog::warn(
         "fit: the local stage tore the organ into {} pieces; the global stage's organ is kept",
         fitted.report.pieces);
+  if (fitted.report.local_stage_folded)
+    spdlog::warn(
+        "fit: the local stage folded the organ (det(grad phi) <= 0); the global stage's organ "
+        "is kept");
   static_cast<fitting::OrganModel&>(out.model) = std::move(fitted.model);
   out.model.summary = std::move(summary);
   out.report = std::move(fitted.report);

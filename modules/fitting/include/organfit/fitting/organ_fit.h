@@ -88,6 +88,7 @@ struct FitReport {
   bool refused = false;
   int points = 0, rejected_points = 0;
   int pieces = 1;                    ///< > 1: the local stage tore the organ; it was undone
+  bool local_stage_folded = false;   ///< the local stage folded the organ; it was undone
   double residual_floor_mm = 0;      ///< a point on the model's own surface, on average
   double residual_tolerance_mm = 0;  ///< on the mean: the stated one and the floor
   double residual_p95_tolerance_mm = 0;  ///< on the 95th percentile
