@@ -543,7 +543,8 @@ Eigen::MatrixXd RidgeSystem::normal_matrix(const Eigen::MatrixXd& jac, const Eig
     for (Eigen::Index c = 0; c < n; ++c) {
       const double* column = jac.col(c).data();
       for (Eigen::Index k = lo; k < hi; ++k)
-        if (column[k] != 0) by_row[static_cast<size_t>(k)].push_back({static_cast<int>(c), column[k]});
+        if (column[k] != 0)
+          by_row[static_cast<size_t>(k)].push_back({static_cast<int>(c), column[k]});
     }
   }
   std::vector<std::vector<std::pair<int, double>>> nonzeros(rows.size());
@@ -572,7 +573,8 @@ Eigen::MatrixXd RidgeSystem::normal_matrix(const Eigen::MatrixXd& jac, const Eig
         starts.push_back(r);
       }
       for (const auto& [c, value] : nz)
-        if (!in_union[static_cast<size_t>(c)]) in_union[static_cast<size_t>(c)] = 1, members.push_back(c);
+        if (!in_union[static_cast<size_t>(c)])
+          in_union[static_cast<size_t>(c)] = 1, members.push_back(c);
       largest = std::max(largest, nz.size());
     }
     starts.push_back(rows.size());
@@ -651,8 +653,9 @@ std::vector<int> spatial_order(const std::vector<AttractivePoint>& points) {
               spread(static_cast<std::uint64_t>(c.z())) << 2;
     order[k] = static_cast<int>(k);
   }
-  std::stable_sort(order.begin(), order.end(),
-                   [&code](int a, int b) { return code[static_cast<size_t>(a)] < code[static_cast<size_t>(b)]; });
+  std::stable_sort(order.begin(), order.end(), [&code](int a, int b) {
+    return code[static_cast<size_t>(a)] < code[static_cast<size_t>(b)];
+  });
   return order;
 }
 
@@ -721,7 +724,7 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
       [](auto& g) -> auto& { return g.fields.weights; },
       [&](const GlobalMap& g, const Eigen::Vector3d& p, const MappedDistance& d, auto jac_row) {
         std::vector<std::pair<int, double>> near;  // a point's own: rows on threads
-        for (int a = 0; a < 3; ++a) {  // field a's bumps move p along a
+        for (int a = 0; a < 3; ++a) {              // field a's bumps move p along a
           g.fields.bumps(a, p, near);
           for (const auto& [index, value] : near)
             jac_row(index) = -d.gp(a) * value / d.nu;

@@ -94,8 +94,8 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   FitOptions fo;
   fo.residual_mean_tolerance_mm = std::hypot(common.residual_tolerance_mm, residual_floor);
   fo.residual_max_tolerance_mm = common.residual_max_tolerance_mm > 0
-                                      ? common.residual_max_tolerance_mm
-                                      : p95_tolerance_mm(rho, fo.residual_mean_tolerance_mm);
+                                     ? common.residual_max_tolerance_mm
+                                     : p95_tolerance_mm(rho, fo.residual_mean_tolerance_mm);
   fo.kinetic_tolerance = common.kinetic_tolerance;
   fo.max_steps = common.max_steps;
   fo.max_wall_s = common.max_wall_s;

@@ -99,9 +99,9 @@ TEST(RunFit, MeasuresTheVolumeOnlyOfStatesItHasNotBeenGiven) {
   calls = 0;
   fo.volume_at_start_mm3 = 0;
   particles::State again(x);
-  run_fit(model, again, io, points,
-          [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr,
-          fo);
+  run_fit(
+      model, again, io, points,
+      [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr, fo);
   EXPECT_EQ(calls, 5);
 }
 

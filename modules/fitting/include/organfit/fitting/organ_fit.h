@@ -37,7 +37,7 @@ struct OrganFitOptions {
   double residual_tolerance_mm = 0.5;
   /// On the 95th percentile (mm; 0: p95_tolerance_mm of the radius and the mean's).
   double residual_max_tolerance_mm = 0.0;
-  double kinetic_tolerance = 1e-4;         ///< kinetic energy per particle at rest (E0)
+  double kinetic_tolerance = 1e-4;  ///< kinetic energy per particle at rest (E0)
   long long max_steps = 20000;
   double max_wall_s = 60.0;
   int record_every = 20;  ///< steps between history rows
@@ -87,10 +87,10 @@ struct FitReport {
   /// (global_fit.h, GlobalMap::refused): nothing was fitted, the model is as it came.
   bool refused = false;
   int points = 0, rejected_points = 0;
-  int pieces = 1;                    ///< > 1: the local stage tore the organ; it was undone
-  bool local_stage_folded = false;   ///< the local stage folded the organ; it was undone
-  double residual_floor_mm = 0;      ///< a point on the model's own surface, on average
-  double residual_tolerance_mm = 0;  ///< on the mean: the stated one and the floor
+  int pieces = 1;                        ///< > 1: the local stage tore the organ; it was undone
+  bool local_stage_folded = false;       ///< the local stage folded the organ; it was undone
+  double residual_floor_mm = 0;          ///< a point on the model's own surface, on average
+  double residual_tolerance_mm = 0;      ///< on the mean: the stated one and the floor
   double residual_p95_tolerance_mm = 0;  ///< on the 95th percentile
   /// The organ's volume (mm^3) before and after, counted on a grid of volume_voxel_mm;
   /// and after/before from the deformation's Jacobian over it (the grid's error cancels).

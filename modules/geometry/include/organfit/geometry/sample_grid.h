@@ -57,7 +57,8 @@ class SampleGrid {
     if (n == 0) return 1;
     const Eigen::Vector3d lo = samples.rowwise().minCoeff();
     const Eigen::Vector3d extent = samples.rowwise().maxCoeff() - lo;
-    const double h = std::max(extent.maxCoeff() / std::max(1.0, std::cbrt(static_cast<double>(n))), 1e-6);
+    const double h =
+        std::max(extent.maxCoeff() / std::max(1.0, std::cbrt(static_cast<double>(n))), 1e-6);
     Eigen::Vector3i dim;
     for (int c = 0; c < 3; ++c)
       dim[c] = std::min(1024, static_cast<int>(extent[c] / h) + 1);
@@ -67,7 +68,8 @@ class SampleGrid {
       size_t cell = 0;
       for (int c = 2; c >= 0; --c)
         cell = cell * static_cast<size_t>(dim[c]) +
-               static_cast<size_t>(std::min(dim[c] - 1, static_cast<int>((samples(c, j) - lo[c]) / h)));
+               static_cast<size_t>(
+                   std::min(dim[c] - 1, static_cast<int>((samples(c, j) - lo[c]) / h)));
       count += !occupied[cell];
       occupied[cell] = 1;
     }
