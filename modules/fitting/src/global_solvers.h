@@ -18,10 +18,11 @@ namespace organfit::fitting::detail {
 /// points (m, its rows) or fewer, factored in the smaller space: with fewer points (a
 /// GTV's fields have ~500 heights for 20 to 87 points) by Woodbury's identity,
 /// (lambda I + J^T W J)^-1 = (I - J^T W (lambda I + J J^T W)^-1 J) / lambda: m^3, not n^3;
-/// with more (10,000 points), never an m x m matrix. There J^T W J is summed row by row
-/// over each row's nonzeros alone (a point touches the bumps within 5.3 sigmas of it, a
-/// fifth of a lung's 1,767 heights: the dense product took 31 GFLOP a step), and the
-/// symmetric positive definite matrix is factored by Cholesky. Holds references to J and
+/// with more (10,000 points), never an m x m matrix. There J^T W J is summed over the
+/// rows' nonzeros alone (a point touches the bumps within 5.3 sigmas of it, a fifth of a
+/// lung's 1,596 heights: the dense product took 31 GFLOP a step), a group of neighbouring
+/// rows at a time (normal_matrix), and the symmetric positive definite matrix is factored
+/// by Cholesky. Holds references to J and
 /// w (m x n and m, w >= 0; lambda > 0). `row_order` (optional): the rows in an order in
 /// which neighbours share most of their nonzeros (points sorted in space: spatial_order);
 /// it only sets how the sum is grouped, not what it is.

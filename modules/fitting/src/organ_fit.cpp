@@ -243,10 +243,8 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     report.local_stage_folded = true;
     make_organ_after();
   }
-  const bool undone = pieces > 1 || report.local_stage_folded;
-
   // The fit stopped right after a row that measured it, unless the local stage was undone.
-  const double v1 = !undone && std::isfinite(report.fit.volume_at_end_mm3)
+  const double v1 = !report.local_stage_undone() && std::isfinite(report.fit.volume_at_end_mm3)
                         ? report.fit.volume_at_end_mm3
                         : body_volume(state.x, rho, volume_voxel);
   // The organ's volume change from the deformation's Jacobian over the fitted organ

@@ -113,7 +113,7 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
                       {"instrument_wall_s", r.fit.instrument_wall_s},
                       {"converged", r.fit.converged},
                       {"stop_reason", r.fit.stop_reason},
-                      {"local_stage_undone", r.pieces > 1 || r.local_stage_folded},
+                      {"local_stage_undone", r.local_stage_undone()},
                       {"residual_mean_mm", r.fit.residual_mean_mm},
                       {"residual_floor_mm", r.residual_floor_mm},
                       {"residual_tolerance_mm", r.residual_tolerance_mm},
@@ -221,14 +221,8 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
         "fit.spread.global_max_shear); check that they belong to this organ and are in the same "
         "patient coordinates",
         options.spread.global.max_stretch, options.spread.global.max_shear_mm));
-  if (fitted.report.pieces > 1)
-    spdlog::warn(
-        "fit: the local stage tore the organ into {} pieces; the global stage's organ is kept",
-        fitted.report.pieces);
-  if (fitted.report.local_stage_folded)
-    spdlog::warn(
-        "fit: the local stage folded the organ (det(grad phi) <= 0); the global stage's organ "
-        "is kept");
+  if (fitted.report.local_stage_undone())  // the stop reason says why (tore or folded)
+    spdlog::warn("fit: {}", fitted.report.fit.stop_reason);
   static_cast<fitting::OrganModel&>(out.model) = std::move(fitted.model);
   out.model.summary = std::move(summary);
   out.report = std::move(fitted.report);

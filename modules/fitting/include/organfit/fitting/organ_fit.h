@@ -8,7 +8,8 @@
 //               (global_fit.h), the body re-filled in its mapped shape and settled, the
 //               skeleton rebuilt on it, then smooth local patches (SpreadAttractiveForce)
 //               with the skeleton's rest shape following the fit; a local stage that tears
-//               the organ into pieces is undone (the global stage's organ is kept).
+//               the organ into pieces or folds it is undone (the global stage's organ is
+//               kept).
 // Both take the model by value (move it in, or pass copy_model(m) to keep m) and return
 // it fitted, with the organ it carries before and after and what run.json's `fit` says.
 #include <Eigen/Core>
@@ -87,8 +88,9 @@ struct FitReport {
   /// (global_fit.h, GlobalMap::refused): nothing was fitted, the model is as it came.
   bool refused = false;
   int points = 0, rejected_points = 0;
-  int pieces = 1;                        ///< > 1: the local stage tore the organ; it was undone
-  bool local_stage_folded = false;       ///< the local stage folded the organ; it was undone
+  int pieces = 1;                   ///< > 1: the local stage tore the organ; it was undone
+  bool local_stage_folded = false;  ///< the local stage folded the organ; it was undone
+  bool local_stage_undone() const { return pieces > 1 || local_stage_folded; }
   double residual_floor_mm = 0;          ///< a point on the model's own surface, on average
   double residual_tolerance_mm = 0;      ///< on the mean: the stated one and the floor
   double residual_p95_tolerance_mm = 0;  ///< on the 95th percentile

@@ -26,7 +26,7 @@ class SampleGrid {
     if (n == 0) return;
     lo_ = s_.rowwise().minCoeff();
     const Eigen::Vector3d extent = s_.rowwise().maxCoeff() - lo_;
-    h_ = std::max(extent.maxCoeff() / std::max(1.0, std::cbrt(static_cast<double>(n))), 1e-6);
+    h_ = default_cell_mm(extent, n);
     if (cell_mm > 0) {
       const Eigen::Vector3d e = extent.array() + cell_mm;
       h_ = std::max({cell_mm, std::cbrt(e.prod() / (64.0 * static_cast<double>(n))), 1e-6});
@@ -57,8 +57,7 @@ class SampleGrid {
     if (n == 0) return 1;
     const Eigen::Vector3d lo = samples.rowwise().minCoeff();
     const Eigen::Vector3d extent = samples.rowwise().maxCoeff() - lo;
-    const double h =
-        std::max(extent.maxCoeff() / std::max(1.0, std::cbrt(static_cast<double>(n))), 1e-6);
+    const double h = default_cell_mm(extent, n);
     Eigen::Vector3i dim;
     for (int c = 0; c < 3; ++c)
       dim[c] = std::min(1024, static_cast<int>(extent[c] / h) + 1);
@@ -128,6 +127,11 @@ class SampleGrid {
   }
 
  private:
+  /// About cbrt(S) cells a side over the samples' `extent` (mm).
+  static double default_cell_mm(const Eigen::Vector3d& extent, Eigen::Index n) {
+    return std::max(extent.maxCoeff() / std::max(1.0, std::cbrt(static_cast<double>(n))), 1e-6);
+  }
+
   /// Visits the samples shell by shell of cells about q's (clamped) cell: Chebyshev
   /// distance 0, 1, ... After each shell, `done(margin)` is asked with q's distance (mm)
   /// to the cells not yet searched, a lower bound on every unvisited sample's distance
