@@ -411,7 +411,7 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
               // what is measured below a second time.
               pipeline::PointsStageResult pts;
               pts.points = evaluation::sample_deformed_surface(model.shape, d, so);
-              const auto inside = evaluation::deformed_inside(model.shape, d);
+              const evaluation::InsideTest inside = evaluation::deformed_body(model.shape, d);
               const geometry::Aabb bounds = pipeline::deformed_bounds(model.shape, d);
               // The true organ, sampled once for every body of the case compared with it.
               evaluation::KnownBody truth(inside, bounds, voxel);

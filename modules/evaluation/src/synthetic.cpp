@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace organfit::evaluation {
@@ -103,11 +104,23 @@ Eigen::Matrix3d Deformation::rotation() const {
   return Eigen::AngleAxisd(angle, rotation_rad / angle).toRotationMatrix();
 }
 
+namespace {
+/// The rigid part undone: c + R^T (p - t - c).
+Eigen::Vector3d undo_rigid(const Deformation& d, const Eigen::Vector3d& p) {
+  if (d.rotation_rad.isZero(0) && d.shift_mm.isZero(0)) return p;
+  return d.centre_mm + d.rotation().transpose() * (p - d.shift_mm - d.centre_mm);
+}
+
+/// The largest singular value of a shear I - e_a g^T whose gradient g (of length `g`) is
+/// normal to e_a: (g + sqrt(g^2 + 4)) / 2.
+double shear_stretch(double g) {
+  return 0.5 * (g + std::sqrt(g * g + 4));
+}
+}  // namespace
+
 Eigen::Vector3d Deformation::inverse(const Eigen::Vector3d& p) const {
   const Eigen::Vector3d& c = centre_mm;
-  Eigen::Vector3d q = p;
-  if (!rotation_rad.isZero(0) || !shift_mm.isZero(0))
-    q = c + rotation().transpose() * (q - shift_mm - c);
+  Eigen::Vector3d q = undo_rigid(*this, p);
   const double two_s2 = 2 * bump_sigma_mm * bump_sigma_mm;
   if (push_mm != 0)
     q.z() -=
@@ -127,9 +140,66 @@ Eigen::Vector3d Deformation::inverse(const Eigen::Vector3d& p) const {
   return field ? invert_field(*field, x) : x;
 }
 
+double Deformation::inverse_radius(const Eigen::Vector3d& p, double radius_mm) const {
+  if (field) return std::numeric_limits<double>::infinity();
+  // The steps of inverse() in its order, each Lipschitz over the ball as carried so far
+  // (radius r about the carried centre). The rigid part is an isometry.
+  const Eigen::Vector3d& c = centre_mm;
+  const Eigen::Vector3d q = undo_rigid(*this, p);
+  double r = radius_mm;
+  // push and indent: one coordinate moved by a Gaussian bump of the two others, a shear
+  // whose gradient is at most |a| e^(-1/2) / sigma (at sigma from the bump's axis).
+  for (const double a : {push_mm, indent_mm})
+    if (a != 0) r *= shear_stretch(std::abs(a) * std::exp(-0.5) / bump_sigma_mm);
+  // The bumps move y and z by at most their heights and leave x.
+  const double from_axis =
+      std::hypot(q.y() - c.y(), q.z() - c.z()) + std::abs(push_mm) + std::abs(indent_mm) + r;
+  // twist: (y, z) turned by an angle of gradient w / L along x: the Jacobian is a rotation
+  // with a column (w / L) rho added, as a shear's of that size (rho: the distance from the
+  // x axis through c).
+  if (twist_rad != 0) r *= shear_stretch(std::abs(twist_rad) / half_length_mm * from_axis);
+  // bend: y moved by b u^2, u = (x - c_x) / L: a shear of gradient 2 |b| |x - c_x| / L^2.
+  if (bend_mm != 0)
+    r *= shear_stretch(2 * std::abs(bend_mm) * (std::abs(q.x() - c.x()) + r) /
+                       (half_length_mm * half_length_mm));
+  r *= std::max(1 / stretch, std::sqrt(stretch));  // diag(1/s, sqrt(s), sqrt(s))
+  return r * (1 + 1e-9) + 1e-9;
+}
+
 std::function<bool(const Eigen::Vector3d&)> deformed_inside(const geometry::Shape& shape,
                                                             const Deformation& d) {
   return [shape, d](const Eigen::Vector3d& p) { return shape.inside(d.inverse(p)); };
+}
+
+geometry::LabelVolume sample_inside(const InsideTest& body, const geometry::ImageGeometry& grid) {
+  geometry::LabelVolume out(grid);
+  const auto& n = grid.size;
+  auto voxel = [&](int i, int j, int k) {
+    return body.inside(grid.index_to_physical(Eigen::Vector3d(i, j, k)));
+  };
+  if (body.ball) {
+    geometry::IndexRange all;
+    all.lo = {0, 0, 0}, all.hi = {n[0] - 1, n[1] - 1, n[2] - 1};
+    geometry::label_by_blocks(out, all, body.ball, voxel);
+    return out;
+  }
+#pragma omp parallel for schedule(dynamic, 1) collapse(2)
+  for (int k = 0; k < n[2]; ++k)
+    for (int j = 0; j < n[1]; ++j)
+      for (int i = 0; i < n[0]; ++i)
+        out.at(i, j, k) = voxel(i, j, k);
+  return out;
+}
+
+InsideTest deformed_body(const geometry::Shape& shape, const Deformation& d) {
+  InsideTest body;
+  body.inside = deformed_inside(shape, d);
+  if (!d.field && !shape.mask)
+    body.ball = [shape, d](const Eigen::Vector3d& p, double radius_mm) {
+      const double r = d.inverse_radius(p, radius_mm);
+      return std::isfinite(r) ? shape.inside_ball(d.inverse(p), r) : geometry::BallSide::unknown;
+    };
+  return body;
 }
 
 std::vector<fitting::AttractivePoint> sample_deformed_surface(const geometry::Shape& shape,
@@ -173,7 +243,10 @@ std::vector<fitting::AttractivePoint> sample_deformed_surface(const geometry::Sh
 
 KnownBody::KnownBody(std::function<bool(const Eigen::Vector3d&)> inside,
                      const geometry::Aabb& bounds, double voxel_mm)
-    : inside_(std::move(inside)), bounds_(bounds), voxel_mm_(voxel_mm) {
+    : KnownBody(InsideTest{std::move(inside), {}}, bounds, voxel_mm) {}
+
+KnownBody::KnownBody(InsideTest body, const geometry::Aabb& bounds, double voxel_mm)
+    : body_(std::move(body)), bounds_(bounds), voxel_mm_(voxel_mm) {
   if (!(voxel_mm > 0) || !std::isfinite(voxel_mm))
     throw std::invalid_argument("known body: voxel size must be > 0 mm");
   if (!bounds.min_mm.allFinite() || !bounds.max_mm.allFinite())
@@ -255,80 +328,91 @@ std::array<std::array<bool, 2>, 3> KnownBody::faces_touched() const {
 }
 
 void KnownBody::cover(const geometry::ImageGeometry& g) {
-  const bool first = sampled_.labels.empty();
   geometry::ImageGeometry u = g;
-  if (!first) {  // the union of what is sampled and g
+  if (!sampled_.labels.empty()) {  // the union of what is sampled and g, sampled anew
     const geometry::Aabb s = sampled_.geometry.bounds_mm(), b = g.bounds_mm();
     u = lattice_covering({s.min_mm.cwiseMin(b.min_mm), s.max_mm.cwiseMax(b.max_mm)}, 0);
   }
-  geometry::LabelVolume next(u);
-  const Eigen::Vector3i o = first ? Eigen::Vector3i::Zero() : offset_in(sampled_.geometry, u);
-  const std::array<int, 3> old = first ? std::array<int, 3>{0, 0, 0} : sampled_.geometry.size;
-#pragma omp parallel for schedule(dynamic, 1) collapse(2)
-  for (int k = 0; k < u.size[2]; ++k)
-    for (int j = 0; j < u.size[1]; ++j)
-      for (int i = 0; i < u.size[0]; ++i) {
-        const int a = i - o.x(), b = j - o.y(), c = k - o.z();
-        next.at(i, j, k) = a >= 0 && b >= 0 && c >= 0 && a < old[0] && b < old[1] && c < old[2]
-                               ? sampled_.at(a, b, c)
-                               : inside_(u.index_to_physical(Eigen::Vector3d(i, j, k)));
-      }
-  sampled_ = std::move(next);
+  sampled_ = sample_inside(body_, u);
 }
 
-geometry::LabelVolume KnownBody::cropped(const geometry::LabelVolume& whole) const {
+LatticeBody KnownBody::on_lattice(geometry::LabelVolume whole) const {
+  LatticeBody out;
+  out.voxel_mm = voxel_mm_;
   const geometry::IndexRange r = whole.range(1);
   const geometry::ImageGeometry& w = whole.geometry;
-  const Eigen::Vector3d lo = w.index_to_physical(Eigen::Vector3d(r.lo[0], r.lo[1], r.lo[2]));
-  const Eigen::Vector3d hi = w.index_to_physical(Eigen::Vector3d(r.hi[0], r.hi[1], r.hi[2]));
-  geometry::LabelVolume part(lattice_covering(
-      r.empty() ? geometry::Aabb{w.origin_mm, w.origin_mm} : geometry::Aabb{lo, hi},
-      2 * voxel_mm_));
-  const geometry::ImageGeometry& g = part.geometry;
-  const Eigen::Vector3i o = offset_in(g, w);
+  bool on_face = false;
+  for (int d = 0; d < 3; ++d)
+    on_face = on_face || (!r.empty() && (r.lo[d] == 0 || r.hi[d] == w.size[d] - 1));
+  if (!on_face) {
+    // No inside voxel on the faces: its surface voxels are those of any larger part.
+    out.inside = r;
+    out.labels = std::move(whole);
+  } else {
+    // The part about the inside voxels, 2 voxels wide, 0 beyond `whole`: what lies beyond
+    // the part it was sampled over is outside.
+    const Eigen::Vector3d lo = w.index_to_physical(Eigen::Vector3d(r.lo[0], r.lo[1], r.lo[2]));
+    const Eigen::Vector3d hi = w.index_to_physical(Eigen::Vector3d(r.hi[0], r.hi[1], r.hi[2]));
+    out.labels = geometry::LabelVolume(lattice_covering(geometry::Aabb{lo, hi}, 2 * voxel_mm_));
+    const geometry::ImageGeometry& g = out.labels.geometry;
+    const Eigen::Vector3i o = offset_in(g, w);
 #pragma omp parallel for collapse(2) schedule(static)
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        part.at(i, j, k) = label_at(whole, i + o.x(), j + o.y(), k + o.z());
-  return part;
+    for (int k = 0; k < g.size[2]; ++k)
+      for (int j = 0; j < g.size[1]; ++j)
+        for (int i = 0; i < g.size[0]; ++i)
+          out.labels.at(i, j, k) = label_at(whole, i + o.x(), j + o.y(), k + o.z());
+    out.inside = out.labels.range(1);
+  }
+  const geometry::IndexRange& in = out.inside;
+  long long n = 0;
+  if (!in.empty()) {
+#pragma omp parallel for collapse(2) reduction(+ : n)
+    for (int k = in.lo[2]; k <= in.hi[2]; ++k)
+      for (int j = in.lo[1]; j <= in.hi[1]; ++j)
+        for (int i = in.lo[0]; i <= in.hi[0]; ++i)
+          n += out.labels.at(i, j, k) != 0;
+  }
+  out.inside_voxels = n;
+  out.surface = std::make_unique<geometry::MaskSurface>(out.labels);
+  return out;
 }
 
-geometry::SurfaceComparison KnownBody::compare_on(const geometry::LabelVolume& whole) {
-  // On the lattice's part about the body's inside voxels, 2 voxels wide: its surface is
-  // that on any larger part (no inside voxel on the edge), and the truth, whole within the
-  // sampled part, is outside wherever that part does not reach: nothing more is sampled.
-  const geometry::LabelVolume body = cropped(whole);
-  const geometry::ImageGeometry& g = body.geometry;
+geometry::SurfaceComparison KnownBody::compare(const LatticeBody& body) const {
+  if (body.voxel_mm != voxel_mm_ || !body.surface)
+    throw std::invalid_argument("known body: a body sampled on another lattice");
+  // The truth, whole within the sampled part, is outside wherever that part does not
+  // reach: nothing more is sampled.
+  const geometry::ImageGeometry& g = body.labels.geometry;
+  const geometry::IndexRange& in = body.inside;
   const Eigen::Vector3i o = offset_in(g, sampled_.geometry);
-  long long na = 0, inter = 0;
-#pragma omp parallel for collapse(2) reduction(+ : na, inter)
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i) {
-        if (!body.at(i, j, k)) continue;
-        ++na;
-        inter += label_at(sampled_, i + o.x(), j + o.y(), k + o.z()) != 0;
-      }
+  long long inter = 0;
+  if (!in.empty()) {
+#pragma omp parallel for collapse(2) reduction(+ : inter)
+    for (int k = in.lo[2]; k <= in.hi[2]; ++k)
+      for (int j = in.lo[1]; j <= in.hi[1]; ++j)
+        for (int i = in.lo[0]; i <= in.hi[0]; ++i)
+          inter += body.labels.at(i, j, k) != 0 &&
+                   label_at(sampled_, i + o.x(), j + o.y(), k + o.z()) != 0;
+  }
   geometry::SurfaceComparison r;
-  geometry::surface_distances(geometry::MaskSurface(body), *surface_, r);
+  geometry::surface_distances(*body.surface, *surface_, r);
   const double vox = g.voxel_volume_mm3();
+  const long long na = body.inside_voxels;
   r.volume_a_mm3 = static_cast<double>(na) * vox;
   r.volume_b_mm3 = static_cast<double>(inside_voxels_) * vox;
   r.dice = na + inside_voxels_ > 0 ? 2.0 * inter / static_cast<double>(na + inside_voxels_) : 1.0;
   return r;
 }
 
-geometry::SurfaceComparison KnownBody::compare(const fitting::EmbeddedBody& organ) {
-  return compare_on(organ.on_grid(lattice_covering(organ.bounds(), 2 * voxel_mm_)));
+LatticeBody KnownBody::sample(const fitting::EmbeddedBody& organ) const {
+  return on_lattice(organ.on_grid(lattice_covering(organ.bounds(), 2 * voxel_mm_)));
 }
 
-geometry::SurfaceComparison KnownBody::compare(const Eigen::Matrix3Xd& particles,
-                                               double radius_mm) {
+LatticeBody KnownBody::sample(const Eigen::Matrix3Xd& particles, double radius_mm) const {
   const geometry::Aabb box = particles.cols() > 0 ? geometry::Aabb{particles.rowwise().minCoeff(),
                                                                    particles.rowwise().maxCoeff()}
                                                   : bounds_;
-  return compare_on(geometry::closed_body_on_grid(
+  return on_lattice(geometry::closed_body_on_grid(
       particles, radius_mm, radius_mm, lattice_covering(box, 2 * radius_mm + 2 * voxel_mm_)));
 }
 

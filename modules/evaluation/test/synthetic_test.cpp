@@ -4,6 +4,9 @@
 
 #include <Eigen/LU>
 #include <cmath>
+#include <memory>
+#include <random>
+#include <vector>
 
 namespace organfit::evaluation {
 namespace {
@@ -225,5 +228,73 @@ TEST(KnownBody, AMeasureDoesNotDependOnWhatWasComparedBefore) {
   EXPECT_NEAR(a.volume_b_mm3, shape_volume_mm3(s, 0.5), 0.02 * shape_volume_mm3(s, 0.5));
 }
 
+// The deformations the benchmark composes, one family at a time and all together.
+std::vector<Deformation> deformation_families() {
+  Deformation base;
+  base.centre_mm = {1, 2, 3}, base.half_length_mm = 30;
+  std::vector<Deformation> out;
+  Deformation d = base;
+  d.stretch = 1.3, out.push_back(d);
+  d = base, d.stretch = 0.8, out.push_back(d);
+  d = base, d.bend_mm = 10, out.push_back(d);
+  d = base, d.twist_rad = 0.6, out.push_back(d);
+  d = base, d.indent_mm = -8, out.push_back(d);
+  d = base, d.push_mm = 8, out.push_back(d);
+  d = base, d.rotation_rad = {0.05, -0.03, 0.08}, d.shift_mm = {3, -2, 1}, out.push_back(d);
+  d = base, d.stretch = 1.15, d.bend_mm = -6, d.twist_rad = -0.4, d.indent_mm = 5, d.push_mm = -5,
+  d.rotation_rad = {0.02, 0.04, -0.03}, d.shift_mm = {-2, 2, 4};
+  out.push_back(d);
+  return out;
+}
+
+// inverse_radius bounds how far inverse() spreads a ball: every point sampled in a ball
+// (its rim most of all) lands within the radius of the centre's image; and the bound is
+// not loose by much (within 3x of the largest distance found).
+TEST(Deformation, AnInverseRadiusHoldsTheBallsImage) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> uni(-1.0, 1.0);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  for (const Deformation& d : deformation_families()) {
+    for (int b = 0; b < 300; ++b) {
+      const Eigen::Vector3d c = d.centre_mm + 40 * Eigen::Vector3d(uni(rng), uni(rng), uni(rng));
+      const double r = 0.1 + 8 * std::abs(uni(rng));
+      const double bound = d.inverse_radius(c, r);
+      const Eigen::Vector3d y = d.inverse(c);
+      double largest = 0;
+      for (int k = 0; k < 60; ++k) {
+        Eigen::Vector3d dir(gauss(rng), gauss(rng), gauss(rng));
+        dir.normalize();
+        largest = std::max(largest, (d.inverse(c + r * dir) - y).norm());
+      }
+      ASSERT_LE(largest, bound) << "ball " << b;
+      EXPECT_LT(bound, 3 * largest + 1e-6) << "ball " << b;
+    }
+  }
+  Deformation with_field;
+  with_field.field = std::make_shared<SampledDisplacement>();
+  EXPECT_TRUE(std::isinf(with_field.inverse_radius({0, 0, 0}, 1)));  // iterative: no bound
+}
+
+// A truth with a ball test is the truth sampled voxel by voxel: each analytic shape under
+// each family measures the same against the same bodies, to the last bit.
+TEST(KnownBody, ABallTestGivesTheLabelsOfTestingEveryVoxel) {
+  Eigen::Matrix3Xd body(3, 4);
+  body << -10, 0, 10, 0, 2, 2, 2, 8, 3, 3, 3, 3;
+  for (const char* kind : {"ellipsoid", "box", "egg", "lung"}) {
+    const Shape s = make_shape(kind, {44, 30, 26}, {1, 2, 3});
+    for (const Deformation& d : deformation_families()) {
+      const InsideTest test = deformed_body(s, d);
+      ASSERT_TRUE(test.ball);
+      const geometry::Aabb bounds{Eigen::Vector3d(-40, -35, -30), Eigen::Vector3d(42, 39, 36)};
+      const KnownBody each(test.inside, bounds, 1.0), blocks(test, bounds, 1.0);
+      EXPECT_EQ(each.sampled_voxels(), blocks.sampled_voxels()) << kind;
+      const geometry::SurfaceComparison a = each.compare(body, 7.0), b = blocks.compare(body, 7.0);
+      EXPECT_EQ(a.volume_b_mm3, b.volume_b_mm3) << kind;
+      EXPECT_EQ(a.dice, b.dice) << kind;
+      EXPECT_EQ(a.msd_mm, b.msd_mm) << kind;
+      EXPECT_EQ(a.hd95_mm, b.hd95_mm) << kind;
+    }
+  }
+}
 }  // namespace
 }  // namespace organfit::evaluation

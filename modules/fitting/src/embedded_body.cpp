@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "organfit/geometry/image_geometry.h"
+#include "organfit/geometry/label_by_blocks.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/sample_grid.h"
 
@@ -50,25 +51,16 @@ geometry::Aabb EmbeddedBody::bounds() const {
       r, [this](const Eigen::Vector3d& p) { return deformation_->push_forward(p); });
 }
 
-namespace {
-/// Voxels [lo, hi] (inclusive, each axis) of a grid.
-struct Block {
-  std::array<int, 3> lo, hi;
-};
-}  // namespace
-
 geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid) const {
   geometry::LabelVolume out(grid);
   const geometry::IndexRange r = geometry::index_range(grid, bounds());
   if (r.empty()) return out;
-  // Blocks of voxels, coarse to fine. A voxel q is inside when D(q) = d(phi^-1(q)) < 0,
-  // d the reference's signed distance. Over a block of half-diagonal h (mm) about its
-  // centre c, |D(q) - D(c)| <= G (S h + slack), S and slack phi^-1's stretch bound over
-  // the grid's part (pull_back_stretch) and G d's gradient bound about phi^-1(c): where
-  // |D(c)| exceeds that, every voxel of the block has D(c)'s sign and is set without being
-  // evaluated; otherwise the block is halved, down to single voxels, each evaluated as
-  // inside() would. The labels are those of evaluating every voxel; the pull-backs are
-  // those of a band about the surface.
+  // A voxel q is inside when D(q) = d(phi^-1(q)) < 0, d the reference's signed distance.
+  // Over a ball of radius h about c, |D(q) - D(c)| <= G (S h + slack), S and slack phi^-1's
+  // stretch bound over the grid's part (pull_back_stretch) and G d's gradient bound about
+  // phi^-1(c): where |D(c)| exceeds that, the whole ball has D(c)'s sign
+  // (geometry/label_by_blocks.h). The labels are those of evaluating every voxel; the
+  // pull-backs are those of a band about the surface.
   const geometry::Aabb part{grid.index_to_physical(Eigen::Vector3d(r.lo[0], r.lo[1], r.lo[2])),
                             grid.index_to_physical(Eigen::Vector3d(r.hi[0], r.hi[1], r.hi[2]))};
   const geometry::Aabb box =
@@ -77,67 +69,19 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   // d's gradient bound, found here on threads rather than by the first block that asks.
   const bool bounded = std::isfinite(bound.stretch) && std::isfinite(bound.slack_mm) &&
                        std::isfinite(distance_->gradient_bound());
-  auto half_diagonal = [&grid](const Block& b) {
-    Eigen::Vector3d extent;
-    for (int d = 0; d < 3; ++d)
-      extent[d] = (b.hi[d] - b.lo[d]) * grid.spacing_mm[d];
-    return 0.5 * extent.norm();  // the direction matrix is orthonormal
-  };
-  // Sets block b, or halves it; returns nothing, writes only b's voxels.
-  auto classify = [&](const Block& b, auto& self) -> void {
-    const Eigen::Vector3d centre = grid.index_to_physical(
-        0.5 * Eigen::Vector3d(b.lo[0] + b.hi[0], b.lo[1] + b.hi[1], b.lo[2] + b.hi[2]));
+  auto ball = [&](const Eigen::Vector3d& centre, double h) {
+    if (!bounded) return geometry::BallSide::unknown;
     const Eigen::Vector3d y = pull_back(centre);
     const double d = y.allFinite() ? distance_->at(y) : HUGE_VAL;
-    const bool single = b.lo == b.hi;
-    if (!single && bounded && std::isfinite(d)) {
-      const double h = half_diagonal(b);
-      const double reach = bound.stretch * h + bound.slack_mm;
-      if (std::abs(d) > distance_->gradient_bound(y, reach) * reach) {
-        const std::uint8_t label = d < 0 ? 1 : 0;
-        for (int k = b.lo[2]; k <= b.hi[2]; ++k)
-          for (int j = b.lo[1]; j <= b.hi[1]; ++j)
-            for (int i = b.lo[0]; i <= b.hi[0]; ++i)
-              out.at(i, j, k) = label;
-        return;
-      }
-    }
-    if (single) {
-      out.at(b.lo[0], b.lo[1], b.lo[2]) = d < 0 ? 1 : 0;
-      return;
-    }
-    // Halve each axis longer than a voxel.
-    int split[3][2][2];
-    int parts[3];
-    for (int a = 0; a < 3; ++a) {
-      if (b.lo[a] == b.hi[a]) {
-        parts[a] = 1, split[a][0][0] = b.lo[a], split[a][0][1] = b.hi[a];
-      } else {
-        const int mid = (b.lo[a] + b.hi[a]) / 2;
-        parts[a] = 2;
-        split[a][0][0] = b.lo[a], split[a][0][1] = mid;
-        split[a][1][0] = mid + 1, split[a][1][1] = b.hi[a];
-      }
-    }
-    for (int pk = 0; pk < parts[2]; ++pk)
-      for (int pj = 0; pj < parts[1]; ++pj)
-        for (int pi = 0; pi < parts[0]; ++pi)
-          self(Block{{split[0][pi][0], split[1][pj][0], split[2][pk][0]},
-                     {split[0][pi][1], split[1][pj][1], split[2][pk][1]}},
-               self);
+    if (!std::isfinite(d)) return geometry::BallSide::unknown;
+    const double reach = bound.stretch * h + bound.slack_mm;
+    if (std::abs(d) > distance_->gradient_bound(y, reach) * reach)
+      return d < 0 ? geometry::BallSide::inside : geometry::BallSide::outside;
+    return geometry::BallSide::unknown;
   };
-  constexpr int kTop = 16;  // voxels a side of the coarsest blocks
-  std::vector<Block> tops;
-  for (int k = r.lo[2]; k <= r.hi[2]; k += kTop)
-    for (int j = r.lo[1]; j <= r.hi[1]; j += kTop)
-      for (int i = r.lo[0]; i <= r.hi[0]; i += kTop)
-        tops.push_back(Block{{i, j, k},
-                             {std::min(i + kTop - 1, r.hi[0]), std::min(j + kTop - 1, r.hi[1]),
-                              std::min(k + kTop - 1, r.hi[2])}});
-  const long n = static_cast<long>(tops.size());
-#pragma omp parallel for schedule(dynamic, 1)
-  for (long t = 0; t < n; ++t)
-    classify(tops[static_cast<size_t>(t)], classify);
+  geometry::label_by_blocks(out, r, ball, [&](int i, int j, int k) {
+    return inside(grid.index_to_physical(Eigen::Vector3d(i, j, k)));
+  });
   return out;
 }
 

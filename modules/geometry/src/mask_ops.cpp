@@ -165,8 +165,13 @@ std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
       }
       if (w >= 0) ball[static_cast<size_t>(dz + reach[2])].push_back({dy, w});
     }
-  // The set's surface voxels (a face neighbour on the grid outside the set), by slice.
-  std::vector<std::vector<std::pair<int, int>>> surface(static_cast<size_t>(nz));
+  // The set's surface voxels (a face neighbour on the grid outside the set), by slice, as
+  // runs along x: a row's consecutive voxels i0..i1 stamp a ball's run of half-width w
+  // as the one span [i0 - w, i1 + w], the union of their spans.
+  struct SurfaceRun {
+    int i0, i1, j;
+  };
+  std::vector<std::vector<SurfaceRun>> surface(static_cast<size_t>(nz));
   std::vector<std::uint8_t> out(set.size());
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < nz; ++k)
@@ -177,8 +182,13 @@ std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
         out[v] = 1;
         if ((i > 0 && !set[v - 1]) || (i + 1 < nx && !set[v + 1]) || (j > 0 && !set[v - nx]) ||
             (j + 1 < ny && !set[v + nx]) || (k > 0 && !set[v - nxy]) ||
-            (k + 1 < nz && !set[v + nxy]))
-          surface[static_cast<size_t>(k)].push_back({i, j});
+            (k + 1 < nz && !set[v + nxy])) {
+          auto& runs = surface[static_cast<size_t>(k)];
+          if (!runs.empty() && runs.back().j == j && runs.back().i1 == i - 1)
+            runs.back().i1 = i;
+          else
+            runs.push_back({i, i, j});
+        }
       }
       // Each thread writes whole slices of the result: no two write one voxel.
 #pragma omp parallel for schedule(dynamic, 1)
@@ -188,11 +198,11 @@ std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
       if (from < 0 || from >= nz) continue;
       const auto& runs = ball[static_cast<size_t>(dz + reach[2])];
       std::uint8_t* slice = out.data() + k * nxy;
-      for (const auto& [i, j] : surface[static_cast<size_t>(from)])
+      for (const SurfaceRun& s : surface[static_cast<size_t>(from)])
         for (const Run& run : runs) {
-          const int jj = j + run.dy;
+          const int jj = s.j + run.dy;
           if (jj < 0 || jj >= ny) continue;
-          const int lo = std::max(0, i - run.w), hi = std::min(nx - 1, i + run.w);
+          const int lo = std::max(0, s.i0 - run.w), hi = std::min(nx - 1, s.i1 + run.w);
           std::fill(slice + 1LL * jj * nx + lo, slice + 1LL * jj * nx + hi + 1, std::uint8_t{1});
         }
     }

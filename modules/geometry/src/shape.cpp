@@ -26,6 +26,66 @@ bool Shape::inside(const Eigen::Vector3d& p) const {
   return in_ellipsoid;
 }
 
+namespace {
+/// Where a ball of radius r about q (centred coordinates) lies against the ellipsoid of
+/// semi-axes `semi`: |q / semi| changes by at most r / min(semi) over the ball.
+BallSide ellipsoid_ball(const Eigen::Vector3d& q, double r, const Eigen::Vector3d& semi) {
+  const double f = q.cwiseQuotient(semi).norm(), reach = r / semi.minCoeff();
+  constexpr double kRounding = 1e-9;
+  if (f + reach < 1 - kRounding) return BallSide::inside;
+  if (f - reach > 1 + kRounding) return BallSide::outside;
+  return BallSide::unknown;
+}
+}  // namespace
+
+BallSide Shape::inside_ball(const Eigen::Vector3d& p, double radius_mm) const {
+  if (mask || !(radius_mm >= 0) || !p.allFinite()) return BallSide::unknown;
+  const Eigen::Vector3d semi = 0.5 * size_mm;
+  const Eigen::Vector3d q = p - centre_mm;
+  const double r = radius_mm;
+  constexpr double kRounding = 1e-9;
+  switch (kind) {
+    case Kind::box: {
+      const Eigen::Vector3d margin = semi - q.cwiseAbs();  // > r on every axis: inside
+      if ((margin.array() > r + kRounding * semi.array()).all()) return BallSide::inside;
+      if ((margin.array() < -r - kRounding * semi.array()).any()) return BallSide::outside;
+      return BallSide::unknown;
+    }
+    case Kind::egg: {
+      // The taper grows with x (0.7 at the tip, 1 from the middle on): over the ball's
+      // x-range it lies in [taper(x - r), taper(x + r)], and the egg there holds the
+      // ellipsoid of the least taper and lies within that of the largest.
+      auto taper = [&](double x) {
+        const double t = std::clamp(x / semi.x(), -1.0, 1.0);
+        return t < 0 ? 1.0 + 0.3 * t : 1.0;
+      };
+      const double least = taper(q.x() - r), most = taper(q.x() + r);
+      if (ellipsoid_ball(q, r, Eigen::Vector3d(semi.x(), semi.y() * least, semi.z() * least)) ==
+          BallSide::inside)
+        return BallSide::inside;
+      if (ellipsoid_ball(q, r, Eigen::Vector3d(semi.x(), semi.y() * most, semi.z() * most)) ==
+          BallSide::outside)
+        return BallSide::outside;
+      return BallSide::unknown;
+    }
+    case Kind::lung: {
+      const BallSide in_ellipsoid = ellipsoid_ball(q, r, semi);
+      if (in_ellipsoid == BallSide::outside) return BallSide::outside;
+      const Eigen::Vector3d notch(-semi.x() * 1.05, 0, -0.2 * semi.z());
+      const double to_notch = (q - notch).norm(), notch_r = 0.55 * semi.x();
+      if (to_notch + r < notch_r * (1 - kRounding)) return BallSide::outside;  // in the notch
+      if (in_ellipsoid == BallSide::inside && to_notch - r > notch_r * (1 + kRounding))
+        return BallSide::inside;
+      return BallSide::unknown;
+    }
+    case Kind::ellipsoid:
+      return ellipsoid_ball(q, r, semi);
+    case Kind::mask:
+      break;
+  }
+  return BallSide::unknown;
+}
+
 const char* Shape::kind_name() const {
   switch (kind) {
     case Kind::box:

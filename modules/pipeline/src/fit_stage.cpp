@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <sstream>
 
 #include "organfit/fitting/embedded_body.h"
@@ -68,16 +69,12 @@ UncertaintyOnSurface uncertainty_on_surface(const geometry::Shape& planning,
 }
 
 nlohmann::json uncertainty_coverage(const UncertaintyOnSurface& s,
-                                    const std::function<bool(const Eigen::Vector3d&)>& truth_inside,
+                                    const evaluation::InsideTest& truth,
                                     const geometry::Aabb& truth_bounds, double voxel_mm) {
-  geometry::LabelVolume truth(geometry::grid_covering(truth_bounds, voxel_mm, 4 * voxel_mm));
-  const auto& g = truth.geometry;
-#pragma omp parallel for schedule(dynamic)
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        truth.at(i, j, k) = truth_inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
-  const geometry::SignedDistance to_truth(truth, false);
+  const geometry::SignedDistance to_truth(
+      evaluation::sample_inside(truth,
+                                geometry::grid_covering(truth_bounds, voxel_mm, 4 * voxel_mm)),
+      false);
   int within[3] = {0, 0, 0}, count[3] = {0, 0, 0};
   for (size_t i = 0; i < s.surface.size(); ++i) {
     const bool ok = std::abs(to_truth.at(s.surface[i])) <= 2 * s.sigma[i];
@@ -242,17 +239,25 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
                  report.fit.steps, truth_voxel);
     Stopwatch truth_clock;
     Progress truth_progress("truth", 4);
-    // The discretisation floor (the organ as the model carried it before the fit against
-    // the shape it was made from), the undeformed error, and the fit's.
-    const auto floor = evaluation::compare_with_body(
-        organ_before, [&](const Eigen::Vector3d& p) { return out.model.shape.inside(p); },
-        out.model.shape.bounds(), truth_voxel);
+    // The organ as the model carried it before the fit, sampled once and compared with the
+    // shape it was made from (the discretisation floor) and with the known deformed organ
+    // (the undeformed error); the truth is sampled once for the three bodies compared with it.
+    const geometry::Shape& planned = out.model.shape;
+    std::optional<evaluation::KnownBody> shape(
+        std::in_place,
+        evaluation::InsideTest{
+            [&](const Eigen::Vector3d& p) { return planned.inside(p); },
+            [&](const Eigen::Vector3d& p, double r) { return planned.inside_ball(p, r); }},
+        planned.bounds(), truth_voxel);
+    std::optional<evaluation::LatticeBody> before = shape->sample(organ_before);
+    const auto floor = shape->compare(*before);
+    shape.reset();
     throw_if_interrupted();
     truth_progress.update(1, "the model before the fit against its shape");
-    // The known deformed organ, sampled once for the three bodies compared with it.
-    evaluation::KnownBody truth(evaluation::deformed_inside(pts.truth_shape, *pts.truth),
-                                deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
-    const auto undeformed = truth.compare(organ_before);
+    const evaluation::KnownBody truth(evaluation::deformed_body(pts.truth_shape, *pts.truth),
+                                      deformed_bounds(pts.truth_shape, *pts.truth), truth_voxel);
+    const auto undeformed = truth.compare(*before);
+    before.reset();
     throw_if_interrupted();
     truth_progress.update(2, "the organ left undeformed");
     const auto fitted_organ = truth.compare(organ_after);
@@ -279,7 +284,7 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
     // On the organ's own volume grid (rho/2, coarser for a large organ: at most about 8M
     // voxels), not the truth's 0.5 mm: a 2.3 L lung's true organ at 0.5 mm took 1.4 GB.
     out.truth_summary["uncertainty"] =
-        uncertainty_coverage(on_surface, evaluation::deformed_inside(pts.truth_shape, *pts.truth),
+        uncertainty_coverage(on_surface, evaluation::deformed_body(pts.truth_shape, *pts.truth),
                              deformed_bounds(pts.truth_shape, *pts.truth), volume_voxel);
     out.truth_summary["uncertainty"]["voxel_mm"] = volume_voxel;
     out.truth_wall_s = truth_clock.elapsed_s();

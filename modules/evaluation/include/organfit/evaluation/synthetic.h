@@ -62,6 +62,11 @@ struct Deformation {
   std::shared_ptr<const SampledDisplacement> field;  ///< none: no sampled part
   Eigen::Vector3d apply(const Eigen::Vector3d& p) const;
   Eigen::Vector3d inverse(const Eigen::Vector3d& p) const;
+  /// A radius (mm) within which inverse() lays every point of the ball of `radius_mm`
+  /// about p, about inverse(p): each step's Lipschitz bound over the ball as it is carried,
+  /// times a margin for rounding. Infinite with a sampled displacement (its inverse is
+  /// iterative, to a tolerance).
+  double inverse_radius(const Eigen::Vector3d& p, double radius_mm) const;
   Eigen::Matrix3d rotation() const;  ///< R of the rigid part
   bool is_identity() const {
     return stretch == 1.0 && bend_mm == 0.0 && twist_rad == 0.0 && indent_mm == 0.0 &&
@@ -88,12 +93,43 @@ std::vector<fitting::AttractivePoint> sample_deformed_surface(const geometry::Sh
 std::function<bool(const Eigen::Vector3d&)> deformed_inside(const geometry::Shape& shape,
                                                             const Deformation& deformation);
 
+/// A body given by its inside test and, when it has one, a test of a whole ball (all
+/// inside, all outside, or not known; never wrong) that lets a lattice set the voxels far
+/// from its surface without testing each.
+struct InsideTest {
+  std::function<bool(const Eigen::Vector3d&)> inside;
+  std::function<geometry::BallSide(const Eigen::Vector3d&, double)> ball;  ///< may be empty
+};
+
+/// The body on `grid` (label 1 inside): each voxel centre tested, or with a ball test,
+/// blocks of voxels it places wholly inside or outside set at once and the rest halved
+/// down to single voxels, each tested: the same labels, at a cost set by the surface's
+/// area rather than the body's volume. `inside` and `ball` are called from several threads.
+geometry::LabelVolume sample_inside(const InsideTest& body, const geometry::ImageGeometry& grid);
+
+/// The deformed shape: deformed_inside, and its ball test: the shape's
+/// (geometry::Shape::inside_ball) on the ball inverse_radius gives about inverse(p).
+InsideTest deformed_body(const geometry::Shape& shape, const Deformation& deformation);
+
 /// Voxel (mm) of the grid on which a fit is compared with a known truth (surface
 /// distances, Dice, the benchmark's volumes): fixed, so that a measure does not depend on
 /// a model's resolution. On a grid of rho/2, HD95 came in steps of 0.96 mm on the
 /// prostate (rho 1.92 mm) and 1.5 mm on the real GTV (rho 3 mm), and the 30 mm cube at
 /// rest was 0.44 mm from itself (its faces flip a whole layer of voxels).
 inline constexpr double kTruthVoxelMm = 0.5;
+
+/// A body on a KnownBody's lattice (voxels of `voxel_mm` fixed in space), made once and
+/// compared with every truth on that lattice: the organ left as it was is compared with
+/// its own shape (the discretisation floor) and with the deformed one. `labels` covers its
+/// inside voxels with at least one voxel about them on every side (0 beyond), `inside`
+/// is the index range of its inside voxels there, `surface` its surface voxels.
+struct LatticeBody {
+  geometry::LabelVolume labels;
+  geometry::IndexRange inside;
+  long long inside_voxels = 0;
+  double voxel_mm = 0;
+  std::unique_ptr<geometry::MaskSurface> surface;
+};
 
 /// A body known by its inside test (a synthetic case's truth), sampled on a lattice of
 /// cubic voxels of `voxel_mm` fixed in space (centres at (n + f) voxel_mm on each patient
@@ -104,34 +140,45 @@ inline constexpr double kTruthVoxelMm = 0.5;
 /// the particles' balls, each baseline's. It is sampled over `bounds` (mm) and beyond,
 /// grown until none of its inside voxels lies on the sampled part's faces: a connected
 /// body is then whole within the sampled part whatever `bounds` missed (a part wholly
-/// beyond them and apart from the rest would be missed). Each body compared is cropped to
-/// its inside voxels and 2 voxels about them. `inside` is called from several threads.
-/// One compare at a time (not thread-safe). Throws std::invalid_argument for a voxel <= 0,
-/// bounds not finite, or a body that reaches past 1e9 voxels.
+/// beyond them and apart from the rest would be missed). A compared body's measure is
+/// that of its inside voxels alone (its surface and volume do not depend on the box it was
+/// sampled over). `inside` is called from several threads. One compare at a time (not
+/// thread-safe). Throws std::invalid_argument for a voxel <= 0, bounds not finite, or a
+/// body that reaches past 1e9 voxels.
 class KnownBody {
  public:
   KnownBody(std::function<bool(const Eigen::Vector3d&)> inside, const geometry::Aabb& bounds,
             double voxel_mm);
-  /// With the organ a model carries (fitting/embedded_body.h) on the lattice, over its
-  /// box with a margin of 2 voxels (volume_a_mm3: the organ's).
-  geometry::SurfaceComparison compare(const fitting::EmbeddedBody& organ);
-  /// With the closed body of a particle set (balls of `radius_mm` closed by the same),
-  /// over a box with a margin of 2 radii and 2 voxels.
-  geometry::SurfaceComparison compare(const Eigen::Matrix3Xd& particles, double radius_mm);
+  /// With a ball test as well, sampled as sample_inside() samples.
+  KnownBody(InsideTest body, const geometry::Aabb& bounds, double voxel_mm);
+  /// The organ a model carries (fitting/embedded_body.h) on the lattice, over its box with
+  /// a margin of 2 voxels.
+  LatticeBody sample(const fitting::EmbeddedBody& organ) const;
+  /// The closed body of a particle set (balls of `radius_mm` closed by the same) on the
+  /// lattice, over a box with a margin of 2 radii and 2 voxels.
+  LatticeBody sample(const Eigen::Matrix3Xd& particles, double radius_mm) const;
+  /// Compares a body on this lattice (volume_a_mm3: the body's, volume_b_mm3: this one's).
+  /// Throws std::invalid_argument when it was sampled with another voxel size.
+  geometry::SurfaceComparison compare(const LatticeBody& body) const;
+  geometry::SurfaceComparison compare(const fitting::EmbeddedBody& organ) const {
+    return compare(sample(organ));
+  }
+  geometry::SurfaceComparison compare(const Eigen::Matrix3Xd& particles, double radius_mm) const {
+    return compare(sample(particles, radius_mm));
+  }
   double voxel_mm() const { return voxel_mm_; }
   long long sampled_voxels() const { return sampled_.geometry.voxel_count(); }
   /// The part of the lattice covering `box` grown by `margin_mm` (what a compare uses).
   geometry::ImageGeometry lattice_covering(const geometry::Aabb& box, double margin_mm) const;
 
  private:
-  void cover(const geometry::ImageGeometry& g);  // samples the voxels of g not yet sampled
+  void cover(const geometry::ImageGeometry& g);  // samples the union of g and what was sampled
   // Whether an inside voxel lies on the sampled part's low and high face, each axis.
   std::array<std::array<bool, 2>, 3> faces_touched() const;
-  // The part of `whole` (a body on a part of the lattice) about its voxels of label 1, 2
-  // voxels wide; 0 where it reaches beyond `whole`.
-  geometry::LabelVolume cropped(const geometry::LabelVolume& whole) const;
-  geometry::SurfaceComparison compare_on(const geometry::LabelVolume& body);
-  std::function<bool(const Eigen::Vector3d&)> inside_;
+  // `whole` (a body on a part of the lattice) as a LatticeBody: as it is when no inside
+  // voxel lies on its faces, else the part about its inside voxels, 2 voxels wide.
+  LatticeBody on_lattice(geometry::LabelVolume whole) const;
+  InsideTest body_;
   geometry::Aabb bounds_;
   double voxel_mm_;
   geometry::LabelVolume sampled_;  // label 1 inside, on the part of the lattice sampled

@@ -6,6 +6,7 @@
 #include <memory>
 #include <string>
 
+#include "organfit/geometry/label_by_blocks.h"
 #include "organfit/geometry/mask_ops.h"
 
 namespace organfit::geometry {
@@ -19,6 +20,11 @@ struct Shape {
                                             ///< 0.5 level of its trilinear interpolation)
   Aabb box;                                 ///< kind "mask": bounds of its voxels
   bool inside(const Eigen::Vector3d& p) const;
+  /// Whether inside() answers the same for every point within `radius_mm` of p, and what:
+  /// from a bound on how fast the kind's defining function can change (a margin of 1e-9
+  /// relative for rounding), so never wrong, and `unknown` near the surface. A mask always
+  /// answers `unknown` (its test is sampled point by point).
+  BallSide inside_ball(const Eigen::Vector3d& p, double radius_mm) const;
   /// The kind's name, as make_shape takes it: "ellipsoid", "box", "egg", "lung", "mask".
   const char* kind_name() const;
   Aabb bounds() const {

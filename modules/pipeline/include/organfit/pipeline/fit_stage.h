@@ -48,10 +48,10 @@ UncertaintyOnSurface uncertainty_on_surface(const geometry::Shape& planning,
                                             const fitting::SurfaceUncertainty& u);
 
 /// Its calibration against a known truth: the share of the samples whose distance to the
-/// true surface (its inside rasterised at `voxel_mm` over `truth_bounds`) is at most 2
-/// sigma; all, seen half, unseen half.
+/// true surface (its inside sampled at `voxel_mm` over `truth_bounds`,
+/// evaluation::sample_inside) is at most 2 sigma; all, seen half, unseen half.
 nlohmann::json uncertainty_coverage(const UncertaintyOnSurface& on_surface,
-                                    const std::function<bool(const Eigen::Vector3d&)>& truth_inside,
+                                    const evaluation::InsideTest& truth,
                                     const geometry::Aabb& truth_bounds, double voxel_mm);
 
 /// The scene's fit settings for both methods, and for each.
