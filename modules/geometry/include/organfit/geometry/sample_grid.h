@@ -21,11 +21,11 @@ class SampleGrid {
  public:
   /// `cell_mm` > 0: cells of that size (mm), or larger where that would make more than
   /// 64 cells a sample; otherwise about cbrt(S) a side.
-  explicit SampleGrid(const Eigen::Matrix3Xd& samples, double cell_mm = 0) : s_(samples) {
-    const Eigen::Index n = s_.cols();
+  explicit SampleGrid(const Eigen::Matrix3Xd& samples, double cell_mm = 0) {
+    const Eigen::Index n = samples.cols();
     if (n == 0) return;
-    lo_ = s_.rowwise().minCoeff();
-    const Eigen::Vector3d extent = s_.rowwise().maxCoeff() - lo_;
+    lo_ = samples.rowwise().minCoeff();
+    const Eigen::Vector3d extent = samples.rowwise().maxCoeff() - lo_;
     h_ = default_cell_mm(extent, n);
     if (cell_mm > 0) {
       const Eigen::Vector3d e = extent.array() + cell_mm;
@@ -36,7 +36,7 @@ class SampleGrid {
     start_.assign(static_cast<size_t>(dim_[0]) * dim_[1] * dim_[2] + 1, 0);
     std::vector<int> cell(static_cast<size_t>(n));
     for (Eigen::Index j = 0; j < n; ++j) {
-      const Eigen::Vector3i c = cell_of(s_.col(j));
+      const Eigen::Vector3i c = cell_of(samples.col(j));
       cell[static_cast<size_t>(j)] = linear(c);
       ++start_[static_cast<size_t>(cell[static_cast<size_t>(j)]) + 1];
     }
@@ -47,6 +47,10 @@ class SampleGrid {
     for (Eigen::Index j = 0; j < n; ++j)  // by cell, ascending index within a cell
       order_[static_cast<size_t>(fill[static_cast<size_t>(cell[static_cast<size_t>(j)])]++)] =
           static_cast<int>(j);
+    // The samples themselves in that order: a cell's are read one after another.
+    points_.resize(3, n);
+    for (Eigen::Index k = 0; k < n; ++k)
+      points_.col(k) = samples.col(order_[static_cast<size_t>(k)]);
   }
 
   /// A cell size (mm) for queries near samples on a surface: about 4 samples an occupied
@@ -82,12 +86,13 @@ class SampleGrid {
                                  double reach_mm = std::numeric_limits<double>::infinity()) const {
     const std::pair<int, double> none{-1, std::numeric_limits<double>::infinity()};
     std::pair<int, double> best = none;
-    if (s_.cols() == 0) return best;
+    if (points_.cols() == 0) return best;
     const double reach2 = reach_mm * reach_mm;
     walk(
         q,
-        [&](int j) {
-          const double d2 = (s_.col(j) - q).squaredNorm();
+        [&](int k) {
+          const double d2 = (points_.col(k) - q).squaredNorm();
+          const int j = order_[static_cast<size_t>(k)];
           if (d2 < best.second || (d2 == best.second && j < best.first)) best = {j, d2};
         },
         [&](double margin) { return std::min(best.second, reach2) <= margin * margin; });
@@ -100,10 +105,11 @@ class SampleGrid {
   template <class Cost>
   std::pair<int, double> least(const Eigen::Vector3d& q, Cost&& cost) const {
     std::pair<int, double> best{-1, std::numeric_limits<double>::infinity()};
-    if (s_.cols() == 0) return best;
+    if (points_.cols() == 0) return best;
     walk(
         q,
-        [&](int j) {
+        [&](int k) {
+          const int j = order_[static_cast<size_t>(k)];
           const double c = cost(j);
           if (c < best.second || (c == best.second && j < best.first)) best = {j, c};
         },
@@ -114,13 +120,14 @@ class SampleGrid {
   /// Appends to `out` the samples within `radius_mm` of q (squared distance at most
   /// radius^2), in ascending index.
   void within(const Eigen::Vector3d& q, double radius_mm, std::vector<int>& out) const {
-    if (s_.cols() == 0) return;
+    if (points_.cols() == 0) return;
     const size_t first = out.size();
     const double r2 = radius_mm * radius_mm;
     walk(
         q,
-        [&](int j) {
-          if ((s_.col(j) - q).squaredNorm() <= r2) out.push_back(j);
+        [&](int k) {
+          if ((points_.col(k) - q).squaredNorm() <= r2)
+            out.push_back(order_[static_cast<size_t>(k)]);
         },
         [&](double margin) { return margin > radius_mm; });
     std::sort(out.begin() + static_cast<long>(first), out.end());
@@ -132,7 +139,8 @@ class SampleGrid {
     return std::max(extent.maxCoeff() / std::max(1.0, std::cbrt(static_cast<double>(n))), 1e-6);
   }
 
-  /// Visits the samples shell by shell of cells about q's (clamped) cell: Chebyshev
+  /// Visits the samples (by their place k in points_) shell by shell of cells about q's
+  /// (clamped) cell: Chebyshev
   /// distance 0, 1, ... After each shell, `done(margin)` is asked with q's distance (mm)
   /// to the cells not yet searched, a lower bound on every unvisited sample's distance
   /// to q; the walk ends when it says so or when every cell is searched.
@@ -148,7 +156,7 @@ class SampleGrid {
         const int first = linear(Eigen::Vector3i(x0, y, z));
         for (int k = start_[static_cast<size_t>(first)];
              k < start_[static_cast<size_t>(first + x1 - x0) + 1]; ++k)
-          visit(order_[static_cast<size_t>(k)]);
+          visit(k);
       };
       for (int z = lo.z(); z <= hi.z(); ++z) {
         const bool z_on = std::abs(z - c.z()) == r;
@@ -181,7 +189,7 @@ class SampleGrid {
     return c;
   }
   int linear(const Eigen::Vector3i& c) const { return (c.z() * dim_[1] + c.y()) * dim_[0] + c.x(); }
-  const Eigen::Matrix3Xd& s_;
+  Eigen::Matrix3Xd points_;  // the samples by cell: points_.col(k) is sample order_[k]
   Eigen::Vector3d lo_ = Eigen::Vector3d::Zero();
   double h_ = 1;
   Eigen::Vector3i dim_ = Eigen::Vector3i::Ones();
