@@ -194,7 +194,7 @@ geometry::LabelVolume sample_inside(const InsideTest& body, const geometry::Imag
 InsideTest deformed_body(const geometry::Shape& shape, const Deformation& d) {
   InsideTest body;
   body.inside = deformed_inside(shape, d);
-  if (!d.field && !shape.mask)
+  if (!d.field)
     body.ball = [shape, d](const Eigen::Vector3d& p, double radius_mm) {
       const double r = d.inverse_radius(p, radius_mm);
       return std::isfinite(r) ? shape.inside_ball(d.inverse(p), r) : geometry::BallSide::unknown;

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <memory>
 #include <random>
+#include <string>
 #include <vector>
 
 namespace organfit::evaluation {
@@ -280,8 +281,18 @@ TEST(Deformation, AnInverseRadiusHoldsTheBallsImage) {
 TEST(KnownBody, ABallTestGivesTheLabelsOfTestingEveryVoxel) {
   Eigen::Matrix3Xd body(3, 4);
   body << -10, 0, 10, 0, 2, 2, 2, 8, 3, 3, 3, 3;
-  for (const char* kind : {"ellipsoid", "box", "egg", "lung"}) {
-    const Shape s = make_shape(kind, {44, 30, 26}, {1, 2, 3});
+  // A mask of thick slices too: the egg on a 1 x 1 x 2.5 mm grid.
+  geometry::ImageGeometry g;
+  g.size = {56, 42, 16}, g.spacing_mm = {1, 1, 2.5}, g.origin_mm = {-26.5, -18.5, -16};
+  auto mask = std::make_shared<geometry::LabelVolume>(g);
+  const Shape egg = make_shape("egg", {44, 30, 26}, {1, 2, 3});
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        mask->at(i, j, k) = egg.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  for (const char* kind : {"ellipsoid", "box", "egg", "lung", "mask"}) {
+    const Shape s = std::string(kind) == "mask" ? geometry::make_mask_shape(mask)
+                                                : make_shape(kind, {44, 30, 26}, {1, 2, 3});
     for (const Deformation& d : deformation_families()) {
       const InsideTest test = deformed_body(s, d);
       ASSERT_TRUE(test.ball);

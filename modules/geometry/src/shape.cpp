@@ -36,10 +36,40 @@ BallSide ellipsoid_ball(const Eigen::Vector3d& q, double r, const Eigen::Vector3
   if (f - reach > 1 + kRounding) return BallSide::outside;
   return BallSide::unknown;
 }
+/// Where a ball of radius r about p lies against a mask's 0.5 level of its trilinear
+/// interpolation (inside_interpolated): every point of the ball interpolates among the
+/// voxels of an index box (its reach r / spacing along each grid axis, the direction being
+/// orthonormal, and the cell corners about it). All of label 1 and on the grid: each point
+/// interpolates 1, inside; none of label 1: each interpolates 0, outside.
+BallSide mask_ball(const LabelVolume& mask, const Eigen::Vector3d& p, double r) {
+  const ImageGeometry& g = mask.geometry;
+  const Eigen::Vector3d idx = g.physical_to_index(p);
+  if (!idx.allFinite()) return BallSide::unknown;
+  int lo[3], hi[3];
+  bool on_grid = true;
+  for (int a = 0; a < 3; ++a) {
+    const double reach = r / g.spacing_mm[a] + 1e-6;  // and a margin for rounding
+    const double first = std::floor(idx[a] - reach), last = std::floor(idx[a] + reach) + 1;
+    on_grid = on_grid && first >= 0 && last <= g.size[a] - 1;
+    lo[a] = static_cast<int>(std::clamp(first, 0.0, static_cast<double>(g.size[a])));
+    hi[a] = static_cast<int>(std::clamp(last, -1.0, static_cast<double>(g.size[a] - 1)));
+    if (lo[a] > hi[a]) return BallSide::outside;  // wholly beyond the grid
+  }
+  bool any_in = false, any_out = false;
+  for (int k = lo[2]; k <= hi[2]; ++k)
+    for (int j = lo[1]; j <= hi[1]; ++j)
+      for (int i = lo[0]; i <= hi[0]; ++i) {
+        (mask.at(i, j, k) == 1 ? any_in : any_out) = true;
+        if (any_in && any_out) return BallSide::unknown;
+      }
+  if (!any_in) return BallSide::outside;
+  return on_grid ? BallSide::inside : BallSide::unknown;
+}
 }  // namespace
 
 BallSide Shape::inside_ball(const Eigen::Vector3d& p, double radius_mm) const {
-  if (mask || !(radius_mm >= 0) || !p.allFinite()) return BallSide::unknown;
+  if (!(radius_mm >= 0) || !p.allFinite()) return BallSide::unknown;
+  if (mask) return mask_ball(*mask, p, radius_mm);
   const Eigen::Vector3d semi = 0.5 * size_mm;
   const Eigen::Vector3d q = p - centre_mm;
   const double r = radius_mm;

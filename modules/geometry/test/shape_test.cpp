@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <memory>
 #include <random>
 
@@ -68,9 +69,57 @@ TEST(Shapes, ABallTestIsNeverWrongAndPlacesBallsAwayFromTheSurface) {
     EXPECT_GT(placed, 2000) << kind;
     EXPECT_GT(unknown, 50) << kind;  // near the surface
   }
-  Shape m = make_shape("ellipsoid", {10, 10, 10}, {0, 0, 0});
-  m.mask = std::make_shared<LabelVolume>();
-  EXPECT_EQ(m.inside_ball({0, 0, 0}, 0.1), BallSide::unknown);  // masks: point by point
+}
+
+// The same of a mask on a grid of thick slices turned about z, with a one-voxel hole:
+// balls it places are on that side at every point (their rims most of all), balls in the
+// hole or across the grid's edge are not placed inside.
+TEST(Shapes, AMasksBallTestIsNeverWrong) {
+  ImageGeometry g;
+  g.size = {40, 36, 14};
+  g.spacing_mm = {0.9, 0.9, 3};
+  g.origin_mm = {-15, -12, -20};
+  const double a = 0.3;
+  g.direction << std::cos(a), -std::sin(a), 0, std::sin(a), std::cos(a), 0, 0, 0, 1;
+  auto mask = std::make_shared<LabelVolume>(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        const Eigen::Vector3d u((i - 20) / 16.0, (j - 18) / 13.0, (k - 6) / 5.5);
+        mask->at(i, j, k) = u.squaredNorm() <= 1 ? 1 : 0;
+      }
+  mask->at(20, 18, 6) = 0;
+  for (int k = 3; k <= 9; ++k)  // a slab on the grid's -x face
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i <= 2; ++i)
+        mask->at(i, j, k) = 1;
+  const Shape s = make_mask_shape(mask);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> uni(-1.0, 1.0);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  int inside = 0, outside = 0;
+  for (int b = 0; b < 4000; ++b) {
+    const Eigen::Vector3d c = g.index_to_physical(
+        Eigen::Vector3d(20 + 24 * uni(rng), 18 + 22 * uni(rng), 6 + 9 * uni(rng)));
+    const double r = 0.05 + 4.0 * std::abs(uni(rng));
+    const BallSide side = s.inside_ball(c, r);
+    if (side == BallSide::unknown) continue;
+    (side == BallSide::inside ? inside : outside)++;
+    for (int k = 0; k < 40; ++k) {
+      Eigen::Vector3d dir(gauss(rng), gauss(rng), gauss(rng));
+      dir.normalize();
+      const Eigen::Vector3d p = c + (k < 20 ? r : r * std::abs(uni(rng))) * dir;
+      ASSERT_EQ(s.inside(p), side == BallSide::inside) << "ball " << b;
+    }
+  }
+  EXPECT_GT(inside, 50);
+  EXPECT_GT(outside, 1000);
+  EXPECT_NE(s.inside_ball(g.index_to_physical(Eigen::Vector3d(20, 18, 6)), 0.5),
+            BallSide::inside);  // the hole
+  const Eigen::Vector3d edge = g.index_to_physical(Eigen::Vector3d(0.5, 18, 6));
+  EXPECT_TRUE(s.inside(edge));
+  EXPECT_FALSE(s.inside(edge - 1.0 * g.direction.col(0)));  // beyond the grid: 0
+  EXPECT_EQ(s.inside_ball(edge, 1.0), BallSide::unknown);
 }
 
 }  // namespace

@@ -21,9 +21,9 @@ struct Shape {
   Aabb box;                                 ///< kind "mask": bounds of its voxels
   bool inside(const Eigen::Vector3d& p) const;
   /// Whether inside() answers the same for every point within `radius_mm` of p, and what:
-  /// from a bound on how fast the kind's defining function can change (a margin of 1e-9
-  /// relative for rounding), so never wrong, and `unknown` near the surface. A mask always
-  /// answers `unknown` (its test is sampled point by point).
+  /// never wrong, `unknown` near the surface. An analytic kind from a bound on how fast its
+  /// defining function can change (a margin of 1e-9 relative for rounding); a mask from
+  /// the voxels the ball's points interpolate among (all of label 1, or none).
   BallSide inside_ball(const Eigen::Vector3d& p, double radius_mm) const;
   /// The kind's name, as make_shape takes it: "ellipsoid", "box", "egg", "lung", "mask".
   const char* kind_name() const;
