@@ -53,12 +53,12 @@ void edt_1d(const double* f, double* d, int n, double step, std::vector<int>& v,
 
 }  // namespace
 
-std::vector<double> squared_distance_transform(const std::vector<std::uint8_t>& feature,
-                                               const ImageGeometry& g) {
+GridBuffer<double> squared_distance_transform(const std::vector<std::uint8_t>& feature,
+                                              const ImageGeometry& g) {
   const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
   const size_t total = static_cast<size_t>(g.voxel_count());
   if (feature.size() != total) throw std::invalid_argument("distance transform: size mismatch");
-  std::vector<double> d(total);
+  GridBuffer<double> d(total);  // every voxel set below, on threads
 #pragma omp parallel for schedule(static)
   for (long long i = 0; i < static_cast<long long>(total); ++i)
     d[static_cast<size_t>(i)] = feature[static_cast<size_t>(i)] ? 0.0 : kInf;

@@ -24,7 +24,7 @@ SignedDistance::SignedDistance(const LabelVolume& mask, bool smooth_it)
 #pragma omp parallel for schedule(static)
   for (long long v = 0; v < total; ++v)
     feature[v] = !feature[v];
-  const std::vector<double> to_out = squared_distance_transform(feature, geometry_);
+  const GridBuffer<double> to_out = squared_distance_transform(feature, geometry_);
   const double h = 0.5 * geometry_.spacing_mm.minCoeff();
   // An empty mask (or a full one) has no boundary: the transform's infinity stays.
 #pragma omp parallel for schedule(static)
@@ -33,11 +33,60 @@ SignedDistance::SignedDistance(const LabelVolume& mask, bool smooth_it)
   if (smooth_it) smooth();
 }
 
+namespace {
+/// One pass of the binomial 1-4-6-4-1 along `axis`, ends clamped, from `in` into `out`
+/// (every voxel written).
+void binomial_pass(const ImageGeometry& g, int axis, const double* in, double* out) {
+  const double weight[5] = {1 / 16.0, 4 / 16.0, 6 / 16.0, 4 / 16.0, 1 / 16.0};
+  const long long stride[3] = {1, g.size[0], 1LL * g.size[0] * g.size[1]};
+  const int n = g.size[axis];
+  const long long s = stride[axis];
+#pragma omp parallel for schedule(static) collapse(2)
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j) {
+      const long long row = g.linear_index(0, j, k);
+      const int at_jk[3] = {0, j, k};
+      for (int i = 0; i < g.size[0]; ++i) {
+        const long long v = row + i;
+        const int t = axis == 0 ? i : at_jk[axis];  // the voxel's place along the axis
+        double sum = 0;
+        if (t >= 2 && t + 2 < n) {  // inside: no end to clamp at
+          for (int o = -2; o <= 2; ++o)
+            sum += weight[o + 2] * in[v + o * s];
+        } else {
+          for (int o = -2; o <= 2; ++o)
+            sum += weight[o + 2] * in[v + (std::clamp(t + o, 0, n - 1) - t) * s];
+        }
+        out[v] = sum;
+      }
+    }
+}
+}  // namespace
+
 SignedDistance SignedDistance::smoothed() const {
-  SignedDistance out = *this;
-  out.smooth();
-  out.gradient_bound_ = std::make_shared<GradientBound>();  // other values, its own bound
+  SignedDistance out(geometry_, to_index_);  // its own gradient bound: other values
+  if (!all_finite()) {                       // no boundary: nothing to smooth
+    out.values_ = values_;
+    return out;
+  }
+  // The first pass from this distance's values, the others between two new buffers.
+  out.values_ = GridBuffer<double>(values_.size());
+  binomial_pass(geometry_, 0, values_.data(), out.values_.data());
+  GridBuffer<double> next(values_.size());
+  for (int axis = 1; axis < 3; ++axis) {
+    binomial_pass(geometry_, axis, out.values_.data(), next.data());
+    out.values_.swap(next);
+  }
   return out;
+}
+
+bool SignedDistance::all_finite() const {
+  const long long total = static_cast<long long>(values_.size());
+  bool finite = true;
+#pragma omp parallel for schedule(static) reduction(&& : finite)
+  for (long long v = 0; v < total; ++v)
+    finite = finite && std::isfinite(values_[static_cast<size_t>(v)]);
+  return finite;
 }
 
 double SignedDistance::gradient_bound() const {
@@ -83,39 +132,10 @@ double SignedDistance::gradient_bound(const Eigen::Vector3d& p_mm, double radius
 void SignedDistance::smooth() {
   // Binomial 1-4-6-4-1 along each axis (a Gaussian of one voxel), ends clamped: it leaves
   // a linear field unchanged and takes the voxel steps out of a slanted boundary.
-  const ImageGeometry& g = geometry_;
-  const long long total = static_cast<long long>(values_.size());
-  bool finite = true;
-#pragma omp parallel for schedule(static) reduction(&& : finite)
-  for (long long v = 0; v < total; ++v)
-    finite = finite && std::isfinite(values_[static_cast<size_t>(v)]);
-  if (!finite) return;  // no boundary: nothing to smooth
-  std::vector<double> out(values_.size());
-  const double weight[5] = {1 / 16.0, 4 / 16.0, 6 / 16.0, 4 / 16.0, 1 / 16.0};
-  const long long stride[3] = {1, g.size[0], 1LL * g.size[0] * g.size[1]};
+  if (!all_finite()) return;  // no boundary: nothing to smooth
+  GridBuffer<double> out(values_.size());
   for (int axis = 0; axis < 3; ++axis) {
-    const int n = g.size[axis];
-    const long long s = stride[axis];
-    const double* in = values_.data();
-#pragma omp parallel for schedule(static) collapse(2)
-    for (int k = 0; k < g.size[2]; ++k)
-      for (int j = 0; j < g.size[1]; ++j) {
-        const long long row = g.linear_index(0, j, k);
-        const int at_jk[3] = {0, j, k};
-        for (int i = 0; i < g.size[0]; ++i) {
-          const long long v = row + i;
-          const int t = axis == 0 ? i : at_jk[axis];  // the voxel's place along the axis
-          double sum = 0;
-          if (t >= 2 && t + 2 < n) {  // inside: no end to clamp at
-            for (int o = -2; o <= 2; ++o)
-              sum += weight[o + 2] * in[v + o * s];
-          } else {
-            for (int o = -2; o <= 2; ++o)
-              sum += weight[o + 2] * in[v + (std::clamp(t + o, 0, n - 1) - t) * s];
-          }
-          out[static_cast<size_t>(v)] = sum;
-        }
-      }
+    binomial_pass(geometry_, axis, values_.data(), out.data());
     values_.swap(out);
   }
 }

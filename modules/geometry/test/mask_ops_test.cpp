@@ -134,11 +134,11 @@ TEST(MaskOps, ClosedBodyOnALargeGridEqualsClosingTheWholeGrid) {
 // r from the mask, both by the distance transform of the whole grid.
 std::vector<std::uint8_t> closing_by_distance_transforms(const LabelVolume& mask, double r) {
   const double r2 = r * r;
-  const std::vector<double> to_body = squared_distance_transform(mask.labels, mask.geometry);
+  const auto to_body = squared_distance_transform(mask.labels, mask.geometry);
   std::vector<std::uint8_t> outside(to_body.size());
   for (size_t i = 0; i < outside.size(); ++i)
     outside[i] = to_body[i] > r2;
-  const std::vector<double> to_outside = squared_distance_transform(outside, mask.geometry);
+  const auto to_outside = squared_distance_transform(outside, mask.geometry);
   std::vector<std::uint8_t> closed(outside.size());
   for (size_t i = 0; i < closed.size(); ++i)
     closed[i] = to_outside[i] > r2;

@@ -49,7 +49,7 @@ WindowChoice choose_window(const geometry::ImageGeometry& g, const std::vector<f
     for (int j = lo[1]; j <= hi[1]; ++j)
       for (int i = lo[0]; i <= hi[0]; ++i)
         feature[local(i, j, k)] = organ.at(i, j, k) == 1;
-  const std::vector<double> d2 = geometry::squared_distance_transform(feature, box);
+  const auto d2 = geometry::squared_distance_transform(feature, box);
   std::vector<float> shell;
   for (int k = lo[2]; k <= hi[2]; ++k)
     for (int j = lo[1]; j <= hi[1]; ++j)

@@ -18,6 +18,7 @@
 #include <memory>
 #include <vector>
 
+#include "organfit/geometry/grid_buffer.h"
 #include "organfit/geometry/image_geometry.h"
 
 namespace organfit::geometry {
@@ -25,8 +26,8 @@ namespace organfit::geometry {
 /// Squared Euclidean distance (mm^2) from every voxel to the nearest voxel where
 /// `feature` is non-zero (infinity when there is none). Exact, linear time
 /// (Felzenszwalb & Huttenlocher 2012), anisotropic spacing allowed; direction ignored.
-std::vector<double> squared_distance_transform(const std::vector<std::uint8_t>& feature,
-                                               const ImageGeometry& grid);
+GridBuffer<double> squared_distance_transform(const std::vector<std::uint8_t>& feature,
+                                              const ImageGeometry& grid);
 
 /// An axis-aligned grid of cubic voxels covering `box` grown by `margin_mm`.
 ImageGeometry grid_covering(const Aabb& box, double voxel_mm, double margin_mm);

@@ -6,6 +6,7 @@
 #include <mutex>
 #include <vector>
 
+#include "organfit/geometry/grid_buffer.h"
 #include "organfit/geometry/image_geometry.h"
 
 namespace organfit::geometry {
@@ -50,10 +51,13 @@ class SignedDistance {
   const ImageGeometry& geometry() const { return geometry_; }
 
  private:
+  SignedDistance(const ImageGeometry& geometry, const Eigen::Matrix3d& to_index)
+      : geometry_(geometry), to_index_(to_index) {}  // no values yet
   void smooth();
+  bool all_finite() const;
   ImageGeometry geometry_;
   Eigen::Matrix3d to_index_;  ///< physical offset -> index offset
-  std::vector<double> values_;
+  GridBuffer<double> values_;
   /// gradient_bound(), found once on first use (most distances never need it).
   struct GradientBound {
     std::once_flag found;
