@@ -142,8 +142,8 @@ struct LatticeBody {
 /// body is then whole within the sampled part whatever `bounds` missed (a part wholly
 /// beyond them and apart from the rest would be missed). A compared body's measure is
 /// that of its inside voxels alone (its surface and volume do not depend on the box it was
-/// sampled over). `inside` is called from several threads. One compare at a time (not
-/// thread-safe). Throws std::invalid_argument for a voxel <= 0, bounds not finite, or a
+/// sampled over). `inside` is called from several threads; nothing is sampled after the
+/// constructor. Throws std::invalid_argument for a voxel <= 0, bounds not finite, or a
 /// body that reaches past 1e9 voxels.
 class KnownBody {
  public:
