@@ -94,25 +94,28 @@ double SignedDistance::gradient_bound() const {
     // At a cell's corner the partials are the differences along the cell's three edges;
     // over the 8 cells of a voxel the largest is the largest difference along each axis,
     // either side.
+    // Beyond the grid a voxel's neighbour is itself (at_voxel clamps): no difference.
     const ImageGeometry& g = geometry_;
+    const long long stride[3] = {1, g.size[0], 1LL * g.size[0] * g.size[1]};
     double largest_sq = 0;
 #pragma omp parallel for reduction(max : largest_sq) schedule(static)
     for (int k = 0; k < g.size[2]; ++k)
-      for (int j = 0; j < g.size[1]; ++j)
+      for (int j = 0; j < g.size[1]; ++j) {
+        const double* row = values_.data() + g.linear_index(0, j, k);
+        const int at_jk[3] = {0, j, k};
         for (int i = 0; i < g.size[0]; ++i) {
-          const double v = at_voxel(i, j, k);
-          const double dx =
-              std::max(std::abs(at_voxel(i - 1, j, k) - v), std::abs(at_voxel(i + 1, j, k) - v)) /
-              g.spacing_mm[0];
-          const double dy =
-              std::max(std::abs(at_voxel(i, j - 1, k) - v), std::abs(at_voxel(i, j + 1, k) - v)) /
-              g.spacing_mm[1];
-          const double dz =
-              std::max(std::abs(at_voxel(i, j, k - 1) - v), std::abs(at_voxel(i, j, k + 1) - v)) /
-              g.spacing_mm[2];
-          const double sq = dx * dx + dy * dy + dz * dz;
-          largest_sq = std::max(largest_sq, std::isfinite(sq) ? sq : HUGE_VAL);
+          const double* v = row + i;
+          double sq = 0;
+          for (int a = 0; a < 3; ++a) {
+            const int t = a == 0 ? i : at_jk[a];
+            const double below = t > 0 ? std::abs(v[-stride[a]] - *v) : 0.0;
+            const double above = t + 1 < g.size[a] ? std::abs(v[stride[a]] - *v) : 0.0;
+            const double d = std::max(below, above) / g.spacing_mm[a];
+            sq += d * d;
+          }
+          largest_sq = std::max(largest_sq, std::isfinite(sq) && std::isfinite(*v) ? sq : HUGE_VAL);
         }
+      }
     gradient_bound_->value = std::sqrt(largest_sq);
   });
   return gradient_bound_->value;
