@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "organfit/geometry/label_by_blocks.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/meshing/surface.h"
 #include "organfit/report/report.h"
@@ -17,11 +18,12 @@ namespace {
 geometry::LabelVolume shape_on_grid(const geometry::Shape& shape,
                                     const geometry::ImageGeometry& g) {
   geometry::LabelVolume mask(g);
-  const geometry::IndexRange r = geometry::index_range(g, shape.bounds(), 1);
-  for (int k = r.lo[2]; k <= r.hi[2]; ++k)
-    for (int j = r.lo[1]; j <= r.hi[1]; ++j)
-      for (int i = r.lo[0]; i <= r.hi[0]; ++i)
-        mask.at(i, j, k) = shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  geometry::label_by_blocks(
+      mask, geometry::index_range(g, shape.bounds(), 1),
+      [&](const Eigen::Vector3d& c, double r) { return shape.inside_ball(c, r); },
+      [&](int i, int j, int k) {
+        return shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+      });
   return mask;
 }
 
