@@ -191,6 +191,13 @@ geometry::LabelVolume sample_inside(const InsideTest& body, const geometry::Imag
   return out;
 }
 
+InsideTest shape_body(const geometry::Shape& shape) {
+  return {[shape](const Eigen::Vector3d& p) { return shape.inside(p); },
+          [shape](const Eigen::Vector3d& p, double radius_mm) {
+            return shape.inside_ball(p, radius_mm);
+          }};
+}
+
 InsideTest deformed_body(const geometry::Shape& shape, const Deformation& d) {
   InsideTest body;
   body.inside = deformed_inside(shape, d);

@@ -3,7 +3,6 @@
 #include <cmath>
 #include <optional>
 
-#include "organfit/geometry/label_by_blocks.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/particles/cohesion_force.h"
 #include "organfit/particles/lattice_fill.h"
@@ -36,17 +35,10 @@ particles::IntegratorOptions integrator_options_from(const ModelSettings& s,
 geometry::LabelVolume reference_body(const geometry::Shape& shape, double r0_mm) {
   const geometry::ImageGeometry g =
       geometry::grid_covering(shape.bounds(), 0.25 * r0_mm, 0.5 * r0_mm);
-  geometry::LabelVolume reference(g);
-  // Every voxel's inside test, but blocks the shape places wholly on one side set at once
-  // (80M voxels for a million-particle body's reference).
+  // By blocks (80M voxels for a million-particle body's reference).
   geometry::IndexRange all;
   all.hi = {g.size[0] - 1, g.size[1] - 1, g.size[2] - 1};
-  geometry::label_by_blocks(
-      reference, all, [&](const Eigen::Vector3d& c, double r) { return shape.inside_ball(c, r); },
-      [&](int i, int j, int k) {
-        return shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
-      });
-  return reference;
+  return geometry::shape_on_grid(shape, g, all);
 }
 
 void build_model_terms(OrganModel& model, const particles::Skeleton* skeleton) {

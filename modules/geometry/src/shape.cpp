@@ -6,22 +6,38 @@
 
 namespace organfit::geometry {
 
+namespace {
+/// The egg's cross-section scale at x (centred, mm): 1 at the +x end and at the middle,
+/// 0.7 at the -x tip; it grows with x.
+double egg_taper(double x, double semi_x) {
+  const double t = std::clamp(x / semi_x, -1.0, 1.0);
+  return t < 0 ? 1.0 + 0.3 * t : 1.0;
+}
+
+/// The lung's notch: a sphere cut from the ellipsoid's -x side (centred coordinates, mm).
+struct Notch {
+  Eigen::Vector3d centre;
+  double radius;
+};
+Notch lung_notch(const Eigen::Vector3d& semi) {
+  return {Eigen::Vector3d(-semi.x() * 1.05, 0, -0.2 * semi.z()), 0.55 * semi.x()};
+}
+}  // namespace
+
 bool Shape::inside(const Eigen::Vector3d& p) const {
   if (mask) return inside_interpolated(*mask, p);
   const Eigen::Vector3d semi = 0.5 * size_mm;
   const Eigen::Vector3d q = p - centre_mm;
   if (kind == Kind::box) return (q.cwiseAbs().array() <= semi.array()).all();
   if (kind == Kind::egg) {
-    // Cross-section scale: 1 at +x end and at the middle, 0.7 at the -x tip.
-    const double t = std::clamp(q.x() / semi.x(), -1.0, 1.0);
-    const double taper = t < 0 ? 1.0 + 0.3 * t : 1.0;
+    const double taper = egg_taper(q.x(), semi.x());
     const Eigen::Vector3d s(semi.x(), semi.y() * taper, semi.z() * taper);
     return q.cwiseQuotient(s).squaredNorm() <= 1.0;
   }
   const bool in_ellipsoid = q.cwiseQuotient(semi).squaredNorm() <= 1.0;
   if (kind == Kind::lung) {
-    const Eigen::Vector3d notch(-semi.x() * 1.05, 0, -0.2 * semi.z());
-    return in_ellipsoid && (q - notch).norm() > 0.55 * semi.x();
+    const Notch notch = lung_notch(semi);
+    return in_ellipsoid && (q - notch.centre).norm() > notch.radius;
   }
   return in_ellipsoid;
 }
@@ -82,14 +98,10 @@ BallSide Shape::inside_ball(const Eigen::Vector3d& p, double radius_mm) const {
       return BallSide::unknown;
     }
     case Kind::egg: {
-      // The taper grows with x (0.7 at the tip, 1 from the middle on): over the ball's
-      // x-range it lies in [taper(x - r), taper(x + r)], and the egg there holds the
-      // ellipsoid of the least taper and lies within that of the largest.
-      auto taper = [&](double x) {
-        const double t = std::clamp(x / semi.x(), -1.0, 1.0);
-        return t < 0 ? 1.0 + 0.3 * t : 1.0;
-      };
-      const double least = taper(q.x() - r), most = taper(q.x() + r);
+      // The taper grows with x: over the ball's x-range it lies in [taper(x - r),
+      // taper(x + r)], and the egg there holds the ellipsoid of the least taper and lies
+      // within that of the largest.
+      const double least = egg_taper(q.x() - r, semi.x()), most = egg_taper(q.x() + r, semi.x());
       if (ellipsoid_ball(q, r, Eigen::Vector3d(semi.x(), semi.y() * least, semi.z() * least)) ==
           BallSide::inside)
         return BallSide::inside;
@@ -101,8 +113,8 @@ BallSide Shape::inside_ball(const Eigen::Vector3d& p, double radius_mm) const {
     case Kind::lung: {
       const BallSide in_ellipsoid = ellipsoid_ball(q, r, semi);
       if (in_ellipsoid == BallSide::outside) return BallSide::outside;
-      const Eigen::Vector3d notch(-semi.x() * 1.05, 0, -0.2 * semi.z());
-      const double to_notch = (q - notch).norm(), notch_r = 0.55 * semi.x();
+      const Notch notch = lung_notch(semi);
+      const double to_notch = (q - notch.centre).norm(), notch_r = notch.radius;
       if (to_notch + r < notch_r * (1 - kRounding)) return BallSide::outside;  // in the notch
       if (in_ellipsoid == BallSide::inside && to_notch - r > notch_r * (1 + kRounding))
         return BallSide::inside;
@@ -170,6 +182,16 @@ Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask) {
   s.centre_mm = sum / static_cast<double>(n);
   s.size_mm = hi - lo;
   return s;
+}
+
+LabelVolume shape_on_grid(const Shape& shape, const ImageGeometry& grid, const IndexRange& range) {
+  LabelVolume out(grid);
+  label_by_blocks(
+      out, range, [&](const Eigen::Vector3d& c, double r) { return shape.inside_ball(c, r); },
+      [&](int i, int j, int k) {
+        return shape.inside(grid.index_to_physical(Eigen::Vector3d(i, j, k)));
+      });
+  return out;
 }
 
 double shape_volume_mm3(const Shape& shape, double voxel_mm) {

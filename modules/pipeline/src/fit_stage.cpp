@@ -242,16 +242,14 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
     // The organ as the model carried it before the fit, sampled once and compared with the
     // shape it was made from (the discretisation floor) and with the known deformed organ
     // (the undeformed error); the truth is sampled once for the three bodies compared with it.
-    const geometry::Shape& planned = out.model.shape;
-    std::optional<evaluation::KnownBody> shape(
-        std::in_place,
-        evaluation::InsideTest{
-            [&](const Eigen::Vector3d& p) { return planned.inside(p); },
-            [&](const Eigen::Vector3d& p, double r) { return planned.inside_ball(p, r); }},
-        planned.bounds(), truth_voxel);
-    std::optional<evaluation::LatticeBody> before = shape->sample(organ_before);
-    const auto floor = shape->compare(*before);
-    shape.reset();
+    std::optional<evaluation::LatticeBody> before;
+    geometry::SurfaceComparison floor;
+    {  // the shape's lattice let go before the truth's is made
+      const evaluation::KnownBody shape(evaluation::shape_body(out.model.shape),
+                                        out.model.shape.bounds(), truth_voxel);
+      before = shape.sample(organ_before);
+      floor = shape.compare(*before);
+    }
     throw_if_interrupted();
     truth_progress.update(1, "the model before the fit against its shape");
     const evaluation::KnownBody truth(evaluation::deformed_body(pts.truth_shape, *pts.truth),

@@ -5,29 +5,13 @@
 #include <algorithm>
 #include <cmath>
 
-#include "organfit/geometry/label_by_blocks.h"
 #include "organfit/geometry/mask_ops.h"
+#include "organfit/geometry/shape.h"
 #include "organfit/meshing/surface.h"
 #include "organfit/report/report.h"
 #include "organfit/support/progress.h"
 
 namespace organfit::pipeline {
-namespace {
-
-/// A shape's inside test at the CT's voxel centres (only within the shape's bounds).
-geometry::LabelVolume shape_on_grid(const geometry::Shape& shape,
-                                    const geometry::ImageGeometry& g) {
-  geometry::LabelVolume mask(g);
-  geometry::label_by_blocks(
-      mask, geometry::index_range(g, shape.bounds(), 1),
-      [&](const Eigen::Vector3d& c, double r) { return shape.inside_ball(c, r); },
-      [&](int i, int j, int k) {
-        return shape.inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
-      });
-  return mask;
-}
-
-}  // namespace
 
 std::string build_report(const ReportContext& c) {
   report::ReportInput in;
@@ -63,7 +47,9 @@ std::string build_report(const ReportContext& c) {
     const auto& g = c.ct->geometry;
     const geometry::LabelVolume fitted = c.fitted_on_ct ? *c.fitted_on_ct : c.fitted->on_grid(g);
     const geometry::LabelVolume planning =
-        c.planning ? shape_on_grid(*c.planning, g) : geometry::LabelVolume(g);
+        c.planning ? geometry::shape_on_grid(*c.planning, g,
+                                             geometry::index_range(g, c.planning->bounds(), 1))
+                   : geometry::LabelVolume(g);
     std::array<int, 3> lo{g.size[0], g.size[1], g.size[2]}, hi{-1, -1, -1};
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     long long n = 0;

@@ -107,6 +107,9 @@ struct InsideTest {
 /// area rather than the body's volume. `inside` and `ball` are called from several threads.
 geometry::LabelVolume sample_inside(const InsideTest& body, const geometry::ImageGeometry& grid);
 
+/// The shape itself: its inside() and inside_ball().
+InsideTest shape_body(const geometry::Shape& shape);
+
 /// The deformed shape: deformed_inside, and its ball test: the shape's
 /// (geometry::Shape::inside_ball) on the ball inverse_radius gives about inverse(p).
 InsideTest deformed_body(const geometry::Shape& shape, const Deformation& deformation);

@@ -42,6 +42,11 @@ Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask);
 Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
                  const Eigen::Vector3d& centre_mm);
 
+/// The shape on `grid` (label 1 inside) over the voxels of `range` (0 elsewhere): each
+/// voxel centre's inside(), blocks that inside_ball places wholly on one side set at once
+/// (label_by_blocks.h): the same labels.
+LabelVolume shape_on_grid(const Shape& shape, const ImageGeometry& grid, const IndexRange& range);
+
 /// Volume of a shape by counting the voxel centres of a grid of `voxel_mm` inside it (mm^3).
 double shape_volume_mm3(const Shape& shape, double voxel_mm);
 
