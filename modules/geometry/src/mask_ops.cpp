@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 
@@ -255,14 +256,46 @@ LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_m
 }
 
 namespace {
-/// Whether voxel (i, j, k), inside the mask, has a face neighbour outside it or lies on
-/// the grid's edge.
-bool on_surface(const LabelVolume& mask, int i, int j, int k) {
-  const auto& g = mask.geometry;
-  return i == 0 || j == 0 || k == 0 || i == g.size[0] - 1 || j == g.size[1] - 1 ||
-         k == g.size[2] - 1 || !mask.at(i - 1, j, k) || !mask.at(i + 1, j, k) ||
-         !mask.at(i, j - 1, k) || !mask.at(i, j + 1, k) || !mask.at(i, j, k - 1) ||
-         !mask.at(i, j, k + 1);
+/// Calls on_surface(i) for each voxel of row (j, k) that is inside the mask and has a face
+/// neighbour outside it or lies on the grid's edge, in order of i. The row and its four
+/// neighbouring rows are read by pointer: the whole grid is scanned (43M voxels for a lung's
+/// truth at 0.5 mm), and most of it is outside.
+template <class F>
+void surface_of_row(const LabelVolume& mask, int j, int k, F&& on_surface) {
+  const ImageGeometry& g = mask.geometry;
+  const int nx = g.size[0];
+  const long long row_stride = nx, slice_stride = static_cast<long long>(nx) * g.size[1];
+  const std::uint8_t* row = mask.labels.data() + g.linear_index(0, j, k);
+  const bool edge_row = j == 0 || k == 0 || j == g.size[1] - 1 || k == g.size[2] - 1;
+  auto eight = [](const std::uint8_t* p) {
+    std::uint64_t w;
+    std::memcpy(&w, p, 8);
+    return w;
+  };
+  auto no_zero_byte = [](std::uint64_t w) {
+    return ((w - 0x0101010101010101ULL) & ~w & 0x8080808080808080ULL) == 0;
+  };
+  for (int i = 0; i < nx; ++i) {
+    // Eight voxels at once where all are outside, or all inside with every face neighbour
+    // inside too: most of a grid is one or the other.
+    while (i + 8 <= nx) {
+      const std::uint64_t w = eight(row + i);
+      if (w == 0 ||
+          (!edge_row && i >= 1 && i + 9 <= nx && no_zero_byte(w) &&
+           no_zero_byte(eight(row + i - 1)) && no_zero_byte(eight(row + i + 1)) &&
+           no_zero_byte(eight(row + i - row_stride)) && no_zero_byte(eight(row + i + row_stride)) &&
+           no_zero_byte(eight(row + i - slice_stride)) &&
+           no_zero_byte(eight(row + i + slice_stride))))
+        i += 8;
+      else
+        break;
+    }
+    if (i >= nx) break;
+    if (!row[i]) continue;
+    if (edge_row || i == 0 || i == nx - 1 || !row[i - 1] || !row[i + 1] || !row[i - row_stride] ||
+        !row[i + row_stride] || !row[i - slice_stride] || !row[i + slice_stride])
+      on_surface(i);
+  }
 }
 }  // namespace
 
@@ -271,9 +304,10 @@ std::vector<std::uint8_t> surface_of(const LabelVolume& mask) {
   std::vector<std::uint8_t> s(mask.labels.size(), 0);
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        if (mask.at(i, j, k) && on_surface(mask, i, j, k)) s[g.linear_index(i, j, k)] = 1;
+    for (int j = 0; j < g.size[1]; ++j) {
+      std::uint8_t* out = s.data() + g.linear_index(0, j, k);
+      surface_of_row(mask, j, k, [out](int i) { out[i] = 1; });
+    }
   return s;
 }
 
@@ -283,12 +317,16 @@ std::vector<Eigen::Vector3i> surface_voxels(const LabelVolume& mask) {
   // pass would give them.
   std::vector<std::vector<Eigen::Vector3i>> slices(static_cast<size_t>(g.size[2]));
 #pragma omp parallel for schedule(dynamic, 4)
-  for (int k = 0; k < g.size[2]; ++k)
+  for (int k = 0; k < g.size[2]; ++k) {
+    auto& slice = slices[static_cast<size_t>(k)];
     for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        if (mask.at(i, j, k) && on_surface(mask, i, j, k))
-          slices[static_cast<size_t>(k)].emplace_back(i, j, k);
+      surface_of_row(mask, j, k, [&slice, j, k](int i) { slice.emplace_back(i, j, k); });
+  }
   std::vector<Eigen::Vector3i> out;
+  size_t total = 0;
+  for (const auto& slice : slices)
+    total += slice.size();
+  out.reserve(total);
   for (const auto& slice : slices)
     out.insert(out.end(), slice.begin(), slice.end());
   return out;

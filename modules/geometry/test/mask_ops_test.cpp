@@ -35,6 +35,43 @@ TEST(DistanceTransform, MatchesBruteForceOnAnisotropicGrid) {
       }
 }
 
+TEST(MaskOps, SurfaceVoxelsAreTheInsideVoxelsWithAFaceNeighbourOutsideOrOnTheEdge) {
+  // Rows of several lengths (shorter than eight voxels, not a multiple of eight), solid
+  // blocks with holes, and labels other than 1: the scan by eight voxels at a time must
+  // find what the definition does, voxel by voxel.
+  std::mt19937 rng(11);
+  for (const Eigen::Vector3i size : {Eigen::Vector3i(5, 4, 3), Eigen::Vector3i(37, 11, 9),
+                                     Eigen::Vector3i(64, 6, 5), Eigen::Vector3i(1, 7, 4)}) {
+    LabelVolume mask;
+    mask.geometry.size = {size.x(), size.y(), size.z()};
+    mask.labels.assign(mask.geometry.voxel_count(), 0);
+    for (int k = 0; k < size.z(); ++k)
+      for (int j = 0; j < size.y(); ++j)
+        for (int i = 0; i < size.x(); ++i)
+          if (i > size.x() / 5 && rng() % 23 != 0)
+            mask.at(i, j, k) = static_cast<std::uint8_t>(1 + rng() % 255 * (rng() % 2));
+    std::vector<Eigen::Vector3i> expected;
+    for (int k = 0; k < size.z(); ++k)
+      for (int j = 0; j < size.y(); ++j)
+        for (int i = 0; i < size.x(); ++i) {
+          if (!mask.at(i, j, k)) continue;
+          bool surface = false;
+          for (int d = 0; d < 3; ++d)
+            for (const int step : {-1, 1}) {
+              Eigen::Vector3i n(i, j, k);
+              n(d) += step;
+              surface = surface || n(d) < 0 || n(d) >= size(d) || !mask.at(n.x(), n.y(), n.z());
+            }
+          if (surface) expected.emplace_back(i, j, k);
+        }
+    EXPECT_EQ(surface_voxels(mask), expected) << size.transpose();
+    const std::vector<std::uint8_t> flags = surface_of(mask);
+    EXPECT_EQ(static_cast<size_t>(std::count(flags.begin(), flags.end(), 1)), expected.size());
+    for (const Eigen::Vector3i& v : expected)
+      EXPECT_EQ(flags[static_cast<size_t>(mask.geometry.linear_index(v.x(), v.y(), v.z()))], 1);
+  }
+}
+
 TEST(MaskOps, BallVolumeAndSurfaceDistanceOfConcentricSpheres) {
   const ImageGeometry g =
       grid_covering({Eigen::Vector3d::Constant(-12), Eigen::Vector3d::Constant(12)}, 0.25, 1);
