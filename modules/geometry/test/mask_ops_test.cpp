@@ -40,8 +40,8 @@ TEST(MaskOps, SurfaceVoxelsAreTheInsideVoxelsWithAFaceNeighbourOutsideOrOnTheEdg
   // blocks with holes, and labels other than 1: the scan by eight voxels at a time must
   // find what the definition does, voxel by voxel.
   std::mt19937 rng(11);
-  for (const Eigen::Vector3i size : {Eigen::Vector3i(5, 4, 3), Eigen::Vector3i(37, 11, 9),
-                                     Eigen::Vector3i(64, 6, 5), Eigen::Vector3i(1, 7, 4)}) {
+  for (const Eigen::Vector3i& size : {Eigen::Vector3i(5, 4, 3), Eigen::Vector3i(37, 11, 9),
+                                      Eigen::Vector3i(64, 6, 5), Eigen::Vector3i(1, 7, 4)}) {
     LabelVolume mask;
     mask.geometry.size = {size.x(), size.y(), size.z()};
     mask.labels.assign(mask.geometry.voxel_count(), 0);
