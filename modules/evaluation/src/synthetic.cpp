@@ -173,21 +173,16 @@ std::function<bool(const Eigen::Vector3d&)> deformed_inside(const geometry::Shap
 
 geometry::LabelVolume sample_inside(const InsideTest& body, const geometry::ImageGeometry& grid) {
   geometry::LabelVolume out(grid);
-  const auto& n = grid.size;
-  auto voxel = [&](int i, int j, int k) {
-    return body.inside(grid.index_to_physical(Eigen::Vector3d(i, j, k)));
-  };
   if (body.ball) {
-    geometry::IndexRange all;
-    all.lo = {0, 0, 0}, all.hi = {n[0] - 1, n[1] - 1, n[2] - 1};
-    geometry::label_by_blocks(out, all, body.ball, voxel);
+    geometry::label_by_blocks(out, geometry::whole_range(grid), body.ball, body.inside);
     return out;
   }
+  const auto& n = grid.size;
 #pragma omp parallel for schedule(dynamic, 1) collapse(2)
   for (int k = 0; k < n[2]; ++k)
     for (int j = 0; j < n[1]; ++j)
       for (int i = 0; i < n[0]; ++i)
-        out.at(i, j, k) = voxel(i, j, k);
+        out.at(i, j, k) = body.inside(grid.index_to_physical(Eigen::Vector3d(i, j, k)));
   return out;
 }
 

@@ -79,9 +79,7 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
       return d < 0 ? geometry::BallSide::inside : geometry::BallSide::outside;
     return geometry::BallSide::unknown;
   };
-  geometry::label_by_blocks(out, r, ball, [&](int i, int j, int k) {
-    return inside(grid.index_to_physical(Eigen::Vector3d(i, j, k)));
-  });
+  geometry::label_by_blocks(out, r, ball, [&](const Eigen::Vector3d& p) { return inside(p); });
   return out;
 }
 

@@ -36,9 +36,7 @@ geometry::LabelVolume reference_body(const geometry::Shape& shape, double r0_mm)
   const geometry::ImageGeometry g =
       geometry::grid_covering(shape.bounds(), 0.25 * r0_mm, 0.5 * r0_mm);
   // By blocks (80M voxels for a million-particle body's reference).
-  geometry::IndexRange all;
-  all.hi = {g.size[0] - 1, g.size[1] - 1, g.size[2] - 1};
-  return geometry::shape_on_grid(shape, g, all);
+  return geometry::shape_on_grid(shape, g, geometry::whole_range(g));
 }
 
 void build_model_terms(OrganModel& model, const particles::Skeleton* skeleton) {

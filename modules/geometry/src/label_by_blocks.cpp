@@ -16,13 +16,14 @@ struct Block {
 
 void label_by_blocks(LabelVolume& out, const IndexRange& range,
                      const std::function<BallSide(const Eigen::Vector3d&, double)>& ball,
-                     const std::function<bool(int, int, int)>& voxel) {
+                     const std::function<bool(const Eigen::Vector3d&)>& inside) {
   if (range.empty()) return;
   const ImageGeometry& grid = out.geometry;
   // Sets block b or halves it; writes only b's voxels.
   auto classify = [&](const Block& b, auto& self) -> void {
     if (b.lo == b.hi) {
-      out.at(b.lo[0], b.lo[1], b.lo[2]) = voxel(b.lo[0], b.lo[1], b.lo[2]) ? 1 : 0;
+      out.at(b.lo[0], b.lo[1], b.lo[2]) =
+          inside(grid.index_to_physical(Eigen::Vector3d(b.lo[0], b.lo[1], b.lo[2]))) ? 1 : 0;
       return;
     }
     const Eigen::Vector3d centre = grid.index_to_physical(

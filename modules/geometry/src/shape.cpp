@@ -188,9 +188,7 @@ LabelVolume shape_on_grid(const Shape& shape, const ImageGeometry& grid, const I
   LabelVolume out(grid);
   label_by_blocks(
       out, range, [&](const Eigen::Vector3d& c, double r) { return shape.inside_ball(c, r); },
-      [&](int i, int j, int k) {
-        return shape.inside(grid.index_to_physical(Eigen::Vector3d(i, j, k)));
-      });
+      [&](const Eigen::Vector3d& p) { return shape.inside(p); });
   return out;
 }
 

@@ -61,6 +61,15 @@ void binomial_pass(const ImageGeometry& g, int axis, const double* in, double* o
       }
     }
 }
+
+/// The three passes, x then y then z: from `in` into a, a into b, b into a (the smoothed
+/// values end in a). `b` may hold `in`: only the first pass reads it.
+void binomial_passes(const ImageGeometry& g, const double* in, GridBuffer<double>& a,
+                     GridBuffer<double>& b) {
+  binomial_pass(g, 0, in, a.data());
+  binomial_pass(g, 1, a.data(), b.data());
+  binomial_pass(g, 2, b.data(), a.data());
+}
 }  // namespace
 
 SignedDistance SignedDistance::smoothed() const {
@@ -69,14 +78,10 @@ SignedDistance SignedDistance::smoothed() const {
     out.values_ = values_;
     return out;
   }
-  // The first pass from this distance's values, the others between two new buffers.
+  // From this distance's values into two new buffers.
   out.values_ = GridBuffer<double>(values_.size());
-  binomial_pass(geometry_, 0, values_.data(), out.values_.data());
-  GridBuffer<double> next(values_.size());
-  for (int axis = 1; axis < 3; ++axis) {
-    binomial_pass(geometry_, axis, out.values_.data(), next.data());
-    out.values_.swap(next);
-  }
+  GridBuffer<double> scratch(values_.size());
+  binomial_passes(geometry_, values_.data(), out.values_, scratch);
   return out;
 }
 
@@ -137,10 +142,8 @@ void SignedDistance::smooth() {
   // a linear field unchanged and takes the voxel steps out of a slanted boundary.
   if (!all_finite()) return;  // no boundary: nothing to smooth
   GridBuffer<double> out(values_.size());
-  for (int axis = 0; axis < 3; ++axis) {
-    binomial_pass(geometry_, axis, values_.data(), out.data());
-    values_.swap(out);
-  }
+  binomial_passes(geometry_, values_.data(), out, values_);  // values_ the second buffer
+  values_.swap(out);
 }
 
 double SignedDistance::at_voxel(int i, int j, int k) const {

@@ -66,6 +66,11 @@ struct IndexRange {
   bool empty() const { return lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]; }
 };
 
+/// Every voxel of `grid`.
+inline IndexRange whole_range(const ImageGeometry& grid) {
+  return {{0, 0, 0}, {grid.size[0] - 1, grid.size[1] - 1, grid.size[2] - 1}};
+}
+
 /// The voxels of `grid` whose centres may lie in the physical `box` (any direction
 /// matrix): the index bounding box of its 8 corners (floor, ceil), widened by `pad`
 /// voxels and clamped to the grid.

@@ -19,10 +19,11 @@ enum class BallSide { inside, outside, unknown };
 ///  - ball(centre_mm, radius_mm): the side every point within the radius of the centre lies
 ///    on, or unknown; never wrong. Asked of each block of more than one voxel, with the ball
 ///    through its corner voxels' centres.
-///  - voxel(i, j, k): whether voxel (i, j, k) is inside.
+///  - inside(centre_mm): whether a voxel whose centre is there is inside (asked of single
+///    voxels).
 /// Both are called from several threads; each writes nothing.
 void label_by_blocks(LabelVolume& out, const IndexRange& range,
                      const std::function<BallSide(const Eigen::Vector3d&, double)>& ball,
-                     const std::function<bool(int, int, int)>& voxel);
+                     const std::function<bool(const Eigen::Vector3d&)>& inside);
 
 }  // namespace organfit::geometry
