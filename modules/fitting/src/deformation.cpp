@@ -160,7 +160,7 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
   particle_box_ = {lo.array() - h_ - largest_move, hi.array() + h_ + largest_move};
   if (largest_move == 0) return;  // at rest: u is zero everywhere
   const double margin = std::max(2 * h_, 2 * largest_move);
-  spacing_ = h_ / kLatticePerSupport;
+  spacing_ = lattice_mm();
   origin_ = lo.array() - margin;
   for (int d = 0; d < 3; ++d)
     n_[d] = static_cast<int>(std::ceil((hi[d] - lo[d] + 2 * margin) / spacing_)) + 1;
@@ -259,6 +259,10 @@ long long Deformation::solve_harmonic_part(const std::vector<std::uint8_t>& fitt
     values_[static_cast<size_t>(lattice.free_nodes[f])] =
         x.col(static_cast<Eigen::Index>(f)).cast<float>();
   return static_cast<long long>(nf);
+}
+
+double Deformation::lattice_mm() const {
+  return h_ / kLatticePerSupport;
 }
 
 Eigen::Vector3d Deformation::node(long long v) const {

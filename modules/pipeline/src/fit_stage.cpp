@@ -125,7 +125,7 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
                       {"deformation",
                        {{"min_volume_ratio", phi.min_volume_ratio()},
                         {"max_volume_ratio", phi.max_volume_ratio()},
-                        {"lattice_mm", phi.support_mm() / 4},
+                        {"lattice_mm", phi.lattice_mm()},
                         {"fitted_nodes", phi.fitted_nodes()},
                         {"harmonic_nodes", phi.harmonic_nodes()},
                         {"folds", phi.folds()}}},

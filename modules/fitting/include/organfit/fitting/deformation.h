@@ -76,6 +76,8 @@ class Deformation {
   geometry::Aabb particle_box() const { return particle_box_; }
   const GlobalMap& global_map() const { return map_; }
   double support_mm() const { return h_; }
+  /// The spacing of u's lattice (mm): a quarter of the support.
+  double lattice_mm() const;
   /// Lattice nodes where u is the moving least squares' answer, and where it is harmonic.
   long long fitted_nodes() const { return fitted_nodes_; }
   long long harmonic_nodes() const { return harmonic_nodes_; }
