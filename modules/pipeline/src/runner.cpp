@@ -388,12 +388,14 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
       request.copy_rois_from = &*input_rtss;
       request.skip_roi = organ_name;  // the fitted ROI replaces its source
     }
-    pending =
-        prepare_export(organ_of_model(), model->model->radius_mm(), ct ? &*ct : nullptr, request);
-    for (const auto& w : pending->warnings)
-      warn(w);
-    for (const auto& f : pending->files)
-      exported.push_back(f);
+    if (request.writes_organ()) {  // not for the model file alone (a planning run's)
+      pending =
+          prepare_export(organ_of_model(), model->model->radius_mm(), ct ? &*ct : nullptr, request);
+      for (const auto& w : pending->warnings)
+        warn(w);
+      for (const auto& f : pending->files)
+        exported.push_back(f);
+    }
     model_file = scene.text("export", "model");
     if (!model_file.empty()) exported.push_back(model_file);
     record_stage("export", clock.elapsed_s() - ct_read_s);

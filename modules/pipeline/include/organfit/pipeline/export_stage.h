@@ -70,6 +70,8 @@ struct ExportRequest {
     return !displacement_field.empty() || !registration.empty() || !jacobian.empty();
   }
   bool needs_ct() const { return on_ct_grid() || deformation_files() || !uncertainty.empty(); }
+  /// Any file made from the organ or its deformation (the model file is not).
+  bool writes_organ() const { return needs_ct() || !mesh.empty(); }
 };
 
 class PendingExport {
