@@ -15,8 +15,9 @@ namespace {
 constexpr double kMaxExtentMm = 2000;     // larger than any organ: grids over it are not made
 constexpr double kMaxCells = 1 << 26;     // the particle buckets (4 bytes a cell)
 constexpr double kMaxNodes = 6e7;         // the lattice (12 bytes a node)
-constexpr double kLatticePerSupport = 4;  // nodes per support: an interpolation error of
-                                          // ~ (h/4)^2 / 8 times u's curvature
+constexpr double kLatticePerSupport = 3;  // nodes per support: an interpolation error of
+                                          // ~ (h/3)^2 / 8 times u's curvature (on a real
+                                          // GTV, within 0.04 mm of the field at h/8)
 
 /// The particles bucketed on cells of size h: cell c holds order[start[c] .. start[c + 1]).
 struct Buckets {
@@ -74,8 +75,10 @@ struct LocalFit {
   bool kept = false;
 };
 
+/// `least_weight`: the sum of the weights at q below which there is no answer;
+/// `first_widen`: the support to start from (0: h, 1: 1.5 h, 2: 2 h).
 LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& sorted,
-                              const Buckets& b, double h0) {
+                              const Buckets& b, double h0, double least_weight, int first_widen) {
   LocalFit out;
   if (b.dims.prod() == 0) return out;
   const Eigen::Vector3d c = ((q - b.lo) / h0).array().floor();
@@ -85,7 +88,7 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& s
   // Where they spread too little in some direction to fix the gradient (a tip of the
   // body, where they may all lie in one lattice plane), h grows: the field is
   // extrapolated from a wider, well-spread neighbourhood instead of guessing a zero slope.
-  for (int widen = 0; widen < 3; ++widen) {
+  for (int widen = first_widen; widen < 3; ++widen) {
     const double h = h0 * (widen == 0 ? 1.0 : widen == 1 ? 1.5 : 2.0);
     const int reach = widen == 0 ? 1 : 2;
     Eigen::Matrix4d m = Eigen::Matrix4d::Zero();
@@ -123,7 +126,7 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& s
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> spread;
     spread.computeDirect(cov, Eigen::EigenvaluesOnly);
     if (spread.eigenvalues()(0) < 1e-2) continue;  // a cap of particles: no slope to be had
-    if (m(0, 0) < 1) return out;                   // too few near q to trust
+    if (m(0, 0) < least_weight) return out;        // too few near q to trust
     m.bottomRightCorner<3, 3>() += 1e-9 * m(0, 0) * Eigen::Matrix3d::Identity();
     const Eigen::Matrix<double, 4, 3> coef = m.ldlt().solve(r);
     out.u = coef.row(0).transpose();
@@ -131,6 +134,34 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& s
     return out;
   }
   return out;
+}
+
+/// A cell's corner values (corner c at offsets (c & 1, c >> 1 & 1, c >> 2 & 1)) as its
+/// edges' differences: along[a][e], the 4 edges along axis a, e indexing the other two
+/// axes' offsets (the lower axis first).
+struct CellEdges {
+  Eigen::Vector3d along[3][4];
+  explicit CellEdges(const Eigen::Vector3d (&corner)[8]) {
+    for (int e = 0; e < 4; ++e) {
+      const int p = e & 1, q = e >> 1;
+      along[0][e] = corner[1 + 2 * p + 4 * q] - corner[2 * p + 4 * q];
+      along[1][e] = corner[p + 2 + 4 * q] - corner[p + 4 * q];
+      along[2][e] = corner[p + 2 * q + 4] - corner[p + 2 * q];
+    }
+  }
+};
+
+/// The gradient of the cell's trilinear interpolant at fraction f of the cell (spacing in
+/// mm): along each axis, the bilinear mean of its 4 edges' differences over the other two.
+Eigen::Matrix3d cell_gradient(const CellEdges& cell, const Eigen::Vector3d& f, double spacing) {
+  Eigen::Matrix3d g;
+  for (int a = 0; a < 3; ++a) {
+    const double s = f(a == 0 ? 1 : 0), t = f(a == 2 ? 1 : 2);  // the other two axes'
+    g.col(a) = ((1 - s) * (1 - t) * cell.along[a][0] + s * (1 - t) * cell.along[a][1] +
+                (1 - s) * t * cell.along[a][2] + s * t * cell.along[a][3]) /
+               spacing;
+  }
+  return g;
 }
 
 }  // namespace
@@ -159,8 +190,9 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
   const double largest_move = (placed - current).colwise().norm().maxCoeff();
   particle_box_ = {lo.array() - h_ - largest_move, hi.array() + h_ + largest_move};
   if (largest_move == 0) return;  // at rest: u is zero everywhere
-  const double margin = std::max(2 * h_, 2 * largest_move);
   spacing_ = lattice_mm();
+  // D beyond the particles, and one node more for the rim the moving least squares answers.
+  const double margin = std::max(2 * h_, 2 * largest_move) + spacing_;
   origin_ = lo.array() - margin;
   for (int d = 0; d < 3; ++d)
     n_[d] = static_cast<int>(std::ceil((hi[d] - lo[d] + 2 * margin) / spacing_)) + 1;
@@ -175,31 +207,70 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
     const SortedParticles sorted(buckets, placed, current);
 #pragma omp parallel for schedule(dynamic, 64)
     for (long long v = 0; v < nodes; ++v) {
-      const LocalFit f = moving_least_squares(node(v), sorted, buckets, h_);
+      const LocalFit f = moving_least_squares(node(v), sorted, buckets, h_, 1.0, 0);
       if (!f.kept) continue;
       values_[static_cast<size_t>(v)] = f.u.cast<float>();
       fitted[static_cast<size_t>(v)] = 1;
     }
+    // The rim: the other nodes of every cell with a node kept above, answered too, so that
+    // a point it answers is interpolated from its answers alone (an affine motion
+    // exactly) rather than mixed with the harmonic part. Beyond the weight of one
+    // particle, from a support of 2h: an extrapolation from the few particles within h
+    // tilts with them (it folded a real GTV twisted 10 mm; docs/decisions.md).
+    std::vector<std::uint8_t> rim(static_cast<size_t>(nodes), 0);
+    const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
+#pragma omp parallel for schedule(dynamic, 64)
+    for (long long v = 0; v < nodes; ++v) {
+      if (fitted[static_cast<size_t>(v)]) continue;
+      const int at[3] = {static_cast<int>(v % n_[0]), static_cast<int>((v / n_[0]) % n_[1]),
+                         static_cast<int>(v / step[2])};
+      bool near = false;
+      for (int c = 0; c < 27 && !near; ++c) {
+        const int d[3] = {c % 3 - 1, (c / 3) % 3 - 1, c / 9 - 1};
+        bool on = true;
+        for (int a = 0; a < 3; ++a)
+          on = on && at[a] + d[a] >= 0 && at[a] + d[a] < n_[a];
+        near =
+            on && fitted[static_cast<size_t>(v + d[0] * step[0] + d[1] * step[1] + d[2] * step[2])];
+      }
+      if (!near) continue;
+      const LocalFit f = moving_least_squares(node(v), sorted, buckets, h_, 0.0, 2);
+      if (!f.kept) continue;
+      values_[static_cast<size_t>(v)] = f.u.cast<float>();
+      rim[static_cast<size_t>(v)] = 1;
+    }
+    for (size_t v = 0; v < rim.size(); ++v)
+      fitted[v] |= rim[v];
   }
   for (const auto f : fitted)
     fitted_nodes_ += f;
   // u where the moving least squares did not answer: harmonic, zero at the lattice's faces.
   harmonic_nodes_ = solve_harmonic_part(fitted);
-  // det(grad phi^-1) over the cells, at their centres.
+  // det(grad phi^-1) over the cells, at the centres of their eight octants (within a cell
+  // the trilinear gradient varies, and a fold need not reach the centre).
+  const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
   double lo_det = 1, hi_det = 1;
 #pragma omp parallel for collapse(2) reduction(min : lo_det) reduction(max : hi_det)
   for (int k = 0; k < n_[2] - 1; ++k)
     for (int j = 0; j < n_[1] - 1; ++j)
       for (int i = 0; i < n_[0] - 1; ++i) {
-        const Eigen::Vector3d q = origin_ + spacing_ * Eigen::Vector3d(i + 0.5, j + 0.5, k + 0.5);
-        double det = 1;
-        evaluate(q, &det, false);
-        lo_det = std::min(lo_det, det), hi_det = std::max(hi_det, det);
+        Eigen::Vector3d corner[8];
+        for (int c = 0; c < 8; ++c)
+          corner[c] = values_[static_cast<size_t>(i + (c & 1) + step[1] * (j + ((c >> 1) & 1)) +
+                                                  step[2] * (k + ((c >> 2) & 1)))]
+                          .cast<double>();
+        const CellEdges cell(corner);
+        for (int octant = 0; octant < 8; ++octant) {
+          const Eigen::Vector3d f(octant & 1 ? 0.75 : 0.25, octant & 2 ? 0.75 : 0.25,
+                                  octant & 4 ? 0.75 : 0.25);
+          const double det =
+              (Eigen::Matrix3d::Identity() + cell_gradient(cell, f, spacing_)).determinant();
+          lo_det = std::min(lo_det, det), hi_det = std::max(hi_det, det);
+        }
       }
   min_det_ = lo_det, max_det_ = hi_det;
   // u's largest size and gradient (for pull_back_stretch): at a node, the largest edge
   // difference either side along each axis, over the spacing.
-  const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
   double largest_u = 0, largest_grad_sq = 0;
 #pragma omp parallel for collapse(2) reduction(max : largest_u, largest_grad_sq)
   for (int k = 0; k < n_[2]; ++k)
@@ -291,23 +362,19 @@ Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det, boo
   const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
   const Eigen::Vector3d f = t - base;
   Eigen::Vector3d u = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d g = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d corner[8];
   for (int c = 0; c < 8; ++c) {
     const int di = c & 1, dj = (c >> 1) & 1, dk = (c >> 2) & 1;
-    const Eigen::Vector3d value =
-        values_[static_cast<size_t>(v0 + di * step[0] + dj * step[1] + dk * step[2])]
-            .cast<double>();
+    corner[c] = values_[static_cast<size_t>(v0 + di * step[0] + dj * step[1] + dk * step[2])]
+                    .cast<double>();
     const double wx = di ? f.x() : 1 - f.x(), wy = dj ? f.y() : 1 - f.y(),
                  wz = dk ? f.z() : 1 - f.z();
-    u += wx * wy * wz * value;
-    if (det) {
-      g.col(0) += (di ? 1.0 : -1.0) * wy * wz / spacing_ * value;
-      g.col(1) += (dj ? 1.0 : -1.0) * wx * wz / spacing_ * value;
-      g.col(2) += (dk ? 1.0 : -1.0) * wx * wy / spacing_ * value;
-    }
+    u += wx * wy * wz * corner[c];
   }
   // The global map keeps volume: det(grad phi^-1) = det(I + grad u).
-  if (det) *det = (Eigen::Matrix3d::Identity() + g).determinant();
+  if (det)
+    *det =
+        (Eigen::Matrix3d::Identity() + cell_gradient(CellEdges(corner), f, spacing_)).determinant();
   return point ? map_.inverse(q + u, map_inverse_a_) : q + u;
 }
 
