@@ -14,10 +14,6 @@
 
 namespace organfit::fitting {
 
-double volume_voxel_mm(double rho, double organ_volume_mm3) {
-  return std::max(0.5 * rho, std::cbrt(organ_volume_mm3 / 8e6));
-}
-
 double p95_tolerance_mm(double radius_mm, double mean_tolerance_mm) {
   // Half-normal residuals |n|, n ~ N(0, s^2): mean s sqrt(2 / pi), 95th percentile 1.96 s.
   constexpr double kP95OverMean = 1.959964 / 0.7978846;

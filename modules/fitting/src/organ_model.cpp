@@ -32,10 +32,26 @@ particles::IntegratorOptions integrator_options_from(const ModelSettings& s,
   return opt;
 }
 
+namespace {
+/// A shape's volume (mm^3): a mask's own voxels, or an analytic shape sampled with
+/// `samples` voxels along its largest extent.
+double shape_volume(const geometry::Shape& shape, double samples) {
+  const Eigen::Vector3d extent = shape.bounds().max_mm - shape.bounds().min_mm;
+  return shape.mask
+             ? shape.mask->volume_mm3(1)
+             : geometry::shape_volume_mm3(shape, std::max(0.05, extent.maxCoeff() / samples));
+}
+}  // namespace
+
+double volume_voxel_mm(double rho, double organ_volume_mm3) {
+  return std::max(0.5 * rho, std::cbrt(organ_volume_mm3 / 8e6));
+}
+
 geometry::LabelVolume reference_body(const geometry::Shape& shape, double r0_mm) {
-  const geometry::ImageGeometry g =
-      geometry::grid_covering(shape.bounds(), 0.25 * r0_mm, 0.5 * r0_mm);
-  // By blocks (80M voxels for a million-particle body's reference).
+  // The volume to within a few percent is enough (its cube root sets the voxel).
+  const geometry::ImageGeometry g = geometry::grid_covering(
+      shape.bounds(), volume_voxel_mm(0.5 * r0_mm, shape_volume(shape, 100)), 0.5 * r0_mm);
+  // By blocks (15M voxels for a million-particle body's reference).
   return geometry::shape_on_grid(shape, g, geometry::whole_range(g));
 }
 
@@ -91,10 +107,7 @@ double radius_for_count(const ModelSettings& s, const geometry::Shape& shape, lo
   unit.radius_mm = 0.5;  // r0 = 1 mm
   const double spacing_per_r0 =
       particles::fcc_equilibrium_spacing(particles::LennardJones(cohesion_params_from(unit)));
-  const Eigen::Vector3d extent = shape.bounds().max_mm - shape.bounds().min_mm;
-  const double volume_mm3 =
-      shape.mask ? shape.mask->volume_mm3(1)
-                 : geometry::shape_volume_mm3(shape, std::max(0.05, extent.maxCoeff() / 200));
+  const double volume_mm3 = shape_volume(shape, 200);
   // The surface's partial cells make the count differ a little from the volume's; a box
   // whose faces lie on lattice planes gains whole face layers (+10% at 6,000 particles).
   const double a = std::cbrt(std::sqrt(2.0) * volume_mm3 / static_cast<double>(count));

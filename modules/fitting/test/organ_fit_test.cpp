@@ -125,6 +125,21 @@ TEST(P95Tolerance, IsTheRadiusOrTheNoisesOwn95thPercentileWhicheverIsLarger) {
   EXPECT_NEAR(p95_tolerance_mm(0, mean), r[190000], 0.01 * r[190000]);
 }
 
+TEST(ReferenceBody, IsOnAGridOfHalfTheRadiusUntilTheOrganWouldHoldOver8MillionVoxels) {
+  // A 36 x 28 x 24 mm ellipsoid (12.7 cm3): r0 = 2 mm gives voxels of r0/4 = 0.5 mm (about
+  // 100k inside); r0 = 0.1 mm would give 0.025 mm (8e8 inside), so the voxel is the one
+  // that holds 8e6: cbrt(12,667 / 8e6) = 0.117 mm.
+  const geometry::Shape shape = geometry::make_shape("ellipsoid", {36, 28, 24}, {0, 0, 0});
+  const double volume_mm3 = 4.0 / 3.0 * M_PI * 18 * 14 * 12;
+  const geometry::LabelVolume fine = reference_body(shape, 2.0);
+  EXPECT_DOUBLE_EQ(fine.geometry.spacing_mm.x(), 0.5);
+  EXPECT_NEAR(fine.volume_mm3(1), volume_mm3, 0.01 * volume_mm3);
+  const geometry::LabelVolume capped = reference_body(shape, 0.1);
+  EXPECT_NEAR(capped.geometry.spacing_mm.x(), std::cbrt(volume_mm3 / 8e6), 0.002);
+  EXPECT_NEAR(static_cast<double>(capped.count(1)), 8e6, 0.03 * 8e6);
+  EXPECT_NEAR(capped.volume_mm3(1), volume_mm3, 0.001 * volume_mm3);
+}
+
 // Small particles, noisy points: 95% of the residuals within rho (0.7 mm) is more than
 // points of 0.5 mm noise can give (their own 95th percentile is 0.98 mm); the tolerance
 // is the noise's, and the fit converges.

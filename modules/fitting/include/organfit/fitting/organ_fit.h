@@ -127,12 +127,6 @@ FittedOrgan fit_paper(OrganModel model, const std::vector<AttractivePoint>& poin
 FittedOrgan fit_spread(OrganModel model, const std::vector<AttractivePoint>& points,
                        const SpreadFitOptions& options, const FitObserver& observer = {});
 
-/// Voxel (mm) of the volume measures made in every fit: half the particle radius, but
-/// coarse enough that the organ holds at most about 8 million voxels (a voxel count's
-/// error is about its surface voxels over its volume: 0.1% there), so that a model of
-/// small particles in a large organ is not measured on a grid of 10^8 voxels.
-double volume_voxel_mm(double rho_mm, double organ_volume_mm3);
-
 /// The fit's default tolerance on the residuals' 95th percentile (mm): the particle radius
 /// rho, or the 95th percentile that residuals of mean `mean_tolerance_mm` have when they
 /// are a noise's (half-normal: 2.46 times the mean), whichever is larger. Below the latter

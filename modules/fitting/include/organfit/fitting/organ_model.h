@@ -66,7 +66,15 @@ particles::CohesionParams cohesion_params_from(const ModelSettings& s);
 particles::IntegratorOptions integrator_options_from(const ModelSettings& s,
                                                      const particles::Model& model);
 
-/// The reference body of a shape: a mask on a grid of r0/4 covering it.
+/// Voxel (mm) of the organ's grids made from its particles' size (the reference body, the
+/// volume measures made in every fit): half the particle radius, but coarse enough that
+/// the organ holds at most about 8 million voxels (a voxel count's error is about its
+/// surface voxels over its volume: 0.1% there), so that a model of small particles in a
+/// large organ is not held on a grid of 10^8 voxels.
+double volume_voxel_mm(double rho_mm, double organ_volume_mm3);
+
+/// The reference body of a shape: a mask covering it on a grid of volume_voxel_mm (r0/4
+/// below 8e6 (r0/4)^3 of organ).
 geometry::LabelVolume reference_body(const geometry::Shape& shape, double r0_mm);
 
 /// The model's force terms (cohesion, and the skeleton when `skeleton` has nodes) around
