@@ -202,6 +202,7 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
   const long long nodes = 1LL * n_[0] * n_[1] * n_[2];
   values_.assign(static_cast<size_t>(nodes), Eigen::Vector3f::Zero());
   std::vector<std::uint8_t> fitted(static_cast<size_t>(nodes), 0);  // the MLS's answer kept
+  const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
   {
     const Buckets buckets(current, h_);
     const SortedParticles sorted(buckets, placed, current);
@@ -218,7 +219,6 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
     // particle, from a support of 2h: an extrapolation from the few particles within h
     // tilts with them (it folded a real GTV twisted 10 mm; docs/decisions.md).
     std::vector<std::uint8_t> rim(static_cast<size_t>(nodes), 0);
-    const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
 #pragma omp parallel for schedule(dynamic, 64)
     for (long long v = 0; v < nodes; ++v) {
       if (fitted[static_cast<size_t>(v)]) continue;
@@ -248,17 +248,13 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
   harmonic_nodes_ = solve_harmonic_part(fitted);
   // det(grad phi^-1) over the cells, at the centres of their eight octants (within a cell
   // the trilinear gradient varies, and a fold need not reach the centre).
-  const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
   double lo_det = 1, hi_det = 1;
 #pragma omp parallel for collapse(2) reduction(min : lo_det) reduction(max : hi_det)
   for (int k = 0; k < n_[2] - 1; ++k)
     for (int j = 0; j < n_[1] - 1; ++j)
       for (int i = 0; i < n_[0] - 1; ++i) {
         Eigen::Vector3d corner[8];
-        for (int c = 0; c < 8; ++c)
-          corner[c] = values_[static_cast<size_t>(i + (c & 1) + step[1] * (j + ((c >> 1) & 1)) +
-                                                  step[2] * (k + ((c >> 2) & 1)))]
-                          .cast<double>();
+        cell_corners(i + step[1] * j + step[2] * k, corner);
         const CellEdges cell(corner);
         for (int octant = 0; octant < 8; ++octant) {
           const Eigen::Vector3d f(octant & 1 ? 0.75 : 0.25, octant & 2 ? 0.75 : 0.25,
@@ -347,6 +343,14 @@ geometry::Aabb Deformation::local_box() const {
   return {origin_, origin_ + spacing_ * (n_.cast<double>().array() - 1).matrix()};
 }
 
+void Deformation::cell_corners(long long v0, Eigen::Vector3d (&corner)[8]) const {
+  const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
+  for (int c = 0; c < 8; ++c)
+    corner[c] = values_[static_cast<size_t>(v0 + (c & 1) * step[0] + ((c >> 1) & 1) * step[1] +
+                                            ((c >> 2) & 1) * step[2])]
+                    .cast<double>();
+}
+
 Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det, bool point) const {
   if (det) *det = 1;
   if (!q.allFinite()) return q;
@@ -359,14 +363,12 @@ Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det, boo
       static_cast<long long>(base.x()) +
       1LL * n_[0] *
           (static_cast<long long>(base.y()) + 1LL * n_[1] * static_cast<long long>(base.z()));
-  const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
   const Eigen::Vector3d f = t - base;
   Eigen::Vector3d u = Eigen::Vector3d::Zero();
   Eigen::Vector3d corner[8];
+  cell_corners(v0, corner);
   for (int c = 0; c < 8; ++c) {
     const int di = c & 1, dj = (c >> 1) & 1, dk = (c >> 2) & 1;
-    corner[c] = values_[static_cast<size_t>(v0 + di * step[0] + dj * step[1] + dk * step[2])]
-                    .cast<double>();
     const double wx = di ? f.x() : 1 - f.x(), wy = dj ? f.y() : 1 - f.y(),
                  wz = dk ? f.z() : 1 - f.z();
     u += wx * wy * wz * corner[c];

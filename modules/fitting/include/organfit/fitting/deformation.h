@@ -27,9 +27,9 @@
 // a third of it holds the field within 0.04 mm of a lattice of h/8 on a real GTV
 // (docs/decisions.md). Every node of a cell with a node it answers is answered by it too
 // (the rim: fitted over 2h, whatever its weight), so a point it answers is interpolated
-// from its answers alone: an affine motion is carried exactly up to the surface. At rest (x_i =
-// x_i^0) u is zero everywhere and phi is the global map exactly: the identity gives the planning
-// organ exactly.
+// from its answers alone: an affine motion is carried exactly up to the surface.
+// At rest (x_i = x_i^0) u is zero everywhere and phi is the global map exactly: the
+// identity gives the planning organ exactly.
 //
 // Since M keeps volume, det(grad phi) at the tissue now at q is 1 / det(I + grad u(q)).
 #include <Eigen/Core>
@@ -107,6 +107,9 @@ class Deformation {
   long long solve_harmonic_part(const std::vector<std::uint8_t>& fitted);
 
   Eigen::Vector3d node(long long v) const;  ///< node v's position (mm)
+  /// u (mm) at the 8 nodes of the cell whose lowest node is v0: corner c at offsets
+  /// (c & 1, c >> 1 & 1, c >> 2 & 1).
+  void cell_corners(long long v0, Eigen::Vector3d (&corner)[8]) const;
   /// phi^-1(q), and det(grad phi^-1) at q when asked; without `point` the global map is
   /// not inverted (its exponentials dominate on a large organ) and q + u(q) is returned.
   Eigen::Vector3d evaluate(const Eigen::Vector3d& q, double* det, bool point = true) const;
