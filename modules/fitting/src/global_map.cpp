@@ -81,32 +81,41 @@ void gaussian_row(double t0, int n, double* g) {
 /// A bump below this (of unit height) is left out of a field.
 constexpr double kLeastBump = 1e-6;
 
-/// The bumps of field `a` of `f` about q: the centres within 5.3 sigmas of q's other two
-/// coordinates (exp(-5.3^2 / 2) < kLeastBump), rows i0..i1 along axis b, columns j0..j1 along c,
-/// bump (i, j)'s value along_b[i - i0] * along_c[j - j0] and weight index first + i +
-/// stride * j. Empty (i0 > i1) without a grid.
-struct BumpWindow {
-  int i0 = 0, i1 = -1, j0 = 0, j1 = -1, first = 0, stride = 0;
-  double along_b[16], along_c[16];
-  BumpWindow(const ShearFields& f, int a, const Eigen::Vector3d& q) {
+/// The bump centres along one axis within 5.3 sigmas of coordinate x (exp(-5.3^2 / 2) <
+/// kLeastBump): centres i0..i1, centre i's Gaussian value g[i - i0]. Empty (i0 > i1)
+/// without a grid. A field's bumps are products of a row along each of its two other axes
+/// (the Gaussian is separable), and a row depends on its axis and coordinate alone: apply
+/// and inverse share the rows of a coordinate the fields before left unchanged.
+struct BumpRow {
+  int i0 = 0, i1 = -1;
+  double g[16];
+  BumpRow(const ShearFields& f, int axis, double x) {
     if (!(f.sigma_mm > 0)) return;
-    const auto [b, c] = other_axes(a);
     const double reach = 5.3;
-    const double ub = (q(b) - f.origin_mm(b)) / f.sigma_mm;
-    const double uc = (q(c) - f.origin_mm(c)) / f.sigma_mm;
-    i0 = std::max(0, static_cast<int>(std::ceil(ub - reach)));
-    i1 = std::min(f.count(b) - 1, static_cast<int>(std::floor(ub + reach)));
-    j0 = std::max(0, static_cast<int>(std::ceil(uc - reach)));
-    j1 = std::min(f.count(c) - 1, static_cast<int>(std::floor(uc + reach)));
-    if (i1 - i0 >= 16 || j1 - j0 >= 16) {  // cannot be: 2 x 5.3 sigmas span 11 centres
+    const double u = (x - f.origin_mm(axis)) / f.sigma_mm;
+    i0 = std::max(0, static_cast<int>(std::ceil(u - reach)));
+    i1 = std::min(f.count(axis) - 1, static_cast<int>(std::floor(u + reach)));
+    if (i1 - i0 >= 16) {  // cannot be: 2 x 5.3 sigmas span 11 centres
       i1 = i0 - 1;
       return;
     }
-    // The Gaussian is separable: a row of values along b, a column along c.
-    gaussian_row(ub - i0, i1 - i0 + 1, along_b);
-    gaussian_row(uc - j0, j1 - j0 + 1, along_c);
-    first = a * f.block(), stride = f.count(b);
+    gaussian_row(u - i0, i1 - i0 + 1, g);
   }
+  bool empty() const { return i0 > i1; }
+};
+
+/// The bumps of field `a` of `f` about q: rows i along axis b (along_b), columns j along
+/// c (along_c), bump (i, j)'s value along_b.g[i - i0] * along_c.g[j - j0] and weight
+/// index first + i + stride * j.
+struct BumpWindow {
+  BumpRow along_b, along_c;
+  int first, stride;
+  BumpWindow(const ShearFields& f, int a, const Eigen::Vector3d& q)
+      : along_b(f, other_axes(a).first, q(other_axes(a).first)),
+        along_c(f, other_axes(a).second, q(other_axes(a).second)),
+        first(a * f.block()),
+        stride(f.count(other_axes(a).first)) {}
+  bool empty() const { return along_b.empty() || along_c.empty(); }
 };
 
 /// Calls visit(index, value) for each bump of field `a` of `f` at q at least kLeastBump,
@@ -114,11 +123,37 @@ struct BumpWindow {
 template <class Visit>
 void for_each_bump(const ShearFields& f, int a, const Eigen::Vector3d& q, Visit&& visit) {
   const BumpWindow w(f, a, q);
-  for (int j = w.j0; j <= w.j1; ++j)
-    for (int i = w.i0; i <= w.i1; ++i) {
-      const double e = w.along_b[i - w.i0] * w.along_c[j - w.j0];
+  if (w.empty()) return;
+  const BumpRow &rb = w.along_b, &rc = w.along_c;
+  for (int j = rc.i0; j <= rc.i1; ++j)
+    for (int i = rb.i0; i <= rb.i1; ++i) {
+      const double e = rb.g[i - rb.i0] * rc.g[j - rc.i0];
       if (e >= kLeastBump) visit(w.first + i + w.stride * j, e);
     }
+}
+
+/// Field `a` of `f` from its two rows (b then c, other_axes' order): the bumps
+/// for_each_bump visits, without a list (it is called for every lattice site of a re-fill
+/// and every voxel an evaluation asks about) and a column at a time: along a column the
+/// values are unimodal, so those at least kLeastBump are a run, summed as one dot product.
+double field_of(const ShearFields& f, int a, const BumpRow& rb, const BumpRow& rc) {
+  double sum_all = 0;
+  if (f.weights.size() == 0 || rb.empty() || rc.empty()) return sum_all;
+  const int first = a * f.block(), stride = f.count(other_axes(a).first);
+  for (int j = rc.i0; j <= rc.i1; ++j) {
+    const double c = rc.g[j - rc.i0];
+    int lo = rb.i0, hi = rb.i1;
+    while (lo <= hi && rb.g[lo - rb.i0] * c < kLeastBump)
+      ++lo;
+    while (hi >= lo && rb.g[hi - rb.i0] * c < kLeastBump)
+      --hi;
+    const double* weight = f.weights.data() + first + stride * j;
+    double sum = 0;
+    for (int i = lo; i <= hi; ++i)
+      sum += weight[i] * rb.g[i - rb.i0];
+    sum_all += c * sum;
+  }
+  return sum_all;
 }
 }  // namespace
 
@@ -129,42 +164,30 @@ void ShearFields::bumps(int a, const Eigen::Vector3d& q,
 }
 
 double ShearFields::field(int a, const Eigen::Vector3d& q) const {
-  // The bumps for_each_bump visits, without a list (it is called for every lattice site of
-  // a re-fill and every voxel an evaluation asks about) and a column at a time: along a
-  // column the values are unimodal, so those at least kLeastBump are a run, summed as one
-  // dot product.
-  double f = 0;
-  if (weights.size() == 0) return f;
-  const BumpWindow w(*this, a, q);
-  for (int j = w.j0; j <= w.j1; ++j) {
-    const double c = w.along_c[j - w.j0];
-    int lo = w.i0, hi = w.i1;
-    while (lo <= hi && w.along_b[lo - w.i0] * c < kLeastBump)
-      ++lo;
-    while (hi >= lo && w.along_b[hi - w.i0] * c < kLeastBump)
-      --hi;
-    const double* weight = weights.data() + w.first + w.stride * j;
-    double sum = 0;
-    for (int i = lo; i <= hi; ++i)
-      sum += weight[i] * w.along_b[i - w.i0];
-    f += c * sum;
-  }
-  return f;
+  if (weights.size() == 0) return 0;
+  const auto [b, c] = other_axes(a);
+  return field_of(*this, a, BumpRow(*this, b, q(b)), BumpRow(*this, c, q(c)));
 }
 
 Eigen::Vector3d ShearFields::apply(const Eigen::Vector3d& q) const {
-  Eigen::Vector3d u = q;
+  Eigen::Vector3d u = q;  // the fields x, y, z, each on the coordinates the ones before left
   if (weights.size() == 0) return u;
-  for (int a = 0; a < 3; ++a)
-    u(a) += field(a, u);
+  const BumpRow y(*this, 1, u(1)), z(*this, 2, u(2));
+  u(0) += field_of(*this, 0, y, z);
+  const BumpRow x(*this, 0, u(0));
+  u(1) += field_of(*this, 1, x, z);
+  u(2) += field_of(*this, 2, x, BumpRow(*this, 1, u(1)));
   return u;
 }
 
 Eigen::Vector3d ShearFields::inverse(const Eigen::Vector3d& q) const {
   Eigen::Vector3d u = q;  // undo the fields in reverse order
   if (weights.size() == 0) return u;
-  for (int a = 2; a >= 0; --a)
-    u(a) -= field(a, u);
+  const BumpRow x(*this, 0, u(0)), y(*this, 1, u(1));
+  u(2) -= field_of(*this, 2, x, y);
+  const BumpRow z(*this, 2, u(2));
+  u(1) -= field_of(*this, 1, x, z);
+  u(0) -= field_of(*this, 0, BumpRow(*this, 1, u(1)), z);
   return u;
 }
 
