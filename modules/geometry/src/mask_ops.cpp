@@ -136,27 +136,50 @@ LabelVolume rasterize_balls(const Eigen::Matrix3Xd& centres, double radius_mm,
 }
 
 namespace {
+/// Rows of bits (bit i of a row: voxel i along x, 64 to a word, zero past the row's end).
+using Word = std::uint64_t;
+
+/// out |= row shifted by s voxels towards larger i (s > 0) or smaller (s < 0).
+void or_shifted(const Word* row, int words, int s, Word* out) {
+  const int q = std::abs(s) / 64, b = std::abs(s) % 64;
+  for (int k = 0; k < words; ++k) {
+    Word w = 0;
+    if (s > 0) {
+      if (k - q >= 0) w = row[k - q] << b;
+      if (b && k - q - 1 >= 0) w |= row[k - q - 1] >> (64 - b);
+    } else {
+      if (k + q < words) w = row[k + q] >> b;
+      if (b && k + q + 1 < words) w |= row[k + q + 1] << (64 - b);
+    }
+    out[k] |= w;
+  }
+}
+
 /// The voxels of g within `radius_mm` of a voxel of `set` (nonzero), 1, else 0: what a
 /// distance transform of `set` thresholded at radius_mm^2 gives, at a cost set by the
-/// set's surface rather than the grid's volume. The voxel of `set` nearest to a voxel
-/// outside it has a face neighbour outside it (the neighbour towards that voxel is
-/// nearer), so stamping a ball on the surface voxels alone reaches every voxel the
-/// transform does. Each offset's squared length is summed as the transform sums it,
-/// dz^2 + (dy^2 + dx^2), so that a voxel on the ball's rim falls the same way.
+/// rows the set reaches rather than the voxels. The ball is a set of runs along x: for
+/// each (dz, dy) a half-width w, dx in [-w, w], each offset's squared length summed as
+/// the transform sums it, dz^2 + (dy^2 + dx^2), so that a voxel on the ball's rim falls
+/// the same way. Row (j, k) of the result is then the union, over the ball's runs, of row
+/// (j - dy, k - dz) of the set widened by w along x: rows held as bits, each set row
+/// widened once for each half-width (within a block of slices), the unions taken 64
+/// voxels at a time.
 std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
                                            const ImageGeometry& g, double radius_mm) {
   const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
   const long long nxy = 1LL * nx * ny;
+  std::vector<std::uint8_t> out(set.size(), 0);
+  if (set.empty()) return out;
   const double r2 = radius_mm * radius_mm;
   int reach[3];
   for (int d = 0; d < 3; ++d)
     reach[d] = std::min(g.size[d], static_cast<int>(std::floor(radius_mm / g.spacing_mm[d])) + 1);
-  // The ball as runs along x: for each dz in [-reach_z, reach_z], the rows dy it meets and
-  // their half-width w (dx in [-w, w]; the squared length grows with |dx|).
   struct Run {
     int dy, w;
   };
   std::vector<std::vector<Run>> ball(2 * static_cast<size_t>(reach[2]) + 1);
+  std::vector<int> slot(static_cast<size_t>(reach[0]) + 1, -1);  // a half-width's place
+  std::vector<int> widths;
   for (int dz = -reach[2]; dz <= reach[2]; ++dz)
     for (int dy = -reach[1]; dy <= reach[1]; ++dy) {
       int w = -1;
@@ -164,49 +187,79 @@ std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
         const double x = dx * g.spacing_mm[0], y = dy * g.spacing_mm[1], z = dz * g.spacing_mm[2];
         if (z * z + (y * y + x * x) <= r2) w = dx;
       }
-      if (w >= 0) ball[static_cast<size_t>(dz + reach[2])].push_back({dy, w});
+      if (w < 0) continue;
+      ball[static_cast<size_t>(dz + reach[2])].push_back({dy, w});
+      if (slot[static_cast<size_t>(w)] < 0) slot[static_cast<size_t>(w)] = 0, widths.push_back(w);
     }
-  // The set's surface voxels (a face neighbour on the grid outside the set), by slice, as
-  // runs along x: a row's consecutive voxels i0..i1 stamp a ball's run of half-width w
-  // as the one span [i0 - w, i1 + w], the union of their spans.
-  struct SurfaceRun {
-    int i0, i1, j;
-  };
-  std::vector<std::vector<SurfaceRun>> surface(static_cast<size_t>(nz));
-  std::vector<std::uint8_t> out(set.size());
+  std::sort(widths.begin(), widths.end());
+  for (size_t s = 0; s < widths.size(); ++s)
+    slot[static_cast<size_t>(widths[s])] = static_cast<int>(s);
+  const int words = (nx + 63) / 64, nw = static_cast<int>(widths.size());
+  // The set's rows as bits, and which rows hold any.
+  std::vector<Word> bits(static_cast<size_t>(ny) * nz * words, 0);
+  std::vector<std::uint8_t> any(static_cast<size_t>(ny) * nz, 0);
 #pragma omp parallel for schedule(static)
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < ny; ++j)
-      for (int i = 0; i < nx; ++i) {
-        const long long v = k * nxy + 1LL * j * nx + i;
-        if (!set[v]) continue;
-        out[v] = 1;
-        if ((i > 0 && !set[v - 1]) || (i + 1 < nx && !set[v + 1]) || (j > 0 && !set[v - nx]) ||
-            (j + 1 < ny && !set[v + nx]) || (k > 0 && !set[v - nxy]) ||
-            (k + 1 < nz && !set[v + nxy])) {
-          auto& runs = surface[static_cast<size_t>(k)];
-          if (!runs.empty() && runs.back().j == j && runs.back().i1 == i - 1)
-            runs.back().i1 = i;
-          else
-            runs.push_back({i, i, j});
+  for (long long row = 0; row < 1LL * ny * nz; ++row) {
+    const std::uint8_t* in = set.data() + row * nx;
+    Word* b = bits.data() + row * words;
+    bool hit = false;
+    for (int i = 0; i < nx; ++i)
+      if (in[i]) b[i / 64] |= Word{1} << (i % 64), hit = true;
+    any[static_cast<size_t>(row)] = hit;
+  }
+  // Blocks of output slices; each widens the set's rows of the slices it reaches.
+  constexpr int kBlock = 16;
+  const int blocks = (nz + kBlock - 1) / kBlock;
+#pragma omp parallel
+  {
+    std::vector<Word> widened, union_row(static_cast<size_t>(words));
+#pragma omp for schedule(dynamic, 1)
+    for (int block = 0; block < blocks; ++block) {
+      const int k0 = block * kBlock, k1 = std::min(nz, k0 + kBlock) - 1;
+      const int s0 = std::max(0, k0 - reach[2]), s1 = std::min(nz - 1, k1 + reach[2]);
+      const size_t per_row = static_cast<size_t>(nw) * words;
+      widened.assign(static_cast<size_t>(s1 - s0 + 1) * ny * per_row, 0);
+      for (int s = s0; s <= s1; ++s)
+        for (int j = 0; j < ny; ++j) {
+          const long long row = 1LL * s * ny + j;
+          if (!any[static_cast<size_t>(row)]) continue;
+          const Word* b = bits.data() + row * words;
+          Word* w_out = widened.data() + (static_cast<size_t>(s - s0) * ny + j) * per_row;
+          std::copy_n(b, words, union_row.data());  // widened by 0
+          int done = 0;
+          for (int v = 0; v < nw; ++v) {
+            for (; done < widths[static_cast<size_t>(v)]; ++done) {
+              or_shifted(b, words, done + 1, union_row.data());
+              or_shifted(b, words, -(done + 1), union_row.data());
+            }
+            std::copy_n(union_row.data(), words, w_out + static_cast<size_t>(v) * words);
+          }
         }
-      }
-      // Each thread writes whole slices of the result: no two write one voxel.
-#pragma omp parallel for schedule(dynamic, 1)
-  for (int k = 0; k < nz; ++k)
-    for (int dz = -reach[2]; dz <= reach[2]; ++dz) {
-      const int from = k - dz;
-      if (from < 0 || from >= nz) continue;
-      const auto& runs = ball[static_cast<size_t>(dz + reach[2])];
-      std::uint8_t* slice = out.data() + k * nxy;
-      for (const SurfaceRun& s : surface[static_cast<size_t>(from)])
-        for (const Run& run : runs) {
-          const int jj = s.j + run.dy;
-          if (jj < 0 || jj >= ny) continue;
-          const int lo = std::max(0, s.i0 - run.w), hi = std::min(nx - 1, s.i1 + run.w);
-          std::fill(slice + 1LL * jj * nx + lo, slice + 1LL * jj * nx + hi + 1, std::uint8_t{1});
+      for (int k = k0; k <= k1; ++k)
+        for (int j = 0; j < ny; ++j) {
+          std::fill(union_row.begin(), union_row.end(), Word{0});
+          bool hit = false;
+          for (int dz = -reach[2]; dz <= reach[2]; ++dz) {
+            const int s = k - dz;
+            if (s < 0 || s >= nz) continue;
+            for (const Run& run : ball[static_cast<size_t>(dz + reach[2])]) {
+              const int jj = j - run.dy;
+              if (jj < 0 || jj >= ny || !any[static_cast<size_t>(1LL * s * ny + jj)]) continue;
+              const Word* w_in = widened.data() +
+                                 (static_cast<size_t>(s - s0) * ny + jj) * per_row +
+                                 static_cast<size_t>(slot[static_cast<size_t>(run.w)]) * words;
+              for (int q = 0; q < words; ++q)
+                union_row[static_cast<size_t>(q)] |= w_in[q];
+              hit = true;
+            }
+          }
+          if (!hit) continue;
+          std::uint8_t* o = out.data() + k * nxy + 1LL * j * nx;
+          for (int i = 0; i < nx; ++i)
+            o[i] = (union_row[static_cast<size_t>(i / 64)] >> (i % 64)) & 1;
         }
     }
+  }
   return out;
 }
 }  // namespace
