@@ -178,6 +178,7 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
   if (!(support_mm > 0) || !std::isfinite(support_mm))
     throw std::invalid_argument("deformation: support must be > 0 mm");
   map_inverse_a_ = map_.affine.a.inverse();
+  map_fields_ = ShearFieldTable(map_.fields);
   if (current.cols() == 0) return;
   const Eigen::Vector3d lo = current.rowwise().minCoeff().cwiseMin(placed.rowwise().minCoeff());
   const Eigen::Vector3d hi = current.rowwise().maxCoeff().cwiseMax(placed.rowwise().maxCoeff());
@@ -294,7 +295,7 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
 StretchBound Deformation::pull_back_stretch(const geometry::Aabb& box) const {
   const geometry::Aabb grown{box.min_mm.array() - largest_u_mm_,
                              box.max_mm.array() + largest_u_mm_};
-  StretchBound b = map_.inverse_stretch(grown);
+  StretchBound b = map_.inverse_stretch(grown, map_fields_.error());
   b.stretch *= 1 + largest_grad_u_;
   return b;
 }
@@ -358,7 +359,7 @@ Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det, boo
   const Eigen::Vector3d base = t.array().floor();
   if (values_.empty() || (base.array() < 0).any() || base.x() >= n_[0] - 1 ||
       base.y() >= n_[1] - 1 || base.z() >= n_[2] - 1)
-    return point ? map_.inverse(q, map_inverse_a_) : q;
+    return point ? map_.inverse(q, map_inverse_a_, map_fields_) : q;
   const long long v0 =
       static_cast<long long>(base.x()) +
       1LL * n_[0] *
@@ -377,7 +378,7 @@ Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det, boo
   if (det)
     *det =
         (Eigen::Matrix3d::Identity() + cell_gradient(CellEdges(corner), f, spacing_)).determinant();
-  return point ? map_.inverse(q + u, map_inverse_a_) : q + u;
+  return point ? map_.inverse(q + u, map_inverse_a_, map_fields_) : q + u;
 }
 
 Eigen::Vector3d Deformation::pull_back(const Eigen::Vector3d& q) const {

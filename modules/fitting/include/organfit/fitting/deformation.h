@@ -22,14 +22,16 @@
 // the CT far from the organ (docs/decisions.md).
 // The price: far from the organ the field is the global map's extrapolation, which grows
 // with the distance (docs/outputs.md).
+// M's shear fields are evaluated from their table (shear_field_table.h: within 1e-5 of
+// their largest height, 4 to 5 times faster), so phi^-1 = M^-1(q + u) with that M.
 // u is held on a lattice of h/3 (nodes over the particles' box widened by D and a node)
 // and interpolated trilinearly; zero outside it. The moving least squares varies over h:
 // a third of it holds the field within 0.04 mm of a lattice of h/8 on a real GTV
 // (docs/decisions.md). Every node of a cell with a node it answers is answered by it too
 // (the rim: fitted over 2h, whatever its weight), so a point it answers is interpolated
 // from its answers alone: an affine motion is carried exactly up to the surface.
-// At rest (x_i = x_i^0) u is zero everywhere and phi is the global map exactly: the
-// identity gives the planning organ exactly.
+// At rest (x_i = x_i^0) u is zero everywhere and phi is the global map (its fields from
+// their table): the identity gives the planning organ exactly.
 //
 // Since M keeps volume, det(grad phi) at the tissue now at q is 1 / det(I + grad u(q)).
 #include <Eigen/Core>
@@ -38,6 +40,7 @@
 #include <vector>
 
 #include "organfit/fitting/global_fit.h"
+#include "organfit/fitting/shear_field_table.h"
 #include "organfit/geometry/image_geometry.h"
 #include "organfit/particles/state.h"
 
@@ -91,6 +94,7 @@ class Deformation {
  private:
   GlobalMap map_;
   Eigen::Matrix3d map_inverse_a_ = Eigen::Matrix3d::Identity();
+  ShearFieldTable map_fields_;  // map_'s shear fields, tabulated (shear_field_table.h)
   double h_ = 1;
   geometry::Aabb particle_box_;
   // The lattice: node (i, j, k) at origin_ + spacing_ * (i, j, k), n_ nodes a side.

@@ -4,6 +4,7 @@
 // it, an incompressible flow. Each part keeps volume (exactly; the flow to its RK4's error)
 // and inverts (likewise); global_fit.h fits it.
 #include <Eigen/Core>
+#include <array>
 #include <utility>
 #include <vector>
 
@@ -125,6 +126,16 @@ struct StretchBound {
   double slack_mm = 0;
 };
 
+class ShearFieldTable;
+
+/// How far an evaluation of the shear fields may be from their bumps' smooth sum, each
+/// field: its value (mm) and its gradient (mm per mm). Zero for the bumps themselves
+/// (what they leave out is StretchBound's slack); a table's (shear_field_table.h) else.
+struct FieldEvaluationError {
+  std::array<double, 3> value_mm{0, 0, 0};
+  std::array<double, 3> gradient{0, 0, 0};
+};
+
 /// The global map: affine (det 1), then quadratic shears, then smooth shear fields, then
 /// the flow. Volume-preserving.
 struct GlobalMap {
@@ -148,16 +159,23 @@ struct GlobalMap {
   Eigen::Vector3d inverse(const Eigen::Vector3d& q, const Eigen::Matrix3d& a_inverse) const {
     return a_inverse * (shears.inverse(fields.inverse(flow.inverse(q))) - affine.t);
   }
+  /// apply and inverse with the fields evaluated by `table` (made from `fields`).
+  Eigen::Vector3d apply(const Eigen::Vector3d& p, const ShearFieldTable& table) const;
+  Eigen::Vector3d inverse(const Eigen::Vector3d& q, const Eigen::Matrix3d& a_inverse,
+                          const ShearFieldTable& table) const;
   /// A bound on how the inverse stretches distances over `box` (mm), from each part's
   /// largest gradient there: the fields' from their largest weight, the shears' from the
   /// box's extent about their centre (grown by the fields' largest move), the affine
   /// part's from its smallest singular value. Loose (a product of the parts' bounds) but
-  /// never below the truth.
-  StretchBound inverse_stretch(const geometry::Aabb& box) const;
+  /// never below the truth. With `evaluation`, for fields evaluated within that error of
+  /// their bumps (a table's): each field's gradient bound and move grown by it.
+  StretchBound inverse_stretch(const geometry::Aabb& box,
+                               const FieldEvaluationError& evaluation = {}) const;
 };
 
-/// The surface samples moved by `map`: points mapped, normals turned by the inverse
-/// transpose of its Jacobian (by central differences) and made unit again.
+/// The surface samples moved by `map` (its fields from their table, shear_field_table.h):
+/// points mapped, normals turned by the inverse transpose of its Jacobian (by central
+/// differences) and made unit again.
 SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface);
 
 /// How much `map` changes the shape and orientation of the body whose surface is sampled
