@@ -88,13 +88,18 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     pulls.push_back(o);
     pulls.back().regularisation = o.regularisation_alternative;
   }
-  std::vector<GlobalMap> affine_fits, fits;
-  for (const AffineFitOptions& pull : pulls) {
+  // The pulls' fits are independent and mostly serial (small systems): one pull a thread,
+  // each pull's fits kept in its own place and joined in the pulls' order.
+  std::vector<std::vector<GlobalMap>> affine_of(pulls.size()), whole_of(pulls.size());
+  const int pull_count = static_cast<int>(pulls.size());
+#pragma omp parallel for schedule(static, 1) if (pull_count > 1)
+  for (int k = 0; k < pull_count; ++k) {
+    const AffineFitOptions& pull = pulls[static_cast<size_t>(k)];
     GlobalMap affine_only;
     affine_only.affine = fit_volume_preserving_affine(surface, points, pull);
     affine_only.rms_after_mm = affine_only.affine.rms_after_mm;
     affine_only.found_by = "affine";
-    affine_fits.push_back(affine_only);
+    affine_of[static_cast<size_t>(k)].push_back(affine_only);
     if (points.size() < 21 || surface.points.cols() == 0) continue;  // 21 unknowns (c0..c8)
     // Two starts: from the affine fit, and from its translation alone with the stiffness
     // annealed (each level's settled map kept). From the affine fit alone, a bend seen
@@ -111,8 +116,15 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
       for (GlobalMap& fit : refine_global_map(anneal ? from_translation : from_affine, surface,
                                               points, pull, anneal)) {
         fit.found_by = anneal ? "whole map annealed" : "whole map";
-        fits.push_back(fit);
+        whole_of[static_cast<size_t>(k)].push_back(fit);
       }
+  }
+  std::vector<GlobalMap> affine_fits, fits;
+  for (int k = 0; k < pull_count; ++k) {
+    for (const GlobalMap& fit : affine_of[static_cast<size_t>(k)])
+      affine_fits.push_back(fit);
+    for (const GlobalMap& fit : whole_of[static_cast<size_t>(k)])
+      fits.push_back(fit);
   }
   if (distance && !points.empty() && surface.points.cols() > 0) {
     GlobalMap identity;
