@@ -11,8 +11,9 @@ namespace {
 /// The plane's nodes along one axis: Gaussian values g(t) and h times their derivatives
 /// in mm, -t g(t) h / sigma, at the nodes (rows) for each bump centre (columns); t the
 /// node's distance from the centre in sigmas.
-void node_rows(int centres, int nodes, Eigen::MatrixXd& value, Eigen::MatrixXd& slope) {
-  const double per = ShearFieldTable::kNodesPerSigma;
+void node_rows(int centres, int nodes, int per_sigma, Eigen::MatrixXd& value,
+               Eigen::MatrixXd& slope) {
+  const double per = per_sigma;
   value.resize(nodes, centres), slope.resize(nodes, centres);
   for (int p = 0; p < nodes; ++p)
     for (int i = 0; i < centres; ++i) {
@@ -35,10 +36,20 @@ struct Hermite {
 ShearFieldTable::ShearFieldTable(const ShearFields& fields) {
   if (fields.empty()) return;
   const double sigma = fields.sigma_mm;
-  h_mm_ = sigma / kNodesPerSigma;
+  // Nodes along one axis of a plane (the bumps' centres and 6 sigmas either side).
+  auto along = [&](int axis, int per) {
+    return static_cast<long long>(fields.count(axis) - 1 + 2 * kMarginSigmas) * per + 1;
+  };
+  auto nodes = [&](int per) {
+    return along(1, per) * along(2, per) + along(0, per) * along(2, per) +
+           along(0, per) * along(1, per);
+  };
+  while (per_sigma_ > 4 && nodes(per_sigma_) > 8'000'000)
+    --per_sigma_;
+  h_mm_ = sigma / per_sigma_;
   const auto& sums = detail::bump_sum_bounds();
   const double a0 = sums[0], a1 = sums[1], a4 = sums[4];
-  const double r = 1.0 / kNodesPerSigma, r3 = r * r * r, r4 = r3 * r;
+  const double r = 1.0 / per_sigma_, r3 = r * r * r, r4 = r3 * r;
   // The bicubic Hermite remainder, f - Hb Hc f = (f - Hb f) + Hb (f - Hc f): a cubic
   // Hermite interpolant's error is at most h^4 / 384 |f''''| and its derivative's
   // (sqrt 3 / 216) h^3 |f''''| (Birkhoff and Priver 1967; taken here as h^3 / 24), and Hb
@@ -57,16 +68,16 @@ ShearFieldTable::ShearFieldTable(const ShearFields& fields) {
     Plane& plane = planes_[static_cast<size_t>(a)];
     plane.b = a == 0 ? 1 : 0, plane.c = a == 2 ? 1 : 2;
     const int cb = fields.count(plane.b), cc = fields.count(plane.c);
-    plane.nb = (cb - 1 + 2 * kMarginSigmas) * kNodesPerSigma + 1;
-    plane.nc = (cc - 1 + 2 * kMarginSigmas) * kNodesPerSigma + 1;
+    plane.nb = static_cast<int>(along(plane.b, per_sigma_));
+    plane.nc = static_cast<int>(along(plane.c, per_sigma_));
     plane.origin_b = fields.origin_mm(plane.b) - kMarginSigmas * sigma;
     plane.origin_c = fields.origin_mm(plane.c) - kMarginSigmas * sigma;
     // f = Gb W Gc^T and its derivatives, W the heights (centre (i, j) at i + cb j).
     const Eigen::Map<const Eigen::MatrixXd> weights(fields.weights.data() + a * fields.block(), cb,
                                                     cc);
     Eigen::MatrixXd gb, db, gc, dc;
-    node_rows(cb, plane.nb, gb, db);
-    node_rows(cc, plane.nc, gc, dc);
+    node_rows(cb, plane.nb, per_sigma_, gb, db);
+    node_rows(cc, plane.nc, per_sigma_, gc, dc);
     const Eigen::MatrixXd gw = gb * weights, dw = db * weights;
     const Eigen::MatrixXd f = gw * gc.transpose(), fb = dw * gc.transpose(),
                           fc = gw * dc.transpose(), fbc = dw * dc.transpose();

@@ -98,3 +98,32 @@ TEST(ShearFieldTable, NoFieldsAndFarPointsAreLeftWhereTheyAre) {
   EXPECT_EQ(table.field(0, Eigen::Vector3d(0, 0, 60 + 8 * 7)), 0.0);
   EXPECT_EQ(table.field(2, Eigen::Vector3d(NAN, 0, 0)), 0.0);
 }
+
+TEST(ShearFieldTable, FewerNodesWhereTheBumpsAreManyWithinTheErrorItStates) {
+  // sigma 1 mm over a 200 x 300 x 400 mm box: 10 nodes a sigma would pass 8M nodes.
+  ShearFields f =
+      ShearFields::over(Eigen::Vector3d(-100, -150, -200), Eigen::Vector3d(100, 150, 200), 1);
+  std::mt19937 rng(8);
+  std::normal_distribution<double> height(0, 0.2);
+  for (Eigen::Index i = 0; i < f.weights.size(); ++i)
+    f.weights[i] = height(rng);
+  const ShearFieldTable table(f);
+  EXPECT_LT(table.nodes_per_sigma(), ShearFieldTable::kNodesPerSigma);
+  EXPECT_GE(table.nodes_per_sigma(), 4);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int a = 0; a < 3; ++a) {
+    const double w = f.largest_weight(a);
+    for (int k = 0; k < 60; ++k) {
+      const Eigen::Vector3d q(90 * u(rng), 140 * u(rng), 190 * u(rng));
+      EXPECT_LE(std::abs(table.field(a, q) - f.field(a, q)),
+                table.error().value_mm[static_cast<size_t>(a)] + 1e-4 * w);
+      Eigen::Vector3d fd;
+      for (int d = 0; d < 3; ++d) {
+        const Eigen::Vector3d s = 1e-5 * Eigen::Vector3d::Unit(d);
+        fd(d) = (table.field(a, q + s) - table.field(a, q - s)) / 2e-5;
+      }
+      EXPECT_LE((fd - bump_gradient(f, a, q)).norm(),
+                table.error().gradient[static_cast<size_t>(a)] + 1e-5);
+    }
+  }
+}

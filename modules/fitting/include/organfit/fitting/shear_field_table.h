@@ -1,8 +1,8 @@
 #pragma once
 // The global map's shear fields (global_map.h) tabulated for evaluation at many points: a
 // field f_a is a function of the other two coordinates, held with its gradient and mixed
-// derivative at nodes sigma / 10 apart over the plane of its bumps (6 sigmas beyond the
-// outermost centres, where every bump is below 2e-8 of its height) and interpolated by
+// derivative at nodes sigma / 10 apart (nodes_per_sigma) over the plane of its bumps (6 sigmas
+// beyond the outermost centres, where every bump is below 2e-8 of its height) and interpolated by
 // bicubic Hermite. Made once from fitted weights, it evaluates a field in a quarter to a
 // fifth of the time of its bumps (a window of 11 x 11 and up to six exponentials), which the
 // deformation asks for at every voxel near the organ's surface (fitting/deformation.h).
@@ -39,8 +39,11 @@ class ShearFieldTable {
   /// How far field() may be from the bumps' smooth sum, and its gradient from theirs.
   const FieldEvaluationError& error() const { return error_; }
 
-  /// Nodes per sigma along each axis of a plane.
+  /// Nodes per sigma along each axis of a plane: 10, fewer (down to 4, the errors stated
+  /// growing as (10 / n)^3 and ^4) where that many would pass 8M nodes in all (a field
+  /// sigma far below the organ's size: 100 nodes a bump).
   static constexpr int kNodesPerSigma = 10;
+  int nodes_per_sigma() const { return per_sigma_; }
   /// Sigmas beyond the outermost bump centres that a plane reaches.
   static constexpr int kMarginSigmas = 6;
 
@@ -54,6 +57,7 @@ class ShearFieldTable {
   };
   std::array<Plane, 3> planes_;
   double h_mm_ = 1;
+  int per_sigma_ = kNodesPerSigma;
   FieldEvaluationError error_;
 };
 
