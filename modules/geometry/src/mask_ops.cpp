@@ -290,12 +290,16 @@ std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
 void close_mask(LabelVolume& mask, double radius_mm) {
   if (radius_mm <= 0) return;
   std::vector<std::uint8_t> outside = within_radius_of(mask.labels, mask.geometry, radius_mm);
-  for (std::uint8_t& v : outside)
-    v = !v;  // complement of the dilation
+  const long long n = static_cast<long long>(outside.size());
+#pragma omp parallel for schedule(static)
+  for (long long i = 0; i < n; ++i)
+    outside[static_cast<size_t>(i)] =
+        !outside[static_cast<size_t>(i)];  // the dilation's complement
   const std::vector<std::uint8_t> near_outside =
       within_radius_of(outside, mask.geometry, radius_mm);
-  for (size_t i = 0; i < near_outside.size(); ++i)
-    mask.labels[i] = !near_outside[i];
+#pragma omp parallel for schedule(static)
+  for (long long i = 0; i < n; ++i)
+    mask.labels[static_cast<size_t>(i)] = !near_outside[static_cast<size_t>(i)];
 }
 
 LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm,
