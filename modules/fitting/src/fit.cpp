@@ -122,7 +122,9 @@ FitResult run_fit(
       after_row(state);
       integ.refresh_forces(state);
     }
+    const auto steps_start = Clock::now();
     integ.run(state, std::min<long long>(o.record_every, o.max_steps - integ.stats().steps));
+    result.steps_wall_s += std::chrono::duration<double>(Clock::now() - steps_start).count();
   }
   result.steps = integ.stats().steps;
   result.wall_s = now_s();

@@ -108,6 +108,7 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
                       {"iterations", r.fit.steps},
                       {"wall_s", r.fit.wall_s},
                       {"instrument_wall_s", r.fit.instrument_wall_s},
+                      {"steps_wall_s", r.fit.steps_wall_s},
                       {"converged", r.fit.converged},
                       {"stop_reason", r.fit.stop_reason},
                       {"local_stage_undone", r.local_stage_undone()},

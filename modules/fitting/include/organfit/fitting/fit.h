@@ -61,7 +61,10 @@ struct FitResult {
   bool converged = false;
   std::string stop_reason;  ///< "converged", "stalled", "step budget", "wall-time budget"
   long long steps = 0;
-  double wall_s = 0;             ///< fitting work
+  double wall_s = 0;  ///< fitting work
+  /// of wall_s, the dynamics steps alone (forces, skin, data forces): the set-up (the first
+  /// neighbour lists and forces) and the rows' residuals left out
+  double steps_wall_s = 0;
   double instrument_wall_s = 0;  ///< history measurements (volume), not part of the fit
   double residual_mean_mm = 0, residual_max_mm = 0, residual_p95_mm = 0;
   std::vector<double> residuals_mm;
