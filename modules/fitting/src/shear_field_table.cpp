@@ -52,10 +52,10 @@ ShearFieldTable::ShearFieldTable(const ShearFields& fields) {
   const double r = 1.0 / per_sigma_, r3 = r * r * r, r4 = r3 * r;
   // The bicubic Hermite remainder, f - Hb Hc f = (f - Hb f) + Hb (f - Hc f): a cubic
   // Hermite interpolant's error is at most h^4 / 384 |f''''| and its derivative's
-  // (sqrt 3 / 216) h^3 |f''''| (Birkhoff and Priver 1967; taken here as h^3 / 24), and Hb
-  // raises a function's size by at most (8 / 27) h times its slope, and its slope by 3 / h
-  // times its size plus twice its slope. A field's derivatives are at most its largest
-  // weight times the bump sums' bounds, a_m a_n / sigma^(m + n).
+  // (sqrt 3 / 216) h^3 |f''''| (Birkhoff and Priver 1967; taken here as h^3 / 24), and for
+  // any e, |Hb e| <= max |e| + (8 / 27) h max |e'| and |(Hb e)'| <= (3 / h) max |e| + 2 max
+  // |e'| (the basis' largest values and slopes). A field's derivatives are at most its
+  // largest weight times the bump sums' bounds, a_m a_n / sigma^(m + n).
   const double c1 = 1.0 / 24;
   for (int a = 0; a < 3; ++a) {
     const double w = fields.largest_weight(a);
