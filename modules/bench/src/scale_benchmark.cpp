@@ -152,7 +152,6 @@ nlohmann::json run_cases(const std::vector<const ScaleCase*>& chosen, const Scal
       // The update a clinic waits for: load the saved model, the points, the fit.
       entry["update_s"] =
           stage_s(entry, "planning_model") + stage_s(entry, "points") + stage_s(entry, "fit");
-      // The fit loop alone: run.json's fit.wall_s includes the global stage.
       // Per particle-step: the fit's dynamics steps (forces, skin, data forces) over the
       // particles it moved (the body re-filled by the global stage); beside it, the fit's
       // wall time less the global stage's, which also counts once-per-fit work (the first

@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "lattice_laplace.h"
+#include "other_axes.h"
 
 namespace organfit::fitting {
 namespace {
@@ -156,7 +157,8 @@ struct CellEdges {
 Eigen::Matrix3d cell_gradient(const CellEdges& cell, const Eigen::Vector3d& f, double spacing) {
   Eigen::Matrix3d g;
   for (int a = 0; a < 3; ++a) {
-    const double s = f(a == 0 ? 1 : 0), t = f(a == 2 ? 1 : 2);  // the other two axes'
+    const auto [b, c] = detail::other_axes(a);
+    const double s = f(b), t = f(c);
     g.col(a) = ((1 - s) * (1 - t) * cell.along[a][0] + s * (1 - t) * cell.along[a][1] +
                 (1 - s) * t * cell.along[a][2] + s * t * cell.along[a][3]) /
                spacing;

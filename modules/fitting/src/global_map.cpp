@@ -9,8 +9,11 @@
 #include "bump_sums.h"
 #include "mapped_samples.h"
 #include "organfit/fitting/shear_field_table.h"
+#include "other_axes.h"
 
 namespace organfit::fitting {
+
+using detail::other_axes;
 
 Eigen::Vector3d QuadraticShears::apply(const Eigen::Vector3d& q) const {
   Eigen::Vector3d u = q - centre;
@@ -31,13 +34,6 @@ Eigen::Vector3d QuadraticShears::inverse(const Eigen::Vector3d& q) const {
   u.x() -= c(0) * u.y() * u.y() + c(1) * u.z() * u.z() + c(2) * u.y() * u.z();
   return centre + u;
 }
-
-namespace {
-/// The two axes other than `a`, in order.
-std::pair<int, int> other_axes(int a) {
-  return {a == 0 ? 1 : 0, a == 2 ? 1 : 2};
-}
-}  // namespace
 
 ShearFields ShearFields::over(const Eigen::Vector3d& box_min_mm, const Eigen::Vector3d& box_max_mm,
                               double sigma_mm) {

@@ -2,8 +2,10 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <tuple>
 
 #include "bump_sums.h"
+#include "other_axes.h"
 
 namespace organfit::fitting {
 
@@ -66,7 +68,7 @@ ShearFieldTable::ShearFieldTable(const ShearFields& fields) {
   }
   for (int a = 0; a < 3; ++a) {
     Plane& plane = planes_[static_cast<size_t>(a)];
-    plane.b = a == 0 ? 1 : 0, plane.c = a == 2 ? 1 : 2;
+    std::tie(plane.b, plane.c) = detail::other_axes(a);
     const int cb = fields.count(plane.b), cc = fields.count(plane.c);
     plane.nb = static_cast<int>(along(plane.b, per_sigma_));
     plane.nc = static_cast<int>(along(plane.c, per_sigma_));

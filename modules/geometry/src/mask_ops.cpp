@@ -201,8 +201,7 @@ std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
     int dy, w;
   };
   std::vector<std::vector<Run>> ball(2 * static_cast<size_t>(reach[2]) + 1);
-  std::vector<int> slot(static_cast<size_t>(reach[0]) + 1, -1);  // a half-width's place
-  std::vector<int> widths;
+  std::vector<int> widths;  // the runs' half-widths, each once, ascending
   for (int dz = -reach[2]; dz <= reach[2]; ++dz)
     for (int dy = -reach[1]; dy <= reach[1]; ++dy) {
       int w = -1;
@@ -212,9 +211,11 @@ std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
       }
       if (w < 0) continue;
       ball[static_cast<size_t>(dz + reach[2])].push_back({dy, w});
-      if (slot[static_cast<size_t>(w)] < 0) slot[static_cast<size_t>(w)] = 0, widths.push_back(w);
+      widths.push_back(w);
     }
   std::sort(widths.begin(), widths.end());
+  widths.erase(std::unique(widths.begin(), widths.end()), widths.end());
+  std::vector<int> slot(static_cast<size_t>(reach[0]) + 1, -1);  // a half-width's place
   for (size_t s = 0; s < widths.size(); ++s)
     slot[static_cast<size_t>(widths[s])] = static_cast<int>(s);
   const int words = (nx + 63) / 64, nw = static_cast<int>(widths.size());
@@ -291,10 +292,10 @@ void close_mask(LabelVolume& mask, double radius_mm) {
   if (radius_mm <= 0) return;
   std::vector<std::uint8_t> outside = within_radius_of(mask.labels, mask.geometry, radius_mm);
   const long long n = static_cast<long long>(outside.size());
+  // The dilation's complement: what lies farther than r from the mask.
 #pragma omp parallel for schedule(static)
   for (long long i = 0; i < n; ++i)
-    outside[static_cast<size_t>(i)] =
-        !outside[static_cast<size_t>(i)];  // the dilation's complement
+    outside[static_cast<size_t>(i)] = !outside[static_cast<size_t>(i)];
   const std::vector<std::uint8_t> near_outside =
       within_radius_of(outside, mask.geometry, radius_mm);
 #pragma omp parallel for schedule(static)
