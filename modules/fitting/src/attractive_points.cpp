@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 
@@ -11,20 +12,34 @@
 
 namespace organfit::fitting {
 
-std::vector<int> first_shell_counts(const particles::Positions& x, double shell_mm) {
-  const int n = static_cast<int>(x.cols());
-  std::vector<int> w(n, 0);
-  if (n < 2) return w;
-  particles::NeighbourList list(shell_mm, 1e-9 * shell_mm);
-  list.update(x);
-  const auto& order = list.order();
+std::vector<int> first_shell_counts(const particles::Positions& x, double shell_mm,
+                                    const std::vector<int>& of) {
+  std::vector<int> w(static_cast<size_t>(x.cols()), 0);
+  if (of.empty()) return w;
+  const geometry::SampleGrid grid(x, shell_mm);
   const double shell2 = shell_mm * shell_mm;
-  for (int s = 0; s < n; ++s)
-    for (int k = list.first()[s]; k < list.first()[s + 1]; ++k) {
-      const int i = order[s], j = order[list.neighbours()[k]];
-      if ((x.col(i) - x.col(j)).squaredNorm() < shell2) ++w[i], ++w[j];
+  const long listed = static_cast<long>(of.size());
+#pragma omp parallel if (listed >= particles::kParallelMinParticles)
+  {
+    std::vector<int> near;
+#pragma omp for schedule(static)
+    for (long a = 0; a < listed; ++a) {
+      const int i = of[static_cast<size_t>(a)];
+      near.clear();
+      grid.within(x.col(i), shell_mm, near);  // a superset: within is <= the radius
+      int count = 0;
+      for (int j : near)
+        count += j != i && (x.col(i) - x.col(j)).squaredNorm() < shell2;
+      w[static_cast<size_t>(i)] = count;
     }
+  }
   return w;
+}
+
+std::vector<int> first_shell_counts(const particles::Positions& x, double shell_mm) {
+  std::vector<int> all(static_cast<size_t>(x.cols()));
+  std::iota(all.begin(), all.end(), 0);
+  return first_shell_counts(x, shell_mm, all);
 }
 
 void cap_by_cohesion(particles::Forces& g, const std::vector<int>& touched,
@@ -156,7 +171,7 @@ AttractivePointTerm::AttractivePointTerm(std::vector<AttractivePoint> points,
 }
 
 void AttractivePointTerm::count_first_shells(const particles::Positions& x) {
-  w_ = first_shell_counts(x, first_shell_mm_);
+  w_ = first_shell_counts(x, first_shell_mm_, skin_.skin());
 }
 
 PaperAttractiveForce::PaperAttractiveForce(std::vector<AttractivePoint> points,

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "organfit/particles/neighbour_list.h"
+
 namespace organfit::fitting {
 
 SkinDetector::SkinDetector(double voxel_mm, double radius_mm, double recompute_fraction)
@@ -18,9 +20,14 @@ SkinDetector::SkinDetector(double voxel_mm, double radius_mm, double recompute_f
 bool SkinDetector::update(const Eigen::Matrix3Xd& x) {
   if (valid_ && x.cols() == x_at_compute_.cols()) {
     const double limit = recompute_fraction_ * voxel_mm_;
-    if (x.cols() == 0 || (x - x_at_compute_).colwise().squaredNorm().maxCoeff() <= limit * limit) {
-      return false;
-    }
+    const long n = static_cast<long>(x.cols());
+    double largest2 = 0;  // the largest squared move since the last computation (mm^2)
+#pragma omp parallel for reduction(max         \
+                                   : largest2) \
+    schedule(static) if (n >= particles::kParallelMinParticles)
+    for (long i = 0; i < n; ++i)
+      largest2 = std::max(largest2, (x.col(i) - x_at_compute_.col(i)).squaredNorm());
+    if (largest2 <= limit * limit) return false;
   }
   compute(x);
   return true;
@@ -74,12 +81,18 @@ void SkinDetector::compute(const Eigen::Matrix3Xd& x) {
           if (d2 <= r2) visit(grid_.linear_index(v, j, k));
         }
   };
+  const bool parallel = n >= particles::kParallelMinParticles;
+#pragma omp parallel for schedule(static) if (parallel)
   for (int i = 0; i < n; ++i)
-    for_each_voxel_of(i, [&](long long v) { kept[v] = 1; });
+    for_each_voxel_of(i, [&](long long v) {
+#pragma omp atomic write
+      kept[v] = 1;  // balls overlap: several threads may set one voxel
+    });
 
   // 3. Boundary voxels: kept, with at least one of the 26 neighbours not kept. The
   // margin guarantees every kept voxel has all 26 neighbours on the grid.
   std::vector<std::uint8_t> boundary(total, 0);
+#pragma omp parallel for schedule(static) if (parallel)
   for (int k = 1; k < nz - 1; ++k)
     for (int j = 1; j < ny - 1; ++j)
       for (int v = 1; v < nx - 1; ++v) {
@@ -93,15 +106,15 @@ void SkinDetector::compute(const Eigen::Matrix3Xd& x) {
         boundary[idx] = !full;
       }
 
-  // 4. Skin particles touch a boundary voxel.
+      // 4. Skin particles touch a boundary voxel.
+#pragma omp parallel for schedule(static) if (parallel)
   for (int i = 0; i < n; ++i) {
     bool touches = false;
     for_each_voxel_of(i, [&](long long v) { touches = touches || boundary[v]; });
-    if (touches) {
-      is_skin_[i] = 1;
-      skin_.push_back(i);
-    }
+    is_skin_[i] = touches;
   }
+  for (int i = 0; i < n; ++i)
+    if (is_skin_[i]) skin_.push_back(i);
 
   // Closed body: everything not reachable from the border through free voxels.
   closed_.assign(total, 1);

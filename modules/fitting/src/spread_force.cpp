@@ -1,5 +1,6 @@
 #include "organfit/fitting/spread_force.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -49,29 +50,34 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
   const double sigma = params_.patch_sigma_r0 * r0_, radius = params_.patch_radius_r0 * r0_;
   gap_.assign(points_.size(), 0.0);
   const SkinIndex index(x, skin, &feet_);
-  std::vector<int> near;
-  for (size_t k = 0; k < points_.size(); ++k) {
-    PointStatus& st = status_[k];
-    st = PointStatus{};
-    patch_[k].clear();
-    // Epicentre: the skin particle whose surface is nearest the point.
-    const auto [epicentre, gap] = index.nearest_surface_particle(points_[k].p_mm, rho_);
-    st.epicentre = epicentre;
-    if (st.epicentre < 0) continue;
-    gap_[k] = gap;
-    st.d_min_mm = (x.col(st.epicentre) - points_[k].p_mm).norm();
-    st.inside_model = skin_.inside(points_[k].p_mm);
-    if (!st.inside_model && gap > outlier) {
-      st.rejected = true;
-      continue;
+  const long points = static_cast<long>(points_.size());
+#pragma omp parallel if (points >= 64)  // a nearest search and a patch each
+  {
+    std::vector<int> near;
+#pragma omp for schedule(dynamic, 16)
+    for (long k = 0; k < points; ++k) {  // each point's own status and patch
+      PointStatus& st = status_[k];
+      st = PointStatus{};
+      patch_[k].clear();
+      // Epicentre: the skin particle whose surface is nearest the point.
+      const auto [epicentre, gap] = index.nearest_surface_particle(points_[k].p_mm, rho_);
+      st.epicentre = epicentre;
+      if (st.epicentre < 0) continue;
+      gap_[k] = gap;
+      st.d_min_mm = (x.col(st.epicentre) - points_[k].p_mm).norm();
+      st.inside_model = skin_.inside(points_[k].p_mm);
+      if (!st.inside_model && gap > outlier) {
+        st.rejected = true;
+        continue;
+      }
+      const Eigen::Vector3d e = x.col(st.epicentre);
+      index.within(e, radius, near);
+      for (int i : near) {
+        const double d2 = (x.col(i) - e).squaredNorm();
+        patch_[k].push_back({i, points_[k].confidence * std::exp(-d2 / (2 * sigma * sigma))});
+      }
+      st.influence_count = static_cast<int>(patch_[k].size());
     }
-    const Eigen::Vector3d e = x.col(st.epicentre);
-    index.within(e, radius, near);
-    for (int i : near) {
-      const double d2 = (x.col(i) - e).squaredNorm();
-      patch_[k].push_back({i, points_[k].confidence * std::exp(-d2 / (2 * sigma * sigma))});
-    }
-    st.influence_count = static_cast<int>(patch_[k].size());
   }
   // Points far off the surface compared with the others (median + 5 x 1.4826 MAD, and
   // more than 2 r0) are not boundary data: e.g. a point deep inside the organ.
@@ -106,14 +112,22 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
     for (size_t k = 0; k < status_.size(); ++k)
       if (lone[k]) status_[k].rejected = true, patch_[k].clear();
   }
+  in_patches_.clear();
+  for (const auto& patch : patch_)
+    for (const auto& [i, w] : patch)
+      in_patches_.push_back(i);
+  std::sort(in_patches_.begin(), in_patches_.end());
+  in_patches_.erase(std::unique(in_patches_.begin(), in_patches_.end()), in_patches_.end());
 }
 
 double SpreadAttractiveForce::add_forces(const particles::State& state, particles::Forces& f,
                                          bool) {
   if (skin_.update(state.x)) assign(state.x);
-  const int n = state.size();
-  num_.assign(n, Eigen::Vector3d::Zero());
-  den_.assign(n, 0.0);
+  const auto n = static_cast<size_t>(state.size());
+  if (num_.size() != n) {
+    num_.assign(n, Eigen::Vector3d::Zero());
+    den_.assign(n, 0.0);
+  }
   for (size_t k = 0; k < points_.size(); ++k) {
     PointStatus& st = status_[k];
     if (st.rejected || patch_[k].empty()) continue;
@@ -143,13 +157,16 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
   const auto& skin = skin_.skin();
   const Eigen::Vector3d centroid = state.x.rowwise().mean();
   double inflation = 0;
-  for (int i = 0; i < n; ++i) {
-    if (den_[i] == 0) continue;
-    Eigen::Vector3d force = kappa_ * num_[i] / std::max(1.0, den_[i]);
-    const double mag = force.norm(), cap = 0.5 * std::max(1, w_[i]) * f_max_;  // W(i) F_max / 2
-    if (mag > cap) force *= cap / mag;
-    f.col(i) += force;
-    inflation += force.dot((state.x.col(i) - centroid).normalized());
+  for (int i : in_patches_) {
+    if (den_[i] != 0) {
+      Eigen::Vector3d force = kappa_ * num_[i] / std::max(1.0, den_[i]);
+      const double mag = force.norm(), cap = 0.5 * std::max(1, w_[i]) * f_max_;  // W(i) F_max / 2
+      if (mag > cap) force *= cap / mag;
+      f.col(i) += force;
+      inflation += force.dot((state.x.col(i) - centroid).normalized());
+    }
+    num_[i].setZero();
+    den_[i] = 0;
   }
   if (!skin.empty() && params_.hold_volume) {
     const double pressure = inflation / static_cast<double>(skin.size());

@@ -63,6 +63,24 @@ TEST_F(PaperForceTest, EpicentreReceivesExactlyFMaxKTowardsThePoint) {
   EXPECT_FALSE(st.inside_model);
 }
 
+TEST_F(PaperForceTest, FirstShellCountsOfListedParticlesAreTheBruteForceCounts) {
+  const double shell = 1.3 * params_.r0_mm;
+  std::vector<int> listed;
+  for (int i = 0; i < state_.size(); i += 7)
+    listed.push_back(i);
+  const std::vector<int> w = first_shell_counts(state_.x, shell, listed);
+  ASSERT_EQ(static_cast<int>(w.size()), state_.size());
+  int interior = 0;
+  for (int i = 0; i < state_.size(); ++i) {
+    int brute = 0;
+    for (int j = 0; j < state_.size(); ++j)
+      brute += j != i && (state_.x.col(j) - state_.x.col(i)).norm() < shell;
+    EXPECT_EQ(w[i], i % 7 == 0 ? brute : 0) << i;
+    interior += i % 7 == 0 && brute == 12;  // fcc bulk
+  }
+  EXPECT_GT(interior, 10);
+}
+
 TEST_F(PaperForceTest, OthersFallOffAsTheRatioToThePowerAlphaMinusOne) {
   force_params_.alpha = 3.0;
   force_params_.influence_radius_min_r0 = 2.5;

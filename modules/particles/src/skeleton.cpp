@@ -7,6 +7,7 @@
 #include <limits>
 #include <set>
 #include <stdexcept>
+#include <string>
 
 #include "organfit/geometry/image_geometry.h"
 #include "organfit/geometry/sample_grid.h"
@@ -223,11 +224,22 @@ SkeletonForce::SkeletonForce(const Skeleton& skeleton, const Positions& rest,
         edges.insert({member_of[i][a], member_of[i][b]});
   }
   skeleton_.edges.assign(edges.begin(), edges.end());
+  first_.assign(n + 1, 0);
+  for (int i = 0; i < n; ++i)
+    first_[i + 1] = first_[i] + static_cast<int>(member_of[i].size());
+  memberships_.resize(first_[n]);
+  std::vector<int> fill(first_.begin(), first_.end() - 1);
+  for (int k = 0; k < nodes; ++k)
+    for (size_t m = 0; m < clusters_[k].members.size(); ++m)
+      memberships_[fill[clusters_[k].members[m]]++] = {k, static_cast<int>(m)};
   compute_offsets(rest);
 }
 
 void SkeletonForce::compute_offsets(const Positions& rest) {
-  for (auto& c : clusters_) {
+  const int clusters = static_cast<int>(clusters_.size());
+#pragma omp parallel for schedule(dynamic, 16) if (rest.cols() >= kParallelMinParticles)
+  for (int k = 0; k < clusters; ++k) {
+    auto& c = clusters_[k];
     c.weight_sum = 0;
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (size_t m = 0; m < c.members.size(); ++m) {
@@ -268,9 +280,15 @@ Eigen::Matrix3Xd SkeletonForce::node_positions(const Positions& x) const {
 }
 
 double SkeletonForce::add_forces(const State& state, Forces& f, bool want_energy) {
+  const int n = state.size();
+  if (n + 1 != static_cast<int>(first_.size()))
+    throw std::invalid_argument("skeleton: the state has " + std::to_string(n) +
+                                " particles, the skeleton was tied to " +
+                                std::to_string(first_.size() - 1));
   const int clusters = static_cast<int>(clusters_.size());
-  // Frames first (independent per cluster), then forces in a fixed order: deterministic.
-#pragma omp parallel for schedule(dynamic, 1) if (state.size() >= kParallelMinParticles)
+  // Frames first (independent per cluster), then each particle's pulls gathered in cluster
+  // order: the sums a scan of the clusters makes, for any thread count.
+#pragma omp parallel for schedule(dynamic, 1) if (n >= kParallelMinParticles)
   for (int k = 0; k < clusters; ++k) {
     const auto& c = clusters_[k];
     if (c.members.empty()) continue;
@@ -284,17 +302,22 @@ double SkeletonForce::add_forces(const State& state, Forces& f, bool want_energy
     centres_[k] = centre;
     rotations_[k] = closest_rotation(a);
   }
-  double energy = 0;
   const double ks = params_.stiffness;
-  for (int k = 0; k < clusters; ++k) {
-    const auto& c = clusters_[k];
-    for (size_t m = 0; m < c.members.size(); ++m) {
-      const int i = c.members[m];
+  if (want_energy) energies_.assign(n, 0.0);
+#pragma omp parallel for schedule(static) if (n >= kParallelMinParticles)
+  for (int i = 0; i < n; ++i) {
+    for (int e = first_[i]; e < first_[i + 1]; ++e) {
+      const auto [k, m] = memberships_[e];
+      const Cluster& c = clusters_[k];
       const Eigen::Vector3d d = rotations_[k] * c.offsets.col(m) + centres_[k] - state.x.col(i);
       f.col(i) += ks * c.weights[m] * d;
-      if (want_energy) energy += 0.5 * ks * c.weights[m] * d.squaredNorm();
+      if (want_energy) energies_[i] += 0.5 * ks * c.weights[m] * d.squaredNorm();
     }
   }
+  double energy = 0;
+  if (want_energy)
+    for (double e : energies_)
+      energy += e;  // in particle order, for any thread count
   return energy;
 }
 

@@ -23,6 +23,12 @@ struct AttractivePoint {
 /// W(i) for every particle: neighbours within `shell_mm` (the first shell), O(N).
 std::vector<int> first_shell_counts(const particles::Positions& x, double shell_mm);
 
+/// W(i) for the particles `of` (indices into x), one count per particle of x, 0 for the
+/// others: the data terms need it only where their forces land, the skin. O(N) to bucket
+/// the particles, then a few cells a listed particle.
+std::vector<int> first_shell_counts(const particles::Positions& x, double shell_mm,
+                                    const std::vector<int>& of);
+
 /// The first shell of a relaxed fcc lattice, in r0: its 12 neighbours lie within this,
 /// the next shell (at sqrt(2) times the spacing) beyond.
 constexpr double kFirstShellR0 = 1.3;
@@ -129,7 +135,8 @@ class AttractivePointTerm : public particles::ForceTerm {
   /// Throws std::invalid_argument on a bad point (validate_points).
   AttractivePointTerm(std::vector<AttractivePoint> points, const particles::LennardJones& law,
                       double radius_mm, double skin_voxel_mm, double first_shell_r0);
-  /// W(i) at `x`: neighbours within first_shell_r0 r0.
+  /// W(i) at `x` of the skin's particles (the others' are 0: no data force lands on
+  /// them): neighbours within first_shell_r0 r0.
   void count_first_shells(const particles::Positions& x);
 
   std::vector<AttractivePoint> points_;

@@ -65,6 +65,8 @@ class SpreadAttractiveForce : public AttractivePointTerm {
   std::vector<std::vector<int>> neighbours_;  // each point's nearest points (fixed: points stay)
   SurfaceFeet feet_;                          // empty: the balls' surface
   std::vector<double> gap_;                   // each point's signed residual at assignment
+  std::vector<int> in_patches_;  // the particles of any patch, ascending (set by assign)
+  // Per particle, zero outside in_patches_: a step costs the patches, not the body.
   std::vector<Eigen::Vector3d> num_;
   std::vector<double> den_;
 };

@@ -90,10 +90,20 @@ class SkeletonForce : public ForceTerm {
     double weight_sum = 0;
     Eigen::Matrix3Xd offsets;  // rest offsets q_i = x0_i - c0, one column per member
   };
+  /// One membership of a particle: cluster k, its place m among k's members.
+  struct Membership {
+    int cluster, member;
+  };
   void compute_offsets(const Positions& rest);
   Skeleton skeleton_;
   SkeletonParams params_;
   std::vector<Cluster> clusters_;
+  // The clusters by particle (particle i's memberships are [first_[i], first_[i + 1]), in
+  // ascending cluster order): forces are gathered per particle, in parallel, adding the
+  // clusters' pulls in the order a scan of the clusters would.
+  std::vector<int> first_;
+  std::vector<Membership> memberships_;
+  std::vector<double> energies_;  // per particle, when asked for
   std::vector<Eigen::Vector3d> centres_;
   std::vector<Eigen::Matrix3d> rotations_;
 };
