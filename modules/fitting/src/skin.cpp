@@ -1,7 +1,9 @@
 #include "organfit/fitting/skin.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <numeric>
 #include <stdexcept>
 
 #include "organfit/particles/neighbour_list.h"
@@ -106,9 +108,8 @@ void SkinDetector::compute(const Eigen::Matrix3Xd& x) {
         boundary[idx] = !full;
       }
 
-      // 4. Skin particles touch a boundary voxel.
 #pragma omp parallel for schedule(static) if (parallel)
-  for (int i = 0; i < n; ++i) {
+  for (int i = 0; i < n; ++i) {  // 4. Skin particles touch a boundary voxel.
     bool touches = false;
     for_each_voxel_of(i, [&](long long v) { touches = touches || boundary[v]; });
     is_skin_[i] = touches;
@@ -116,32 +117,78 @@ void SkinDetector::compute(const Eigen::Matrix3Xd& x) {
   for (int i = 0; i < n; ++i)
     if (is_skin_[i]) skin_.push_back(i);
 
-  // Closed body: everything not reachable from the border through free voxels.
-  closed_.assign(total, 1);
-  std::vector<long long> stack;
-  auto push = [&](int v, int j, int k) {
-    const long long idx = grid_.linear_index(v, j, k);
-    if (closed_[idx] && !kept[idx]) {
-      closed_[idx] = 0;
-      stack.push_back(idx);
+  // Closed body: everything not reachable from the border through free voxels (6-
+  // connected). Free voxels come in runs along x; two runs in rows adjacent in y or z
+  // are connected where their x ranges overlap. Runs are joined by union-find and the
+  // pieces holding a border voxel (every border voxel is free: the margin) are outside.
+  const long long rows = 1LL * ny * nz;
+  std::vector<long long> row_first(static_cast<size_t>(rows) + 1, 0);
+  std::vector<std::array<int, 2>> runs;  // [begin, end) along x
+  for (long long r = 0; r < rows; ++r) {
+    const std::uint8_t* row = kept.data() + r * nx;
+    for (int v = 0; v < nx;) {
+      if (row[v]) {
+        ++v;
+        continue;
+      }
+      const int begin = v;
+      while (v < nx && !row[v])
+        ++v;
+      runs.push_back({begin, v});
+    }
+    row_first[static_cast<size_t>(r) + 1] = static_cast<long long>(runs.size());
+  }
+  std::vector<long long> parent(runs.size());
+  std::iota(parent.begin(), parent.end(), 0LL);
+  auto root = [&parent](long long a) {
+    while (parent[static_cast<size_t>(a)] != a)
+      a = parent[static_cast<size_t>(a)] =
+          parent[static_cast<size_t>(parent[static_cast<size_t>(a)])];
+    return a;
+  };
+  auto join_rows = [&](long long r, long long s) {  // runs of rows r and s that overlap
+    long long a = row_first[static_cast<size_t>(r)], b = row_first[static_cast<size_t>(s)];
+    const long long a_end = row_first[static_cast<size_t>(r) + 1],
+                    b_end = row_first[static_cast<size_t>(s) + 1];
+    while (a < a_end && b < b_end) {
+      const auto& ra = runs[static_cast<size_t>(a)];
+      const auto& rb = runs[static_cast<size_t>(b)];
+      if (ra[0] < rb[1] && rb[0] < ra[1]) {
+        const long long root_a = root(a), root_b = root(b);
+        if (root_a != root_b)
+          parent[static_cast<size_t>(std::max(root_a, root_b))] = std::min(root_a, root_b);
+      }
+      (ra[1] < rb[1] ? a : b) += 1;  // the run that ends first meets no later run
     }
   };
   for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < ny; ++j)
-      for (int v = 0; v < nx; ++v)
-        if (v == 0 || j == 0 || k == 0 || v == nx - 1 || j == ny - 1 || k == nz - 1) push(v, j, k);
-  while (!stack.empty()) {
-    const long long idx = stack.back();
-    stack.pop_back();
-    const int v = static_cast<int>(idx % nx), j = static_cast<int>((idx / nx) % ny),
-              k = static_cast<int>(idx / (1LL * nx * ny));
-    if (v > 0) push(v - 1, j, k);
-    if (v < nx - 1) push(v + 1, j, k);
-    if (j > 0) push(v, j - 1, k);
-    if (j < ny - 1) push(v, j + 1, k);
-    if (k > 0) push(v, j, k - 1);
-    if (k < nz - 1) push(v, j, k + 1);
-  }
+    for (int j = 0; j < ny; ++j) {
+      const long long r = j + 1LL * ny * k;
+      if (j > 0) join_rows(r, r - 1);
+      if (k > 0) join_rows(r, r - ny);
+    }
+  std::vector<std::uint8_t> outside(runs.size(), 0);
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j) {
+      const long long r = j + 1LL * ny * k;
+      const bool border_row = j == 0 || k == 0 || j == ny - 1 || k == nz - 1;
+      for (long long a = row_first[static_cast<size_t>(r)];
+           a < row_first[static_cast<size_t>(r) + 1]; ++a) {
+        const auto& run = runs[static_cast<size_t>(a)];
+        if (border_row || run[0] == 0 || run[1] == nx) outside[static_cast<size_t>(root(a))] = 1;
+      }
+    }
+  for (size_t a = 0; a < runs.size(); ++a)
+    outside[a] = outside[static_cast<size_t>(root(static_cast<long long>(a)))];
+  closed_.assign(total, 1);
+#pragma omp parallel for schedule(static) if (parallel)
+  for (long long r = 0; r < rows; ++r)
+    for (long long a = row_first[static_cast<size_t>(r)]; a < row_first[static_cast<size_t>(r) + 1];
+         ++a) {
+      const auto& run = runs[static_cast<size_t>(a)];
+      if (outside[static_cast<size_t>(a)])
+        std::fill(closed_.begin() + r * nx + run[0], closed_.begin() + r * nx + run[1], 0);
+    }
 }
 
 bool SkinDetector::inside(const Eigen::Vector3d& p) const {

@@ -99,5 +99,78 @@ TEST(SkinDetector, EmptyModelAndBadParameters) {
   EXPECT_THROW(SkinDetector(1.0, 1.0, 0.0), std::invalid_argument);
 }
 
+TEST(SkinDetector, ClosedBodyIsEveryVoxelNotReachableFromTheBorder) {
+  // Two shells of balls: one closed (its cavity inside), one with an opening at its pole
+  // (its cavity reachable from outside). Against a breadth-first fill of the free voxels
+  // from the border, on the detector's own grid and voxel rule.
+  std::vector<Eigen::Vector3d> pts;
+  for (int shell = 0; shell < 2; ++shell)
+    for (int t = 0; t < 40; ++t)
+      for (int u = 0; u < 80; ++u) {
+        const double th = M_PI * (t + 0.5) / 40, ph = 2 * M_PI * u / 80;
+        if (shell == 1 && th < 0.4) continue;  // the opening
+        pts.push_back(Eigen::Vector3d(30 * shell, 0, 0) +
+                      10 * Eigen::Vector3d(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph),
+                                           std::cos(th)));
+      }
+  Eigen::Matrix3Xd x(3, pts.size());
+  for (size_t i = 0; i < pts.size(); ++i)
+    x.col(i) = pts[i];
+  const double rho = 1.0, h = 0.5;
+  SkinDetector skin(h, rho);
+  skin.update(x);
+  const geometry::ImageGeometry& g = skin.grid();
+  const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
+  // Kept: a voxel whose box lies within rho of a centre (each ball's bounding voxels).
+  std::vector<std::uint8_t> kept(static_cast<size_t>(g.voxel_count()), 0);
+  for (Eigen::Index p = 0; p < x.cols(); ++p) {
+    const Eigen::Vector3d c = g.physical_to_index(x.col(p));
+    for (int k = int(c.z()) - 4; k <= int(c.z()) + 4; ++k)
+      for (int j = int(c.y()) - 4; j <= int(c.y()) + 4; ++j)
+        for (int i = int(c.x()) - 4; i <= int(c.x()) + 4; ++i) {
+          if (i < 0 || j < 0 || k < 0 || i >= nx || j >= ny || k >= nz) continue;
+          const Eigen::Vector3d lo = g.index_to_physical(Eigen::Vector3d(i, j, k)).array() - h / 2;
+          const Eigen::Vector3d gap =
+              (lo - x.col(p)).cwiseMax(x.col(p) - (lo.array() + h).matrix()).cwiseMax(0.0);
+          if (gap.squaredNorm() <= rho * rho)
+            kept[static_cast<size_t>(g.linear_index(i, j, k))] = 1;
+        }
+  }
+  std::vector<std::uint8_t> outside(kept.size(), 0);
+  std::vector<Eigen::Vector3i> queue;
+  auto visit = [&](int i, int j, int k) {
+    if (i < 0 || j < 0 || k < 0 || i >= nx || j >= ny || k >= nz) return;
+    const auto v = static_cast<size_t>(g.linear_index(i, j, k));
+    if (kept[v] || outside[v]) return;
+    outside[v] = 1;
+    queue.emplace_back(i, j, k);
+  };
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i)
+        if (i == 0 || j == 0 || k == 0 || i == nx - 1 || j == ny - 1 || k == nz - 1) visit(i, j, k);
+  for (size_t q = 0; q < queue.size(); ++q) {
+    const Eigen::Vector3i c = queue[q];
+    for (int d = 0; d < 3; ++d)
+      for (int s = -1; s <= 1; s += 2) {
+        Eigen::Vector3i n = c;
+        n[d] += s;
+        visit(n.x(), n.y(), n.z());
+      }
+  }
+  long long mismatches = 0, cavity = 0;
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const auto v = static_cast<size_t>(g.linear_index(i, j, k));
+        mismatches += skin.inside(g.index_to_physical(Eigen::Vector3d(i, j, k))) == !!outside[v];
+        cavity += !kept[v] && !outside[v];
+      }
+  EXPECT_EQ(mismatches, 0);
+  EXPECT_GT(cavity, 1000);  // the closed shell's cavity, about 4/3 pi 8^3 / h^3 voxels
+  EXPECT_TRUE(skin.inside(Eigen::Vector3d::Zero()));
+  EXPECT_FALSE(skin.inside(Eigen::Vector3d(30, 0, 0)));
+}
+
 }  // namespace
 }  // namespace organfit::fitting
