@@ -58,6 +58,25 @@ Eigen::Vector3d apply(const LatticeFreeNodes& l, double scale, const Field& v, F
   return {s0, s1, s2};
 }
 
+/// y += diag(a) x, node by node on threads (each entry its own: the values one pass
+/// gives).
+void add_scaled(Field& y, const Eigen::Array3d& a, const Field& x) {
+  const Eigen::Index n = y.cols();
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (int d = 0; d < 3; ++d)
+      y(d, i) += a[d] * x(d, i);
+}
+
+/// y = x + diag(a) y, likewise.
+void scaled_plus(Field& y, const Eigen::Array3d& a, const Field& x) {
+  const Eigen::Index n = y.cols();
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (int d = 0; d < 3; ++d)
+      y(d, i) = x(d, i) + a[d] * y(d, i);
+}
+
 /// The node counts of the next coarser lattice: its node I is the fine node 2I.
 Eigen::Vector3i coarser_dims(const Eigen::Vector3i& dims) {
   return (dims.array() - 1) / 2 + 1;
@@ -264,13 +283,13 @@ int conjugate_gradients(const LatticeFreeNodes& lattice, const Field& rhs, Field
     if ((active > 0 && (pap.array() <= 0 || rz.array() <= 0)).any()) return -1;
     // A component that has stopped takes no step.
     const Eigen::Array3d alpha = (active > 0).select(rz.array() / pap.array(), 0.0);
-    x += alpha.matrix().asDiagonal() * p;
-    r -= alpha.matrix().asDiagonal() * ap;
+    add_scaled(x, alpha, p);
+    add_scaled(r, -alpha, ap);
     z = &precondition(r);
     const Eigen::Vector3d rz_next = r.cwiseProduct(*z).rowwise().sum();
     const Eigen::Array3d beta = (active > 0).select(rz_next.array() / rz.array(), 0.0);
     rz = rz_next;
-    p = *z + beta.matrix().asDiagonal() * p;
+    scaled_plus(p, beta, *z);
   }
   return -1;
 }
