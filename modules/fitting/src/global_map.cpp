@@ -111,8 +111,8 @@ struct BumpWindow {
   BumpWindow(const ShearFields& f, int a, const Eigen::Vector3d& q)
       : along_b(f, other_axes(a).first, q(other_axes(a).first)),
         along_c(f, other_axes(a).second, q(other_axes(a).second)),
-        first(a * f.block()),
-        stride(f.count(other_axes(a).first)) {}
+        first(f.weight_index(a, 0, 0)),
+        stride(f.weight_index(a, 0, 1) - first) {}
   bool empty() const { return along_b.empty() || along_c.empty(); }
 };
 
@@ -137,7 +137,7 @@ void for_each_bump(const ShearFields& f, int a, const Eigen::Vector3d& q, Visit&
 double field_of(const ShearFields& f, int a, const BumpRow& rb, const BumpRow& rc) {
   double sum_all = 0;
   if (f.weights.size() == 0 || rb.empty() || rc.empty()) return sum_all;
-  const int first = a * f.block(), stride = f.count(other_axes(a).first);
+  const auto heights = f.heights(a);
   for (int j = rc.i0; j <= rc.i1; ++j) {
     const double c = rc.g[j - rc.i0];
     int lo = rb.i0, hi = rb.i1;
@@ -145,7 +145,7 @@ double field_of(const ShearFields& f, int a, const BumpRow& rb, const BumpRow& r
       ++lo;
     while (hi >= lo && rb.g[hi - rb.i0] * c < kLeastBump)
       --hi;
-    const double* weight = f.weights.data() + first + stride * j;
+    const double* weight = heights.col(j).data();
     double sum = 0;
     for (int i = lo; i <= hi; ++i)
       sum += weight[i] * rb.g[i - rb.i0];
@@ -434,7 +434,7 @@ constexpr double kLeftOutBumps = 1e-4;
 }  // namespace
 
 double ShearFields::largest_weight(int a) const {
-  return weights.size() == 0 ? 0.0 : weights.segment(a * block(), block()).cwiseAbs().maxCoeff();
+  return weights.size() == 0 ? 0.0 : heights(a).cwiseAbs().maxCoeff();
 }
 
 double ShearFields::largest_gradient(int a, const geometry::Aabb& box) const {
@@ -455,6 +455,7 @@ double ShearFields::largest_gradient(int a, const geometry::Aabb& box) const {
             nc = 1 + static_cast<int>(std::ceil(span_c / delta));
   if (1.0 * nb * nc > 1e6)  // a box far larger than the fields: the bound from the weights
     return std::sqrt(2.0) * w * sums[1] * sums[0] / sigma_mm;
+  const auto field_heights = heights(a);
   double largest = 0;
 #pragma omp parallel for collapse(2) reduction(max : largest) schedule(static)
   for (int jc = 0; jc < nc; ++jc)
@@ -475,7 +476,7 @@ double ShearFields::largest_gradient(int a, const geometry::Aabb& box) const {
         const double tc = uc - j, ec = std::exp(-0.5 * tc * tc);
         for (int i = i0; i <= i1; ++i) {
           const double tb = ub - i, eb = along_b[i - i0];
-          const double wij = weights(a * block() + i + count(b) * j);
+          const double wij = field_heights(i, j);
           gb -= wij * tb * eb * ec, gc -= wij * eb * tc * ec;
         }
       }

@@ -74,9 +74,8 @@ ShearFieldTable::ShearFieldTable(const ShearFields& fields) {
     plane.nc = static_cast<int>(along(plane.c, per_sigma_));
     plane.origin_b = fields.origin_mm(plane.b) - kMarginSigmas * sigma;
     plane.origin_c = fields.origin_mm(plane.c) - kMarginSigmas * sigma;
-    // f = Gb W Gc^T and its derivatives, W the heights (centre (i, j) at i + cb j).
-    const Eigen::Map<const Eigen::MatrixXd> weights(fields.weights.data() + a * fields.block(), cb,
-                                                    cc);
+    // f = Gb W Gc^T and its derivatives, W the heights (centre (i, j) at W(i, j)).
+    const auto weights = fields.heights(a);
     Eigen::MatrixXd gb, db, gc, dc;
     node_rows(cb, plane.nb, per_sigma_, gb, db);
     node_rows(cc, plane.nc, per_sigma_, gc, dc);
