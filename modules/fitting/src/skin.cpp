@@ -24,9 +24,7 @@ bool SkinDetector::update(const Eigen::Matrix3Xd& x) {
     const double limit = recompute_fraction_ * voxel_mm_;
     const long n = static_cast<long>(x.cols());
     double largest2 = 0;  // the largest squared move since the last computation (mm^2)
-#pragma omp parallel for reduction(max         \
-                                   : largest2) \
-    schedule(static) if (n >= particles::kParallelMinParticles)
+#pragma omp parallel for reduction(max : largest2) if (n >= particles::kParallelMinParticles)
     for (long i = 0; i < n; ++i)
       largest2 = std::max(largest2, (x.col(i) - x_at_compute_.col(i)).squaredNorm());
     if (largest2 <= limit * limit) return false;
