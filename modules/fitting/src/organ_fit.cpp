@@ -254,7 +254,11 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   for (const auto& st : *status)
     report.rejected_points += st.rejected;
   report.particle_body_volume_change_pct = 100.0 * (v1 - v0) / v0;
-  report.components = particles::connected_components(state.x, 1.5 * law.r0());
+  // The spread fit counted the pieces of this state already, unless its local stage was
+  // undone (the state then is the global stage's).
+  report.components = spread && state.size() > 0 && !report.local_stage_undone()
+                          ? pieces
+                          : particles::connected_components(state.x, 1.5 * law.r0());
   report.skin_particles = skin_of(state.x).size();
   report.finite = state.x.allFinite();
   // The uncertainty (surface_uncertainty.h): n the noise the fit accepts, l the
