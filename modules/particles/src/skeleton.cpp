@@ -16,17 +16,17 @@
 namespace organfit::particles {
 namespace {
 
-/// Calls visit(i, j, r) for each pair closer than `reach` (each pair once).
+/// Calls visit(i, j) for each pair of `list`'s particles closer than its cutoff (each pair
+/// once), on threads: `visit` must be safe to call concurrently.
 template <class Visit>
-void for_each_close_pair(const Positions& x, double reach, Visit&& visit) {
-  NeighbourList list(reach, 1e-9 * reach);
-  list.update(x);
+void for_each_close_pair(const NeighbourList& list, const Positions& x, Visit&& visit) {
   const auto& order = list.order();
+  const double reach = list.cutoff();
+#pragma omp parallel for schedule(static) if (list.size() >= kParallelMinParticles)
   for (int s = 0; s < list.size(); ++s) {
     for (int k = list.first()[s]; k < list.first()[s + 1]; ++k) {
       const int i = order[s], j = order[list.neighbours()[k]];
-      const double r = (x.col(i) - x.col(j)).norm();
-      if (r < reach) visit(i, j, r);
+      if ((x.col(i) - x.col(j)).norm() < reach) visit(i, j);
     }
   }
 }
@@ -45,9 +45,11 @@ Eigen::Matrix3d closest_rotation(const Eigen::Matrix3d& a) {
 namespace {
 
 /// The medial nodes of a body given as sample points (particles or voxel centres):
-/// `graph` joins each point to its close neighbours, `surface` marks the points on the
-/// body's surface, `min_lambda_mm` is the sampling's own scale (see below).
-Skeleton medial_nodes(const Positions& rest, const std::vector<std::vector<int>>& graph,
+/// `for_each_pair(visit)` calls visit(i, j) for each pair of close neighbours (possibly
+/// on threads), `surface` marks the points on the body's surface, `min_lambda_mm` is the
+/// sampling's own scale (see below).
+template <class ForEachPair>
+Skeleton medial_nodes(const Positions& rest, ForEachPair&& for_each_pair,
                       const std::vector<char>& surface_flags, double min_lambda_mm,
                       double node_spacing_mm) {
   const int n = static_cast<int>(rest.cols());
@@ -83,16 +85,17 @@ Skeleton medial_nodes(const Positions& rest, const std::vector<std::vector<int>>
   // different ones have features a few sample spacings apart.
   const double max_depth = *std::max_element(depth.begin(), depth.end());
   const double lambda = std::max(min_lambda_mm, 0.4 * max_depth);
+  // The test is symmetric: a pair that passes makes both its points medial.
   std::vector<char> medial(n, 0);
-  for (int i = 0; i < n; ++i) {
-    if (feature[i] < 0) continue;
-    for (int j : graph[i]) {
-      if (feature[j] >= 0 && (rest.col(feature[i]) - rest.col(feature[j])).norm() >= 2 * lambda) {
-        medial[i] = 1;
-        break;
-      }
+  for_each_pair([&](int i, int j) {
+    if (feature[i] >= 0 && feature[j] >= 0 &&
+        (rest.col(feature[i]) - rest.col(feature[j])).norm() >= 2 * lambda) {
+#pragma omp atomic write
+      medial[i] = 1;
+#pragma omp atomic write
+      medial[j] = 1;
     }
-  }
+  });
   std::vector<int> candidates;
   for (int i = 0; i < n; ++i)
     if (medial[i]) candidates.push_back(i);
@@ -135,17 +138,23 @@ Skeleton medial_skeleton(const Positions& rest, double a_nn_mm, double node_spac
     empty.nodes_mm.resize(3, 0);
     return empty;
   }
-  // Neighbour graph of the first shell; surface = incomplete first shell (fcc bulk: 12).
-  std::vector<std::vector<int>> graph(n);
-  for_each_close_pair(rest, 1.2 * a_nn_mm, [&](int i, int j, double) {
-    graph[i].push_back(j);
-    graph[j].push_back(i);
+  // Neighbours: the first shell; surface = incomplete first shell (fcc bulk: 12).
+  const double reach = 1.2 * a_nn_mm;
+  NeighbourList list(reach, 1e-9 * reach);
+  list.update(rest);
+  auto for_each_pair = [&](auto&& visit) { for_each_close_pair(list, rest, visit); };
+  std::vector<int> count(n, 0);
+  for_each_pair([&](int i, int j) {
+#pragma omp atomic
+    ++count[i];
+#pragma omp atomic
+    ++count[j];
   });
   std::vector<char> surface(n, 0);
   for (int i = 0; i < n; ++i)
-    surface[i] = graph[i].size() < 12;
+    surface[i] = count[i] < 12;
   // Neighbours may pick features up to a + 1.2 a + a apart: lambda >= 2 a.
-  return medial_nodes(rest, graph, surface, 2.0 * a_nn_mm, node_spacing_mm);
+  return medial_nodes(rest, for_each_pair, surface, 2.0 * a_nn_mm, node_spacing_mm);
 }
 
 Skeleton medial_skeleton(const geometry::LabelVolume& mask, double node_spacing_mm) {
@@ -181,7 +190,12 @@ Skeleton medial_skeleton(const geometry::LabelVolume& mask, double node_spacing_
       }
   }
   const double voxel_mm = g.spacing_mm.maxCoeff();
-  return medial_nodes(rest, graph, surface, 2.0 * voxel_mm, node_spacing_mm);
+  auto for_each_pair = [&graph](auto&& visit) {
+    for (size_t a = 0; a < graph.size(); ++a)
+      for (int b : graph[a])
+        visit(static_cast<int>(a), b);
+  };
+  return medial_nodes(rest, for_each_pair, surface, 2.0 * voxel_mm, node_spacing_mm);
 }
 
 SkeletonForce::SkeletonForce(const Skeleton& skeleton, const Positions& rest,
