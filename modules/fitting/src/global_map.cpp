@@ -58,6 +58,15 @@ int ShearFields::block() const {
   return most;
 }
 
+int ShearFields::weight_index(int a, int i, int j) const {
+  return a * block() + i + count(other_axes(a).first) * j;
+}
+
+Eigen::Map<const Eigen::MatrixXd> ShearFields::heights(int a) const {
+  const auto [b, c] = other_axes(a);
+  return {weights.data() + weight_index(a, 0, 0), count(b), count(c)};
+}
+
 namespace {
 /// g(t0 - k) = exp(-(t0 - k)^2 / 2) for k = 0 .. n - 1, into g: from the centre nearest
 /// the peak (its value by exp, exactly 1 on it) outwards, g(t -+ 1) = g(t) exp(+-t - 1/2),

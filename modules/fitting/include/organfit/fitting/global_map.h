@@ -65,14 +65,9 @@ struct ShearFields {
   bool empty() const { return sigma_mm <= 0 || weights.size() == 0 || weights.isZero(0); }
   int block() const;
   /// The index in `weights` of field a's centre (i, j) (the layout above).
-  int weight_index(int a, int i, int j) const {
-    return a * block() + i + count(a == 0 ? 1 : 0) * j;
-  }
+  int weight_index(int a, int i, int j) const;
   /// Field a's heights as a count[b] x count[c] matrix, centre (i, j) at (i, j).
-  Eigen::Map<const Eigen::MatrixXd> heights(int a) const {
-    const int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;
-    return {weights.data() + weight_index(a, 0, 0), count(b), count(c)};
-  }
+  Eigen::Map<const Eigen::MatrixXd> heights(int a) const;
   /// The bumps of field `a` at q (only q's other two coordinates count), index and value;
   /// those below 1e-6 are left out.
   void bumps(int a, const Eigen::Vector3d& q, std::vector<std::pair<int, double>>& out) const;
