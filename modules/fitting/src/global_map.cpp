@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "bump_sums.h"
+#include "central_differences.h"
 #include "mapped_samples.h"
 #include "organfit/fitting/shear_field_table.h"
 #include "other_axes.h"
@@ -553,11 +554,8 @@ SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface) 
 #pragma omp parallel for schedule(static)
   for (Eigen::Index j = 0; j < surface.points.cols(); ++j) {
     const Eigen::Vector3d s = surface.points.col(j);
-    Eigen::Matrix3d jacobian;
-    for (int c = 0; c < 3; ++c) {
-      const Eigen::Vector3d e = h * Eigen::Vector3d::Unit(c);
-      jacobian.col(c) = (map.apply(s + e, fields) - map.apply(s - e, fields)) / (2 * h);
-    }
+    const Eigen::Matrix3d jacobian = detail::central_jacobian(
+        [&](const Eigen::Vector3d& p) { return map.apply(p, fields); }, s, h);
     out.points.col(j) = map.apply(s, fields);
     out.normals.col(j) = (jacobian.inverse().transpose() * surface.normals.col(j)).normalized();
   }

@@ -7,6 +7,7 @@
 #include <Eigen/SVD>
 #include <random>
 
+#include "../src/central_differences.h"
 #include "organfit/fitting/skin.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/sample_grid.h"
@@ -586,11 +587,8 @@ TEST(QuadraticShears, MakeATwistOfThreeShears) {
   for (Eigen::Index j = 0; j < samples.points.cols(); j += 97) {
     const Eigen::Vector3d p = samples.points.col(j);
     EXPECT_LT((three.inverse(three.apply(p)) - p).norm(), 1e-9);
-    Eigen::Matrix3d jacobian;
-    for (int c = 0; c < 3; ++c) {
-      const Eigen::Vector3d e = 1e-4 * Eigen::Vector3d::Unit(c);
-      jacobian.col(c) = (three.apply(p + e) - three.apply(p - e)) / 2e-4;
-    }
+    const Eigen::Matrix3d jacobian =
+        detail::central_jacobian([&](const Eigen::Vector3d& x) { return three.apply(x); }, p, 1e-4);
     EXPECT_NEAR(jacobian.determinant(), 1.0, 1e-6);
   }
 }
@@ -614,12 +612,8 @@ TEST(ShearFields, KeepVolumeAndInvertExactly) {
     largest_move = std::max(largest_move, (f.apply(q) - q).norm());
     EXPECT_LT((f.inverse(f.apply(q)) - q).norm(), 1e-9) << q.transpose();
     EXPECT_LT((f.apply(f.inverse(q)) - q).norm(), 1e-9) << q.transpose();
-    Eigen::Matrix3d jacobian;
-    const double h = 1e-4;
-    for (int c = 0; c < 3; ++c)
-      jacobian.col(c) =
-          (f.apply(q + h * Eigen::Vector3d::Unit(c)) - f.apply(q - h * Eigen::Vector3d::Unit(c))) /
-          (2 * h);
+    const Eigen::Matrix3d jacobian =
+        detail::central_jacobian([&](const Eigen::Vector3d& x) { return f.apply(x); }, q, 1e-4);
     EXPECT_NEAR(jacobian.determinant(), 1.0, 1e-5) << q.transpose();
   }
   EXPECT_GT(largest_move, 15.0);  // the heights above do move things
@@ -744,14 +738,11 @@ TEST(IncompressibleFlow, KeepsVolumeAndInverts) {
     for (const auto& [n, grad] : near)
       v += grad.cross(f.potentials.segment<3>(3 * n));
     EXPECT_LT((v - f.velocity(q)).norm(), 1e-12 * (1 + v.norm()));
-    const double h = 1e-4;
-    double divergence = 0;
-    Eigen::Matrix3d jacobian;
-    for (int c = 0; c < 3; ++c) {
-      const Eigen::Vector3d e = h * Eigen::Vector3d::Unit(c);
-      divergence += (f.velocity(q + e)(c) - f.velocity(q - e)(c)) / (2 * h);
-      jacobian.col(c) = (f.apply(q + e) - f.apply(q - e)) / (2 * h);
-    }
+    const double divergence =
+        detail::central_jacobian([&](const Eigen::Vector3d& x) { return f.velocity(x); }, q, 1e-4)
+            .trace();
+    const Eigen::Matrix3d jacobian =
+        detail::central_jacobian([&](const Eigen::Vector3d& x) { return f.apply(x); }, q, 1e-4);
     EXPECT_NEAR(divergence, 0.0, 1e-7) << q.transpose();
     EXPECT_NEAR(jacobian.determinant(), 1.0, 1e-5) << q.transpose();
     EXPECT_LT((f.inverse(f.apply(q)) - q).norm(), 1e-5) << q.transpose();

@@ -6,8 +6,12 @@
 #include <cmath>
 #include <random>
 
+#include "../src/central_differences.h"
+
 using organfit::fitting::ShearFields;
 using organfit::fitting::ShearFieldTable;
+using organfit::fitting::detail::central_gradient;
+using organfit::fitting::detail::central_jacobian;
 
 namespace {
 
@@ -54,11 +58,8 @@ TEST(ShearFieldTable, FieldsAndGradientsWithinTheStatedErrorOfTheBumps) {
       const Eigen::Vector3d q(50 * u(rng), 70 * u(rng), 90 * u(rng));  // beyond the box too
       // The bumps leave out those below 1e-6 (at most 1e-4 of the largest height in all).
       worst_value = std::max(worst_value, std::abs(table.field(a, q) - f.field(a, q)) - 1e-4 * w);
-      Eigen::Vector3d fd;
-      for (int d = 0; d < 3; ++d) {
-        const Eigen::Vector3d s = 1e-4 * Eigen::Vector3d::Unit(d);
-        fd(d) = (table.field(a, q + s) - table.field(a, q - s)) / 2e-4;
-      }
+      const Eigen::Vector3d fd =
+          central_gradient([&](const Eigen::Vector3d& x) { return table.field(a, x); }, q, 1e-4);
       worst_gradient = std::max(worst_gradient, (fd - bump_gradient(f, a, q)).norm());
     }
     EXPECT_LE(worst_value, value) << "field " << a;
@@ -77,11 +78,8 @@ TEST(ShearFieldTable, ApplyAndInverseAreExactInversesAndKeepVolume) {
     EXPECT_LT((table.inverse(table.apply(p)) - p).norm(), 1e-12);
     EXPECT_LT((table.apply(table.inverse(p)) - p).norm(), 1e-12);
     EXPECT_GT((table.apply(p) - p).norm(), 0.0);
-    Eigen::Matrix3d j;
-    for (int d = 0; d < 3; ++d) {
-      const Eigen::Vector3d s = 1e-5 * Eigen::Vector3d::Unit(d);
-      j.col(d) = (table.apply(p + s) - table.apply(p - s)) / 2e-5;
-    }
+    const Eigen::Matrix3d j =
+        central_jacobian([&](const Eigen::Vector3d& x) { return table.apply(x); }, p, 1e-5);
     EXPECT_NEAR(j.determinant(), 1.0, 1e-7);
   }
 }
@@ -117,11 +115,8 @@ TEST(ShearFieldTable, FewerNodesWhereTheBumpsAreManyWithinTheErrorItStates) {
       const Eigen::Vector3d q(90 * u(rng), 140 * u(rng), 190 * u(rng));
       EXPECT_LE(std::abs(table.field(a, q) - f.field(a, q)),
                 table.error().value_mm[static_cast<size_t>(a)] + 1e-4 * w);
-      Eigen::Vector3d fd;
-      for (int d = 0; d < 3; ++d) {
-        const Eigen::Vector3d s = 1e-5 * Eigen::Vector3d::Unit(d);
-        fd(d) = (table.field(a, q + s) - table.field(a, q - s)) / 2e-5;
-      }
+      const Eigen::Vector3d fd =
+          central_gradient([&](const Eigen::Vector3d& x) { return table.field(a, x); }, q, 1e-5);
       EXPECT_LE((fd - bump_gradient(f, a, q)).norm(),
                 table.error().gradient[static_cast<size_t>(a)] + 1e-5);
     }
