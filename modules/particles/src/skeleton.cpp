@@ -229,10 +229,8 @@ SkeletonForce::SkeletonForce(const Skeleton& skeleton, const Positions& rest,
   }
   std::set<std::pair<int, int>> edges;
   for (int i = 0; i < n; ++i) {
-    for (int k : member_of[i]) {
+    for (int k : member_of[i])
       clusters_[k].members.push_back(i);
-      clusters_[k].weights.push_back(1.0 / static_cast<double>(member_of[i].size()));
-    }
     for (size_t a = 0; a < member_of[i].size(); ++a)
       for (size_t b = a + 1; b < member_of[i].size(); ++b)
         edges.insert({member_of[i][a], member_of[i][b]});
@@ -243,9 +241,16 @@ SkeletonForce::SkeletonForce(const Skeleton& skeleton, const Positions& rest,
     first_[i + 1] = first_[i] + static_cast<int>(member_of[i].size());
   memberships_.resize(first_[n]);
   std::vector<int> fill(first_.begin(), first_.end() - 1);
-  for (int k = 0; k < nodes; ++k)
-    for (size_t m = 0; m < clusters_[k].members.size(); ++m)
-      memberships_[fill[clusters_[k].members[m]]++] = {k, static_cast<int>(m)};
+  for (int k = 0; k < nodes; ++k) {
+    auto& c = clusters_[k];
+    c.entries.resize(c.members.size());
+    for (size_t m = 0; m < c.members.size(); ++m) {
+      const int i = c.members[m];
+      c.entries[m] = fill[i]++;
+      memberships_[c.entries[m]] = {k, 1.0 / static_cast<double>(member_of[i].size()),
+                                    Eigen::Vector3d::Zero()};
+    }
+  }
   compute_offsets(rest);
 }
 
@@ -257,13 +262,13 @@ void SkeletonForce::compute_offsets(const Positions& rest) {
     c.weight_sum = 0;
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (size_t m = 0; m < c.members.size(); ++m) {
-      centre += c.weights[m] * rest.col(c.members[m]);
-      c.weight_sum += c.weights[m];
+      const double w = memberships_[c.entries[m]].weight;
+      centre += w * rest.col(c.members[m]);
+      c.weight_sum += w;
     }
     if (c.weight_sum > 0) centre /= c.weight_sum;
-    c.offsets.resize(3, static_cast<Eigen::Index>(c.members.size()));
     for (size_t m = 0; m < c.members.size(); ++m)
-      c.offsets.col(m) = rest.col(c.members[m]) - centre;
+      memberships_[c.entries[m]].offset = rest.col(c.members[m]) - centre;
   }
   centres_.assign(clusters_.size(), Eigen::Vector3d::Zero());
   rotations_.assign(clusters_.size(), Eigen::Matrix3d::Identity());
@@ -286,7 +291,7 @@ Eigen::Matrix3Xd SkeletonForce::node_positions(const Positions& x) const {
     const auto& c = clusters_[k];
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (size_t m = 0; m < c.members.size(); ++m)
-      centre += c.weights[m] * x.col(c.members[m]);
+      centre += memberships_[c.entries[m]].weight * x.col(c.members[m]);
     nodes.col(k) =
         c.weight_sum > 0 ? Eigen::Vector3d(centre / c.weight_sum) : skeleton_.nodes_mm.col(k);
   }
@@ -308,11 +313,13 @@ double SkeletonForce::add_forces(const State& state, Forces& f, bool want_energy
     if (c.members.empty()) continue;
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (size_t m = 0; m < c.members.size(); ++m)
-      centre += c.weights[m] * state.x.col(c.members[m]);
+      centre += memberships_[c.entries[m]].weight * state.x.col(c.members[m]);
     centre /= c.weight_sum;
     Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
-    for (size_t m = 0; m < c.members.size(); ++m)
-      a += c.weights[m] * (state.x.col(c.members[m]) - centre) * c.offsets.col(m).transpose();
+    for (size_t m = 0; m < c.members.size(); ++m) {
+      const Membership& ms = memberships_[c.entries[m]];
+      a += ms.weight * (state.x.col(c.members[m]) - centre) * ms.offset.transpose();
+    }
     centres_[k] = centre;
     rotations_[k] = closest_rotation(a);
   }
@@ -321,11 +328,11 @@ double SkeletonForce::add_forces(const State& state, Forces& f, bool want_energy
 #pragma omp parallel for schedule(static) if (n >= kParallelMinParticles)
   for (int i = 0; i < n; ++i) {
     for (int e = first_[i]; e < first_[i + 1]; ++e) {
-      const auto [k, m] = memberships_[e];
-      const Cluster& c = clusters_[k];
-      const Eigen::Vector3d d = rotations_[k] * c.offsets.col(m) + centres_[k] - state.x.col(i);
-      f.col(i) += ks * c.weights[m] * d;
-      if (want_energy) energies_[i] += 0.5 * ks * c.weights[m] * d.squaredNorm();
+      const Membership& ms = memberships_[e];
+      const int k = ms.cluster;
+      const Eigen::Vector3d d = rotations_[k] * ms.offset + centres_[k] - state.x.col(i);
+      f.col(i) += ks * ms.weight * d;
+      if (want_energy) energies_[i] += 0.5 * ks * ms.weight * d.squaredNorm();
     }
   }
   double energy = 0;

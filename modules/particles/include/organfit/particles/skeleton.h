@@ -84,15 +84,20 @@ class SkeletonForce : public ForceTerm {
   std::vector<int> cluster_sizes() const;
 
  private:
+  /// A node's cluster: its members (ascending particle index) and, for each, where that
+  /// membership is stored in memberships_.
   struct Cluster {
     std::vector<int> members;
-    std::vector<double> weights;
+    std::vector<int> entries;
     double weight_sum = 0;
-    Eigen::Matrix3Xd offsets;  // rest offsets q_i = x0_i - c0, one column per member
   };
-  /// One membership of a particle: cluster k, its place m among k's members.
+  /// One membership of a particle: cluster k, the particle's weight in it (one over its
+  /// number of clusters) and its rest offset q_i = x0_i - c0 (mm). Stored by particle, so
+  /// that gathering a particle's pulls reads one contiguous run.
   struct Membership {
-    int cluster, member;
+    int cluster;
+    double weight;
+    Eigen::Vector3d offset;
   };
   void compute_offsets(const Positions& rest);
   Skeleton skeleton_;
