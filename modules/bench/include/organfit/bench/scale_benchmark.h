@@ -4,7 +4,8 @@
 // truth, export, report), each run a separate `organfit run` process so that its peak
 // memory is its own. Reports every stage's wall time (s) and the run's peak memory
 // (MiB) after it, the particles, and particle-steps per second of the relaxation and of
-// the fit; checks the 2.3 L lung against issue 26's targets.
+// the fit; checks the 2.3 L lung and the 1M body against issue 26's targets, and the
+// fit step's cost per particle-step for flatness across the sizes run together.
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -20,6 +21,13 @@ struct ScaleBenchOptions {
   std::vector<std::string> cases;
   int threads = 0;  ///< OpenMP threads of each run (0: all cores)
 };
+
+/// Issue 26's flatness of the fit step: for each session of the `cases` (scale.json's
+/// rows) of at least `from_particles` particles, its cost per particle-step (us, the fit's
+/// dynamics steps over the particles they moved), and the largest over the smallest
+/// against kFlatLimit. Null when fewer than two sessions qualify.
+inline constexpr double kFlatLimit = 1.3;
+nlohmann::json fit_step_flatness(const nlohmann::json& cases, double from_particles);
 
 /// Runs the cases; returns machine-readable results. Throws InputError on an unknown
 /// case or an output folder that cannot be used, Error when a run fails.
