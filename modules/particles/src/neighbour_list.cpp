@@ -104,20 +104,25 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
   }
   const int by = (ny + kBlock - 1) / kBlock, bz = (nz + kBlock - 1) / kBlock;
   const long long nblocks = 1LL * by * bz;
-  // Rank of each cell in memory: block-major, then the cell's place in its block.
+  // Rank of each cell in memory: block-major, then the cell's place in its block (its row
+  // among the block's rows, z then y, times nx, plus x). Blocks before (b2, b3) hold
+  // whole slabs of kBlock rows in z (each ny rows, nx cells) and, in slab b3, b2 blocks
+  // of kBlock rows in y (each slab's height rows).
   std::vector<int> rank(ncells);
-  {
-    std::vector<int> block_fill(nblocks + 1, 0);
-    auto block_of = [&](long long c) {
-      const int cy = static_cast<int>((c / nx) % ny), cz = static_cast<int>(c / (1LL * nx * ny));
-      return (cy / kBlock) + by * (cz / kBlock);
-    };
-    for (long long c = 0; c < ncells; ++c)
-      ++block_fill[block_of(c) + 1];
-    for (long long b = 0; b < nblocks; ++b)
-      block_fill[b + 1] += block_fill[b];
-    for (long long c = 0; c < ncells; ++c)
-      rank[c] = block_fill[block_of(c)]++;
+#pragma omp parallel for schedule(static) if (n >= kParallelMinParticles)
+  for (int cz = 0; cz < nz; ++cz) {
+    const int b3 = cz / kBlock;
+    const int height = std::min(kBlock, nz - b3 * kBlock);  // the slab's rows in z
+    for (int cy = 0; cy < ny; ++cy) {
+      const int b2 = cy / kBlock;
+      const int width = std::min(kBlock, ny - b2 * kBlock);  // the block's rows in y
+      const long long block_start = (1LL * b3 * kBlock * ny + 1LL * b2 * kBlock * height) * nx;
+      const long long row_in_block = 1LL * (cz - b3 * kBlock) * width + (cy - b2 * kBlock);
+      const long long first = block_start + row_in_block * nx;
+      int* out = rank.data() + 1LL * nx * (cy + 1LL * ny * cz);
+      for (int cx = 0; cx < nx; ++cx)
+        out[cx] = static_cast<int>(first + cx);
+    }
   }
   std::vector<int> count(ncells + 1, 0);
   for (int i = 0; i < n; ++i)
