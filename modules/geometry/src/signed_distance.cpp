@@ -3,15 +3,22 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <memory>
 
 #include "organfit/geometry/mask_ops.h"
+#include "organfit/geometry/sample_grid.h"
 
 namespace organfit::geometry {
+namespace {
+/// Physical offset (mm) -> index offset.
+Eigen::Matrix3d index_map(const ImageGeometry& g) {
+  return g.spacing_mm.cwiseInverse().asDiagonal() * g.direction.inverse();
+}
+}  // namespace
 
 SignedDistance::SignedDistance(const LabelVolume& mask, bool smooth_it)
-    : geometry_(mask.geometry),
-      to_index_(mask.geometry.spacing_mm.cwiseInverse().asDiagonal() *
-                mask.geometry.direction.inverse()) {
+    : geometry_(mask.geometry), to_index_(index_map(mask.geometry)) {
   // One feature buffer (the inside, then the outside) and one transform beside values_:
   // two grids of doubles at a time, not three (a million-particle body's reference has
   // 80M voxels, 640 MB a grid).
@@ -153,9 +160,14 @@ double SignedDistance::at_voxel(int i, int j, int k) const {
   return values_[static_cast<size_t>(g.linear_index(i, j, k))];
 }
 
-double SignedDistance::at(const Eigen::Vector3d& p_mm, Eigen::Vector3d* gradient) const {
-  const ImageGeometry& g = geometry_;
-  const Eigen::Vector3d idx = to_index_ * (p_mm - g.origin_mm);
+namespace {
+
+/// The trilinear interpolant at `p_mm` of the values `value(v)` at the grid's voxels
+/// (linear index v), as SignedDistance::at() documents it; `gradient` as there.
+template <class Value>
+double interpolate(const ImageGeometry& g, const Eigen::Matrix3d& to_index,
+                   const Eigen::Vector3d& p_mm, Value&& value, Eigen::Vector3d* gradient) {
+  const Eigen::Vector3d idx = to_index * (p_mm - g.origin_mm);
   const Eigen::Vector3d hi(g.size[0] - 1, g.size[1] - 1, g.size[2] - 1);
   const Eigen::Vector3d inside = idx.cwiseMax(Eigen::Vector3d::Zero()).cwiseMin(hi);
   // Beyond the grid: the distance to the grid's nearest point is added (a lower bound
@@ -172,23 +184,100 @@ double SignedDistance::at(const Eigen::Vector3d& p_mm, Eigen::Vector3d* gradient
   // one voxel (as at_voxel's clamping would give).
   const long long step[3] = {g.size[0] > 1 ? 1 : 0, g.size[1] > 1 ? g.size[0] : 0,
                              g.size[2] > 1 ? 1LL * g.size[0] * g.size[1] : 0};
-  const double* corner0 = values_.data() + g.linear_index(base[0], base[1], base[2]);
-  double value = 0;
+  const long long corner0 = g.linear_index(base[0], base[1], base[2]);
+  double sum = 0;
   Eigen::Vector3d d_index = Eigen::Vector3d::Zero();  // d value / d index
   for (int corner = 0; corner < 8; ++corner) {
     const int di = corner & 1, dj = (corner >> 1) & 1, dk = (corner >> 2) & 1;
-    const double v = corner0[di * step[0] + dj * step[1] + dk * step[2]];
+    const double v = value(corner0 + di * step[0] + dj * step[1] + dk * step[2]);
     const double wx = di ? f[0] : 1 - f[0], wy = dj ? f[1] : 1 - f[1], wz = dk ? f[2] : 1 - f[2];
-    value += wx * wy * wz * v;
+    sum += wx * wy * wz * v;
     d_index[0] += (di ? 1 : -1) * wy * wz * v;
     d_index[1] += (dj ? 1 : -1) * wx * wz * v;
     d_index[2] += (dk ? 1 : -1) * wx * wy * v;
   }
   if (gradient) {
-    *gradient = to_index_.transpose() * d_index;
+    *gradient = to_index.transpose() * d_index;
     if (beyond > 0) *gradient = beyond_mm / beyond;  // outside the grid: straight away from it
   }
-  return value + beyond;
+  return sum + beyond;
+}
+
+/// The voxels the interpolation at `p_mm` reads (linear indices), appended to `out`.
+void corners_read(const ImageGeometry& g, const Eigen::Matrix3d& to_index,
+                  const Eigen::Vector3d& p_mm, std::vector<long long>& out) {
+  interpolate(
+      g, to_index, p_mm,
+      [&out](long long v) {
+        out.push_back(v);
+        return 0.0;
+      },
+      nullptr);
+}
+
+}  // namespace
+
+double SignedDistance::at(const Eigen::Vector3d& p_mm, Eigen::Vector3d* gradient) const {
+  const double* values = values_.data();
+  return interpolate(
+      geometry_, to_index_, p_mm, [values](long long v) { return values[v]; }, gradient);
+}
+
+std::vector<double> signed_distance_at(const LabelVolume& mask, const Eigen::Matrix3Xd& points_mm) {
+  const ImageGeometry& g = mask.geometry;
+  const Eigen::Matrix3d to_index = index_map(g);
+  std::vector<long long> read;
+  for (Eigen::Index c = 0; c < points_mm.cols(); ++c)
+    corners_read(g, to_index, points_mm.col(c), read);
+  std::sort(read.begin(), read.end());
+  read.erase(std::unique(read.begin(), read.end()), read.end());
+  // The voxels across the boundary from each side (a superset: the grid's faces count as
+  // boundary too), in the transform's units: index times spacing along each axis.
+  LabelVolume outside(g);
+#pragma omp parallel for schedule(static)
+  for (long long v = 0; v < static_cast<long long>(mask.labels.size()); ++v)
+    outside.labels[static_cast<size_t>(v)] = mask.labels[static_cast<size_t>(v)] == 0;
+  const std::vector<Eigen::Vector3i> side[2] = {surface_voxels(mask), surface_voxels(outside)};
+  auto scaled = [&g](const Eigen::Vector3i& i) -> Eigen::Vector3d {
+    return i.cast<double>().cwiseProduct(g.spacing_mm);
+  };
+  std::unique_ptr<SampleGrid> search[2];
+  for (int s = 0; s < 2; ++s) {
+    Eigen::Matrix3Xd at(3, static_cast<Eigen::Index>(side[s].size()));
+    for (size_t k = 0; k < side[s].size(); ++k)
+      at.col(static_cast<Eigen::Index>(k)) = scaled(side[s][k]);
+    search[s] = std::make_unique<SampleGrid>(at, SampleGrid::surface_cell_mm(at));
+  }
+  const double h = 0.5 * g.spacing_mm.minCoeff();
+  std::vector<double> value(read.size());
+#pragma omp parallel for schedule(dynamic, 64)
+  for (long long r = 0; r < static_cast<long long>(read.size()); ++r) {
+    const long long v = read[static_cast<size_t>(r)];
+    const Eigen::Vector3i at(static_cast<int>(v % g.size[0]),
+                             static_cast<int>((v / g.size[0]) % g.size[1]),
+                             static_cast<int>(v / (1LL * g.size[0] * g.size[1])));
+    const bool in = mask.labels[static_cast<size_t>(v)] != 0;
+    const int s = in ? 1 : 0;  // an inside voxel's distance is to the outside's voxels
+    const int nearest = search[s]->nearest(scaled(at)).first;
+    double d2 = std::numeric_limits<double>::infinity();
+    if (nearest >= 0) {  // summed as the transform sums it: x, then y, then z
+      const Eigen::Vector3i d = side[s][static_cast<size_t>(nearest)] - at;
+      const double dx = d.x() * g.spacing_mm.x(), dy = d.y() * g.spacing_mm.y(),
+                   dz = d.z() * g.spacing_mm.z();
+      d2 = dz * dz + (dy * dy + dx * dx);
+    }
+    value[static_cast<size_t>(r)] = in ? -(std::sqrt(d2) - h) : std::sqrt(d2) - h;
+  }
+  std::vector<double> out(static_cast<size_t>(points_mm.cols()));
+  for (Eigen::Index c = 0; c < points_mm.cols(); ++c)
+    out[static_cast<size_t>(c)] = interpolate(
+        g, to_index, points_mm.col(c),
+        [&](long long v) {
+          return value[static_cast<size_t>(std::lower_bound(read.begin(), read.end(), v) -
+                                           read.begin())];
+        },
+        nullptr);
+  return out;
 }
 
 }  // namespace organfit::geometry

@@ -28,6 +28,46 @@ LabelVolume rotated_ball() {
   return ball;
 }
 
+// The sparse evaluation is the transforms' value at every point: two blobs and a cavity
+// on a rotated grid of unequal spacings (rounding in every sum), points inside, outside,
+// on the boundary and beyond the grid; and infinite for a mask without boundary.
+TEST(SignedDistance, AtPointsIsTheWholeGridsValue) {
+  ImageGeometry g;
+  g.size = {41, 37, 23};
+  g.spacing_mm = Eigen::Vector3d(0.977, 0.61, 2.5);
+  g.direction = Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  g.origin_mm = Eigen::Vector3d(-20.3, 7.1, -30.9);
+  LabelVolume mask(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        const Eigen::Vector3d p(i * 0.977, j * 0.61, k * 2.5);
+        const bool a = (p - Eigen::Vector3d(14, 10, 25)).norm() < 9 &&
+                       (p - Eigen::Vector3d(14, 10, 25)).norm() > 3;  // with a cavity
+        const bool b = (p - Eigen::Vector3d(30, 15, 30)).cwiseAbs().maxCoeff() < 5;
+        mask.at(i, j, k) = a || b;
+      }
+  const SignedDistance whole(mask, false);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-0.1, 1.1);  // a tenth of the grid beyond it
+  Eigen::Matrix3Xd points(3, 600);
+  for (Eigen::Index c = 0; c < points.cols(); ++c) {
+    const Eigen::Vector3d f(u(rng) * (g.size[0] - 1), u(rng) * (g.size[1] - 1),
+                            u(rng) * (g.size[2] - 1));
+    points.col(c) = g.index_to_physical(c % 3 == 0 ? f.array().round().matrix() : f);
+  }
+  const std::vector<double> sparse = signed_distance_at(mask, points);
+  ASSERT_EQ(sparse.size(), 600u);
+  int inside = 0;
+  for (Eigen::Index c = 0; c < points.cols(); ++c) {
+    EXPECT_EQ(sparse[static_cast<size_t>(c)], whole.at(points.col(c))) << c;
+    inside += sparse[static_cast<size_t>(c)] < 0;
+  }
+  EXPECT_GT(inside, 10);  // both sides were tried
+  const LabelVolume empty(g);
+  EXPECT_TRUE(std::isinf(signed_distance_at(empty, points.leftCols(3))[1]));
+}
+
 TEST(SignedDistance, IsTheDistanceToABallsSurfaceWithinTheVoxelsStaircase) {
   const SignedDistance d(rotated_ball());
   for (const Eigen::Vector3d& dir : {Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0.3, -0.7, 0.648),

@@ -71,13 +71,17 @@ UncertaintyOnSurface uncertainty_on_surface(const geometry::Shape& planning,
 nlohmann::json uncertainty_coverage(const UncertaintyOnSurface& s,
                                     const evaluation::InsideTest& truth,
                                     const geometry::Aabb& truth_bounds, double voxel_mm) {
-  const geometry::SignedDistance to_truth(
+  // The true organ's signed distance at the surface samples alone, not on its whole grid.
+  Eigen::Matrix3Xd at(3, static_cast<Eigen::Index>(s.surface.size()));
+  for (size_t i = 0; i < s.surface.size(); ++i)
+    at.col(static_cast<Eigen::Index>(i)) = s.surface[i];
+  const std::vector<double> to_truth = geometry::signed_distance_at(
       evaluation::sample_inside(truth,
                                 geometry::grid_covering(truth_bounds, voxel_mm, 4 * voxel_mm)),
-      false);
+      at);
   int within[3] = {0, 0, 0}, count[3] = {0, 0, 0};
   for (size_t i = 0; i < s.surface.size(); ++i) {
-    const bool ok = std::abs(to_truth.at(s.surface[i])) <= 2 * s.sigma[i];
+    const bool ok = std::abs(to_truth[i]) <= 2 * s.sigma[i];
     const int half = s.unseen(i) ? 2 : 1;
     within[0] += ok, ++count[0], within[half] += ok, ++count[half];
   }

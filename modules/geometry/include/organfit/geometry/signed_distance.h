@@ -66,4 +66,12 @@ class SignedDistance {
   std::shared_ptr<GradientBound> gradient_bound_ = std::make_shared<GradientBound>();
 };
 
+/// SignedDistance(mask, false).at(p) at each column of `points_mm` (mm), without
+/// transforming the whole grid: each voxel the interpolation reads gets the distance to
+/// its nearest voxel across the boundary, found among the boundary's voxels (the nearest
+/// always is one: its face neighbour towards the voxel would be nearer), summed as the
+/// transform sums it. For a few thousand points on a grid of millions of voxels (the
+/// transforms' cost is the grid's; this one's, the points' and the boundary's).
+std::vector<double> signed_distance_at(const LabelVolume& mask, const Eigen::Matrix3Xd& points_mm);
+
 }  // namespace organfit::geometry
