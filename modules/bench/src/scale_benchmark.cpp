@@ -169,7 +169,7 @@ nlohmann::json run_cases(const std::vector<const ScaleCase*>& chosen, const Scal
       const double fit_loop_s =
           s["fit"]["wall_s"].get<double>() -
           (s["fit"].contains("global") ? s["fit"]["global"]["wall_s"].get<double>() : 0.0);
-      entry["fit_wall_particle_steps_per_s"] = fit_loop_s > 0 ? n * steps / fit_loop_s : 0.0;
+      entry["fit_wall_particle_steps_per_s"] = fit_loop_s > 0 ? moved * steps / fit_loop_s : 0.0;
       if (s.contains("truth")) entry["truth_msd_mm"] = s["truth"]["msd_mm"];
       entry["volume_change_pct"] = s["fit"]["volume_change_pct"];
       sessions.push_back(entry);
