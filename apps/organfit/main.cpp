@@ -13,6 +13,7 @@
 #include "organfit/support/interrupt.h"
 #include "organfit/support/log.h"
 #include "organfit/support/progress.h"
+#include "organfit/support/resources.h"
 
 namespace {
 
@@ -76,6 +77,7 @@ std::string one_line(const char* what) {
 }
 
 int main(int argc, char** argv) {
+  organfit::keep_freed_memory();
   int code = 0;
   try {
     code = run_main(argc, argv);
