@@ -314,20 +314,28 @@ long long Deformation::solve_harmonic_part(const std::vector<std::uint8_t>& fitt
   const detail::LatticeFreeNodes lattice = detail::lattice_free_nodes(n_, fitted);
   const size_t nf = lattice.free_nodes.size();
   if (nf == 0) return 0;
-  Eigen::Matrix3Xd rhs = Eigen::Matrix3Xd::Zero(3, static_cast<Eigen::Index>(nf));
+  const auto count = static_cast<Eigen::Index>(nf);
+  Eigen::Matrix3Xd rhs(3, count), x(3, count);
   const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
-  for (size_t f = 0; f < nf; ++f)
+  // Node by node on threads (3.3M free nodes on a million particles' lattice): each
+  // node's sum is its own.
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index f = 0; f < count; ++f) {
+    const auto at = static_cast<size_t>(f);
+    Eigen::Vector3d held = Eigen::Vector3d::Zero();
     for (int d = 0; d < 3; ++d)
       for (int side = 0; side < 2; ++side)
-        if (lattice.neighbours[f][static_cast<size_t>(2 * d + side)] < 0)  // 0 on a face
-          rhs.col(static_cast<Eigen::Index>(f)) +=
-              values_[static_cast<size_t>(lattice.free_nodes[f] + (side ? step[d] : -step[d]))]
-                  .cast<double>();
-  Eigen::Matrix3Xd x = Eigen::Matrix3Xd::Zero(3, static_cast<Eigen::Index>(nf));
+        if (lattice.neighbours[at][static_cast<size_t>(2 * d + side)] < 0)  // 0 on a face
+          held += values_[static_cast<size_t>(lattice.free_nodes[at] + (side ? step[d] : -step[d]))]
+                      .cast<double>();
+    rhs.col(f) = held;
+    x.col(f).setZero();
+  }
   detail::solve_lattice_laplace(lattice, rhs, x);
-  for (size_t f = 0; f < nf; ++f)
-    values_[static_cast<size_t>(lattice.free_nodes[f])] =
-        x.col(static_cast<Eigen::Index>(f)).cast<float>();
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index f = 0; f < count; ++f)
+    values_[static_cast<size_t>(lattice.free_nodes[static_cast<size_t>(f)])] =
+        x.col(f).cast<float>();
   return static_cast<long long>(nf);
 }
 

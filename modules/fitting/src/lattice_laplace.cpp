@@ -77,6 +77,15 @@ void scaled_plus(Field& y, const Eigen::Array3d& a, const Field& x) {
       y(d, i) = x(d, i) + a[d] * y(d, i);
 }
 
+/// out = a x, node by node on threads.
+void scaled(double a, const Field& x, Field& out) {
+  const Eigen::Index n = x.cols();
+  out.resize(3, n);
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index i = 0; i < n; ++i)
+    out.col(i) = a * x.col(i);
+}
+
 /// The node counts of the next coarser lattice: its node I is the fine node 2I.
 Eigen::Vector3i coarser_dims(const Eigen::Vector3i& dims) {
   return (dims.array() - 1) / 2 + 1;
@@ -188,7 +197,7 @@ class Multigrid {
     const LatticeFreeNodes& fine = level(l);
     const LatticeFreeNodes& coarse = level(l + 1);
     const double s = scale(l), step = kJacobiWeight / (6 * s);
-    e_[at] = step * f;  // the first sweep, from zero
+    scaled(step, f, e_[at]);  // the first sweep, from zero
     for (int k = 1; k < kSweeps; ++k) {
       sweep(fine, s, step, f, e_[at], t_[at], false);
       e_[at].swap(t_[at]);
