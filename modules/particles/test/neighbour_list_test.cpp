@@ -99,6 +99,19 @@ TEST(NeighbourList, ListsExactlyThePairsWithinReachWhenCoincident) {
   EXPECT_EQ(all_pairs_within(x, 2.8).size(), 50u * 49u / 2u);
 }
 
+TEST(NeighbourList, ListsExactlyThePairsWhereASlotHasHundredsOfNeighbours) {
+  // More candidates for a slot than its first buffer holds (64): that slot is listed again
+  // with room, alone and on threads (a cloud above the parallel size with a pile in it).
+  expect_exact_half_list(Eigen::Matrix3Xd::Constant(3, 300, -4.0), 2.5, 0.3);
+  Eigen::Matrix3Xd x = testing::random_cloud(9000, 34.0, 0.6, 5);
+  ASSERT_GT(x.cols(), kParallelMinParticles);
+  const Eigen::Index cloud = x.cols();
+  x.conservativeResize(3, cloud + 200);
+  for (Eigen::Index k = cloud; k < x.cols(); ++k)
+    x.col(k) = x.col(cloud / 2) + 0.01 * Eigen::Vector3d(k % 5, (k / 5) % 5, k % 3);
+  expect_exact_half_list(x, 2.5, 0.3);
+}
+
 TEST(NeighbourList, ListsTheSamePairsWithOneAndTwoThreads) {
   const Eigen::Matrix3Xd x = testing::random_cloud(9000, 34.0, 0.6, 4);
   ASSERT_GT(x.cols(), kParallelMinParticles);

@@ -71,9 +71,8 @@ class NeighbourList {
   double build_seconds_ = 0;
   Eigen::Matrix3Xd x_at_build_;
   std::vector<int> order_, first_, neighbours_, cell_begin_, cell_end_, block_begin_, block_end_;
-  std::vector<int> scratch_;  // per-slot lists at a fixed stride, before compaction
-  int stride_ = 64;           // room per slot; grows when a build overflows it
   std::vector<std::vector<int>> colours_;
+  std::vector<std::vector<int>> runs_;  // each thread's lists during a build (room reused)
 };
 
 }  // namespace organfit::particles
