@@ -346,6 +346,40 @@ TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
   EXPECT_EQ(geometry::SampleGrid(none).nearest(Eigen::Vector3d::Zero()).first, -1);
 }
 
+TEST(SampleGrid, NearestEachGivesEveryQueryItsOwnSearchsAnswer) {
+  // A lattice of queries filling the ellipsoid and beyond it (the skeleton's depths: most
+  // deep inside), points equidistant from the duplicated sample, one query 1 m away; boxes
+  // smaller than the spacing, about it, and larger than the body.
+  SurfaceSamples s = ellipsoid_mask_surface();
+  s.points.conservativeResize(Eigen::NoChange, s.points.cols() + 1);
+  s.points.col(s.points.cols() - 1) = s.points.col(7);
+  const geometry::SampleGrid grid(s.points);
+  std::vector<Eigen::Vector3d> q;
+  for (double z = -20; z <= 20; z += 1.7)
+    for (double y = -14; y <= 14; y += 1.3)
+      for (double x = -26; x <= 26; x += 1.1)
+        q.emplace_back(x, y, z);
+  q.push_back(s.points.col(7));
+  q.push_back(Eigen::Vector3d(1000, -20, 3));
+  Eigen::Matrix3Xd queries(3, static_cast<Eigen::Index>(q.size()));
+  for (size_t i = 0; i < q.size(); ++i)
+    queries.col(static_cast<Eigen::Index>(i)) = q[i];
+  ASSERT_GT(queries.cols(), 10000);  // above the threads' threshold
+  for (double box_mm : {0.4, 2.0, 5.0, 100.0}) {
+    const auto each = grid.nearest_each(queries, box_mm);
+    ASSERT_EQ(each.size(), q.size());
+    long differ = 0;
+    for (size_t i = 0; i < q.size(); ++i) {
+      const auto one = grid.nearest(q[i]);
+      differ += each[i].first != one.first || each[i].second != one.second;
+    }
+    EXPECT_EQ(differ, 0) << "box " << box_mm;
+    EXPECT_EQ(each[q.size() - 2].first, 7);  // a tie: the lower index
+  }
+  EXPECT_TRUE(geometry::SampleGrid(Eigen::Matrix3Xd(3, 0)).nearest_each(queries, 1.0)[0].first ==
+              -1);
+}
+
 TEST(MapSurface, TurnsNormalsToStayNormalToTheMappedSurface) {
   // A stretch and all the shears: a mapped tangent stays orthogonal to the mapped normal,
   // and for the affine part alone the normal is a^-T n.

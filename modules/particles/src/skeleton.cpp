@@ -68,10 +68,14 @@ Skeleton medial_nodes(const Positions& rest, ForEachPair&& for_each_pair,
       at.col(static_cast<Eigen::Index>(k)) = rest.col(surface[k]);
     // Buckets sized by the surface's extent, not by the sampling: a point deep inside
     // searches a few rings of them, where rings of sample-sized cells would be thousands.
+    // The points by boxes of 2 lattice spacings sharing one list of candidates: the
+    // answers of a search per point (ties: the lower index), a million-particle body's
+    // 1.65 s -> 0.95 s (boxes of 1 and 4 spacings: 3.0 and 1.8 s).
     const geometry::SampleGrid nearest(at);
-#pragma omp parallel for schedule(dynamic, 64) if (n >= kParallelMinParticles)
+    const std::vector<std::pair<int, double>> found = nearest.nearest_each(rest, min_lambda_mm);
+#pragma omp parallel for schedule(static) if (n >= kParallelMinParticles)
     for (int i = 0; i < n; ++i) {
-      const auto [k, d2] = nearest.nearest(rest.col(i));  // ties: the lower index
+      const auto [k, d2] = found[static_cast<size_t>(i)];
       depth[i] = std::sqrt(d2);
       feature[i] = surface[static_cast<size_t>(k)];
     }

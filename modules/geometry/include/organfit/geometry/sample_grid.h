@@ -99,6 +99,14 @@ class SampleGrid {
     return best.second <= reach2 ? best : none;
   }
 
+  /// nearest(q) for every column of `queries`, the same answers (ties to the lower index),
+  /// by boxes of `box_mm`: the queries in one box share one list of candidates, the
+  /// samples within d0 + 2 hd of the box's centre (d0 its own nearest sample's distance,
+  /// hd the box's half-diagonal), which holds every sample at the least distance from any
+  /// point of the box. For many queries deep inside a surface (a body's particles against
+  /// its surface): each query then reads its box's list, not the shells of cells about it.
+  std::vector<std::pair<int, double>> nearest_each(const Eigen::Matrix3Xd& queries,
+                                                   double box_mm) const;
   /// The sample of least `cost(j)` and that cost, for a cost no less than the sample's
   /// distance to q (mm; the search stops where the unsearched samples are farther than
   /// the best cost). Exact; ties go to the lower index. {-1, inf} when there are none.
