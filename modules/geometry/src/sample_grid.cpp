@@ -45,12 +45,7 @@ std::vector<std::pair<int, double>> SampleGrid::nearest_each(const Eigen::Matrix
       const double d0 = std::sqrt(nearest(centre).second);
       const double reach = (d0 + 2 * half_diagonal) * (1 + 1e-12) + 1e-12;
       candidates.clear();
-      walk(
-          centre,
-          [&](int k) {
-            if ((points_.col(k) - centre).squaredNorm() <= reach * reach) candidates.push_back(k);
-          },
-          [&](double margin) { return margin > reach; });
+      places_within(centre, reach, candidates);
       for (size_t e = group[static_cast<size_t>(g)]; e < group[static_cast<size_t>(g) + 1]; ++e) {
         const Eigen::Vector3d q = queries.col(keyed[e].second);
         std::pair<int, double> best{-1, std::numeric_limits<double>::infinity()};

@@ -128,20 +128,27 @@ class SampleGrid {
   /// Appends to `out` the samples within `radius_mm` of q (squared distance at most
   /// radius^2), in ascending index.
   void within(const Eigen::Vector3d& q, double radius_mm, std::vector<int>& out) const {
-    if (points_.cols() == 0) return;
     const size_t first = out.size();
-    const double r2 = radius_mm * radius_mm;
-    walk(
-        q,
-        [&](int k) {
-          if ((points_.col(k) - q).squaredNorm() <= r2)
-            out.push_back(order_[static_cast<size_t>(k)]);
-        },
-        [&](double margin) { return margin > radius_mm; });
+    places_within(q, radius_mm, out);
+    for (size_t e = first; e < out.size(); ++e)
+      out[e] = order_[static_cast<size_t>(out[e])];
     std::sort(out.begin() + static_cast<long>(first), out.end());
   }
 
  private:
+  /// Appends to `out` the places k in points_ (not the samples' indices) of the samples
+  /// within `radius_mm` of q (squared distance at most radius^2), in the walk's order.
+  void places_within(const Eigen::Vector3d& q, double radius_mm, std::vector<int>& out) const {
+    if (points_.cols() == 0) return;
+    const double r2 = radius_mm * radius_mm;
+    walk(
+        q,
+        [&](int k) {
+          if ((points_.col(k) - q).squaredNorm() <= r2) out.push_back(k);
+        },
+        [&](double margin) { return margin > radius_mm; });
+  }
+
   /// About cbrt(S) cells a side over the samples' `extent` (mm).
   static double default_cell_mm(const Eigen::Vector3d& extent, Eigen::Index n) {
     return std::max(extent.maxCoeff() / std::max(1.0, std::cbrt(static_cast<double>(n))), 1e-6);
