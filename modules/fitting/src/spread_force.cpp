@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "organfit/fitting/robust.h"
+#include "organfit/particles/neighbour_list.h"
 
 namespace organfit::fitting {
 
@@ -118,60 +119,92 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
       in_patches_.push_back(i);
   std::sort(in_patches_.begin(), in_patches_.end());
   in_patches_.erase(std::unique(in_patches_.begin(), in_patches_.end()), in_patches_.end());
+  // The same pairs by particle: counted, then listed point by point (points ascending).
+  if (slot_.size() != static_cast<size_t>(x.cols())) slot_.assign(x.cols(), -1);
+  const size_t m = in_patches_.size();
+  for (size_t j = 0; j < m; ++j)
+    slot_[in_patches_[j]] = static_cast<int>(j);
+  pull_first_.assign(m + 1, 0);
+  for (const auto& patch : patch_)
+    for (const auto& [i, w] : patch)
+      ++pull_first_[slot_[i] + 1];
+  for (size_t j = 0; j < m; ++j)
+    pull_first_[j + 1] += pull_first_[j];
+  pulls_.resize(pull_first_[m]);
+  std::vector<int> fill(pull_first_.begin(), pull_first_.end() - 1);
+  for (size_t k = 0; k < patch_.size(); ++k)
+    for (const auto& [i, w] : patch_[k])
+      pulls_[fill[slot_[i]]++] = {static_cast<int>(k), w};
+  for (int i : in_patches_)
+    slot_[i] = -1;
 }
 
 double SpreadAttractiveForce::add_forces(const particles::State& state, particles::Forces& f,
                                          bool) {
   if (skin_.update(state.x)) assign(state.x);
-  const auto n = static_cast<size_t>(state.size());
-  if (num_.size() != n) {
-    num_.assign(n, Eigen::Vector3d::Zero());
-    den_.assign(n, 0.0);
-  }
-  for (size_t k = 0; k < points_.size(); ++k) {
+  // Each point's residual r_k (independent of the others).
+  const long points = static_cast<long>(points_.size());
+  residual_.resize(points_.size());
+  pulls_now_.assign(points_.size(), 0);
+#pragma omp parallel for schedule(static) if (points >= particles::kParallelMinParticles)
+  for (long k = 0; k < points; ++k) {
     PointStatus& st = status_[k];
     if (st.rejected || patch_[k].empty()) continue;
     const int e = st.epicentre;
     const Eigen::Vector3d to_p = points_[k].p_mm - state.x.col(e);
     const double d = to_p.norm();
     st.d_min_mm = d;
-    Eigen::Vector3d r;
     if (!feet_.empty()) {
       const Eigen::Vector3d normal = feet_.normal.col(e);
       const double gap = normal.dot(to_p - feet_.offset_mm.col(e));
       st.reached = std::abs(gap) < 1e-3 * rho_;
-      r = gap * normal;
+      residual_[k] = gap * normal;
     } else {
       st.reached = std::abs(d - rho_) < 1e-3 * rho_;
       if (d < 1e-12) continue;
-      r = (d - rho_) * (to_p / d);
+      residual_[k] = (d - rho_) * (to_p / d);
     }
-    for (const auto& [i, w] : patch_[k]) {
-      num_[i] += w * r;
-      den_[i] += w;
-    }
+    pulls_now_[k] = 1;
   }
-  // Pressure compensation: the patches' net outward push, sum F_i . n_i, is taken back
-  // evenly over the whole skin, so the local stage moves the surface without inflating
-  // or deflating the body (normals radial from the centroid: organs are near-convex).
+  // Each patch particle's force: its pulls, normalised and capped. Pressure compensation:
+  // the patches' net outward push, sum F_i . n_i, is taken back evenly over the whole
+  // skin, so the local stage moves the surface without inflating or deflating the body
+  // (normals radial from the centroid: organs are near-convex).
   const auto& skin = skin_.skin();
   const Eigen::Vector3d centroid = state.x.rowwise().mean();
-  double inflation = 0;
-  for (int i : in_patches_) {
-    if (den_[i] != 0) {
-      Eigen::Vector3d force = kappa_ * num_[i] / std::max(1.0, den_[i]);
-      const double mag = force.norm(), cap = 0.5 * std::max(1, w_[i]) * f_max_;  // W(i) F_max / 2
-      if (mag > cap) force *= cap / mag;
-      f.col(i) += force;
-      inflation += force.dot((state.x.col(i) - centroid).normalized());
+  const long m = static_cast<long>(in_patches_.size());
+  push_.resize(in_patches_.size());
+  pushed_.assign(in_patches_.size(), 0);
+#pragma omp parallel for schedule(static) if (m >= particles::kParallelMinParticles)
+  for (long j = 0; j < m; ++j) {
+    Eigen::Vector3d num = Eigen::Vector3d::Zero();
+    double den = 0;
+    for (int e = pull_first_[j]; e < pull_first_[j + 1]; ++e) {
+      const auto [k, w] = pulls_[e];
+      if (!pulls_now_[k]) continue;
+      num += w * residual_[k];
+      den += w;
     }
-    num_[i].setZero();
-    den_[i] = 0;
+    if (den == 0) continue;
+    const int i = in_patches_[j];
+    Eigen::Vector3d force = kappa_ * num / std::max(1.0, den);
+    const double mag = force.norm(), cap = 0.5 * std::max(1, w_[i]) * f_max_;  // W(i) F_max / 2
+    if (mag > cap) force *= cap / mag;
+    f.col(i) += force;
+    push_[j] = force.dot((state.x.col(i) - centroid).normalized());
+    pushed_[j] = 1;
   }
+  double inflation = 0;
+  for (size_t j = 0; j < push_.size(); ++j)  // in particle order, for any thread count
+    if (pushed_[j]) inflation += push_[j];
   if (!skin.empty() && params_.hold_volume) {
     const double pressure = inflation / static_cast<double>(skin.size());
-    for (int i : skin)
+    const long skin_count = static_cast<long>(skin.size());
+#pragma omp parallel for schedule(static) if (skin_count >= particles::kParallelMinParticles)
+    for (long s = 0; s < skin_count; ++s) {
+      const int i = skin[s];
       f.col(i) -= pressure * (state.x.col(i) - centroid).normalized();
+    }
   }
   return 0.0;
 }

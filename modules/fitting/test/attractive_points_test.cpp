@@ -1,6 +1,7 @@
 #include "organfit/fitting/attractive_points.h"
 
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -213,6 +214,50 @@ TEST_F(PaperForceTest, SpreadForceRejectsALoneJumpButNotACoherentDent) {
     for (const auto& st : plain.status())
       EXPECT_FALSE(st.rejected);
   }
+}
+
+// The spread force on threads: each point's residual and each patch particle's sum run in
+// parallel once there are thousands of them; the forces must be those of one thread, bit
+// for bit, and the pressure must still take back the patches' whole outward push.
+TEST(SpreadForce, ThreadsGiveOneThreadsForcesAndNoNetOutwardPush) {
+  particles::CohesionParams params;
+  params.r0_mm = 2.0;
+  const particles::LennardJones law(params);
+  const double rho = 0.5 * params.r0_mm;
+  const State state(
+      particles::fill_ellipsoid({120, 80, 80}, {0, 0, 0}, particles::fcc_equilibrium_spacing(law)));
+  // 6,000 points 1.5 mm outside the body's surface, spread evenly (a Fibonacci sphere).
+  const Eigen::Vector3d semi(60, 40, 40);
+  std::vector<AttractivePoint> pts;
+  const int count = 6000;
+  for (int k = 0; k < count; ++k) {
+    const double z = 1 - 2 * (k + 0.5) / count, ring = std::sqrt(1 - z * z);
+    const double phi = k * M_PI * (3 - std::sqrt(5.0));
+    const Eigen::Vector3d on =
+        semi.cwiseProduct(Eigen::Vector3d(ring * std::cos(phi), ring * std::sin(phi), z));
+    pts.push_back({on + 1.5 * on.cwiseQuotient(semi.cwiseProduct(semi)).normalized(), 1.0});
+  }
+  const int saved = omp_get_max_threads();
+  std::vector<Forces> f;
+  std::vector<int> skin;
+  for (int threads : {1, 2}) {
+    omp_set_num_threads(threads);
+    SpreadAttractiveForce term(pts, law, rho, SpreadForceParams{}, rho);
+    f.push_back(Forces::Zero(3, state.size()));
+    term.add_forces(state, f.back(), false);
+    skin = term.skin().skin();
+  }
+  omp_set_num_threads(saved);
+  ASSERT_GE(skin.size(), 4096u);  // the threaded paths ran
+  EXPECT_EQ((f[0] - f[1]).cwiseAbs().maxCoeff(), 0.0);
+  const Eigen::Vector3d centroid = state.x.rowwise().mean();
+  double outward = 0, magnitude = 0;
+  for (int i : skin) {
+    outward += f[1].col(i).dot((state.x.col(i) - centroid).normalized());
+    magnitude += f[1].col(i).norm();
+  }
+  EXPECT_GT(magnitude, 0.0);
+  EXPECT_LT(std::abs(outward), 1e-9 * magnitude);
 }
 
 TEST(PaperForce, BadPointsAndParametersAreRefused) {

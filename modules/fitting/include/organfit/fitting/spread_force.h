@@ -66,9 +66,18 @@ class SpreadAttractiveForce : public AttractivePointTerm {
   SurfaceFeet feet_;                          // empty: the balls' surface
   std::vector<double> gap_;                   // each point's signed residual at assignment
   std::vector<int> in_patches_;  // the particles of any patch, ascending (set by assign)
-  // Per particle, zero outside in_patches_: a step costs the patches, not the body.
-  std::vector<Eigen::Vector3d> num_;
-  std::vector<double> den_;
+  // The patches by particle: in_patches_[j]'s (point, weight) pairs are
+  // pulls_[pull_first_[j] .. pull_first_[j + 1]), points ascending, so that each particle
+  // sums its pulls on its own thread in the order a scan of the patches makes.
+  std::vector<int> pull_first_;
+  std::vector<std::pair<int, double>> pulls_;
+  std::vector<int> slot_;  // per particle: its j in in_patches_ while assign() lists, else -1
+  // Per step: each point's residual r_k (mm) and whether it pulls; each in_patches_[j]'s
+  // outward push F . n, where a point pulls it (pushed_).
+  std::vector<Eigen::Vector3d> residual_;
+  std::vector<char> pulls_now_;
+  std::vector<double> push_;
+  std::vector<char> pushed_;
 };
 
 }  // namespace organfit::fitting
