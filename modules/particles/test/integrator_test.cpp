@@ -164,7 +164,8 @@ TEST(Integrator, NearlyCoincidentPairInsideABodyKeepsItInOnePiece) {
     State block = warm_block(law, {6, 6, 6}, 0.0, 6);
     Positions x(3, block.size() + 1);
     x.leftCols(block.size()) = block.x;
-    const int centre = block.size() / 2;
+    Eigen::Index centre = 0;  // the particle nearest the block's centroid
+    (block.x.colwise() - block.x.rowwise().mean()).colwise().squaredNorm().minCoeff(&centre);
     x.col(block.size()) = block.x.col(centre) + Eigen::Vector3d(0.01 * p.r0_mm, 0, 0);
     State s(x);
     Model model = testing::cohesion_model(s.size(), p);

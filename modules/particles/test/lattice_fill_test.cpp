@@ -3,8 +3,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <tuple>
+
 #include "organfit/particles/diagnostics.h"
 #include "organfit/particles/integrator.h"
+#include "organfit/particles/neighbour_list.h"
 #include "test_systems.h"
 
 namespace organfit::particles {
@@ -30,6 +34,40 @@ TEST(FccEquilibriumSpacing, ZeroVirialAtTheComputedSpacing) {
   }
   // 12-6 at r_c = 2.5 r0: the value quoted in METHOD.md s.8 is "about 0.976".
   EXPECT_NEAR(fcc_equilibrium_spacing(LennardJones(CohesionParams{})), 0.9758, 5e-4);
+}
+
+// Particles near in space are near in memory: first-shell neighbours lie a few dozen
+// places apart in the fill's order, where a z, y, x order puts most of them a plane of
+// the lattice apart (here over 500 places).
+TEST(LatticeFill, FirstShellNeighboursAreNearInTheFillsOrder) {
+  const double a = 2.0;
+  const Positions x = fill_ellipsoid({80, 80, 80}, {0, 0, 0}, a);
+  ASSERT_GT(x.cols(), 30000);
+  NeighbourList list(1.05 * a, 0.01 * a);  // the first shell: a apart
+  list.update(x);
+  auto median_gap = [&](const std::vector<int>& place) {
+    std::vector<long> gap;
+    const auto& order = list.order();
+    for (int s = 0; s < list.size(); ++s)
+      for (int k = list.first()[s]; k < list.first()[s + 1]; ++k) {
+        const int i = order[s], j = order[list.neighbours()[k]];
+        if ((x.col(j) - x.col(i)).norm() < 1.05 * a) gap.push_back(std::labs(place[i] - place[j]));
+      }
+    std::nth_element(gap.begin(), gap.begin() + static_cast<long>(gap.size() / 2), gap.end());
+    return gap[gap.size() / 2];
+  };
+  std::vector<int> fill(x.cols()), raster(x.cols());
+  for (Eigen::Index i = 0; i < x.cols(); ++i)
+    fill[i] = static_cast<int>(i), raster[i] = static_cast<int>(i);
+  std::sort(raster.begin(), raster.end(), [&](int l, int r) {
+    return std::make_tuple(x(2, l), x(1, l), x(0, l)) < std::make_tuple(x(2, r), x(1, r), x(0, r));
+  });
+  std::vector<int> raster_place(x.cols());
+  for (Eigen::Index k = 0; k < x.cols(); ++k)
+    raster_place[raster[k]] = static_cast<int>(k);
+  const long ours = median_gap(fill), planes = median_gap(raster_place);
+  EXPECT_LE(ours, 64) << "z, y, x order: " << planes;
+  EXPECT_GT(planes, 500);
 }
 
 TEST(LatticeFill, CountsMatchTheLatticeDensity) {

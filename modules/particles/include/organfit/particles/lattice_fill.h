@@ -27,7 +27,8 @@ inline double fcc_volume_per_particle(double a_nn_mm) {
 }
 
 /// fcc lattice points with nearest-neighbour distance `a_nn_mm`, one of them at
-/// `centre_mm`, that lie in `box` and satisfy `inside`. Order: z, then y, then x.
+/// `centre_mm`, that lie in `box` and satisfy `inside`. Order: the Z-order (Morton) curve
+/// of the lattice's cubic cells, each cell's basis sites in kFccBasis order.
 Positions fcc_lattice_points(const geometry::Aabb& box, const Eigen::Vector3d& centre_mm,
                              double a_nn_mm,
                              const std::function<bool(const Eigen::Vector3d&)>& inside);
