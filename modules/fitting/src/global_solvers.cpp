@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "organfit/fitting/robust.h"
+#include "organfit/geometry/morton.h"
 #include "organfit/geometry/sample_grid.h"
 
 namespace organfit::fitting {
@@ -635,22 +636,13 @@ std::vector<int> spatial_order(const std::vector<AttractivePoint>& points) {
   Eigen::Vector3d lo = points[0].p_mm;
   for (const auto& p : points)
     lo = lo.cwiseMin(p.p_mm);
-  // 21 bits a coordinate: 1 mm cells over 2 km.
-  auto spread = [](std::uint64_t v) {
-    v &= 0x1fffff;
-    v = (v | v << 32) & 0x1f00000000ffffULL;
-    v = (v | v << 16) & 0x1f0000ff0000ffULL;
-    v = (v | v << 8) & 0x100f00f00f00f00fULL;
-    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
-    v = (v | v << 2) & 0x1249249249249249ULL;
-    return v;
-  };
+  // 1 mm cells; morton_code reads 21 bits a coordinate: 2 km.
   std::vector<std::uint64_t> code(points.size());
   for (size_t k = 0; k < points.size(); ++k) {
     const Eigen::Vector3d c = (points[k].p_mm - lo).cwiseMax(0.0).cwiseMin(2e6);
-    code[k] = spread(static_cast<std::uint64_t>(c.x())) |
-              spread(static_cast<std::uint64_t>(c.y())) << 1 |
-              spread(static_cast<std::uint64_t>(c.z())) << 2;
+    code[k] =
+        geometry::morton_code(static_cast<std::uint64_t>(c.x()), static_cast<std::uint64_t>(c.y()),
+                              static_cast<std::uint64_t>(c.z()));
     order[k] = static_cast<int>(k);
   }
   std::stable_sort(order.begin(), order.end(), [&code](int a, int b) {

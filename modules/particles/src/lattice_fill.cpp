@@ -6,6 +6,8 @@
 #include <utility>
 #include <vector>
 
+#include "organfit/geometry/morton.h"
+
 namespace organfit::particles {
 
 double fcc_equilibrium_spacing(const LennardJones& law) {
@@ -50,22 +52,13 @@ Positions fcc_lattice_points(const geometry::Aabb& box, const Eigen::Vector3d& c
   // near in memory at every scale, so a neighbour list's slots, a skeleton cluster's
   // members and a patch of skin read few runs of memory (LAMMPS sorts atoms by bins for
   // the same reason). Reproducible: the key is a function of the site alone.
-  auto spread = [](std::uint64_t v) {  // the bits of v at every third place
-    v &= 0x1fffff;
-    v = (v | v << 32) & 0x1f00000000ffffULL;
-    v = (v | v << 16) & 0x1f0000ff0000ffULL;
-    v = (v | v << 8) & 0x100f00f00f00f00fULL;
-    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
-    v = (v | v << 2) & 0x1249249249249249ULL;
-    return v;
-  };
   std::vector<std::pair<std::uint64_t, Eigen::Vector3d>> pts;
   for (int k = lo.z(); k <= hi.z(); ++k)
     for (int j = lo.y(); j <= hi.y(); ++j)
       for (int i = lo.x(); i <= hi.x(); ++i) {
-        const std::uint64_t cell = spread(static_cast<std::uint64_t>(i - lo.x())) |
-                                   spread(static_cast<std::uint64_t>(j - lo.y())) << 1 |
-                                   spread(static_cast<std::uint64_t>(k - lo.z())) << 2;
+        const std::uint64_t cell = geometry::morton_code(static_cast<std::uint64_t>(i - lo.x()),
+                                                         static_cast<std::uint64_t>(j - lo.y()),
+                                                         static_cast<std::uint64_t>(k - lo.z()));
         for (int b = 0; b < 4; ++b) {
           const Eigen::Vector3d p =
               centre_mm +
