@@ -120,23 +120,21 @@ void SpreadAttractiveForce::assign(const particles::Positions& x) {
   std::sort(in_patches_.begin(), in_patches_.end());
   in_patches_.erase(std::unique(in_patches_.begin(), in_patches_.end()), in_patches_.end());
   // The same pairs by particle: counted, then listed point by point (points ascending).
-  if (slot_.size() != static_cast<size_t>(x.cols())) slot_.assign(x.cols(), -1);
+  std::vector<int> slot(static_cast<size_t>(x.cols()), -1);  // particle -> its j
   const size_t m = in_patches_.size();
   for (size_t j = 0; j < m; ++j)
-    slot_[in_patches_[j]] = static_cast<int>(j);
+    slot[in_patches_[j]] = static_cast<int>(j);
   pull_first_.assign(m + 1, 0);
   for (const auto& patch : patch_)
     for (const auto& [i, w] : patch)
-      ++pull_first_[slot_[i] + 1];
+      ++pull_first_[slot[i] + 1];
   for (size_t j = 0; j < m; ++j)
     pull_first_[j + 1] += pull_first_[j];
   pulls_.resize(pull_first_[m]);
   std::vector<int> fill(pull_first_.begin(), pull_first_.end() - 1);
   for (size_t k = 0; k < patch_.size(); ++k)
     for (const auto& [i, w] : patch_[k])
-      pulls_[fill[slot_[i]]++] = {static_cast<int>(k), w};
-  for (int i : in_patches_)
-    slot_[i] = -1;
+      pulls_[fill[slot[i]]++] = {static_cast<int>(k), w};
 }
 
 double SpreadAttractiveForce::add_forces(const particles::State& state, particles::Forces& f,

@@ -220,8 +220,7 @@ void NeighbourList::build(const Eigen::Matrix3Xd& x) {
   // branchless scan writes every candidate), and the runs are joined in slot order: the
   // lists one pass in slot order makes. Not into a buffer of fixed room per slot: that is
   // n x 64 ints or more (a quarter of a gigabyte at a million particles for a list that
-  // keeps a tenth of it), and each new list touched every page of it: 1.4 s for the
-  // skeleton's list at a million particles on this machine.
+  // keeps a tenth of it), and each new list would touch every page of it.
   std::vector<int> counts(n, 0);
   std::vector<int> run_first;  // each run's first slot
 #pragma omp parallel if (n >= kParallelMinParticles)

@@ -69,8 +69,8 @@ Skeleton medial_nodes(const Positions& rest, ForEachPair&& for_each_pair,
     // Buckets sized by the surface's extent, not by the sampling: a point deep inside
     // searches a few rings of them, where rings of sample-sized cells would be thousands.
     // The points by boxes of 2 lattice spacings sharing one list of candidates: the
-    // answers of a search per point (ties: the lower index), a million-particle body's
-    // 1.65 s -> 0.95 s (boxes of 1 and 4 spacings: 3.0 and 1.8 s).
+    // answers of a search per point (ties: the lower index), for fewer cell walks (the box
+    // size sets the speed only; docs/decisions.md has the sizes measured).
     const geometry::SampleGrid nearest(at);
     const std::vector<std::pair<int, double>> found = nearest.nearest_each(rest, min_lambda_mm);
 #pragma omp parallel for schedule(static) if (n >= kParallelMinParticles)

@@ -71,7 +71,6 @@ class SpreadAttractiveForce : public AttractivePointTerm {
   // sums its pulls on its own thread in the order a scan of the patches makes.
   std::vector<int> pull_first_;
   std::vector<std::pair<int, double>> pulls_;
-  std::vector<int> slot_;  // per particle: its j in in_patches_ while assign() lists, else -1
   // Per step: each point's residual r_k (mm) and whether it pulls; each in_patches_[j]'s
   // outward push F . n, where a point pulls it (pushed_).
   std::vector<Eigen::Vector3d> residual_;
