@@ -48,7 +48,7 @@ FitResult run_fit(
     const std::function<const std::vector<int>&(const particles::Positions&)>& skin_of,
     const std::vector<PointStatus>* status, const FitOptions& o,
     const std::function<void(const HistoryRow&)>& on_row,
-    const std::function<void(particles::State&)>& after_row) {
+    const std::function<void(particles::State&)>& while_reaching) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   double instrument_s = 0;
@@ -97,8 +97,10 @@ FitResult run_fit(
     result.residual_p95_mm = h.residual_p95_mm;
 
     // The 95th percentile, not the largest: one noisy point must not decide convergence.
-    if (h.residual_mean_mm <= o.residual_mean_tolerance_mm && h.residual_p95_mm <= max_tol &&
-        h.kinetic_energy_per_particle <= o.kinetic_tolerance && row > 0) {
+    const bool explained = h.residual_mean_mm <= o.residual_mean_tolerance_mm &&
+                           h.residual_p95_mm <= max_tol && row > 0;
+    if (explained && result.explained_at_step < 0) result.explained_at_step = h.step;
+    if (explained && h.kinetic_energy_per_particle <= o.kinetic_tolerance) {
       result.converged = true;
       result.stop_reason = "converged";
       break;
@@ -118,8 +120,8 @@ FitResult run_fit(
       result.stop_reason = "wall-time budget";
       break;
     }
-    if (after_row) {
-      after_row(state);
+    if (while_reaching && result.explained_at_step < 0) {
+      while_reaching(state);
       integ.refresh_forces(state);
     }
     const auto steps_start = Clock::now();

@@ -4,7 +4,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <optional>
+#include <string>
 
 #include "mapped_samples.h"
 #include "organfit/fitting/embedded_body.h"
@@ -26,8 +28,17 @@ double body_volume(const particles::Positions& x, double rho, double voxel_mm) {
   return geometry::particle_body_volume_mm3(x, rho, voxel_mm, rho);
 }
 
+std::string volume_change_reason(double volume_ratio, double tolerance_pct) {
+  char text[160];
+  std::snprintf(text, sizeof text,
+                "the local stage changed the organ's volume by %+.1f%% (more than %g%%)",
+                100.0 * (volume_ratio - 1), tolerance_pct);
+  return text;
+}
+
 /// Both fits: the measures before, the method's own stages (`paper` or `spread` set),
-/// the fit loop, the undoing of a torn local stage, the measures after.
+/// the fit loop, the undoing of a local stage that tore, folded or swelled the organ, the
+/// measures after.
 FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& points,
                       const OrganFitOptions& common, const PaperFitOptions* paper,
                       const SpreadFitOptions* spread, const FitObserver& observer) {
@@ -104,7 +115,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
 
   particles::ForceTerm* data_term = nullptr;
   std::function<const std::vector<int>&(const particles::Positions&)> skin_of;
-  std::function<void(particles::State&)> after_row;
+  std::function<void(particles::State&)> while_reaching;
   const std::vector<PointStatus>* status = nullptr;
   if (paper) {
     auto& term =
@@ -173,8 +184,9 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
           &m.add(std::make_unique<particles::SkeletonForce>(sk, state.x, model.skeleton_params));
     }
     preparing(5, "the skeleton");
-    // Local stage: smooth patches; the skeleton's rest shape follows the fit (it keeps
-    // the global shape between rows but does not pull the body back to where it was).
+    // Local stage: smooth patches; the skeleton's rest shape follows the fit until the
+    // points are explained (it keeps the global shape between rows but does not pull the
+    // body back to where it was), then stays (run_fit's while_reaching).
     auto& term =
         m.add(std::make_unique<SpreadAttractiveForce>(points, law, rho, spread->local, skin_voxel));
     // The surface the local stage fits is the organ's embedded surface (the reference
@@ -190,7 +202,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     status = &term.status();
     data_term = &term;
     if (model.skeleton) {
-      after_row = [&model](particles::State& s) { model.skeleton->set_rest_shape(s.x); };
+      while_reaching = [&model](particles::State& s) { model.skeleton->set_rest_shape(s.x); };
     }
   }
 
@@ -199,7 +211,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   preparing(6, "the surface feet");
   const particles::Positions placed = state.x;
   model.placed = state.x;
-  report.fit = run_fit(m, state, opt, points, skin_of, status, fo, observer.row, after_row);
+  report.fit = run_fit(m, state, opt, points, skin_of, status, fo, observer.row, while_reaching);
   if (report.global) report.fit.wall_s += report.global->wall_s;
 
   // A local stage that tears the organ apart, or folds it (det(grad phi) <= 0 somewhere),
@@ -239,16 +251,30 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     report.local_stage_folded = true;
     make_organ_after();
   }
+  // The organ's volume change from the deformation's Jacobian over the fitted organ
+  // (EmbeddedBody::volume_ratio: the grid's sampling cancels); the voxel count beside it.
+  auto measure_organ_after = [&] {
+    const geometry::LabelVolume organ_after_grid = out.after->on_grid(
+        geometry::grid_covering(out.after->bounds(), volume_voxel, volume_voxel));
+    report.volume_after_mm3 = organ_after_grid.volume_mm3(1);
+    report.volume_ratio = out.after->volume_ratio(organ_after_grid);
+  };
+  measure_organ_after();
+  // The local stage reshapes the organ and keeps its volume (the hold on its patches'
+  // push); one that does not has not done its job: particles far smaller than the
+  // points' noise are pulled by bumps of several diameters and the body swells.
+  report.volume_tolerance_pct = common.volume_tolerance_pct;
+  if (spread && !report.local_stage_undone() &&
+      std::abs(100.0 * (report.volume_ratio - 1)) > common.volume_tolerance_pct) {
+    undo_local_stage(volume_change_reason(report.volume_ratio, common.volume_tolerance_pct));
+    report.local_stage_changed_volume = true;
+    make_organ_after();
+    measure_organ_after();
+  }
   // The fit stopped right after a row that measured it, unless the local stage was undone.
   const double v1 = !report.local_stage_undone() && std::isfinite(report.fit.volume_at_end_mm3)
                         ? report.fit.volume_at_end_mm3
                         : body_volume(state.x, rho, volume_voxel);
-  // The organ's volume change from the deformation's Jacobian over the fitted organ
-  // (EmbeddedBody::volume_ratio: the grid's sampling cancels); the voxel count beside it.
-  const geometry::LabelVolume organ_after_grid =
-      out.after->on_grid(geometry::grid_covering(out.after->bounds(), volume_voxel, volume_voxel));
-  report.volume_after_mm3 = organ_after_grid.volume_mm3(1);
-  report.volume_ratio = out.after->volume_ratio(organ_after_grid);
   const Deformation& phi = out.after->deformation();
   report.deformation = out.after->shared_deformation();
   for (const auto& st : *status)

@@ -105,5 +105,48 @@ TEST(RunFit, MeasuresTheVolumeOnlyOfStatesItHasNotBeenGiven) {
   EXPECT_EQ(calls, 5);
 }
 
+TEST(RunFit, AdjustsTheModelBetweenRowsOnlyUntilThePointsAreExplained) {
+  // Particles with no force on them, points 1 mm beyond their surface; while_reaching
+  // moves every particle 0.3 mm towards its point. Rows at steps 0, 5, 10: residuals 1.0,
+  // 0.7, 0.4 mm; 0.4 is within the 0.5 mm tolerance, so the points are explained at step
+  // 10 and the model is left alone from then on (the kinetic tolerance is never met here:
+  // the fit runs to its step budget).
+  const double rho = 2.0;
+  particles::Positions x(3, 10);
+  for (int i = 0; i < 10; ++i)
+    x.col(i) = Eigen::Vector3d(10.0 * i, 0, 0);
+  particles::Model model(10, 1.0, rho);
+  std::vector<AttractivePoint> points;
+  for (int i = 0; i < 10; ++i)
+    points.push_back({x.col(i) + Eigen::Vector3d(0, 0, rho + 1), 1.0});
+  std::vector<int> all(10);
+  std::iota(all.begin(), all.end(), 0);
+  particles::IntegratorOptions io;
+  io.time_step_s = 1e-3;
+  FitOptions fo;
+  fo.record_every = 5;
+  fo.max_steps = 40;
+  fo.residual_mean_tolerance_mm = 0.5;
+  fo.residual_max_tolerance_mm = 0.5;
+  fo.kinetic_tolerance = -1;
+  int calls = 0;
+  particles::State state(x);
+  const FitResult r = run_fit(
+      model, state, io, points,
+      [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr, fo,
+      nullptr,
+      [&calls](particles::State& s) {
+        ++calls;
+        s.x.row(2).array() += 0.3;
+      });
+  EXPECT_FALSE(r.converged);
+  EXPECT_EQ(r.stop_reason, "step budget");
+  EXPECT_EQ(r.explained_at_step, 10);
+  EXPECT_EQ(calls, 2);
+  ASSERT_EQ(r.history.size(), 9u);  // steps 0, 5, ..., 40
+  EXPECT_NEAR(r.history[1].residual_mean_mm, 0.7, 1e-12);
+  EXPECT_NEAR(r.history.back().residual_mean_mm, 0.4, 1e-12);
+}
+
 }  // namespace
 }  // namespace organfit::fitting

@@ -16,9 +16,11 @@
 namespace organfit::fitting {
 namespace {
 
-/// An ellipsoid of 36 x 28 x 24 mm filled at rho (mm; 1.85: about 1,200 particles) with
-/// the scene's default model settings, not relaxed (the lattice is at its equilibrium).
-OrganModel ellipsoid_model(double rho_mm = 1.85) {
+/// An ellipsoid of `size_mm` (default 36 x 28 x 24 mm) filled at rho (mm; 1.85: about 1,200
+/// particles) with the scene's default model settings, not relaxed (the lattice is at its
+/// equilibrium).
+OrganModel ellipsoid_model(double rho_mm = 1.85,
+                           const Eigen::Vector3d& size_mm = Eigen::Vector3d(36, 28, 24)) {
   OrganModel m;
   ModelSettings& s = m.settings;
   s.radius_mm = rho_mm, s.cohesion_energy = 1, s.exponent_m = 6, s.exponent_n = 12;
@@ -26,7 +28,7 @@ OrganModel ellipsoid_model(double rho_mm = 1.85) {
   s.neighbour_skin_r0 = 0.3, s.time_step_fraction = 0.1;
   s.skeleton = false, s.skeleton_stiffness = 0.2, s.skeleton_node_spacing_r0 = 3;
   s.skeleton_overlap_r0 = 0.5, s.seed = 1;
-  m.shape = geometry::make_shape("ellipsoid", {36, 28, 24}, {0, 0, 0});
+  m.shape = geometry::make_shape("ellipsoid", size_mm, {0, 0, 0});
   const particles::LennardJones law(cohesion_params_from(s));
   m.lattice_spacing_mm = particles::fcc_equilibrium_spacing(law);
   m.state = particles::State(
@@ -37,10 +39,12 @@ OrganModel ellipsoid_model(double rho_mm = 1.85) {
   return m;
 }
 
-/// `count` points on the ellipsoid stretched by `s` along x (1/sqrt(s) across: its volume
-/// kept), spread by a Fibonacci spiral, no noise.
-std::vector<AttractivePoint> stretched_surface(double s, int count) {
-  const Eigen::Vector3d semi(18 * s, 14 / std::sqrt(s), 12 / std::sqrt(s));
+/// `count` points on the ellipsoid of semi-axes `semi_mm` stretched by `s` along x
+/// (1/sqrt(s) across: its volume kept), spread by a Fibonacci spiral, no noise.
+std::vector<AttractivePoint> stretched_surface(
+    double s, int count, const Eigen::Vector3d& semi_mm = Eigen::Vector3d(18, 14, 12)) {
+  const Eigen::Vector3d semi(semi_mm.x() * s, semi_mm.y() / std::sqrt(s),
+                             semi_mm.z() / std::sqrt(s));
   std::vector<AttractivePoint> points;
   for (int k = 0; k < count; ++k) {
     const double z = 1 - 2 * (k + 0.5) / count, r = std::sqrt(1 - z * z);
@@ -157,6 +161,31 @@ TEST(FitSpread, ConvergesOnPointsNoisierThanTheParticleRadius) {
   EXPECT_TRUE(r.fit.converged) << r.fit.stop_reason << ", p95 " << r.fit.residual_p95_mm;
   EXPECT_LE(r.fit.residual_p95_mm, r.residual_p95_tolerance_mm);
   EXPECT_GT(r.fit.residual_p95_mm, 0.7);  // beyond rho: the old criterion could not be met
+}
+
+TEST(FitSpread, UndoesALocalStageThatTearsFoldsOrSwellsTheOrgan) {
+  // A 10 x 8 x 6 mm organ of 0.3 mm particles, points under 0.8 mm of noise: the patches
+  // pull bumps of several particle diameters, which swell the body by 3 to 5% (seeds 1
+  // and 2) or fold its deformation (seed 3). Each time the global stage's organ is kept
+  // (one piece, its volume), and the fit says it did not converge.
+  OrganModel planning = ellipsoid_model(0.3, Eigen::Vector3d(10, 8, 6));
+  planning.settings.skeleton = true;
+  build_model_terms(planning, nullptr);
+  for (int seed = 1; seed <= 3; ++seed) {
+    std::vector<AttractivePoint> points = stretched_surface(1.15, 87, Eigen::Vector3d(5, 4, 3));
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> noise(0.0, 0.8);
+    for (auto& p : points)
+      p.p_mm += p.p_mm.normalized() * noise(rng);
+    const FittedOrgan fitted = fit_spread(copy_model(planning), points, default_spread_options());
+    const FitReport& r = fitted.report;
+    ASSERT_TRUE(r.local_stage_undone()) << "seed " << seed << ": " << r.fit.stop_reason;
+    EXPECT_FALSE(r.fit.converged);
+    EXPECT_NE(r.fit.stop_reason.find("the global stage's organ kept"), std::string::npos);
+    EXPECT_EQ(fitted.model.state.x, fitted.model.placed);
+    EXPECT_EQ(r.components, 1);
+    EXPECT_NEAR(r.volume_ratio, 1.0, 0.005) << "seed " << seed;
+  }
 }
 
 TEST(FitPaper, RejectsBadPointsBeforeAnything) {

@@ -115,6 +115,7 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
                       {"steps_wall_s", r.fit.steps_wall_s},
                       {"converged", r.fit.converged},
                       {"stop_reason", r.fit.stop_reason},
+                      {"explained_at_step", r.fit.explained_at_step},
                       {"local_stage_undone", r.local_stage_undone()},
                       {"residual_mean_mm", r.fit.residual_mean_mm},
                       {"residual_floor_mm", r.residual_floor_mm},
@@ -333,9 +334,10 @@ std::vector<std::string> fit_warnings(const FitStageResult& fit) {
   std::vector<std::string> w;
   const double organ_change = fit.fit_summary["volume_change_pct"].get<double>();
   const double balls_change = fit.fit_summary["particle_body_volume_change_pct"].get<double>();
-  if (std::abs(organ_change) > 1.0)
+  const double tolerance = fit.report.volume_tolerance_pct;
+  if (std::abs(organ_change) > tolerance)
     w.push_back(
-        std::abs(balls_change) <= 1.0 && std::abs(organ_change) > 3.0
+        std::abs(balls_change) <= tolerance && std::abs(organ_change) > 3.0
             ? fmt::format(
                   "fit: the organ's volume changed by {:+.1f}% while the particles' own body "
                   "changed by {:+.1f}%: the particles rearranged under a deformation larger than "

@@ -36,6 +36,10 @@ const config::Binding<fitting::OrganFitOptions>& fit() {
           .number("unseen_change_sd_mm", &O::unseen_change_sd_mm, "mm", 0.0, 50.0,
                   "the uncertainty's prior: how far the surface may change locally where no "
                   "point is (1.7 mm: the prostate between fractions, Nakazawa et al. 2015)",
+                  true)
+          .number("volume_tolerance_pct", &O::volume_tolerance_pct, "%", 0.0, 100.0,
+                  "the organ's volume change a fit may make (either way): beyond it the spread "
+                  "fit's local stage is undone, and the run warns",
                   true);
   return b;
 }

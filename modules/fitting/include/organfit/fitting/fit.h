@@ -67,6 +67,8 @@ struct FitResult {
   double steps_wall_s = 0;
   double instrument_wall_s = 0;  ///< history measurements (volume), not part of the fit
   double residual_mean_mm = 0, residual_max_mm = 0, residual_p95_mm = 0;
+  /// The step of the first row that explained the points (see run_fit); -1: none did.
+  long long explained_at_step = -1;
   std::vector<double> residuals_mm;
   std::vector<HistoryRow> history;
   /// volume() of the state as it ends when the last row measured it (the fit stops right
@@ -75,9 +77,14 @@ struct FitResult {
 };
 
 /// Runs the fit. `data_term` must already be in `model`; `skin_of` returns the current
-/// skin particles (for residuals). `on_row` (optional) sees each history row;
-/// `after_row` (optional) may adjust the state or force terms between rows (e.g. let
-/// the skeleton's rest shape follow the fit); forces are recomputed after it.
+/// skin particles (for residuals). `on_row` (optional) sees each history row.
+/// `while_reaching` (optional) may adjust the state or force terms between rows until the
+/// points are explained (a row after the first with the mean and 95th percentile within
+/// tolerance), and not after: e.g. the skeleton's rest shape follows the fit while the
+/// surface is on its way, then stays, so that the body settles elastically about the shape
+/// that explained the points instead of creeping on after their noise (the discrepancy
+/// principle: a fit taken beyond the noise's level fits the noise). Forces are recomputed
+/// after it.
 FitResult run_fit(
     particles::Model& model, particles::State& state,
     const particles::IntegratorOptions& integrator_options,
@@ -85,6 +92,6 @@ FitResult run_fit(
     const std::function<const std::vector<int>&(const particles::Positions&)>& skin_of,
     const std::vector<PointStatus>* status, const FitOptions& options,
     const std::function<void(const HistoryRow&)>& on_row = nullptr,
-    const std::function<void(particles::State&)>& after_row = nullptr);
+    const std::function<void(particles::State&)>& while_reaching = nullptr);
 
 }  // namespace organfit::fitting

@@ -7,9 +7,10 @@
 //   fit_spread  ours: a volume-preserving map of the whole organ fitted to the points
 //               (global_fit.h), the body re-filled in its mapped shape and settled, the
 //               skeleton rebuilt on it, then smooth local patches (SpreadAttractiveForce)
-//               with the skeleton's rest shape following the fit; a local stage that tears
-//               the organ into pieces or folds it is undone (the global stage's organ is
-//               kept).
+//               with the skeleton's rest shape following the fit until the points are
+//               explained; a local stage that tears the organ into pieces, folds it, or
+//               changes its volume by more than fit.volume_tolerance_pct is undone (the
+//               global stage's organ, which keeps the volume, is kept).
 // Both take the model by value (move it in, or pass copy_model(m) to keep m) and return
 // it fitted, with the organ it carries before and after and what run.json's `fit` says.
 #include <Eigen/Core>
@@ -45,6 +46,9 @@ struct OrganFitOptions {
   /// The prior standard deviation (mm) of the local change where no point is, for the
   /// fit's uncertainty (surface_uncertainty.h).
   double unseen_change_sd_mm = 1.7;
+  /// The organ's volume change (%, either way) a fit may make: beyond it the spread fit's
+  /// local stage is undone, and a run warns of either method's.
+  double volume_tolerance_pct = 1.0;
 };
 
 struct PaperFitOptions {
@@ -90,7 +94,12 @@ struct FitReport {
   int points = 0, rejected_points = 0;
   int pieces = 1;                   ///< > 1: the local stage tore the organ; it was undone
   bool local_stage_folded = false;  ///< the local stage folded the organ; it was undone
-  bool local_stage_undone() const { return pieces > 1 || local_stage_folded; }
+  /// The local stage changed the organ's volume by more than volume_tolerance_pct; undone.
+  bool local_stage_changed_volume = false;
+  bool local_stage_undone() const {
+    return pieces > 1 || local_stage_folded || local_stage_changed_volume;
+  }
+  double volume_tolerance_pct = 1.0;     ///< the options' (fit_warnings reads it)
   double residual_floor_mm = 0;          ///< a point on the model's own surface, on average
   double residual_tolerance_mm = 0;      ///< on the mean: the stated one and the floor
   double residual_p95_tolerance_mm = 0;  ///< on the 95th percentile
