@@ -290,17 +290,20 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   // The uncertainty (surface_uncertainty.h): n the noise the fit accepts, l the
   // deformation's own support (one point informs the field that far), s^2 the stated
   // prior of unseen local change plus the mean square of the local change the points
-  // did show (the part beyond the global map).
+  // did show (the part beyond the global map). Its observations are the points the fit
+  // used: a rejected point (an outlier) neither pins the surface nor shows a change.
   std::vector<Eigen::Vector3d> point_positions;
   double local_sq = 0;
-  for (const auto& p : points) {
-    point_positions.push_back(p.p_mm);
-    local_sq += (phi.global_map().apply(phi.pull_back(p.p_mm)) - p.p_mm).squaredNorm();
+  for (size_t k = 0; k < points.size(); ++k) {
+    if (status && k < status->size() && (*status)[k].rejected) continue;
+    const Eigen::Vector3d& p = points[k].p_mm;
+    point_positions.push_back(p);
+    local_sq += (phi.global_map().apply(phi.pull_back(p)) - p).squaredNorm();
   }
   SurfaceUncertaintyOptions uo;
   const double s0 = common.unseen_change_sd_mm;
-  uo.prior_sd_mm =
-      std::sqrt(s0 * s0 + (points.empty() ? 0.0 : local_sq / static_cast<double>(points.size())));
+  const auto used = static_cast<double>(point_positions.size());
+  uo.prior_sd_mm = std::sqrt(s0 * s0 + (used > 0 ? local_sq / used : 0.0));
   uo.length_mm = phi.support_mm();
   uo.noise_sd_mm = fo.residual_mean_tolerance_mm;
   report.uncertainty = std::make_shared<const SurfaceUncertainty>(point_positions, uo);

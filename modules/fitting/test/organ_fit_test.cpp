@@ -188,6 +188,22 @@ TEST(FitSpread, UndoesALocalStageThatTearsFoldsOrSwellsTheOrgan) {
   }
 }
 
+TEST(FitSpread, LeavesARejectedPointOutOfTheUncertainty) {
+  // 87 points on the stretched ellipsoid and one lone point 5 mm above its top, among
+  // points on the surface: rejected, it pins nothing, so sigma there is not the noise's.
+  std::vector<AttractivePoint> points = stretched_surface(1.15, 87);
+  const Eigen::Vector3d lone(0, 0, 12 / std::sqrt(1.15) + 5);
+  points.push_back({lone, 1.0});
+  const FittedOrgan fitted =
+      fit_spread(copy_model(ellipsoid_model()), points, default_spread_options());
+  const FitReport& r = fitted.report;
+  ASSERT_EQ(r.rejected_points, 1);
+  ASSERT_TRUE(r.uncertainty);
+  EXPECT_NEAR(r.uncertainty->nearest_point_mm(lone), 5.0, 2.0);
+  EXPECT_NEAR(r.uncertainty->nearest_point_mm(points[0].p_mm), 0.0, 1e-12);
+  EXPECT_GT(r.uncertainty->sd_mm(lone), 2 * r.uncertainty->sd_mm(points[0].p_mm));
+}
+
 TEST(FitPaper, RejectsBadPointsBeforeAnything) {
   PaperFitOptions o;
   o.fit = default_spread_options().fit;
