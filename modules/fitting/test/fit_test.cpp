@@ -4,11 +4,35 @@
 
 #include <gtest/gtest.h>
 
+#include <functional>
 #include <limits>
 #include <numeric>
 
 namespace organfit::fitting {
 namespace {
+
+/// n particles at rest 10 mm apart along x (the first at x0_mm), no force on them, every
+/// one on the skin; each test puts its points beside them.
+struct ParticleRow {
+  ParticleRow(int n, double rho_mm, double x0_mm = 0) : x(3, n), model(n, 1.0, rho_mm), all(n) {
+    for (int i = 0; i < n; ++i)
+      x.col(i) = Eigen::Vector3d(10.0 * i + x0_mm, 0, 0);
+    std::iota(all.begin(), all.end(), 0);
+    io.time_step_s = 1e-3;
+  }
+  FitResult fit(particles::State& state, const std::vector<AttractivePoint>& points,
+                const FitOptions& fo,
+                const std::function<void(particles::State&)>& while_reaching = nullptr) {
+    return run_fit(
+        model, state, io, points,
+        [this](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr, fo,
+        nullptr, while_reaching);
+  }
+  particles::Positions x;
+  particles::Model model;
+  std::vector<int> all;
+  particles::IntegratorOptions io;
+};
 
 // Rejected points (NaN) are left out; the 95th percentile is by nearest rank: of 20
 // residuals 1..20 mm, the 19th.
@@ -31,24 +55,16 @@ TEST(RunFit, OneFarPointDoesNotKeepAFitFromConverging) {
   // 0) but one, 1.5 radii off (beyond the radius): the largest residual exceeds rho, the
   // 95th percentile does not.
   const double rho = 2.0;
-  particles::Positions x(3, 20);
-  for (int i = 0; i < 20; ++i)
-    x.col(i) = Eigen::Vector3d(10.0 * i, 0, 0);
-  particles::Model model(20, 1.0, rho);
+  ParticleRow row(20, rho);
+  const particles::Positions& x = row.x;
   particles::State state(x);
   std::vector<AttractivePoint> points;
   for (int i = 0; i < 20; ++i)
     points.push_back({x.col(i) + Eigen::Vector3d(0, 0, i == 7 ? 2.5 * rho : rho), 1.0});
-  std::vector<int> all(20);
-  std::iota(all.begin(), all.end(), 0);
-  particles::IntegratorOptions io;
-  io.time_step_s = 1e-3;
   FitOptions fo;
   fo.record_every = 5;
   fo.max_steps = 200;
-  const FitResult r = run_fit(
-      model, state, io, points,
-      [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr, fo);
+  const FitResult r = row.fit(state, points, fo);
   EXPECT_TRUE(r.converged) << r.stop_reason;
   EXPECT_NEAR(r.residual_max_mm, 1.5 * rho, 1e-12);
   EXPECT_NEAR(r.residual_p95_mm, 0.0, 1e-12);
@@ -56,9 +72,7 @@ TEST(RunFit, OneFarPointDoesNotKeepAFitFromConverging) {
   // Two such points out of 20 (10%) are beyond the 95th percentile's tolerance: no.
   points[3].p_mm = x.col(3) + Eigen::Vector3d(0, 0, 2.5 * rho);
   particles::State again(x);
-  const FitResult s = run_fit(
-      model, again, io, points,
-      [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr, fo);
+  const FitResult s = row.fit(again, points, fo);
   EXPECT_FALSE(s.converged);
   EXPECT_NEAR(s.residual_p95_mm, 1.5 * rho, 1e-12);
 }
@@ -69,17 +83,11 @@ TEST(RunFit, MeasuresTheVolumeOnlyOfStatesItHasNotBeenGiven) {
   // the first row (the start) is not measured again, and the last row's measure is the
   // state the fit ends in.
   const double rho = 2.0;
-  particles::Positions x(3, 10);
-  for (int i = 0; i < 10; ++i)
-    x.col(i) = Eigen::Vector3d(10.0 * i + 10, 0, 0);
-  particles::Model model(10, 1.0, rho);
+  ParticleRow row(10, rho, 10);
+  const particles::Positions& x = row.x;
   std::vector<AttractivePoint> points;
   for (int i = 0; i < 10; ++i)
     points.push_back({x.col(i) + Eigen::Vector3d(rho + 1, 0, 0), 1.0});
-  std::vector<int> all(10);
-  std::iota(all.begin(), all.end(), 0);
-  particles::IntegratorOptions io;
-  io.time_step_s = 1e-3;
   int calls = 0;
   FitOptions fo;
   fo.record_every = 5;
@@ -88,9 +96,7 @@ TEST(RunFit, MeasuresTheVolumeOnlyOfStatesItHasNotBeenGiven) {
   fo.volume = [&calls](const particles::Positions& p) { return ++calls, p.row(0).sum(); };
   fo.volume_at_start_mm3 = x.row(0).sum();
   particles::State state(x);
-  const FitResult r = run_fit(
-      model, state, io, points,
-      [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr, fo);
+  const FitResult r = row.fit(state, points, fo);
   ASSERT_EQ(r.history.size(), 5u);  // steps 0, 5, 10, 15, 20
   EXPECT_EQ(calls, 4);
   EXPECT_EQ(r.history[0].volume_change_pct, 0.0);
@@ -99,9 +105,7 @@ TEST(RunFit, MeasuresTheVolumeOnlyOfStatesItHasNotBeenGiven) {
   calls = 0;
   fo.volume_at_start_mm3 = 0;
   particles::State again(x);
-  run_fit(
-      model, again, io, points,
-      [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr, fo);
+  row.fit(again, points, fo);
   EXPECT_EQ(calls, 5);
 }
 
@@ -112,17 +116,10 @@ TEST(RunFit, AdjustsTheModelBetweenRowsOnlyUntilThePointsAreExplained) {
   // 10 and the model is left alone from then on (the kinetic tolerance is never met here:
   // the fit runs to its step budget).
   const double rho = 2.0;
-  particles::Positions x(3, 10);
-  for (int i = 0; i < 10; ++i)
-    x.col(i) = Eigen::Vector3d(10.0 * i, 0, 0);
-  particles::Model model(10, 1.0, rho);
+  ParticleRow row(10, rho);
   std::vector<AttractivePoint> points;
   for (int i = 0; i < 10; ++i)
-    points.push_back({x.col(i) + Eigen::Vector3d(0, 0, rho + 1), 1.0});
-  std::vector<int> all(10);
-  std::iota(all.begin(), all.end(), 0);
-  particles::IntegratorOptions io;
-  io.time_step_s = 1e-3;
+    points.push_back({row.x.col(i) + Eigen::Vector3d(0, 0, rho + 1), 1.0});
   FitOptions fo;
   fo.record_every = 5;
   fo.max_steps = 40;
@@ -130,15 +127,11 @@ TEST(RunFit, AdjustsTheModelBetweenRowsOnlyUntilThePointsAreExplained) {
   fo.residual_max_tolerance_mm = 0.5;
   fo.kinetic_tolerance = -1;
   int calls = 0;
-  particles::State state(x);
-  const FitResult r = run_fit(
-      model, state, io, points,
-      [&](const particles::Positions&) -> const std::vector<int>& { return all; }, nullptr, fo,
-      nullptr,
-      [&calls](particles::State& s) {
-        ++calls;
-        s.x.row(2).array() += 0.3;
-      });
+  particles::State state(row.x);
+  const FitResult r = row.fit(state, points, fo, [&calls](particles::State& s) {
+    ++calls;
+    s.x.row(2).array() += 0.3;
+  });
   EXPECT_FALSE(r.converged);
   EXPECT_EQ(r.stop_reason, "step budget");
   EXPECT_EQ(r.explained_at_step, 10);
