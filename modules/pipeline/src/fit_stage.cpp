@@ -126,6 +126,7 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
                       {"volume_before_mm3", r.volume_before_mm3},
                       {"volume_after_mm3", r.volume_after_mm3},
                       {"volume_change_pct", 100.0 * (r.volume_ratio - 1)},
+                      {"volume_tolerance_pct", r.volume_tolerance_pct},
                       {"volume_change_counted_pct",
                        100.0 * (r.volume_after_mm3 - r.volume_before_mm3) / r.volume_before_mm3},
                       {"deformation",

@@ -387,7 +387,7 @@ std::string report_html(const ReportInput& in) {
       warnings.push_back(w.get<std::string>());
   if (run.contains("fit")) {
     const auto& f = run["fit"];
-    if (std::abs(f.value("volume_change_pct", 0.0)) > 1.0)
+    if (std::abs(f.value("volume_change_pct", 0.0)) > f.value("volume_tolerance_pct", 1.0))
       warnings.push_back(fmt::format("volume changed by {:+.2f}% during the fit",
                                      f.value("volume_change_pct", 0.0)));
     int far = 0;

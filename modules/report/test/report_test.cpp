@@ -189,6 +189,9 @@ TEST(ReportHtml, HasTheSectionsEscapesTextAndShowsNoPatientUnlessGiven) {
   EXPECT_EQ(links, 0);
   in.patient = "Doe^J (ID 7)";
   EXPECT_NE(report_html(in).find("Patient: Doe^J (ID 7)"), std::string::npos);
+  // The volume warning is the run's own tolerance's (fit.volume_tolerance_pct).
+  in.run["fit"]["volume_tolerance_pct"] = 2.0;
+  EXPECT_EQ(report_html(in).find("volume changed by"), std::string::npos);
 }
 
 }  // namespace
