@@ -117,7 +117,7 @@ assert u['seen']['median_mm'] < u['unseen']['median_mm'] <= u['prior_sd_mm'], u
 assert u['all']['p95_mm'] <= u['prior_sd_mm'] + 1e-9 and u['surface_samples'] == 4000, u
 assert d['truth']['uncertainty']['within_2sd_share'] >= 0.9, d['truth']['uncertainty']
 assert d['export']['uncertainty']['file'] == 'sigma.nrrd', d['export']"
-check "sigma.nrrd: the prior far from the points, less near them, on the CT's grid" $py -c "
+check "sigma.nrrd: the prior (with the resolution) far from the points, less near them, on the CT's grid" $py -c "
 import json, struct
 d = json.load(open('$tmp/run/run.json')); u = d['fit']['uncertainty']
 raw = open('$tmp/run/sigma.nrrd', 'rb').read()
@@ -125,8 +125,10 @@ head, body = raw.split(b'\n\n', 1)
 assert b'sizes: 320 320 56' in head and b'type: float' in head, head
 v = struct.unpack('<%df' % (len(body) // 4), body)
 assert len(v) == 320 * 320 * 56
-assert abs(v[0] - u['prior_sd_mm']) < 1e-5 and abs(v[-1] - u['prior_sd_mm']) < 1e-5, (v[0], v[-1])
-assert min(v) >= 0 and max(v) <= u['prior_sd_mm'] + 1e-5 and min(v) < 0.6 * u['prior_sd_mm'], min(v)"
+far = (u['prior_sd_mm'] ** 2 + u['resolution_sd_mm'] ** 2) ** 0.5  # the prior and the model's resolution
+assert 0 < u['resolution_sd_mm'] < u['prior_sd_mm'], u
+assert abs(v[0] - far) < 1e-5 and abs(v[-1] - far) < 1e-5, (v[0], v[-1], far)
+assert min(v) >= u['resolution_sd_mm'] - 1e-5 and max(v) <= far + 1e-5 and min(v) < 0.6 * far, min(v)"
 check "the VTP mesh carries sigma_mm at each point" $py - "$tmp/run/prostate_fit.vtp" <<'EOF'
 import re, sys
 x = open(sys.argv[1]).read()

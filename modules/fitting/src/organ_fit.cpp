@@ -287,11 +287,12 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
                           : particles::connected_components(state.x, 1.5 * law.r0());
   report.skin_particles = skin_of(state.x).size();
   report.finite = state.x.allFinite();
-  // The uncertainty (surface_uncertainty.h): n the noise the fit accepts, l the
-  // deformation's own support (one point informs the field that far), s^2 the stated
-  // prior of unseen local change plus the mean square of the local change the points
-  // did show (the part beyond the global map). Its observations are the points the fit
-  // used: a rejected point (an outlier) neither pins the surface nor shows a change.
+  // The uncertainty (surface_uncertainty.h): n the points' stated noise, r the model's
+  // resolution (its residual floor: how far its own surface lies from the organ it was
+  // made from), l the deformation's own support (one point informs the field that far), s^2 the
+  // stated prior of unseen local change plus the mean square of the local change the points did
+  // show (the part beyond the global map). Its observations are the points the fit used: a rejected
+  // point (an outlier) neither pins the surface nor shows a change.
   std::vector<Eigen::Vector3d> point_positions;
   double local_sq = 0;
   for (size_t k = 0; k < points.size(); ++k) {
@@ -305,7 +306,8 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   const auto used = static_cast<double>(point_positions.size());
   uo.prior_sd_mm = std::sqrt(s0 * s0 + (used > 0 ? local_sq / used : 0.0));
   uo.length_mm = phi.support_mm();
-  uo.noise_sd_mm = fo.residual_mean_tolerance_mm;
+  uo.noise_sd_mm = common.residual_tolerance_mm;
+  uo.resolution_sd_mm = report.residual_floor_mm;
   report.uncertainty = std::make_shared<const SurfaceUncertainty>(point_positions, uo);
   // The data term is the fit's, not the model's: the model leaves with its own terms.
   m.remove(*data_term);

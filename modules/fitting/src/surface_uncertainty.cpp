@@ -15,6 +15,8 @@ SurfaceUncertainty::SurfaceUncertainty(const std::vector<Eigen::Vector3d>& point
   for (double v : {options.prior_sd_mm, options.length_mm, options.noise_sd_mm})
     if (!(v > 0) || !std::isfinite(v))
       throw std::invalid_argument("SurfaceUncertainty: s, l and n must be positive and finite");
+  if (!(options.resolution_sd_mm >= 0) || !std::isfinite(options.resolution_sd_mm))
+    throw std::invalid_argument("SurfaceUncertainty: r must be >= 0 and finite");
   if (options.max_points < 1)
     throw std::invalid_argument("SurfaceUncertainty: max_points must be at least 1");
   for (size_t i = 0; i < points_mm.size(); ++i)
@@ -53,13 +55,18 @@ SurfaceUncertainty::SurfaceUncertainty(const std::vector<Eigen::Vector3d>& point
 double SurfaceUncertainty::sd_mm(const Eigen::Vector3d& x) const {
   const double s2 = options_.prior_sd_mm * options_.prior_sd_mm;
   const double inv_2l2 = 1.0 / (2 * options_.length_mm * options_.length_mm);
-  if (points_.cols() == 0) return options_.prior_sd_mm;
+  const double r2 = options_.resolution_sd_mm * options_.resolution_sd_mm;
+  if (points_.cols() == 0) return std::sqrt(s2 + r2);
   Eigen::VectorXd kx(points_.cols());
   for (Eigen::Index i = 0; i < points_.cols(); ++i)
     kx[i] = s2 * std::exp(-(points_.col(i) - x).squaredNorm() * inv_2l2);
   // k_x^T (L L^T)^-1 k_x = |L^-1 k_x|^2
   const Eigen::VectorXd v = lower_.triangularView<Eigen::Lower>().solve(kx);
-  return std::sqrt(std::max(0.0, s2 - v.squaredNorm()));
+  return std::sqrt(std::max(0.0, s2 - v.squaredNorm()) + r2);
+}
+
+double SurfaceUncertainty::far_sd_mm() const {
+  return std::hypot(options_.prior_sd_mm, options_.resolution_sd_mm);
 }
 
 geometry::Aabb SurfaceUncertainty::points_box() const {

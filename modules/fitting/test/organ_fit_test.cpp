@@ -201,7 +201,15 @@ TEST(FitSpread, LeavesARejectedPointOutOfTheUncertainty) {
   ASSERT_TRUE(r.uncertainty);
   EXPECT_NEAR(r.uncertainty->nearest_point_mm(lone), 5.0, 2.0);
   EXPECT_NEAR(r.uncertainty->nearest_point_mm(points[0].p_mm), 0.0, 1e-12);
-  EXPECT_GT(r.uncertainty->sd_mm(lone), 2 * r.uncertainty->sd_mm(points[0].p_mm));
+  // The posterior is the used points' alone, and the lone point would have pinned it.
+  std::vector<Eigen::Vector3d> used;
+  for (size_t k = 0; k + 1 < points.size(); ++k)
+    used.push_back(points[k].p_mm);
+  const SurfaceUncertainty without(used, r.uncertainty->options());
+  EXPECT_NEAR(r.uncertainty->sd_mm(lone), without.sd_mm(lone), 1e-12);
+  used.push_back(lone);
+  EXPECT_GT(r.uncertainty->sd_mm(lone),
+            SurfaceUncertainty(used, r.uncertainty->options()).sd_mm(lone) + 0.3);
 }
 
 TEST(FitPaper, RejectsBadPointsBeforeAnything) {

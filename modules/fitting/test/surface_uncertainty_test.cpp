@@ -59,6 +59,27 @@ TEST(SurfaceUncertainty, ManyPointsAreBinnedWithTheirNoiseShared) {
   EXPECT_NEAR(u.nearest_point_mm(Eigen::Vector3d(0.5, 0.5, 3)), 3.0, 1e-12);
 }
 
+TEST(SurfaceUncertainty, AddsTheModelsResolutionInQuadrature) {
+  // One point: at it, s^2 n^2 / (s^2 + n^2) + r^2; far away, s^2 + r^2; a dense sheet of
+  // points no longer takes sigma below r.
+  SurfaceUncertaintyOptions o;
+  o.prior_sd_mm = 3.0, o.length_mm = 8.0, o.noise_sd_mm = 0.5, o.resolution_sd_mm = 0.4;
+  const SurfaceUncertainty u({Eigen::Vector3d(1, 2, 3)}, o);
+  EXPECT_NEAR(u.sd_mm(Eigen::Vector3d(1, 2, 3)), std::sqrt(9 * 0.25 / 9.25 + 0.16), 1e-12);
+  EXPECT_NEAR(u.sd_mm(Eigen::Vector3d(200, 2, 3)), std::sqrt(9 + 0.16), 1e-12);
+  EXPECT_NEAR(u.far_sd_mm(), std::sqrt(9 + 0.16), 1e-12);
+  EXPECT_NEAR(SurfaceUncertainty({}, o).sd_mm({0, 0, 0}), std::sqrt(9 + 0.16), 1e-12);
+  std::vector<Eigen::Vector3d> sheet;
+  for (int i = 0; i < 100; ++i)
+    for (int j = 0; j < 100; ++j)
+      sheet.emplace_back(0.5 * i, 0.5 * j, 0);
+  const double on_sheet = SurfaceUncertainty(sheet, o).sd_mm(Eigen::Vector3d(25, 25, 0));
+  EXPECT_GE(on_sheet, 0.4);
+  EXPECT_LT(on_sheet, 0.41);
+  o.resolution_sd_mm = -0.1;
+  EXPECT_THROW(SurfaceUncertainty({}, o), std::invalid_argument);
+}
+
 TEST(SurfaceUncertainty, RefusesNonPositiveOptions) {
   SurfaceUncertaintyOptions o;
   o.length_mm = 0;

@@ -201,10 +201,10 @@ void sample_deformation(const fitting::Deformation& phi, const geometry::ImageGe
 
 /// sigma(x) at every voxel centre: computed on a grid of l/4 over the points' box grown
 /// by 5 l (sigma varies over l) and interpolated trilinearly; beyond that box, where no
-/// point informs it (exp(-12.5) of the prior), the prior s itself.
+/// point informs it (exp(-12.5) of the prior), its value far from every point.
 std::vector<float> sigma_on_grid(const fitting::SurfaceUncertainty& u,
                                  const geometry::ImageGeometry& g) {
-  const double s = u.options().prior_sd_mm, l = u.options().length_mm;
+  const double s = u.far_sd_mm(), l = u.options().length_mm;
   geometry::Aabb box = u.points_box();
   box.min_mm.array() -= 5 * l, box.max_mm.array() += 5 * l;
   const geometry::ImageGeometry coarse = geometry::grid_covering(box, l / 4, 0);

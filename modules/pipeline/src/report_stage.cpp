@@ -25,7 +25,7 @@ std::string build_report(const ReportContext& c) {
   Progress progress("report", 2);
   std::function<double(const Eigen::Vector3d&)> sigma;
   if (c.uncertainty) {
-    in.sigma_scale_mm = c.uncertainty->options().prior_sd_mm;
+    in.sigma_scale_mm = c.uncertainty->far_sd_mm();
     sigma = [u = c.uncertainty](const Eigen::Vector3d& x) { return u->sd_mm(x); };
   }
   if (c.fitted) {

@@ -93,7 +93,7 @@ struct ReportInput {
   std::vector<float> surface_vertex_mm;  ///< fitted surface, x y z per vertex
   std::vector<int> surface_triangles;    ///< three indices per triangle
   std::vector<float> surface_sigma_mm;   ///< the uncertainty per vertex (empty: none)
-  double sigma_scale_mm = 0;             ///< the colour scale's top (red): the uncertainty's prior
+  double sigma_scale_mm = 0;  ///< the colour scale's top (red): sigma far from every point
   std::vector<Eigen::Vector3d> points_mm;
   std::vector<double> residuals_mm;
   std::string patient;  ///< empty: no patient name or ID in the page
