@@ -171,8 +171,7 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
   const auto& skin = skin_.skin();
   const Eigen::Vector3d centroid = state.x.rowwise().mean();
   const long m = static_cast<long>(in_patches_.size());
-  push_.resize(in_patches_.size());
-  pushed_.assign(in_patches_.size(), 0);
+  push_.assign(in_patches_.size(), 0.0);
 #pragma omp parallel for schedule(static) if (m >= particles::kParallelMinParticles)
   for (long j = 0; j < m; ++j) {
     Eigen::Vector3d num = Eigen::Vector3d::Zero();
@@ -190,11 +189,10 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
     if (mag > cap) force *= cap / mag;
     f.col(i) += force;
     push_[j] = force.dot((state.x.col(i) - centroid).normalized());
-    pushed_[j] = 1;
   }
   double inflation = 0;
-  for (size_t j = 0; j < push_.size(); ++j)  // in particle order, for any thread count
-    if (pushed_[j]) inflation += push_[j];
+  for (double push : push_)  // in particle order, for any thread count
+    inflation += push;
   if (!skin.empty() && params_.hold_volume) {
     const double pressure = inflation / static_cast<double>(skin.size());
     const long skin_count = static_cast<long>(skin.size());

@@ -55,8 +55,8 @@ SurfaceUncertainty::SurfaceUncertainty(const std::vector<Eigen::Vector3d>& point
 double SurfaceUncertainty::sd_mm(const Eigen::Vector3d& x) const {
   const double s2 = options_.prior_sd_mm * options_.prior_sd_mm;
   const double inv_2l2 = 1.0 / (2 * options_.length_mm * options_.length_mm);
+  if (points_.cols() == 0) return far_sd_mm();
   const double r2 = options_.resolution_sd_mm * options_.resolution_sd_mm;
-  if (points_.cols() == 0) return std::sqrt(s2 + r2);
   Eigen::VectorXd kx(points_.cols());
   for (Eigen::Index i = 0; i < points_.cols(); ++i)
     kx[i] = s2 * std::exp(-(points_.col(i) - x).squaredNorm() * inv_2l2);

@@ -204,7 +204,7 @@ void sample_deformation(const fitting::Deformation& phi, const geometry::ImageGe
 /// point informs it (exp(-12.5) of the prior), its value far from every point.
 std::vector<float> sigma_on_grid(const fitting::SurfaceUncertainty& u,
                                  const geometry::ImageGeometry& g) {
-  const double s = u.far_sd_mm(), l = u.options().length_mm;
+  const double far = u.far_sd_mm(), l = u.options().length_mm;
   geometry::Aabb box = u.points_box();
   box.min_mm.array() -= 5 * l, box.max_mm.array() += 5 * l;
   const geometry::ImageGeometry coarse = geometry::grid_covering(box, l / 4, 0);
@@ -215,7 +215,7 @@ std::vector<float> sigma_on_grid(const fitting::SurfaceUncertainty& u,
       for (int i = 0; i < coarse.size[0]; ++i)
         values[static_cast<size_t>(coarse.linear_index(i, j, k))] =
             u.sd_mm(coarse.index_to_physical(Eigen::Vector3d(i, j, k)));
-  std::vector<float> out(static_cast<size_t>(g.voxel_count()), static_cast<float>(s));
+  std::vector<float> out(static_cast<size_t>(g.voxel_count()), static_cast<float>(far));
   const geometry::IndexRange range = geometry::index_range(g, box, 0);
 #pragma omp parallel for schedule(dynamic)
   for (int k = range.lo[2]; k <= range.hi[2]; ++k)
@@ -228,7 +228,7 @@ std::vector<float> sigma_on_grid(const fitting::SurfaceUncertainty& u,
             (base.array() >= 0).all() &&
             (base.array() + 1 < Eigen::Array3d(coarse.size[0], coarse.size[1], coarse.size[2]))
                 .all();
-        if (!inside) continue;  // the box's rim: the prior
+        if (!inside) continue;  // the box's rim: the value far from every point
         double v = 0;
         geometry::for_each_trilinear_corner(c - base, [&](int di, int dj, int dk, double w) {
           v += w * values[static_cast<size_t>(coarse.linear_index(

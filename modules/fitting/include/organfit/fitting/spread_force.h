@@ -72,11 +72,10 @@ class SpreadAttractiveForce : public AttractivePointTerm {
   std::vector<int> pull_first_;
   std::vector<std::pair<int, double>> pulls_;
   // Per step: each point's residual r_k (mm) and whether it pulls; each in_patches_[j]'s
-  // outward push F . n, where a point pulls it (pushed_).
+  // outward push F . n (0 where no point pulls it).
   std::vector<Eigen::Vector3d> residual_;
   std::vector<char> pulls_now_;
   std::vector<double> push_;
-  std::vector<char> pushed_;
 };
 
 }  // namespace organfit::fitting
