@@ -80,7 +80,9 @@ double truncated_rms(const GlobalMap& map, const geometry::SignedDistance& dista
 }  // namespace
 
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
-                         const AffineFitOptions& o, const geometry::SignedDistance* distance) {
+                         const AffineFitOptions& o, const geometry::SignedDistance* distance,
+                         std::vector<GlobalMap>* equally_good) {
+  if (equally_good) equally_good->clear();
   // Each pull towards the identity (the stated one, and the alternative if any) gives an
   // affine fit and, with enough points, fits of the whole map from two starts.
   std::vector<AffineFitOptions> pulls = {o};
@@ -208,23 +210,33 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   const double window = o.equally_good_dof / static_cast<double>(points.size());
   const double noise2 =
       o.noise_mm > 0 ? o.noise_mm * o.noise_mm : std::numeric_limits<double>::infinity();
-  auto least_change_of_equally_good = [window, noise2](const std::vector<double>& fit,
-                                                       const std::vector<double>& shape_change) {
+  auto is_equally_good = [window, noise2](const std::vector<double>& fit, size_t c) {
     const double best = *std::min_element(fit.begin(), fit.end());
+    return fit[c] * fit[c] <= best * best + window * std::min(best * best, noise2);
+  };
+  auto least_change_of_equally_good = [&is_equally_good](const std::vector<double>& fit,
+                                                         const std::vector<double>& shape_change) {
     size_t chosen = 0;
     double least = std::numeric_limits<double>::infinity();
     for (size_t c = 0; c < fit.size(); ++c)
-      if (fit[c] * fit[c] <= best * best + window * std::min(best * best, noise2) &&
-          shape_change[c] < least)
-        least = shape_change[c], chosen = c;
+      if (is_equally_good(fit, c) && shape_change[c] < least) least = shape_change[c], chosen = c;
     return chosen;
   };
-  const size_t chosen = least_change_of_equally_good(rms, change);
-  if (!distance || (!(o.field_sigma_mm > 0) && !(o.flow_sigma_mm > 0))) {
-    GlobalMap out = *candidates[chosen];
+  // The choice, and with `equally_good` every fit in its window, the choice first.
+  auto chosen_of = [&](const std::vector<const GlobalMap*>& judged_fits) {
+    const size_t pick = least_change_of_equally_good(rms, change);
+    GlobalMap out = *judged_fits[pick];
     out.shears_dropped = shears_dropped;
+    if (equally_good) {
+      equally_good->push_back(out);
+      for (size_t c = 0; c < judged_fits.size(); ++c)
+        if (c != pick && is_equally_good(rms, c)) equally_good->push_back(*judged_fits[c]);
+    }
     return out;
-  }
+  };
+  const size_t chosen = least_change_of_equally_good(rms, change);
+  if (!distance || (!(o.field_sigma_mm > 0) && !(o.flow_sigma_mm > 0)))
+    return chosen_of(candidates);
   // Shear fields on top of the chosen map and of the one changing the shape least of all
   // (often near the identity: a dent is a local change, not a global one), each judged
   // with the rest. A fit with k effective parameters lowers the mean square by about k/m of
@@ -257,9 +269,7 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     }
   for (const GlobalMap& f : refined)
     all.push_back(&f);
-  GlobalMap out = *all[least_change_of_equally_good(rms, change)];
-  out.shears_dropped = shears_dropped;
-  return out;
+  return chosen_of(all);
 }
 
 }  // namespace organfit::fitting

@@ -1,5 +1,6 @@
 #include "organfit/fitting/organ_fit.h"
 
+#include <Eigen/LU>
 #include <Eigen/SVD>
 #include <algorithm>
 #include <chrono>
@@ -34,6 +35,27 @@ std::string volume_change_reason(double volume_ratio, double tolerance_pct) {
                 "the local stage changed the organ's volume by %+.1f%% (more than %g%%)",
                 100.0 * (volume_ratio - 1), tolerance_pct);
   return text;
+}
+
+/// RMS over the surface samples and over `fits` of each fit's image of a sample from `map`'s,
+/// along `map`'s normal there (its affine part's turn of the sample's normal), mm.
+double normal_spread_mm(const GlobalMap& map, const std::vector<GlobalMap>& fits,
+                        const SurfaceSamples& surface) {
+  const Eigen::Index n = surface.points.cols();
+  if (fits.empty() || n == 0) return 0.0;
+  const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
+  double sum = 0;
+#pragma omp parallel for reduction(+ : sum) schedule(static)
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const Eigen::Vector3d x = surface.points.col(j);
+    const Eigen::Vector3d at = map.apply(x);
+    const Eigen::Vector3d normal = (normal_map * surface.normals.col(j)).normalized();
+    for (const GlobalMap& fit : fits) {
+      const double d = normal.dot(fit.apply(x) - at);
+      sum += d * d;
+    }
+  }
+  return std::sqrt(sum / static_cast<double>(n * static_cast<Eigen::Index>(fits.size())));
 }
 
 /// Both fits: the measures before, the method's own stages (`paper` or `spread` set),
@@ -134,7 +156,9 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     AffineFitOptions global_options = spread->global;
     // The points' noise is what the fit accepts: the scale of fits equally good.
     global_options.noise_mm = spread->fit.residual_tolerance_mm;
-    const GlobalMap map = fit_global_map(samples, points, global_options, &reference_distance);
+    std::vector<GlobalMap> equally_good;
+    const GlobalMap map =
+        fit_global_map(samples, points, global_options, &reference_distance, &equally_good);
     if (map.refused) {
       report.refused = true;
       out.before.reset();
@@ -144,6 +168,8 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     preparing(3, "the global map");
     GlobalStageReport global;
     global.map = map;
+    global.equally_good_fits = static_cast<int>(equally_good.size());
+    global.equally_good_sd_mm = normal_spread_mm(map, equally_good, samples);
     model.global_map = map;
     if (model.skeleton) {
       m.remove(*model.skeleton);
@@ -292,23 +318,36 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   // made from), l the deformation's own support (one point informs the field that far), s^2 the
   // stated prior of unseen local change plus the mean square of the local change the points did
   // show (the part beyond the global map). Its observations are the points the fit used: a rejected
-  // point (an outlier) neither pins the surface nor shows a change.
+  // point (an outlier) neither pins the surface nor shows a change. Each observes the fitted
+  // organ's residual there: the reference's signed distance d at phi^-1(p) (mm), over the
+  // stretch of its normal into today's space by the global map's affine part, |a^-T n|.
   std::vector<Eigen::Vector3d> point_positions;
+  std::vector<double> point_residuals;
   double local_sq = 0;
+  const geometry::SignedDistance& organ_distance = *out.after->shared_distance();
+  const Eigen::Matrix3d normal_map = phi.global_map().affine.a.inverse().transpose();
   for (size_t k = 0; k < points.size(); ++k) {
     if (status && k < status->size() && (*status)[k].rejected) continue;
     const Eigen::Vector3d& p = points[k].p_mm;
+    const Eigen::Vector3d x = phi.pull_back(p);
     point_positions.push_back(p);
-    local_sq += (phi.global_map().apply(phi.pull_back(p)) - p).squaredNorm();
+    local_sq += (phi.global_map().apply(x) - p).squaredNorm();
+    Eigen::Vector3d gradient;
+    const double d = organ_distance.at(x, &gradient);
+    const double stretch =
+        gradient.norm() > 1e-9 ? (normal_map * gradient.normalized()).norm() : 1.0;
+    point_residuals.push_back(d / stretch);
   }
   SurfaceUncertaintyOptions uo;
   const double s0 = common.unseen_change_sd_mm;
   const auto used = static_cast<double>(point_positions.size());
-  uo.prior_sd_mm = std::sqrt(s0 * s0 + (used > 0 ? local_sq / used : 0.0));
+  const double undecided = report.global ? report.global->equally_good_sd_mm : 0.0;
+  uo.prior_sd_mm = std::sqrt(s0 * s0 + (used > 0 ? local_sq / used : 0.0) + undecided * undecided);
   uo.length_mm = phi.support_mm();
   uo.noise_sd_mm = common.residual_tolerance_mm;
   uo.resolution_sd_mm = report.residual_floor_mm;
-  report.uncertainty = std::make_shared<const SurfaceUncertainty>(point_positions, uo);
+  report.uncertainty =
+      std::make_shared<const SurfaceUncertainty>(point_positions, uo, point_residuals);
   // The data term is the fit's, not the model's: the model leaves with its own terms.
   m.remove(*data_term);
   out.model = std::move(model);

@@ -1,6 +1,7 @@
 #include "organfit/fitting/surface_uncertainty.h"
 
 #include <Eigen/Cholesky>
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
@@ -10,36 +11,64 @@
 namespace organfit::fitting {
 
 SurfaceUncertainty::SurfaceUncertainty(const std::vector<Eigen::Vector3d>& points_mm,
-                                       const SurfaceUncertaintyOptions& options)
-    : options_(options), all_points_(3, static_cast<Eigen::Index>(points_mm.size())) {
+                                       const SurfaceUncertaintyOptions& options,
+                                       const std::vector<double>& residuals_mm)
+    : options_(options),
+      all_points_(3, static_cast<Eigen::Index>(points_mm.size())),
+      residuals_mm_(residuals_mm) {
   for (double v : {options.prior_sd_mm, options.length_mm, options.noise_sd_mm})
     if (!(v > 0) || !std::isfinite(v))
       throw std::invalid_argument("SurfaceUncertainty: s, l and n must be positive and finite");
   if (!(options.resolution_sd_mm >= 0) || !std::isfinite(options.resolution_sd_mm))
     throw std::invalid_argument("SurfaceUncertainty: r must be >= 0 and finite");
-  if (options.max_points < 1)
-    throw std::invalid_argument("SurfaceUncertainty: max_points must be at least 1");
+  if (options.max_points < 1 || options.local_observations < 1)
+    throw std::invalid_argument(
+        "SurfaceUncertainty: max_points and local_observations must be at least 1");
+  if (!residuals_mm.empty() && residuals_mm.size() != points_mm.size())
+    throw std::invalid_argument("SurfaceUncertainty: one residual per point");
+  for (double y : residuals_mm)
+    if (!std::isfinite(y)) throw std::invalid_argument("SurfaceUncertainty: residual not finite");
   for (size_t i = 0; i < points_mm.size(); ++i)
     all_points_.col(static_cast<Eigen::Index>(i)) = points_mm[i];
   nearest_ = std::make_shared<const geometry::SampleGrid>(all_points_);
-  // The observations: the points themselves, or their means over cells of a grid.
+  // The observations: the points themselves, or their means (positions and residuals)
+  // over cells of l/2.
   std::vector<double> counts(points_mm.size(), 1.0);
   points_ = all_points_;
-  for (double cell = options.length_mm / 2; points_.cols() > options.max_points; cell *= 1.5) {
-    std::map<std::array<long long, 3>, std::pair<Eigen::Vector3d, double>> bins;
-    for (const auto& p : points_mm) {
+  y_ = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(points_mm.size()));
+  for (size_t i = 0; i < residuals_mm.size(); ++i)
+    y_[static_cast<Eigen::Index>(i)] = residuals_mm[i];
+  local_ = points_.cols() > options.max_points;
+  if (local_) {
+    const double cell = options.length_mm / 2;
+    struct Bin {
+      Eigen::Vector3d sum_mm = Eigen::Vector3d::Zero();
+      double residual_sum_mm = 0, count = 0;
+    };
+    std::map<std::array<long long, 3>, Bin> bins;
+    for (size_t i = 0; i < points_mm.size(); ++i) {
+      const Eigen::Vector3d& p = points_mm[i];
       const std::array<long long, 3> key{static_cast<long long>(std::floor(p.x() / cell)),
                                          static_cast<long long>(std::floor(p.y() / cell)),
                                          static_cast<long long>(std::floor(p.z() / cell))};
-      auto& b = bins.try_emplace(key, Eigen::Vector3d::Zero(), 0.0).first->second;
-      b.first += p, b.second += 1;
+      Bin& b = bins[key];
+      b.sum_mm += p, b.count += 1;
+      if (!residuals_mm.empty()) b.residual_sum_mm += residuals_mm[i];
     }
     points_.resize(3, static_cast<Eigen::Index>(bins.size()));
+    y_.resize(static_cast<Eigen::Index>(bins.size()));
     counts.clear();
     Eigen::Index c = 0;
-    for (const auto& [key, b] : bins)
-      points_.col(c++) = b.first / b.second, counts.push_back(b.second);
+    for (const auto& [key, b] : bins) {
+      points_.col(c) = b.sum_mm / b.count, y_[c] = b.residual_sum_mm / b.count;
+      counts.push_back(b.count), ++c;
+    }
+    observations_ = std::make_shared<const geometry::SampleGrid>(points_);
   }
+  noise2_.resize(points_.cols());
+  for (Eigen::Index i = 0; i < points_.cols(); ++i)
+    noise2_[i] = options.noise_sd_mm * options.noise_sd_mm / counts[static_cast<size_t>(i)];
+  if (local_) return;
   const Eigen::Index m = points_.cols();
   const double s2 = options.prior_sd_mm * options.prior_sd_mm;
   const double inv_2l2 = 1.0 / (2 * options.length_mm * options.length_mm);
@@ -47,22 +76,61 @@ SurfaceUncertainty::SurfaceUncertainty(const std::vector<Eigen::Vector3d>& point
   for (Eigen::Index i = 0; i < m; ++i)
     for (Eigen::Index j = 0; j <= i; ++j)
       k(i, j) = k(j, i) = s2 * std::exp(-(points_.col(i) - points_.col(j)).squaredNorm() * inv_2l2);
-  for (Eigen::Index i = 0; i < m; ++i)
-    k(i, i) += options.noise_sd_mm * options.noise_sd_mm / counts[static_cast<size_t>(i)];
-  lower_ = Eigen::LLT<Eigen::MatrixXd>(k).matrixL();  // K + N is positive definite
+  k.diagonal() += noise2_;
+  const Eigen::LLT<Eigen::MatrixXd> llt(k);  // K + N is positive definite
+  lower_ = llt.matrixL();
+  weights_ = llt.solve(y_);
 }
 
 double SurfaceUncertainty::sd_mm(const Eigen::Vector3d& x) const {
+  if (points_.cols() == 0) return far_sd_mm();
+  if (!local_) return posterior_sd_mm(x, {});
+  // The nearest local_observations within 3 l.
+  std::vector<int> near;
+  observations_->within(x, 3 * options_.length_mm, near);
+  const auto keep = static_cast<size_t>(options_.local_observations);
+  if (near.size() > keep) {
+    auto closer = [&](int a, int b) {
+      const double da = (points_.col(a) - x).squaredNorm(), db = (points_.col(b) - x).squaredNorm();
+      return da < db || (da == db && a < b);
+    };
+    std::nth_element(near.begin(), near.begin() + static_cast<long>(keep), near.end(), closer);
+    near.resize(keep);
+  }
+  if (near.empty()) return far_sd_mm();
+  return posterior_sd_mm(x, near);
+}
+
+double SurfaceUncertainty::posterior_sd_mm(const Eigen::Vector3d& x,
+                                           const std::vector<int>& of) const {
   const double s2 = options_.prior_sd_mm * options_.prior_sd_mm;
   const double inv_2l2 = 1.0 / (2 * options_.length_mm * options_.length_mm);
-  if (points_.cols() == 0) return far_sd_mm();
   const double r2 = options_.resolution_sd_mm * options_.resolution_sd_mm;
-  Eigen::VectorXd kx(points_.cols());
-  for (Eigen::Index i = 0; i < points_.cols(); ++i)
-    kx[i] = s2 * std::exp(-(points_.col(i) - x).squaredNorm() * inv_2l2);
-  // k_x^T (L L^T)^-1 k_x = |L^-1 k_x|^2
-  const Eigen::VectorXd v = lower_.triangularView<Eigen::Lower>().solve(kx);
-  return std::sqrt(std::max(0.0, s2 - v.squaredNorm()) + r2);
+  auto at = [&of](Eigen::Index i) { return of.empty() ? i : of[static_cast<size_t>(i)]; };
+  const Eigen::Index m = of.empty() ? points_.cols() : static_cast<Eigen::Index>(of.size());
+  Eigen::VectorXd kx(m);
+  for (Eigen::Index i = 0; i < m; ++i)
+    kx[i] = s2 * std::exp(-(points_.col(at(i)) - x).squaredNorm() * inv_2l2);
+  double mean = 0, explained = 0;
+  if (of.empty()) {
+    // k_x^T (L L^T)^-1 k_x = |L^-1 k_x|^2
+    explained = lower_.triangularView<Eigen::Lower>().solve(kx).squaredNorm();
+    mean = kx.dot(weights_);
+  } else {
+    Eigen::MatrixXd k(m, m);
+    Eigen::VectorXd y(m);
+    for (Eigen::Index i = 0; i < m; ++i) {
+      y[i] = y_[at(i)];
+      for (Eigen::Index j = 0; j <= i; ++j)
+        k(i, j) = k(j, i) =
+            s2 * std::exp(-(points_.col(at(i)) - points_.col(at(j))).squaredNorm() * inv_2l2);
+      k(i, i) += noise2_[at(i)];
+    }
+    const Eigen::LLT<Eigen::MatrixXd> llt(k);
+    explained = llt.matrixL().solve(kx).squaredNorm();
+    mean = kx.dot(llt.solve(y));
+  }
+  return std::sqrt(mean * mean + std::max(0.0, s2 - explained) + r2);
 }
 
 double SurfaceUncertainty::far_sd_mm() const {

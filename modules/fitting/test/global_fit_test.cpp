@@ -5,7 +5,9 @@
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <Eigen/SVD>
+#include <algorithm>
 #include <random>
+#include <string>
 
 #include "../src/central_differences.h"
 #include "organfit/fitting/skin.h"
@@ -140,7 +142,8 @@ TEST(GlobalFit, OfEquallyGoodFitsKeepsTheLeastChange) {
     p.p_mm += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
   AffineFitOptions best_fit_only;
   best_fit_only.equally_good_dof = 0;
-  const GlobalMap least = fit_global_map(samples, points, {}, &distance);
+  std::vector<GlobalMap> equally_good;
+  const GlobalMap least = fit_global_map(samples, points, {}, &distance, &equally_good);
   const GlobalMap best = fit_global_map(samples, points, best_fit_only, &distance);
   ASSERT_FALSE(least.refused);
   ASSERT_FALSE(best.refused);
@@ -157,6 +160,15 @@ TEST(GlobalFit, OfEquallyGoodFitsKeepsTheLeastChange) {
   };
   EXPECT_LT(mean_move(least), 0.5) << least.found_by;
   EXPECT_GT(mean_move(best), mean_move(least));
+  // The fits the points could not tell apart: the kept one first, the best fit among them.
+  ASSERT_GE(equally_good.size(), 2u);
+  auto same = [](const GlobalMap& a, const GlobalMap& b) {
+    return a.affine.a == b.affine.a && a.affine.t == b.affine.t && a.shears.c == b.shears.c &&
+           std::string(a.found_by) == b.found_by;
+  };
+  EXPECT_TRUE(same(equally_good.front(), least));
+  EXPECT_TRUE(std::any_of(equally_good.begin(), equally_good.end(),
+                          [&](const GlobalMap& m) { return same(m, best); }));
 }
 
 /// The 30 mm cube about `centre` (mm) on a 0.75 mm grid.

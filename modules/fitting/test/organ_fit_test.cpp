@@ -92,6 +92,13 @@ TEST(FitSpread, FitsAVolumePreservingStretchAndLeavesTheModelPassedInAsItWas) {
   EXPECT_EQ(preparing_steps, 6);
   EXPECT_GT(rows, 0);
   ASSERT_TRUE(fitted.before && fitted.after && r.deformation && r.uncertainty);
+  // The uncertainty's prior holds what the global maps the points could not tell apart
+  // leave undecided: with 87 points on the whole stretch, less than their noise.
+  EXPECT_GE(r.global->equally_good_fits, 1);
+  EXPECT_LT(r.global->equally_good_sd_mm, 0.5);
+  const double s0 = default_spread_options().fit.unseen_change_sd_mm;
+  EXPECT_GE(r.uncertainty->options().prior_sd_mm + 1e-12,
+            std::hypot(s0, r.global->equally_good_sd_mm));
   // The particles moved: their x extent grew by about 15%; those passed in did not move.
   auto extent_x = [](const particles::Positions& x) {
     return x.row(0).maxCoeff() - x.row(0).minCoeff();
@@ -190,7 +197,8 @@ TEST(FitSpread, UndoesALocalStageThatTearsFoldsOrSwellsTheOrgan) {
 
 TEST(FitSpread, LeavesARejectedPointOutOfTheUncertainty) {
   // 87 points on the stretched ellipsoid and one lone point 5 mm above its top, among
-  // points on the surface: rejected, it pins nothing, so sigma there is not the noise's.
+  // points on the surface: rejected, it is not an observation: neither pinning the surface
+  // nor saying it is 5 mm off there.
   std::vector<AttractivePoint> points = stretched_surface(1.15, 87);
   const Eigen::Vector3d lone(0, 0, 12 / std::sqrt(1.15) + 5);
   points.push_back({lone, 1.0});
@@ -201,15 +209,22 @@ TEST(FitSpread, LeavesARejectedPointOutOfTheUncertainty) {
   ASSERT_TRUE(r.uncertainty);
   EXPECT_NEAR(r.uncertainty->nearest_point_mm(lone), 5.0, 2.0);
   EXPECT_NEAR(r.uncertainty->nearest_point_mm(points[0].p_mm), 0.0, 1e-12);
-  // The posterior is the used points' alone, and the lone point would have pinned it.
+  // The posterior is the used points' alone, each with the residual the fit left it (the
+  // points lie on the true surface: well within the noise), and the lone point, 5 mm off the
+  // fitted surface, would have said so.
   std::vector<Eigen::Vector3d> used;
   for (size_t k = 0; k + 1 < points.size(); ++k)
     used.push_back(points[k].p_mm);
-  const SurfaceUncertainty without(used, r.uncertainty->options());
+  std::vector<double> residuals = r.uncertainty->residuals_mm();
+  ASSERT_EQ(residuals.size(), used.size());
+  for (double y : residuals)
+    EXPECT_LT(std::abs(y), 1.0);
+  const SurfaceUncertainty without(used, r.uncertainty->options(), residuals);
   EXPECT_NEAR(r.uncertainty->sd_mm(lone), without.sd_mm(lone), 1e-12);
   used.push_back(lone);
-  EXPECT_GT(r.uncertainty->sd_mm(lone),
-            SurfaceUncertainty(used, r.uncertainty->options()).sd_mm(lone) + 0.3);
+  residuals.push_back(5.0);
+  EXPECT_GT(SurfaceUncertainty(used, r.uncertainty->options(), residuals).sd_mm(lone),
+            r.uncertainty->sd_mm(lone) + 1.0);
 }
 
 TEST(FitPaper, RejectsBadPointsBeforeAnything) {

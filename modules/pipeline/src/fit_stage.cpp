@@ -56,7 +56,9 @@ UncertaintyOnSurface uncertainty_on_surface(const geometry::Shape& planning,
     return nlohmann::json{{"median_mm", q(0.5)}, {"p95_mm", q(0.95)}};
   };
   const auto& o = u.options();
-  r.summary = {{"method", "Gaussian-process posterior of the surface's normal error"},
+  r.summary = {{"method",
+                "root mean square of the surface's normal error about the fitted surface: a "
+                "Gaussian-process posterior given the fit's residuals at the points"},
                {"prior_sd_mm", o.prior_sd_mm},
                {"length_mm", o.length_mm},
                {"noise_sd_mm", o.noise_sd_mm},
@@ -162,6 +164,8 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
         {"flow_largest_move_mm", g.moves.flow_mm},
         {"found_by", map.found_by},
         {"shape_change_mm", g.shape_change_mm},
+        {"equally_good_fits", g.equally_good_fits},
+        {"equally_good_sd_mm", g.equally_good_sd_mm},
         {"refill_passes", g.refill_passes},
         {"particles_after_refill", g.particles_after_refill},
         {"volume_change_after_settling_pct", g.volume_change_after_settling_pct},

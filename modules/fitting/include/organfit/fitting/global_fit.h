@@ -124,8 +124,12 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
 ///    made again. Without the raise, fields fitted to the noise of 20 points put every
 ///    other fit out of the window. With `distance` and flow_sigma_mm > 0 (the fields on or
 ///    off), an IncompressibleFlow fitted likewise on the same two maps joins them too.
+///
+/// With `equally_good`, it is filled with the map returned and then every other fit in the
+/// last choice's window: the fits the points cannot tell from it (emptied when refused).
 GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<AttractivePoint>& points,
                          const AffineFitOptions& options,
-                         const geometry::SignedDistance* distance = nullptr);
+                         const geometry::SignedDistance* distance = nullptr,
+                         std::vector<GlobalMap>* equally_good = nullptr);
 
 }  // namespace organfit::fitting

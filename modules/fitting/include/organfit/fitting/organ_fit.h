@@ -79,7 +79,12 @@ struct GlobalStageReport {
   Eigen::Vector3d principal_stretches = Eigen::Vector3d::Ones();  ///< singular values of a
   LargestMoves moves;          ///< largest moves of the shears and fields (mm)
   double shape_change_mm = 0;  ///< shape_change_mm(map, surface)
-  int refill_passes = 0;       ///< re-fills until the settled volume matched
+  /// The fits the points could not tell from the map (fit_global_map's equally_good, the map
+  /// included), and the RMS over the surface and over them of their distance from the map's
+  /// surface along its normal (mm): how far the points leave the organ's place undecided.
+  int equally_good_fits = 1;
+  double equally_good_sd_mm = 0;
+  int refill_passes = 0;  ///< re-fills until the settled volume matched
   int particles_after_refill = 0;
   double volume_change_after_settling_pct = 0;
   double wall_s = 0;

@@ -8,12 +8,19 @@
 // there no larger than the noise. The posterior variance at x is
 //   sigma^2(x) = s^2 - k_x^T (K + n^2 I)^-1 k_x,   K_ij = k(p_i, p_j),  (k_x)_i = k(x, p_i),
 // so sigma is about n at the points, and rises to s beyond a few l from every point: the
-// fit has no information there. The posterior mean is not used (the fit already passes
-// through the points); only where the points leave the surface free is said.
-// The model's own resolution r is added in quadrature, sigma^2(x) + r^2: the particles
-// carry the surface only to their own scale, an error no number of points averages away
-// (without it, 200 noise-free points put sigma under 0.4 mm on a cube whose particles
-// round its edges by more).
+// fit has no information there.
+// What each point observes is the fit's residual there, y_i (mm, signed along the fitted
+// surface's normal): about 0 +- n where the fit explains the points, more where it does
+// not (a fit that stalled, or noise beyond the stated). The posterior mean of the error,
+//   m(x) = k_x^T (K + n^2 I)^-1 y,
+// is where the points say the true surface is; the fitted surface is not moved there, so
+// the spread reported is the root mean square of the error about the fitted surface,
+// sqrt(m^2 + sigma^2): where the fit explains its points, m is their noise smoothed and
+// small, and where it left them 2 mm off, the surface is not claimed to within n.
+// The model's own resolution r is added in quadrature: the particles carry the surface only
+// to their own scale, an error no number of points averages away (without it, 200
+// noise-free points put sigma under 0.4 mm on a cube whose particles round its edges by
+// more). So sd_mm(x) = sqrt(m(x)^2 + sigma^2(x) + r^2).
 #include <Eigen/Core>
 #include <memory>
 #include <vector>
@@ -28,34 +35,55 @@ struct SurfaceUncertaintyOptions {
   double length_mm = 10.0;        ///< l: the distance over which one point informs the surface
   double noise_sd_mm = 0.5;       ///< n: the points' noise
   double resolution_sd_mm = 0.0;  ///< r: the model's own resolution (>= 0)
-  /// More points than this are binned first: the points of a cell (l/2 wide, wider when
-  /// needed) become one observation at their mean with noise n / sqrt(count), which
-  /// keeps the solve O(max_points^3) whatever the point count.
+  /// Up to this many points, sigma is the posterior given all of them (one solve of
+  /// max_points^3). With more, the points of each cell of l/2 become one observation at
+  /// their mean (position and residual) with noise n / sqrt(count), and sigma at x is the
+  /// posterior given the `local_observations` of them nearest x within 3 l (beyond, a
+  /// point's covariance is under 1.2% of the prior's): a posterior given part of the data,
+  /// its variance never narrower than given all of it, at a cost a query that no point
+  /// count raises.
   int max_points = 400;
+  int local_observations = 64;
 };
 
 class SurfaceUncertainty {
  public:
-  /// Throws std::invalid_argument when an option is not positive and finite.
+  /// `residuals_mm`: the fit's residual y_i at each point (mm, signed along the fitted
+  /// surface's outward normal: the point outside is positive); empty: all 0. Throws
+  /// std::invalid_argument when an option is not positive and finite, or when residuals
+  /// are given and their count is not the points' or one is not finite.
   SurfaceUncertainty(const std::vector<Eigen::Vector3d>& points_mm,
-                     const SurfaceUncertaintyOptions& options);
-  /// sigma(x), mm: between about hypot(n, r) (at a point) and hypot(s, r) (far from every
-  /// point).
+                     const SurfaceUncertaintyOptions& options,
+                     const std::vector<double>& residuals_mm = {});
+  /// sqrt(m(x)^2 + sigma^2(x) + r^2), mm: with residuals within the noise between about
+  /// hypot(n, r) (at a point) and hypot(s, r) (far from every point).
   double sd_mm(const Eigen::Vector3d& x_mm) const;
-  /// sigma where no point informs it (mm): hypot(s, r), the largest sd_mm gives.
+  /// The value where no point informs it (mm): hypot(s, r).
   double far_sd_mm() const;
   /// Distance from x to the nearest point (mm; infinity without points).
   double nearest_point_mm(const Eigen::Vector3d& x_mm) const;
   const SurfaceUncertaintyOptions& options() const { return options_; }
+  /// The residuals as given (empty: all 0), one per point.
+  const std::vector<double>& residuals_mm() const { return residuals_mm_; }
   /// The points' bounding box (empty box without points).
   geometry::Aabb points_box() const;
 
  private:
   SurfaceUncertaintyOptions options_;
-  Eigen::Matrix3Xd points_;      ///< the observations (binned when there are many)
-  Eigen::Matrix3Xd all_points_;  ///< the points as given (nearest_point_mm, points_box)
+  Eigen::Matrix3Xd points_;           ///< the observations (binned when there are many)
+  Eigen::Matrix3Xd all_points_;       ///< the points as given (nearest_point_mm, points_box)
+  std::vector<double> residuals_mm_;  ///< as given
   std::shared_ptr<const geometry::SampleGrid> nearest_;  ///< over all_points_
-  Eigen::MatrixXd lower_;                                ///< Cholesky factor of K + n^2 I
+  Eigen::VectorXd y_;                                    ///< the observations' residuals (mm)
+  Eigen::VectorXd noise2_;  ///< the observations' noise variances (mm^2)
+  bool local_ = false;      ///< binned: each query conditions on its nearest observations
+  std::shared_ptr<const geometry::SampleGrid> observations_;  ///< over points_, when local_
+  // All observations at once (not local_):
+  Eigen::MatrixXd lower_;    ///< Cholesky factor of K + N
+  Eigen::VectorXd weights_;  ///< (K + N)^-1 y: m(x) = k_x^T weights_
+  /// The posterior given the observations `of` (indices into points_; all when empty and
+  /// not local_): sqrt(m^2 + sigma^2 + r^2).
+  double posterior_sd_mm(const Eigen::Vector3d& x_mm, const std::vector<int>& of) const;
 };
 
 }  // namespace organfit::fitting
