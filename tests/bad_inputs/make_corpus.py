@@ -397,6 +397,16 @@ open(os.path.join(d, 'scene.yaml'), 'w').write(SESSION)
 d = case('export_ct_of_another_series', ['export', '--model', '{case}/../_planning/out/model.json', '--ct', '{case}/ct', '--labels', '{case}/out/l.nrrd'], 'is not the model', cls='disagree')
 edit_all(d, other_series)
 planned_ct = json.load(open(os.path.join(planning, 'out', 'model.json')))['ct']
+# A model of a body (no CT): a session exporting on the CT's grid is refused before its fit.
+body_planning = os.path.join(out, '_planning_body')
+os.makedirs(body_planning)
+open(os.path.join(body_planning, 'planning.yaml'), 'w').write(BODY_SCENE + 'export:\n  model: model.json\n')
+subprocess.run([organfit, '--quiet', 'run', os.path.join(body_planning, 'planning.yaml'), '--out', os.path.join(body_planning, 'out')],
+               check=True, stdout=subprocess.DEVNULL)
+for key in ['labels: l.nrrd', 'uncertainty: s.nrrd']:
+    scene_case('session_export_on_the_ct_of_a_body_model_' + key.split(':')[0],
+               'planning:\n  model: ../_planning_body/out/model.json\npoints:\n  count: 20\nfit:\n  method: spread\nexport:\n  ' + key + '\n',
+               'model.json: the model has no planning CT to export on', cls='disagree')
 def points_in_ct(name, series, frame, expect, code=2):
     d = case(name, ['--quiet', 'run', '{case}/scene.yaml', '--out', '{case}/out'], expect, code=code, ct=False, cls='disagree')
     open(os.path.join(d, 'points.csv'), 'w').write(

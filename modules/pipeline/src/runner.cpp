@@ -128,6 +128,10 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     ct_reference = saved.ct;
     planning_ct = saved.ct;
     if (ct_reference) check_output_location(out_dir, {ct_reference->folder}, "--out");
+    // Exports on the CT's grid need the planning CT: said now, not after the fit.
+    if (!ct_reference && !scene.has_section("ct") && scene.has_section("export") &&
+        export_request_from(scene, staging, organ_name, organ_look).needs_ct())
+      throw InputError(file.string() + ": the model has no planning CT to export on");
     planning_modelling_s = saved.provenance.value("modelling_wall_s", -1.0);
     model->summary = {
         {"particles", model->state.size()},
