@@ -162,9 +162,11 @@ assert {r['outcome'] for r in rows} <= {'converged', 'stopped', 'refused'}
 assert json.load(open('$tmp/stab.json'))['all_pass']
 # The spread fit never leaves a folding or swollen organ: a local stage that folds it or
 # changes its volume beyond 1% (the 0.3 mm particles of tiny_radius swell it by 1.3% under
-# 0.5 mm noise) is undone to the global stage's, which keeps the volume.
+# 0.5 mm noise) is undone to the global stage's, which keeps the volume and, under this
+# noise, explains the points: converged.
 tiny = [r for r in rows if r['case'] == 'tiny_radius' and r['method'] == 'spread'][0]
 assert abs(float(tiny['volume_change_pct'])) < 0.5 and 'organ kept' in tiny['reason'], tiny
+assert tiny['outcome'] == 'converged' and 'which explains the points' in tiny['reason'], tiny
 assert all(abs(float(r['volume_change_pct'])) <= 1.0 for r in rows if r['method'] == 'spread'), rows
 assert not any('folds' in r['reason'] for r in rows if r['method'] == 'spread'), rows"
 fi

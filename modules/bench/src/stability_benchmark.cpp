@@ -159,6 +159,9 @@ nlohmann::json run_stability_benchmark(const StabilityBenchOptions& o) {
         fit = pipeline::run_fit_stage(options, std::move(model), points);
         outcome = fit->not_converged_message.empty() ? "converged" : "stopped";
         reason = fit->not_converged_message;
+        // Converged on the global stage's organ: why the local stage was undone.
+        if (reason.empty() && fit->report.local_stage_undone())
+          reason = fit->report.fit.stop_reason;
       } catch (const particles::StabilityError& e) {
         outcome = "stopped", reason = e.what();
       } catch (const TargetNotMetError& e) {

@@ -174,21 +174,29 @@ TEST(FitSpread, UndoesALocalStageThatTearsFoldsOrSwellsTheOrgan) {
   // A 10 x 8 x 6 mm organ of 0.3 mm particles, points under 0.8 mm of noise: the patches
   // pull bumps of several particle diameters, which swell the body by 3 to 5% (seeds 1
   // and 2) or fold its deformation (seed 3). Each time the global stage's organ is kept
-  // (one piece, its volume), and the fit says it did not converge.
+  // (one piece, its volume), and the fit has converged when that organ explains the points:
+  // not under this noise, beyond the stated 0.5 mm; under 0.5 mm (seeds 6, 8 and 9: the body
+  // swollen by 1.6, 1.6 and 2.1%), it does.
   OrganModel planning = ellipsoid_model(0.3, Eigen::Vector3d(10, 8, 6));
   planning.settings.skeleton = true;
   build_model_terms(planning, nullptr);
-  for (int seed = 1; seed <= 3; ++seed) {
+  for (const auto& [seed, noise_mm] : std::vector<std::pair<int, double>>{
+           {1, 0.8}, {2, 0.8}, {3, 0.8}, {6, 0.5}, {8, 0.5}, {9, 0.5}}) {
     std::vector<AttractivePoint> points = stretched_surface(1.15, 87, Eigen::Vector3d(5, 4, 3));
     std::mt19937_64 rng(seed);
-    std::normal_distribution<double> noise(0.0, 0.8);
+    std::normal_distribution<double> noise(0.0, noise_mm);
     for (auto& p : points)
       p.p_mm += p.p_mm.normalized() * noise(rng);
     const FittedOrgan fitted = fit_spread(copy_model(planning), points, default_spread_options());
     const FitReport& r = fitted.report;
     ASSERT_TRUE(r.local_stage_undone()) << "seed " << seed << ": " << r.fit.stop_reason;
-    EXPECT_FALSE(r.fit.converged);
-    EXPECT_NE(r.fit.stop_reason.find("the global stage's organ kept"), std::string::npos);
+    const bool explained = r.fit.residual_mean_mm <= r.residual_tolerance_mm &&
+                           r.fit.residual_p95_mm <= r.residual_p95_tolerance_mm;
+    EXPECT_EQ(explained, noise_mm < 0.6) << "seed " << seed;
+    EXPECT_EQ(r.fit.converged, explained) << "seed " << seed;
+    EXPECT_NE(r.fit.stop_reason.find(explained ? "the global stage's organ kept, which explains"
+                                               : "the global stage's organ kept"),
+              std::string::npos);
     EXPECT_EQ(fitted.model.state.x, fitted.model.placed);
     EXPECT_EQ(r.components, 1);
     EXPECT_NEAR(r.volume_ratio, 1.0, 0.005) << "seed " << seed;
