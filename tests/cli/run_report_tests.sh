@@ -113,8 +113,8 @@ print(len(boxes), 'A4 pages')"
 # and the 3D view carry it.
 check "the uncertainty: calibrated on this case, larger where unseen, bounded by its prior" $py -c "
 import json; d = json.load(open('$tmp/run/run.json')); u = d['fit']['uncertainty']
-assert u['seen']['median_mm'] < u['unseen']['median_mm'] <= u['prior_sd_mm'], u
-assert u['all']['p95_mm'] <= u['prior_sd_mm'] + 1e-9 and u['surface_samples'] == 4000, u
+assert u['seen']['median_mm'] < u['unseen']['median_mm'] <= u['far_sd_mm'], u
+assert u['all']['p95_mm'] <= u['far_sd_mm'] + 1e-9 and u['surface_samples'] == 4000, u
 assert d['truth']['uncertainty']['within_2sd_share'] >= 0.9, d['truth']['uncertainty']
 assert d['export']['uncertainty']['file'] == 'sigma.nrrd', d['export']"
 check "sigma.nrrd: the prior (with the resolution) far from the points, less near them, on the CT's grid" $py -c "
@@ -125,7 +125,8 @@ head, body = raw.split(b'\n\n', 1)
 assert b'sizes: 320 320 56' in head and b'type: float' in head, head
 v = struct.unpack('<%df' % (len(body) // 4), body)
 assert len(v) == 320 * 320 * 56
-far = (u['prior_sd_mm'] ** 2 + u['resolution_sd_mm'] ** 2) ** 0.5  # the prior and the model's resolution
+far = u['far_sd_mm']  # the widest prior and the model's resolution
+assert far >= (u['prior_sd_mm'] ** 2 + u['resolution_sd_mm'] ** 2) ** 0.5 - 1e-9, u
 assert 0 < u['resolution_sd_mm'] < u['prior_sd_mm'], u
 assert abs(v[0] - far) < 1e-5 and abs(v[-1] - far) < 1e-5, (v[0], v[-1], far)
 # above that only near a point the fit left off (the posterior mean of its residual)

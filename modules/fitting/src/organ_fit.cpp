@@ -37,25 +37,31 @@ std::string volume_change_reason(double volume_ratio, double tolerance_pct) {
   return text;
 }
 
-/// RMS over the surface samples and over `fits` of each fit's image of a sample from `map`'s,
-/// along `map`'s normal there (its affine part's turn of the sample's normal), mm.
-double normal_spread_mm(const GlobalMap& map, const std::vector<GlobalMap>& fits,
-                        const SurfaceSamples& surface) {
+/// Where the global maps `fits` disagree with `map`: at each surface sample's image by `map`,
+/// the mean over `fits` of the square of each one's image of it from `map`'s, along `map`'s
+/// normal there (its affine part's turn of the sample's normal), mm^2.
+PriorVarianceField undecided_by(const GlobalMap& map, const std::vector<GlobalMap>& fits,
+                                const SurfaceSamples& surface) {
   const Eigen::Index n = surface.points.cols();
-  if (fits.empty() || n == 0) return 0.0;
+  PriorVarianceField out;
+  if (fits.empty() || n == 0) return out;
+  out.at_mm.resize(3, n);
+  out.variance_mm2.resize(n);
   const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
-  double sum = 0;
-#pragma omp parallel for reduction(+ : sum) schedule(static)
+#pragma omp parallel for schedule(static)
   for (Eigen::Index j = 0; j < n; ++j) {
     const Eigen::Vector3d x = surface.points.col(j);
     const Eigen::Vector3d at = map.apply(x);
     const Eigen::Vector3d normal = (normal_map * surface.normals.col(j)).normalized();
+    double sum = 0;
     for (const GlobalMap& fit : fits) {
       const double d = normal.dot(fit.apply(x) - at);
       sum += d * d;
     }
+    out.at_mm.col(j) = at;
+    out.variance_mm2[j] = sum / static_cast<double>(fits.size());
   }
-  return std::sqrt(sum / static_cast<double>(n * static_cast<Eigen::Index>(fits.size())));
+  return out;
 }
 
 /// Both fits: the measures before, the method's own stages (`paper` or `spread` set),
@@ -139,6 +145,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   std::function<const std::vector<int>&(const particles::Positions&)> skin_of;
   std::function<void(particles::State&)> while_reaching;
   const std::vector<PointStatus>* status = nullptr;
+  PriorVarianceField undecided;  // where the equally good global maps disagree (spread)
   if (paper) {
     auto& term =
         m.add(std::make_unique<PaperAttractiveForce>(points, law, rho, paper->force, skin_voxel));
@@ -169,7 +176,9 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     GlobalStageReport global;
     global.map = map;
     global.equally_good_fits = static_cast<int>(equally_good.size());
-    global.equally_good_sd_mm = normal_spread_mm(map, equally_good, samples);
+    undecided = undecided_by(map, equally_good, samples);
+    global.equally_good_sd_mm =
+        undecided.variance_mm2.size() > 0 ? std::sqrt(undecided.variance_mm2.mean()) : 0.0;
     model.global_map = map;
     if (model.skeleton) {
       m.remove(*model.skeleton);
@@ -320,7 +329,8 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   // resolution (its residual floor: how far its own surface lies from the organ it was
   // made from), l the deformation's own support (one point informs the field that far), s^2 the
   // stated prior of unseen local change plus the mean square of the local change the points did
-  // show (the part beyond the global map). Its observations are the points the fit used: a rejected
+  // show (the part beyond the global map), and place by place u(x)^2, where the equally good global
+  // maps disagree (undecided_by). Its observations are the points the fit used: a rejected
   // point (an outlier) neither pins the surface nor shows a change. Each observes the fitted
   // organ's residual there: the reference's signed distance d at phi^-1(p) (mm), over the
   // stretch of its normal into today's space by the global map's affine part, |a^-T n|.
@@ -344,13 +354,12 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   SurfaceUncertaintyOptions uo;
   const double s0 = common.unseen_change_sd_mm;
   const auto used = static_cast<double>(point_positions.size());
-  const double undecided = report.global ? report.global->equally_good_sd_mm : 0.0;
-  uo.prior_sd_mm = std::sqrt(s0 * s0 + (used > 0 ? local_sq / used : 0.0) + undecided * undecided);
+  uo.prior_sd_mm = std::sqrt(s0 * s0 + (used > 0 ? local_sq / used : 0.0));
   uo.length_mm = phi.support_mm();
   uo.noise_sd_mm = common.residual_tolerance_mm;
   uo.resolution_sd_mm = report.residual_floor_mm;
   report.uncertainty =
-      std::make_shared<const SurfaceUncertainty>(point_positions, uo, point_residuals);
+      std::make_shared<const SurfaceUncertainty>(point_positions, uo, point_residuals, undecided);
   // The data term is the fit's, not the model's: the model leaves with its own terms.
   m.remove(*data_term);
   out.model = std::move(model);

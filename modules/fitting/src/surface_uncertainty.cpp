@@ -12,10 +12,12 @@ namespace organfit::fitting {
 
 SurfaceUncertainty::SurfaceUncertainty(const std::vector<Eigen::Vector3d>& points_mm,
                                        const SurfaceUncertaintyOptions& options,
-                                       const std::vector<double>& residuals_mm)
+                                       const std::vector<double>& residuals_mm,
+                                       PriorVarianceField extra)
     : options_(options),
       all_points_(3, static_cast<Eigen::Index>(points_mm.size())),
-      residuals_mm_(residuals_mm) {
+      residuals_mm_(residuals_mm),
+      extra_(std::move(extra)) {
   for (double v : {options.prior_sd_mm, options.length_mm, options.noise_sd_mm})
     if (!(v > 0) || !std::isfinite(v))
       throw std::invalid_argument("SurfaceUncertainty: s, l and n must be positive and finite");
@@ -28,6 +30,12 @@ SurfaceUncertainty::SurfaceUncertainty(const std::vector<Eigen::Vector3d>& point
     throw std::invalid_argument("SurfaceUncertainty: one residual per point");
   for (double y : residuals_mm)
     if (!std::isfinite(y)) throw std::invalid_argument("SurfaceUncertainty: residual not finite");
+  if (extra_.at_mm.cols() != extra_.variance_mm2.size() || !extra_.at_mm.allFinite() ||
+      !extra_.variance_mm2.allFinite() || (extra_.variance_mm2.array() < 0).any())
+    throw std::invalid_argument(
+        "SurfaceUncertainty: the prior's variance field needs one finite value >= 0 a place");
+  if (extra_.at_mm.cols() > 0)
+    extra_places_ = std::make_shared<const geometry::SampleGrid>(extra_.at_mm);
   for (size_t i = 0; i < points_mm.size(); ++i)
     all_points_.col(static_cast<Eigen::Index>(i)) = points_mm[i];
   nearest_ = std::make_shared<const geometry::SampleGrid>(all_points_);
@@ -66,16 +74,19 @@ SurfaceUncertainty::SurfaceUncertainty(const std::vector<Eigen::Vector3d>& point
     observations_ = std::make_shared<const geometry::SampleGrid>(points_);
   }
   noise2_.resize(points_.cols());
-  for (Eigen::Index i = 0; i < points_.cols(); ++i)
+  scale_.resize(points_.cols());
+  for (Eigen::Index i = 0; i < points_.cols(); ++i) {
     noise2_[i] = options.noise_sd_mm * options.noise_sd_mm / counts[static_cast<size_t>(i)];
+    scale_[i] = prior_sd_mm(points_.col(i));
+  }
   if (local_) return;
   const Eigen::Index m = points_.cols();
-  const double s2 = options.prior_sd_mm * options.prior_sd_mm;
   const double inv_2l2 = 1.0 / (2 * options.length_mm * options.length_mm);
   Eigen::MatrixXd k(m, m);
   for (Eigen::Index i = 0; i < m; ++i)
     for (Eigen::Index j = 0; j <= i; ++j)
-      k(i, j) = k(j, i) = s2 * std::exp(-(points_.col(i) - points_.col(j)).squaredNorm() * inv_2l2);
+      k(i, j) = k(j, i) = scale_[i] * scale_[j] *
+                          std::exp(-(points_.col(i) - points_.col(j)).squaredNorm() * inv_2l2);
   k.diagonal() += noise2_;
   const Eigen::LLT<Eigen::MatrixXd> llt(k);  // K + N is positive definite
   lower_ = llt.matrixL();
@@ -83,7 +94,7 @@ SurfaceUncertainty::SurfaceUncertainty(const std::vector<Eigen::Vector3d>& point
 }
 
 double SurfaceUncertainty::sd_mm(const Eigen::Vector3d& x) const {
-  if (points_.cols() == 0) return far_sd_mm();
+  if (points_.cols() == 0) return std::hypot(prior_sd_mm(x), options_.resolution_sd_mm);
   if (!local_) return posterior_sd_mm(x, {});
   // The nearest local_observations within 3 l.
   std::vector<int> near;
@@ -97,20 +108,26 @@ double SurfaceUncertainty::sd_mm(const Eigen::Vector3d& x) const {
     std::nth_element(near.begin(), near.begin() + static_cast<long>(keep), near.end(), closer);
     near.resize(keep);
   }
-  if (near.empty()) return far_sd_mm();
+  if (near.empty()) return std::hypot(prior_sd_mm(x), options_.resolution_sd_mm);
   return posterior_sd_mm(x, near);
+}
+
+double SurfaceUncertainty::prior_sd_mm(const Eigen::Vector3d& x) const {
+  const double s = options_.prior_sd_mm;
+  if (!extra_places_) return s;
+  return std::sqrt(s * s + extra_.variance_mm2[extra_places_->nearest(x).first]);
 }
 
 double SurfaceUncertainty::posterior_sd_mm(const Eigen::Vector3d& x,
                                            const std::vector<int>& of) const {
-  const double s2 = options_.prior_sd_mm * options_.prior_sd_mm;
+  const double sx = prior_sd_mm(x), s2 = sx * sx;
   const double inv_2l2 = 1.0 / (2 * options_.length_mm * options_.length_mm);
   const double r2 = options_.resolution_sd_mm * options_.resolution_sd_mm;
   auto at = [&of](Eigen::Index i) { return of.empty() ? i : of[static_cast<size_t>(i)]; };
   const Eigen::Index m = of.empty() ? points_.cols() : static_cast<Eigen::Index>(of.size());
   Eigen::VectorXd kx(m);
   for (Eigen::Index i = 0; i < m; ++i)
-    kx[i] = s2 * std::exp(-(points_.col(at(i)) - x).squaredNorm() * inv_2l2);
+    kx[i] = sx * scale_[at(i)] * std::exp(-(points_.col(at(i)) - x).squaredNorm() * inv_2l2);
   double mean = 0, explained = 0;
   if (of.empty()) {
     // k_x^T (L L^T)^-1 k_x = |L^-1 k_x|^2
@@ -123,7 +140,8 @@ double SurfaceUncertainty::posterior_sd_mm(const Eigen::Vector3d& x,
       y[i] = y_[at(i)];
       for (Eigen::Index j = 0; j <= i; ++j)
         k(i, j) = k(j, i) =
-            s2 * std::exp(-(points_.col(at(i)) - points_.col(at(j))).squaredNorm() * inv_2l2);
+            scale_[at(i)] * scale_[at(j)] *
+            std::exp(-(points_.col(at(i)) - points_.col(at(j))).squaredNorm() * inv_2l2);
       k(i, i) += noise2_[at(i)];
     }
     const Eigen::LLT<Eigen::MatrixXd> llt(k);
@@ -134,7 +152,9 @@ double SurfaceUncertainty::posterior_sd_mm(const Eigen::Vector3d& x,
 }
 
 double SurfaceUncertainty::far_sd_mm() const {
-  return std::hypot(options_.prior_sd_mm, options_.resolution_sd_mm);
+  const double widest = extra_.variance_mm2.size() > 0 ? extra_.variance_mm2.maxCoeff() : 0.0;
+  return std::hypot(std::sqrt(options_.prior_sd_mm * options_.prior_sd_mm + widest),
+                    options_.resolution_sd_mm);
 }
 
 geometry::Aabb SurfaceUncertainty::points_box() const {

@@ -97,8 +97,7 @@ TEST(FitSpread, FitsAVolumePreservingStretchAndLeavesTheModelPassedInAsItWas) {
   EXPECT_GE(r.global->equally_good_fits, 1);
   EXPECT_LT(r.global->equally_good_sd_mm, 0.5);
   const double s0 = default_spread_options().fit.unseen_change_sd_mm;
-  EXPECT_GE(r.uncertainty->options().prior_sd_mm + 1e-12,
-            std::hypot(s0, r.global->equally_good_sd_mm));
+  EXPECT_GE(r.uncertainty->far_sd_mm() + 1e-12, std::hypot(s0, r.global->equally_good_sd_mm));
   // The particles moved: their x extent grew by about 15%; those passed in did not move.
   auto extent_x = [](const particles::Positions& x) {
     return x.row(0).maxCoeff() - x.row(0).minCoeff();
@@ -227,11 +226,12 @@ TEST(FitSpread, LeavesARejectedPointOutOfTheUncertainty) {
   ASSERT_EQ(residuals.size(), used.size());
   for (double y : residuals)
     EXPECT_LT(std::abs(y), 1.0);
-  const SurfaceUncertainty without(used, r.uncertainty->options(), residuals);
+  const PriorVarianceField& undecided = r.uncertainty->prior_variance_field();
+  const SurfaceUncertainty without(used, r.uncertainty->options(), residuals, undecided);
   EXPECT_NEAR(r.uncertainty->sd_mm(lone), without.sd_mm(lone), 1e-12);
   used.push_back(lone);
   residuals.push_back(5.0);
-  EXPECT_GT(SurfaceUncertainty(used, r.uncertainty->options(), residuals).sd_mm(lone),
+  EXPECT_GT(SurfaceUncertainty(used, r.uncertainty->options(), residuals, undecided).sd_mm(lone),
             r.uncertainty->sd_mm(lone) + 1.0);
 }
 

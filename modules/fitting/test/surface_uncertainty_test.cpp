@@ -146,6 +146,33 @@ TEST(SurfaceUncertainty, AddsThePosteriorMeanOfTheResidualsTheFitLeft) {
   EXPECT_THROW(SurfaceUncertainty({p}, o, {std::nan("")}), std::invalid_argument);
 }
 
+TEST(SurfaceUncertainty, ThePriorWidensWhereItsVarianceFieldSaysSo) {
+  // u^2 = 5 mm^2 about (0, 0, 0), 0 about (40, 0, 0): s(x)^2 = s^2 + u^2 of the nearest place.
+  SurfaceUncertaintyOptions o;
+  o.prior_sd_mm = 2.0, o.length_mm = 8.0, o.noise_sd_mm = 0.5, o.resolution_sd_mm = 0.3;
+  PriorVarianceField u;
+  u.at_mm = (Eigen::Matrix3Xd(3, 2) << 0, 40, 0, 0, 0, 0).finished();
+  u.variance_mm2 = Eigen::Vector2d(5, 0);
+  const SurfaceUncertainty none({}, o, {}, u);
+  EXPECT_NEAR(none.sd_mm(Eigen::Vector3d(5, 3, 0)), std::sqrt(4 + 5 + 0.09), 1e-12);
+  EXPECT_NEAR(none.sd_mm(Eigen::Vector3d(35, -3, 0)), std::sqrt(4 + 0.09), 1e-12);
+  EXPECT_NEAR(none.far_sd_mm(), std::sqrt(4 + 5 + 0.09), 1e-12);
+  // One point at (1, 0, 0): at it s_p^2 n^2 / (s_p^2 + n^2) + r^2 with s_p^2 = 9; at 6 mm
+  // from it towards the other place (still nearer the first), s_x = s_p.
+  const Eigen::Vector3d p(1, 0, 0);
+  const SurfaceUncertainty one({p}, o, {}, u);
+  EXPECT_NEAR(one.sd_mm(p), std::sqrt(9 * 0.25 / 9.25 + 0.09), 1e-12);
+  const double k = 9 * std::exp(-36 / (2 * 64.0));
+  EXPECT_NEAR(one.sd_mm(Eigen::Vector3d(7, 0, 0)), std::sqrt(9 - k * k / 9.25 + 0.09), 1e-12);
+  // Beyond the middle, s_x = s and k(x, p) = s s_p exp(-d^2 / 2 l^2).
+  const double kb = 2 * 3 * std::exp(-22.0 * 22.0 / (2 * 64.0));
+  EXPECT_NEAR(one.sd_mm(Eigen::Vector3d(23, 0, 0)), std::sqrt(4 - kb * kb / 9.25 + 0.09), 1e-12);
+  u.variance_mm2[1] = -1;
+  EXPECT_THROW(SurfaceUncertainty({}, o, {}, u), std::invalid_argument);
+  u.variance_mm2 = Eigen::Vector3d(1, 1, 1);
+  EXPECT_THROW(SurfaceUncertainty({}, o, {}, u), std::invalid_argument);
+}
+
 TEST(SurfaceUncertainty, RefusesNonPositiveOptions) {
   SurfaceUncertaintyOptions o;
   o.length_mm = 0;

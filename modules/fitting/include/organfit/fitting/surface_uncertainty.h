@@ -21,6 +21,10 @@
 // to their own scale, an error no number of points averages away (without it, 200
 // noise-free points put sigma under 0.4 mm on a cube whose particles round its edges by
 // more). So sd_mm(x) = sqrt(m(x)^2 + sigma^2(x) + r^2).
+// The prior's scale may also depend on the place: s(x)^2 = s^2 + u(x)^2, u given at sample
+// places (the value at the one nearest x), and k(a, b) = s(a) s(b) exp(-|a - b|^2 / (2 l^2)),
+// a covariance for any s(.) >= 0: how far the surface may be off where no point is differs
+// from place to place (where the global maps the points cannot tell apart disagree).
 #include <Eigen/Core>
 #include <memory>
 #include <vector>
@@ -46,25 +50,38 @@ struct SurfaceUncertaintyOptions {
   int local_observations = 64;
 };
 
+/// u(x)^2 of the prior's s(x)^2 = s^2 + u(x)^2 (mm^2) at sample places (mm); between them, the
+/// value at the nearest place. Empty: u = 0 everywhere.
+struct PriorVarianceField {
+  Eigen::Matrix3Xd at_mm;
+  Eigen::VectorXd variance_mm2;
+};
+
 class SurfaceUncertainty {
  public:
   /// `residuals_mm`: the fit's residual y_i at each point (mm, signed along the fitted
-  /// surface's outward normal: the point outside is positive); empty: all 0. Throws
-  /// std::invalid_argument when an option is not positive and finite, or when residuals
-  /// are given and their count is not the points' or one is not finite.
+  /// surface's outward normal: the point outside is positive); empty: all 0. `extra`: u^2.
+  /// Throws std::invalid_argument when an option is not positive and finite, when residuals
+  /// are given and their count is not the points' or one is not finite, or when `extra`'s
+  /// places and values differ in count or a value is negative or not finite.
   SurfaceUncertainty(const std::vector<Eigen::Vector3d>& points_mm,
                      const SurfaceUncertaintyOptions& options,
-                     const std::vector<double>& residuals_mm = {});
+                     const std::vector<double>& residuals_mm = {}, PriorVarianceField extra = {});
   /// sqrt(m(x)^2 + sigma^2(x) + r^2), mm: with residuals within the noise between about
-  /// hypot(n, r) (at a point) and hypot(s, r) (far from every point).
+  /// hypot(n, r) (at a point) and hypot(s(x), r) (far from every point).
   double sd_mm(const Eigen::Vector3d& x_mm) const;
-  /// The value where no point informs it (mm): hypot(s, r).
+  /// The value where no point informs it, at the place where the prior is widest (mm):
+  /// hypot(s, max u, r).
   double far_sd_mm() const;
+  /// s(x), the prior's scale at x (mm).
+  double prior_sd_mm(const Eigen::Vector3d& x_mm) const;
   /// Distance from x to the nearest point (mm; infinity without points).
   double nearest_point_mm(const Eigen::Vector3d& x_mm) const;
   const SurfaceUncertaintyOptions& options() const { return options_; }
   /// The residuals as given (empty: all 0), one per point.
   const std::vector<double>& residuals_mm() const { return residuals_mm_; }
+  /// u^2 as given.
+  const PriorVarianceField& prior_variance_field() const { return extra_; }
   /// The points' bounding box (empty box without points).
   geometry::Aabb points_box() const;
 
@@ -74,7 +91,10 @@ class SurfaceUncertainty {
   Eigen::Matrix3Xd all_points_;       ///< the points as given (nearest_point_mm, points_box)
   std::vector<double> residuals_mm_;  ///< as given
   std::shared_ptr<const geometry::SampleGrid> nearest_;  ///< over all_points_
-  Eigen::VectorXd y_;                                    ///< the observations' residuals (mm)
+  PriorVarianceField extra_;
+  std::shared_ptr<const geometry::SampleGrid> extra_places_;  ///< over extra_.at_mm
+  Eigen::VectorXd scale_;                                     ///< s(.) at the observations (mm)
+  Eigen::VectorXd y_;                                         ///< the observations' residuals (mm)
   Eigen::VectorXd noise2_;  ///< the observations' noise variances (mm^2)
   bool local_ = false;      ///< binned: each query conditions on its nearest observations
   std::shared_ptr<const geometry::SampleGrid> observations_;  ///< over points_, when local_
