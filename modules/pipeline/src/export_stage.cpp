@@ -201,7 +201,8 @@ void sample_deformation(const fitting::Deformation& phi, const geometry::ImageGe
 
 /// sigma(x) at every voxel centre: computed on a grid of l/4 over the points' box grown
 /// by 5 l (sigma varies over l) and interpolated trilinearly; beyond that box, where no
-/// point informs it (exp(-12.5) of the prior), its value far from every point.
+/// point informs it (exp(-12.5) of the prior), its value far from every point where the
+/// prior is widest (far_sd_mm: never narrower than the truth there).
 std::vector<float> sigma_on_grid(const fitting::SurfaceUncertainty& u,
                                  const geometry::ImageGeometry& g) {
   const double far = u.far_sd_mm(), l = u.options().length_mm;
