@@ -206,37 +206,42 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   std::vector<double> change;
   for (size_t c = 0; c < candidates.size(); ++c)
     change.push_back(shape_change_of(mapped[c].full, surface.points));
-  // The one changing the shape least within `window` of the best of `fit` (mean squares).
+  // Equally good: within `window` of the best mean square (of the noise's, at most noise2).
   const double window = o.equally_good_dof / static_cast<double>(points.size());
   const double noise2 =
       o.noise_mm > 0 ? o.noise_mm * o.noise_mm : std::numeric_limits<double>::infinity();
-  auto is_equally_good = [window, noise2](const std::vector<double>& fit, size_t c) {
-    const double best = *std::min_element(fit.begin(), fit.end());
-    return fit[c] * fit[c] <= best * best + window * std::min(best * best, noise2);
+  // Which fits are within `window` of the best (by their mean squares rms^2).
+  auto in_window = [window, noise2, &rms] {
+    const double best = *std::min_element(rms.begin(), rms.end());
+    std::vector<char> in(rms.size());
+    for (size_t c = 0; c < rms.size(); ++c)
+      in[c] = rms[c] * rms[c] <= best * best + window * std::min(best * best, noise2);
+    return in;
   };
-  auto least_change_of_equally_good = [&is_equally_good](const std::vector<double>& fit,
-                                                         const std::vector<double>& shape_change) {
+  // Of those, the one changing the shape least.
+  auto least_change_in_window = [&in_window, &change] {
+    const std::vector<char> in = in_window();
     size_t chosen = 0;
     double least = std::numeric_limits<double>::infinity();
-    for (size_t c = 0; c < fit.size(); ++c)
-      if (is_equally_good(fit, c) && shape_change[c] < least) least = shape_change[c], chosen = c;
+    for (size_t c = 0; c < in.size(); ++c)
+      if (in[c] && change[c] < least) least = change[c], chosen = c;
     return chosen;
   };
-  // The choice, and with `equally_good` every fit in its window, the choice first.
-  auto chosen_of = [&](const std::vector<const GlobalMap*>& judged_fits) {
-    const size_t pick = least_change_of_equally_good(rms, change);
-    GlobalMap out = *judged_fits[pick];
+  // fits[pick], and with `equally_good` it and then every other fit in the window.
+  auto taken = [&](const std::vector<const GlobalMap*>& fits_judged, size_t pick) {
+    GlobalMap out = *fits_judged[pick];
     out.shears_dropped = shears_dropped;
     if (equally_good) {
+      const std::vector<char> in = in_window();
       equally_good->push_back(out);
-      for (size_t c = 0; c < judged_fits.size(); ++c)
-        if (c != pick && is_equally_good(rms, c)) equally_good->push_back(*judged_fits[c]);
+      for (size_t c = 0; c < fits_judged.size(); ++c)
+        if (c != pick && in[c]) equally_good->push_back(*fits_judged[c]);
     }
     return out;
   };
-  const size_t chosen = least_change_of_equally_good(rms, change);
+  const size_t chosen = least_change_in_window();
   if (!distance || (!(o.field_sigma_mm > 0) && !(o.flow_sigma_mm > 0)))
-    return chosen_of(candidates);
+    return taken(candidates, chosen);
   // Shear fields on top of the chosen map and of the one changing the shape least of all
   // (often near the identity: a dent is a local change, not a global one), each judged
   // with the rest. A fit with k effective parameters lowers the mean square by about k/m of
@@ -269,7 +274,7 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     }
   for (const GlobalMap& f : refined)
     all.push_back(&f);
-  return chosen_of(all);
+  return taken(all, least_change_in_window());
 }
 
 }  // namespace organfit::fitting

@@ -118,6 +118,11 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   // is checked against it before anything else is done).
   std::optional<CtReference> planning_ct;
   double planning_modelling_s = -1;  // the saved model's own modelling time, for a session
+  // A session whose exports need the planning CT, and whose model names none.
+  auto no_planning_ct = [&scene] {
+    return InputError(scene.path("planning", "model").string() +
+                      ": the model has no planning CT to export on");
+  };
   if (scene.has_section("planning")) {
     Stopwatch clock;
     const fs::path file = scene.path("planning", "model");
@@ -131,7 +136,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     // Exports on the CT's grid need the planning CT: said now, not after the fit.
     if (!ct_reference && !scene.has_section("ct") && scene.has_section("export") &&
         export_request_from(scene, staging, organ_name, organ_look).needs_ct())
-      throw InputError(file.string() + ": the model has no planning CT to export on");
+      throw no_planning_ct();
     planning_modelling_s = saved.provenance.value("modelling_wall_s", -1.0);
     model->summary = {
         {"particles", model->state.size()},
@@ -362,9 +367,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     double ct_read_s = 0;  // its own stage, not the export's
     if ((request.needs_ct() || (scene.has_section("report") && ct_reference)) && !ct) {
       // A session: the planning CT named in the model file, checked to be the same series.
-      if (!ct_reference)
-        throw InputError(scene.path("planning", "model").string() +
-                         ": the model has no planning CT to export on");
+      if (!ct_reference) throw no_planning_ct();
       Stopwatch ct_clock;
       dicom::CtReadOptions o;
       o.series_instance_uid = ct_reference->series_instance_uid;
