@@ -407,6 +407,24 @@ for key in ['labels: l.nrrd', 'uncertainty: s.nrrd']:
     scene_case('session_export_on_the_ct_of_a_body_model_' + key.split(':')[0],
                'planning:\n  model: ../_planning_body/out/model.json\npoints:\n  count: 20\nfit:\n  method: spread\nexport:\n  ' + key + '\n',
                'model.json: the model has no planning CT to export on', cls='disagree')
+# A fitted model's uncertainty: asked of a planning model, or one that does not hold together
+# (a residual short of its points), refused before anything is written.
+fitted = os.path.join(out, '_fitted')
+os.makedirs(fitted)
+open(os.path.join(fitted, 'session.yaml'), 'w').write(
+    'planning:\n  model: ../_planning_body/out/model.json\npoints:\n  count: 20\nfit:\n  method: spread\n'
+    'export:\n  model: fitted.json\n')
+subprocess.run([organfit, '--quiet', 'run', os.path.join(fitted, 'session.yaml'), '--out', os.path.join(fitted, 'out')],
+               check=True, stdout=subprocess.DEVNULL)
+case('export_uncertainty_of_a_planning_model',
+     ['export', '--model', '{case}/../_planning_body/out/model.json', '--uncertainty', '{case}/out/s.nrrd'],
+     "model.json: the model holds no fit's uncertainty", ct=False, cls='disagree')
+d = case('export_model_uncertainty_a_residual_short',
+         ['export', '--model', '{case}/fitted.json', '--mesh', '{case}/out/m.vtp'],
+         'fitted.json: invalid model: uncertainty: SurfaceUncertainty: one residual per point', ct=False)
+model = json.load(open(os.path.join(fitted, 'out', 'fitted.json')))
+model['uncertainty']['residuals_mm'].pop()
+json.dump(model, open(os.path.join(d, 'fitted.json'), 'w'))
 def points_in_ct(name, series, frame, expect, code=2):
     d = case(name, ['--quiet', 'run', '{case}/scene.yaml', '--out', '{case}/out'], expect, code=code, ct=False, cls='disagree')
     open(os.path.join(d, 'points.csv'), 'w').write(

@@ -279,6 +279,8 @@ json.dump(m, open('$tmp/wf/no_rtss_model.json', 'w'))"
 expect workflow.session_copy_needs_a_structure_set_in_the_model 2 "the planning model records no structure set" -- --quiet run "$tmp/wf/pipelines/prostate-session.yaml" --set "planning.model=$tmp/wf/no_rtss_model.json" --set export.copy_other_rois=true --out "$tmp/wf/out/no-copy"
 check workflow.refused_copy_wrote_nothing test ! -e "$tmp/wf/out/no-copy"
 expect export.needs_an_output 2 "name at least one output" -- export --model "$tmp/wf/out/prostate-planning/prostate_model.json"
+expect export.uncertainty_needs_a_fitted_model 2 "holds no fit's uncertainty" -- export --model "$tmp/wf/out/prostate-planning/prostate_model.json" --uncertainty "$tmp/wf/sigma.nrrd"
+check export.uncertainty_refused_writes_nothing test ! -e "$tmp/wf/sigma.nrrd"
 expect export.not_a_model 2 "not an organfit model" -- export --model "$scenes/small-model.yaml" --mesh "$tmp/wf/x.stl"
 check export.refusal_writes_nothing test ! -e "$tmp/wf/x.stl"
 if [[ -d "$src/../shared/data/ct-sts-002" ]]; then

@@ -68,12 +68,16 @@ plastimatch convert --input '$tmp/plan/phantom/ct' --output-img '$tmp/ct.mha' --
 plastimatch convert --input '$tmp/ct.mha' --xf '$tmp/session/vf.mha' --output-img '$tmp/ct_today.mha' >/dev/null &&
 $py '$src/tests/cli/interior_mean.py' '$tmp/ct.mha' '$tmp/plan/planning.nrrd' '$tmp/ct_today.mha' '$tmp/session/fit.nrrd' 2.0"
 fi
-# organfit export --model writes the same field from the saved fitted model.
+# organfit export --model writes the same field from the saved fitted model, and the
+# same uncertainty (the CT map, and the mesh's sigma_mm) as the run did.
 check prostate.export_command_writes_the_same_field bash -c "
 '$bin' --quiet run '$src/pipelines/prostate-session.yaml' --out '$tmp/session2' \
-  --set 'planning.model=$tmp/plan/prostate_model.json' --set points.bend_mm=10 --set export.model=fitted.json &&
-'$bin' --quiet export --model '$tmp/session2/fitted.json' --displacement-field '$tmp/exported_vf.mha' &&
-cmp '$tmp/exported_vf.mha' '$tmp/session/vf.mha'"
+  --set 'planning.model=$tmp/plan/prostate_model.json' --set points.bend_mm=10 --set export.model=fitted.json \
+  --set export.uncertainty=sigma.nrrd --set export.mesh=fit.vtp &&
+'$bin' --quiet export --model '$tmp/session2/fitted.json' --displacement-field '$tmp/exported_vf.mha' \
+  --uncertainty '$tmp/exported_sigma.nrrd' --mesh '$tmp/exported.vtp' &&
+cmp '$tmp/exported_vf.mha' '$tmp/session/vf.mha' && cmp '$tmp/exported_sigma.nrrd' '$tmp/session2/sigma.nrrd' &&
+cmp '$tmp/exported.vtp' '$tmp/session2/fit.vtp' && grep -q 'Name=\"sigma_mm\"' '$tmp/exported.vtp'"
 
 # A stated grid: 2.5 mm over the CT's box (the phantom CT's 320 x 320 x 56 at 1.25 x 1.25 x
 # 2.5 mm gives 160 x 160 x 56); plastimatch warps onto the CT with --fixed. Refused where

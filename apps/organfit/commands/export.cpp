@@ -28,6 +28,7 @@ struct ExportCommand {
   std::filesystem::path ct;     ///< planning CT folder; default: the one the model names
   std::filesystem::path rtstruct, labels, mesh;
   std::filesystem::path displacement_field, jacobian, registration;  ///< on the CT's grid
+  std::filesystem::path uncertainty;     ///< sigma (mm) on the CT's grid, from a fitted model
   double field_spacing_mm = 0;           ///< their grid: 0, the CT's (ExportRequest)
   std::string roi_name;                  ///< default: the model's organ + "_fit"
   std::filesystem::path copy_rois_from;  ///< an RT Structure Set whose ROIs are copied alongside
@@ -38,11 +39,12 @@ struct ExportCommand {
 /// Reference is not the model's, a model outside the CT.
 nlohmann::json run_export_command(const ExportCommand& c) {
   const std::vector<fs::path> outputs = {c.rtstruct,           c.labels,   c.mesh,
-                                         c.displacement_field, c.jacobian, c.registration};
+                                         c.displacement_field, c.jacobian, c.registration,
+                                         c.uncertainty};
   if (std::all_of(outputs.begin(), outputs.end(), [](const fs::path& f) { return f.empty(); }))
     throw InputError(
         "export: name at least one output (--rtstruct, --labels, --mesh, "
-        "--displacement-field, --registration, --jacobian)");
+        "--displacement-field, --registration, --jacobian, --uncertainty)");
   std::vector<fs::path> inputs = {c.model, c.ct, c.copy_rois_from};
   for (const auto& f : outputs)
     if (!f.empty())
@@ -58,6 +60,12 @@ nlohmann::json run_export_command(const ExportCommand& c) {
   request.rtstruct = c.rtstruct, request.labels = c.labels, request.mesh = c.mesh;
   request.displacement_field = c.displacement_field, request.jacobian = c.jacobian;
   request.registration = c.registration;
+  request.uncertainty = c.uncertainty;
+  request.sigma = saved.uncertainty;
+  if (!c.uncertainty.empty() && !saved.uncertainty)
+    throw InputError(c.model.string() +
+                     ": the model holds no fit's uncertainty (a planning model, or a fitted one "
+                     "saved before models kept it); --uncertainty needs a session's model");
   request.field_spacing_mm = c.field_spacing_mm;
   request.roi_name = c.roi_name.empty() ? saved.organ_name + "_fit" : c.roi_name;
   request.roi_colour = saved.organ_look.colour;
@@ -127,6 +135,10 @@ Command add_export(CLI::App& app) {
       ->check(CLI::Range(0.0, 50.0));
   export_cmd->add_option("--jacobian", exp->jacobian,
                          "det(grad phi) to write on the planning CT's grid (.nrrd, .mha)");
+  export_cmd->add_option("--uncertainty", exp->uncertainty,
+                         "The fit's uncertainty to write on the planning CT's grid (.nrrd, "
+                         ".mha): each voxel to sigma (mm) of the surface there; a fitted "
+                         "model's");
   export_cmd->add_option("--roi-name", exp->roi_name,
                          "Name of the exported ROI (default: the organ's name + _fit)");
   export_cmd->add_option("--copy-rois-from", exp->copy_rois_from,

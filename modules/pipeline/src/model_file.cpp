@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <stdexcept>
 
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
@@ -57,11 +58,72 @@ nlohmann::json mask_to_json(const geometry::LabelVolume& mask) {
           {"runs", runs}};
 }
 
+/// The fit's uncertainty as what its posterior is given: rebuilt from these, it is the
+/// same function (the numbers are written with full double precision).
+nlohmann::json uncertainty_to_json(const fitting::SurfaceUncertainty& u) {
+  const fitting::SurfaceUncertaintyOptions& o = u.options();
+  const fitting::PriorVarianceField& extra = u.prior_variance_field();
+  return {{"kind", "gaussian_process"},
+          {"prior_sd_mm", o.prior_sd_mm},
+          {"length_mm", o.length_mm},
+          {"noise_sd_mm", o.noise_sd_mm},
+          {"resolution_sd_mm", o.resolution_sd_mm},
+          {"max_points", o.max_points},
+          {"local_observations", o.local_observations},
+          {"points_mm", flat(u.points_mm())},
+          {"residuals_mm", u.residuals_mm()},
+          {"prior_variance",
+           {{"at_mm", flat(extra.at_mm)},
+            {"variance_mm2",
+             std::vector<double>(extra.variance_mm2.data(),
+                                 extra.variance_mm2.data() + extra.variance_mm2.size())}}}};
+}
+
+/// Throws std::invalid_argument naming the key on counts that do not match (the
+/// uncertainty's own constructor checks the values).
+std::shared_ptr<const fitting::SurfaceUncertainty> uncertainty_from_json(const nlohmann::json& j) {
+  if (j.at("kind").get<std::string>() != "gaussian_process")
+    throw std::invalid_argument("uncertainty.kind: only gaussian_process is known");
+  fitting::SurfaceUncertaintyOptions o;
+  o.prior_sd_mm = j.at("prior_sd_mm").get<double>();
+  o.length_mm = j.at("length_mm").get<double>();
+  o.noise_sd_mm = j.at("noise_sd_mm").get<double>();
+  o.resolution_sd_mm = j.at("resolution_sd_mm").get<double>();
+  o.max_points = j.at("max_points").get<int>();
+  o.local_observations = j.at("local_observations").get<int>();
+  auto columns = [](const std::vector<double>& v, const char* key) {
+    if (v.size() % 3) throw std::invalid_argument(std::string(key) + " needs x, y, z per point");
+    return Eigen::Map<const Eigen::Matrix3Xd>(v.data(), 3, static_cast<Eigen::Index>(v.size() / 3));
+  };
+  const auto xyz = j.at("points_mm").get<std::vector<double>>();
+  const Eigen::Matrix3Xd points = columns(xyz, "uncertainty.points_mm");
+  std::vector<Eigen::Vector3d> points_mm(static_cast<size_t>(points.cols()));
+  for (Eigen::Index k = 0; k < points.cols(); ++k)
+    points_mm[static_cast<size_t>(k)] = points.col(k);
+  if (!points.allFinite()) throw std::invalid_argument("uncertainty.points_mm: not finite");
+  const auto residuals = j.at("residuals_mm").get<std::vector<double>>();
+  const auto& prior = j.at("prior_variance");
+  const auto at = prior.at("at_mm").get<std::vector<double>>();
+  const auto variance = prior.at("variance_mm2").get<std::vector<double>>();
+  fitting::PriorVarianceField extra;
+  extra.at_mm = columns(at, "uncertainty.prior_variance.at_mm");
+  extra.variance_mm2 = Eigen::Map<const Eigen::VectorXd>(
+      variance.data(), static_cast<Eigen::Index>(variance.size()));
+  if (!extra.at_mm.allFinite())
+    throw std::invalid_argument("uncertainty.prior_variance.at_mm: not finite");
+  try {
+    return std::make_shared<const fitting::SurfaceUncertainty>(points_mm, o, residuals,
+                                                               std::move(extra));
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("uncertainty: ") + e.what());
+  }
+}
+
 }  // namespace
 
 void save_model(const fs::path& file, const ModelStageResult& m, const std::string& organ_name,
                 const OrganLook& look, const std::optional<CtReference>& ct,
-                const nlohmann::json& provenance) {
+                const nlohmann::json& provenance, const fitting::SurfaceUncertainty* uncertainty) {
   nlohmann::ordered_json j;
   j["format"] = kFormat;
   j["format_version"] = kFormatVersion;
@@ -123,6 +185,7 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
   } else {
     j["embedding"] = nullptr;
   }
+  j["uncertainty"] = uncertainty ? uncertainty_to_json(*uncertainty) : nlohmann::json(nullptr);
   write_file_atomically(file, j.dump() + "\n");
 }
 
@@ -294,6 +357,8 @@ SavedModel load_model(const fs::path& file) {
           c.contains("structure_set") ? c.at("structure_set").get<std::string>() : std::string()};
     }
     saved.provenance = j.value("provenance", nlohmann::json::object());
+    if (j.contains("uncertainty") && !j.at("uncertainty").is_null())  // absent in older models
+      saved.uncertainty = uncertainty_from_json(j.at("uncertainty"));
   } catch (const nlohmann::json::exception& e) {
     fail(std::string("malformed model: ") + e.what());
   } catch (const std::invalid_argument& e) {

@@ -486,7 +486,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         {"scene", name},
         {"modelling_wall_s", planning_modelling_s >= 0 ? planning_modelling_s : modelling_s()},
         {"fitted", scene.has_section("fit")}};
-    save_model(staging / model_file, *model, organ_name, organ_look, ct_reference, provenance);
+    save_model(staging / model_file, *model, organ_name, organ_look, ct_reference, provenance,
+               uncertainty.get());
   }
   if (scene.has_section("report")) {
     Stopwatch clock;

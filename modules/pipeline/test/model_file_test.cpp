@@ -138,6 +138,49 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   EXPECT_EQ(load_model(dir_ / "rest.json").model.placed.cols(), 0);
 }
 
+// A fitted model keeps what its uncertainty is given, so that an export from the file
+// writes the run's sigma: the loaded one is the same function, bit for bit.
+TEST_F(ModelFile, AFittedModelKeepsItsUncertainty) {
+  ModelStageResult m = build("body:\n  shape: ellipsoid\n  size_mm: [30, 24, 20]\n");
+  std::vector<Eigen::Vector3d> points;
+  std::vector<double> residuals;
+  for (int k = 0; k < 12; ++k) {
+    const double a = 0.5 * k;
+    points.emplace_back(15 * std::cos(a), 12 * std::sin(a), 0.3 * k);  // mm
+    residuals.push_back(0.2 * std::sin(1.3 * k));                      // mm
+  }
+  fitting::SurfaceUncertaintyOptions o;
+  o.prior_sd_mm = 1.7, o.length_mm = 7.5, o.resolution_sd_mm = 0.52;
+  fitting::PriorVarianceField extra;
+  extra.at_mm = Eigen::Matrix3Xd::Random(3, 30) * 15;
+  extra.variance_mm2 = Eigen::VectorXd::LinSpaced(30, 0.0, 2.0);  // mm^2
+  const fitting::SurfaceUncertainty u(points, o, residuals, extra);
+  save_model(dir_ / "fitted.json", m, "Prostate", OrganLook{}, std::nullopt, {}, &u);
+  const SavedModel back = load_model(dir_ / "fitted.json");
+  ASSERT_NE(back.uncertainty, nullptr);
+  EXPECT_EQ(back.uncertainty->points_mm(), u.points_mm());
+  EXPECT_EQ(back.uncertainty->residuals_mm(), u.residuals_mm());
+  EXPECT_EQ(back.uncertainty->options().length_mm, 7.5);
+  for (int i = 0; i < 50; ++i) {
+    const Eigen::Vector3d x(-20 + 0.8 * i, 10 * std::sin(0.4 * i), 5 * std::cos(0.3 * i));
+    EXPECT_EQ(back.uncertainty->sd_mm(x), u.sd_mm(x)) << "at " << x.transpose();
+  }
+  EXPECT_EQ(back.uncertainty->far_sd_mm(), u.far_sd_mm());
+  // A model saved without one (a planning model) has none.
+  save_model(dir_ / "plain.json", m, "Prostate", OrganLook{}, std::nullopt, {});
+  EXPECT_EQ(load_model(dir_ / "plain.json").uncertainty, nullptr);
+  // Residuals that are not one per point are refused, naming the file and the key.
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir_ / "fitted.json"));
+  j["uncertainty"]["residuals_mm"].erase(0);
+  EXPECT_NE(error_of(j.dump()).find("bad.json: invalid model: uncertainty: "), std::string::npos)
+      << error_of(j.dump());
+  j = nlohmann::json::parse(std::ifstream(dir_ / "fitted.json"));
+  j["uncertainty"]["points_mm"].erase(0);
+  EXPECT_NE(error_of(j.dump()).find("uncertainty.points_mm needs x, y, z per point"),
+            std::string::npos)
+      << error_of(j.dump());
+}
+
 TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
   geometry::ImageGeometry g;
   g.size = {30, 26, 12};

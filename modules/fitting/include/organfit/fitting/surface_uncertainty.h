@@ -78,6 +78,8 @@ class SurfaceUncertainty {
   /// Distance from x to the nearest point (mm; infinity without points).
   double nearest_point_mm(const Eigen::Vector3d& x_mm) const;
   const SurfaceUncertaintyOptions& options() const { return options_; }
+  /// The points as given (mm), one per column.
+  const Eigen::Matrix3Xd& points_mm() const { return all_points_; }
   /// The residuals as given (empty: all 0), one per point.
   const std::vector<double>& residuals_mm() const { return residuals_mm_; }
   /// u^2 as given.

@@ -10,14 +10,21 @@
 //   lattice_spacing_mm, positions_mm (x0, y0, z0, x1, ...), skeleton nodes
 //   ct            the planning CT's folder, Series Instance UID and Frame of Reference
 //                 UID (export re-reads the CT there and checks the UIDs)
+//   embedding     a fitted model's: how its reference follows the particles
+//   uncertainty   a fitted model's: what its posterior is given (surface_uncertainty.h):
+//                 the options, the attractive points, the fit's residuals there and the
+//                 prior's variance field, so that an export from the file writes the
+//                 run's sigma exactly (null: a planning model, or none computed)
 //   provenance    organfit version, scene, date, and the planning run's stage times
 // Positions are written with full double precision: a loaded model is the saved one.
 #include <array>
 #include <filesystem>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 
+#include "organfit/fitting/surface_uncertainty.h"
 #include "organfit/pipeline/model_stage.h"
 
 namespace organfit::pipeline {
@@ -43,12 +50,16 @@ struct SavedModel {
   OrganLook organ_look;
   std::optional<CtReference> ct;
   nlohmann::json provenance;
+  /// the fit's uncertainty, rebuilt from the file (null: none saved)
+  std::shared_ptr<const fitting::SurfaceUncertainty> uncertainty;
 };
 
-/// Writes the model (atomically). `organ_name` names the organ for exports.
+/// Writes the model (atomically). `organ_name` names the organ for exports; `uncertainty`
+/// (optional) is the fit's.
 void save_model(const std::filesystem::path& file, const ModelStageResult& model,
                 const std::string& organ_name, const OrganLook& look,
-                const std::optional<CtReference>& ct, const nlohmann::json& provenance);
+                const std::optional<CtReference>& ct, const nlohmann::json& provenance,
+                const fitting::SurfaceUncertainty* uncertainty = nullptr);
 
 /// Reads a model file and rebuilds its force terms. Throws InputError "FILE: reason" on
 /// a file that is not an organfit model, of another format version, or inconsistent
