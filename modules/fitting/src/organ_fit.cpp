@@ -187,6 +187,9 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     // Re-fill the mapped reference and let its new surface settle; the settled surface
     // layer sits a little outside the lattice (more so for a larger surface), so the
     // count is corrected until the settled volume matches the model's (at most 3 passes).
+    // As in planning (model_stage.cpp says why), the skeleton, made on each fill and tied
+    // to it as made, holds the organ's shape while the surface settles; the settled body
+    // becomes its rest shape.
     int count = state.size();
     int passes = 0;
     double settled_change_pct = 0;
@@ -194,6 +197,13 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     while (passes < 3) {
       ++passes;
       state = particles::State(sites.fill(count));
+      if (model.settings.skeleton) {
+        if (model.skeleton) m.remove(*model.skeleton);
+        const particles::Skeleton sk = particles::medial_skeleton(state.x, model.lattice_spacing_mm,
+                                                                  model.skeleton_node_spacing_mm);
+        model.skeleton =
+            &m.add(std::make_unique<particles::SkeletonForce>(sk, state.x, model.skeleton_params));
+      }
       particles::relax(m, state, opt, 300, common.kinetic_tolerance);
       const double v = body_volume(state.x, rho, volume_voxel);
       fo.volume_at_start_mm3 = v;  // the fit starts from the settled body
@@ -212,12 +222,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     global.wall_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
     report.global = global;
-    if (model.settings.skeleton) {
-      const particles::Skeleton sk = particles::medial_skeleton(state.x, model.lattice_spacing_mm,
-                                                                model.skeleton_node_spacing_mm);
-      model.skeleton =
-          &m.add(std::make_unique<particles::SkeletonForce>(sk, state.x, model.skeleton_params));
-    }
+    if (model.skeleton) model.skeleton->set_rest_shape(state.x);
     preparing(5, "the skeleton");
     // Local stage: smooth patches; the skeleton's rest shape follows the fit until the
     // points are explained (it keeps the global shape between rows but does not pull the
