@@ -228,14 +228,20 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     return chosen;
   };
   // fits[pick], and with `equally_good` it and then every other fit in the window.
+  // Each with the points' RMS before any fit (the identity's, the same for every fit).
+  const double rms_before_mm = affine_fits[0].affine.rms_before_mm;
   auto taken = [&](const std::vector<const GlobalMap*>& fits_judged, size_t pick) {
     GlobalMap out = *fits_judged[pick];
     out.shears_dropped = shears_dropped;
+    out.affine.rms_before_mm = rms_before_mm;
     if (equally_good) {
       const std::vector<char> in = in_window();
       equally_good->push_back(out);
       for (size_t c = 0; c < fits_judged.size(); ++c)
-        if (c != pick && in[c]) equally_good->push_back(*fits_judged[c]);
+        if (c != pick && in[c]) {
+          equally_good->push_back(*fits_judged[c]);
+          equally_good->back().affine.rms_before_mm = rms_before_mm;
+        }
     }
     return out;
   };

@@ -255,14 +255,15 @@ Eigen::VectorXd geman_mcclure_weights(const std::vector<AttractivePoint>& points
 /// moved by alpha x step (nullopt: not a map); `residuals(g, r, jac or nullptr)` and
 /// `objective(g, r)` measure a map. Steps until `iterations`, until no step lowers the
 /// objective, or until it settles (a relative fall below 1e-6); r and jac are left the
-/// final map's.
+/// final map's. Returns the steps taken.
 template <class StepOf, class Trial, class Residuals, class Objective>
-void robust_gauss_newton(GlobalMap& map, Eigen::VectorXd& r, Eigen::MatrixXd& jac,
-                         const std::vector<AttractivePoint>& points, double c2, int iterations,
-                         StepOf&& step_of, Trial&& trial, Residuals&& residuals,
-                         Objective&& objective) {
+int robust_gauss_newton(GlobalMap& map, Eigen::VectorXd& r, Eigen::MatrixXd& jac,
+                        const std::vector<AttractivePoint>& points, double c2, int iterations,
+                        StepOf&& step_of, Trial&& trial, Residuals&& residuals,
+                        Objective&& objective) {
   residuals(map, r, &jac);
   double e = objective(map, r);
+  int taken = 0;
   for (int it = 0; it < iterations; ++it) {
     const Eigen::VectorXd step = step_of(map, geman_mcclure_weights(points, r, c2));
     if (!step.allFinite()) break;
@@ -277,11 +278,13 @@ void robust_gauss_newton(GlobalMap& map, Eigen::VectorXd& r, Eigen::MatrixXd& ja
       if (e_new < e) map = std::move(*moved), accepted = true;
     }
     if (!accepted) break;
+    ++taken;
     const bool settled = e - e_new < 1e-6 * (1 + e);
     e = e_new;
     residuals(map, r, &jac);
     if (settled) break;
   }
+  return taken;
 }
 
 }  // namespace
@@ -357,6 +360,7 @@ std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& su
     map.affine.a = a;
     map.affine.t = t;
     map.shears.c.head<9>() = theta.segment<9>(12);
+    ++map.affine.iterations;
   }
   return ends;
 }
@@ -453,7 +457,7 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
     };
     VecX r;
     Eigen::MatrixXd jac;
-    robust_gauss_newton(
+    map.affine.iterations += robust_gauss_newton(
         map, r, jac, points, c2, o.iterations,
         [&](const GlobalMap& g, const VecX& w) -> VecX {
           Eigen::MatrixXd h = jac.transpose() * w.asDiagonal() * jac;
@@ -687,7 +691,7 @@ GlobalMap fit_linearised_part(GlobalMap map, const geometry::SignedDistance& dis
   const std::vector<int> order = spatial_order(points);
   VecX r;
   Eigen::MatrixXd jac;
-  robust_gauss_newton(
+  map.affine.iterations += robust_gauss_newton(
       map, r, jac, points, c2, o.iterations,
       [&](const GlobalMap& g, const VecX& w) -> VecX {
         return -RidgeSystem(jac, w, lambda, &order)

@@ -222,6 +222,13 @@ TEST(GlobalFit, OnTheSignedDistanceFindsALargeStretchSeenFromOneSide) {
   const Eigen::Vector3d corner(15, -15, 15);
   const Eigen::Vector3d truth(s * 15, -15 / std::sqrt(s), 15 / std::sqrt(s));
   EXPECT_LT((map.apply(corner) - truth).norm(), 1.5);
+  // What it reports, whichever solver found it: the points' RMS to the surface before any
+  // fit (the affine fit's first measure, of the identity) and the steps that made it.
+  const double before = fit_volume_preserving_affine(samples, points, o).rms_before_mm;
+  EXPECT_GT(before, 3.0);  // the points lie up to 9 mm beyond the cube's faces
+  EXPECT_EQ(map.affine.rms_before_mm, before) << map.found_by;
+  EXPECT_GT(map.affine.iterations, 0) << map.found_by;
+  EXPECT_LT(map.rms_after_mm, 0.5 * before);
 }
 
 // The paper's Fig. 8: two points 8 mm beyond opposite faces of the 30 mm cube. The

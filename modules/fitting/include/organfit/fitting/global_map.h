@@ -17,6 +17,8 @@ struct AffineFit {
   Eigen::Matrix3d a = Eigen::Matrix3d::Identity();  ///< det(a) = 1
   Eigen::Vector3d t = Eigen::Vector3d::Zero();
   double rms_before_mm = 0, rms_after_mm = 0;  ///< point-to-surface, over the kept points
+  /// the steps (ICP or Gauss-Newton) of the fits that made the map, those of the fit it
+  /// started from included
   int iterations = 0;
 };
 
