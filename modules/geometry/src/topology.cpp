@@ -136,33 +136,34 @@ Topology topology_of(const LabelVolume& mask) {
   return Pieces(mask).topology();
 }
 
-std::vector<SliceSpecks> slice_specks(const LabelVolume& mask) {
+std::vector<SliceSpecks> slice_specks(const LabelVolume& mask, const SpeckExplained& explained) {
   std::vector<SliceSpecks> out;
   const IndexRange r = mask.range(1);  // a speck lies within the organ's box
   if (r.empty()) return out;
   for (int k = r.lo[2]; k <= r.hi[2]; ++k) {
     SliceSpecks s{k, 0, 0};
-    for_each_speck(mask, k, r, [&](int, int, bool island) { island ? ++s.islands : ++s.holes; });
+    for_each_speck(mask, k, r, [&](int i, int j, bool island) {
+      if (explained && explained(i, j, k, island)) return;
+      island ? ++s.islands : ++s.holes;
+    });
     if (s.islands || s.holes) out.push_back(s);
   }
   return out;
 }
 
 TopologyRepair restore_topology(LabelVolume& mask, const Topology& want,
-                                const std::vector<SliceSpecks>& planning_specks) {
+                                const SpeckExplained& explained) {
   TopologyRepair repair;
-  // Slice by slice: one-pixel specks where the planning organ's slice has none of that kind.
+  // Slice by slice: the one-pixel specks the planning organ does not have at their
+  // pre-images.
   const IndexRange r = mask.range(1);
   if (r.empty() || want.components == 0) return repair;
-  std::vector<SliceSpecks> planned(static_cast<size_t>(mask.geometry.size[2]));
-  for (const SliceSpecks& s : planning_specks)
-    if (s.k >= 0 && s.k < mask.geometry.size[2]) planned[static_cast<size_t>(s.k)] = s;
   for (int k = r.lo[2]; k <= r.hi[2]; ++k) {
-    const SliceSpecks& p = planned[static_cast<size_t>(k)];
     std::vector<std::array<int, 3>> flips;  // i, j, new label
     for_each_speck(mask, k, r, [&](int i, int j, bool island) {
-      if (island && p.islands == 0) flips.push_back({i, j, 0}), ++repair.slice_islands_removed;
-      if (!island && p.holes == 0) flips.push_back({i, j, 1}), ++repair.slice_holes_filled;
+      if (explained(i, j, k, island)) return;
+      flips.push_back({i, j, island ? 0 : 1});
+      island ? ++repair.slice_islands_removed : ++repair.slice_holes_filled;
     });
     for (const auto& f : flips)
       mask.at(f[0], f[1], k) = static_cast<std::uint8_t>(f[2]);

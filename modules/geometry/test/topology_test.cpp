@@ -85,6 +85,14 @@ TEST(SliceSpecks, CountOnePixelIslandsAndHolesPerSlice) {
 // restore_topology: a crevice one voxel wide that closed at its mouth (a sealed cavity), a
 // voxel left behind off the organ (an island in 3D and on its slice) and a one-pixel hole
 // are undone, and nothing else changes; what the planning organ has itself is kept.
+/// The identity's SpeckExplained: the speck is `planning`'s own when `planning` has its
+/// label at the same voxel.
+SpeckExplained in_place(const LabelVolume& planning) {
+  return [&planning](int i, int j, int k, bool island) {
+    return (planning.at(i, j, k) == 1) == island;
+  };
+}
+
 TEST(RestoreTopology, UndoesSamplingArtefactsTheMapCannotMake) {
   const LabelVolume planning = box_mask(14);
   LabelVolume sampled = planning;
@@ -92,7 +100,7 @@ TEST(RestoreTopology, UndoesSamplingArtefactsTheMapCannotMake) {
   sampled.at(8, 8, 8) = 0;                           // a pinhole, also a one-pixel hole
   sampled.at(0, 6, 6) = 1;                           // an island one voxel off the box
   ASSERT_EQ(topology_of(sampled), (Topology{2, 2, 1, 1}));
-  const TopologyRepair r = restore_topology(sampled, topology_of(planning), slice_specks(planning));
+  const TopologyRepair r = restore_topology(sampled, topology_of(planning), in_place(planning));
   EXPECT_EQ(topology_of(sampled), topology_of(planning));
   EXPECT_EQ(sampled.labels, planning.labels);
   EXPECT_EQ(r.slice_islands_removed, 1);
@@ -104,8 +112,7 @@ TEST(RestoreTopology, UndoesSamplingArtefactsTheMapCannotMake) {
   // An island of two voxels side by side in a slice is no speck: removed as the smaller piece.
   LabelVolume two = planning;
   two.at(0, 6, 6) = 1, two.at(0, 7, 6) = 1;
-  EXPECT_EQ(restore_topology(two, topology_of(planning), slice_specks(planning)).components_removed,
-            1);
+  EXPECT_EQ(restore_topology(two, topology_of(planning), in_place(planning)).components_removed, 1);
   EXPECT_EQ(two.labels, planning.labels);
 
   // The planning organ's own cavity and one-pixel hole are kept; a broken piece is not
@@ -114,13 +121,40 @@ TEST(RestoreTopology, UndoesSamplingArtefactsTheMapCannotMake) {
   holed.at(6, 6, 6) = 0;
   holed.at(0, 0, 0) = 1;
   LabelVolume same = holed;
-  const TopologyRepair none = restore_topology(same, topology_of(holed), slice_specks(holed));
+  const TopologyRepair none = restore_topology(same, topology_of(holed), in_place(holed));
   EXPECT_EQ(none.voxels_changed, 0);
   EXPECT_EQ(same.labels, holed.labels);
   LabelVolume lost = holed;
   lost.at(0, 0, 0) = 0;
-  EXPECT_EQ(restore_topology(lost, topology_of(holed), slice_specks(holed)).voxels_changed, 0);
+  EXPECT_EQ(restore_topology(lost, topology_of(holed), in_place(holed)).voxels_changed, 0);
   EXPECT_EQ(topology_of(lost).components, 1);
+}
+
+// A void of the planning organ moved by the map onto another slice (a vessel left out of
+// a grown liver, cut by a slice once the organ moved): a real hole, kept, and not counted
+// by slice_specks given the map; a hole the planning organ does not have at its pre-image
+// is the grid's, filled. The rule is the pre-image's, not the slice's: the slice the void
+// moved to had no hole before.
+TEST(RestoreTopology, KeepsAHoleThePlanningOrganHasWhereItCameFrom) {
+  LabelVolume planning = box_mask(14);
+  planning.at(6, 6, 5) = 0;  // a one-pixel void on slice 5
+  LabelVolume moved = box_mask(14);
+  moved.at(6, 6, 6) = 0;  // the void moved up a slice
+  moved.at(9, 9, 6) = 0;  // and a hole the planning organ has not
+  // The map moves everything up a slice: the pre-image of (i, j, k) is (i, j, k - 1).
+  const SpeckExplained moved_up = [&planning](int i, int j, int k, bool island) {
+    return (planning.at(i, j, k - 1) == 1) == island;
+  };
+  const std::vector<SliceSpecks> unexplained = slice_specks(moved, moved_up);
+  ASSERT_EQ(unexplained.size(), 1u);
+  EXPECT_EQ(unexplained[0].k, 6);
+  EXPECT_EQ(unexplained[0].holes, 1);
+  const TopologyRepair r = restore_topology(moved, topology_of(planning), moved_up);
+  EXPECT_EQ(r.slice_holes_filled, 1);
+  EXPECT_EQ(moved.at(9, 9, 6), 1);
+  EXPECT_EQ(moved.at(6, 6, 6), 0);  // kept
+  EXPECT_TRUE(slice_specks(moved, moved_up).empty());
+  EXPECT_EQ(topology_of(moved), topology_of(planning));
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 //               that do not reach the grid's border: holes sealed inside the organ
 // A one-voxel component is an island; a one-voxel cavity, a pinhole. The pair (26, 6)
 // is the one for which a digital surface separates inside from outside.
+#include <functional>
 #include <vector>
 
 #include "organfit/geometry/image_geometry.h"
@@ -34,8 +35,17 @@ struct SliceSpecks {
   int islands = 0, holes = 0;
 };
 
-/// The slices of label 1 of `mask` with at least one island or hole, by slice index.
-std::vector<SliceSpecks> slice_specks(const LabelVolume& mask);
+/// Whether the one-pixel speck of a mask at voxel (i, j, k) is the planning organ's own,
+/// moved there (an island where the planning organ is, a hole where it is not), by the
+/// planning organ at the voxel's pre-image: the caller's map. A void of the planning organ
+/// between two slices (a vessel left out of a grown liver) is cut by a slice once moved: a
+/// real hole, where a speck the planning organ does not have at its pre-image is the grid's.
+using SpeckExplained = std::function<bool(int i, int j, int k, bool island)>;
+
+/// The slices of label 1 of `mask` with at least one island or hole, by slice index; with
+/// `explained`, only the specks it does not explain are counted.
+std::vector<SliceSpecks> slice_specks(const LabelVolume& mask,
+                                      const SpeckExplained& explained = nullptr);
 
 /// What restore_topology changed.
 struct TopologyRepair {
@@ -45,18 +55,18 @@ struct TopologyRepair {
 };
 
 /// Gives label 1 of `mask` back the topology of the planning organ on the same grid
-/// (`planning`: its topology_of; `planning_specks`: its slice_specks) where sampling broke
-/// it. `mask` is meant to be the image of `planning` under a one-to-one
-/// continuous map (the fit's phi, det(grad phi) > 0) sampled at the voxel centres: that
-/// image has planning's pieces and cavities, and no one-pixel speck a slice of planning
-/// lacks. Sampling breaks this only where the organ is about a voxel thin or a crevice a
-/// voxel wide (a crevice closing at one voxel seals what lies beyond as a cavity; a thin
-/// tip leaves a voxel behind as an island). Repaired by the smallest change, in order:
-/// one-pixel islands removed and holes filled on each slice whose planning slice has none
-/// of that kind; then pieces beyond planning's count removed and cavities beyond its count
-/// filled, the smallest first. What planning has and the mask lost (a thin bridge broken,
+/// (`planning`: its topology_of) where sampling broke it. `mask` is meant to be the image of
+/// the planning organ under a one-to-one continuous map (the fit's phi, det(grad phi) > 0)
+/// sampled at the voxel centres: that image has the planning organ's pieces and cavities,
+/// and each of its one-pixel specks is one the planning organ has at its pre-image.
+/// Sampling breaks this only where the organ is about a voxel thin or a crevice a voxel
+/// wide (a crevice closing at one voxel seals what lies beyond as a cavity; a thin tip
+/// leaves a voxel behind as an island). Repaired by the smallest change, in order: the
+/// one-pixel islands and holes `explained` does not explain, removed and filled; then
+/// pieces beyond the planning organ's count removed and cavities beyond its count filled,
+/// the smallest first. What the planning organ has and the mask lost (a thin bridge broken,
 /// a cavity opened) is not made up: topology_of still shows it.
 TopologyRepair restore_topology(LabelVolume& mask, const Topology& planning,
-                                const std::vector<SliceSpecks>& planning_specks);
+                                const SpeckExplained& explained);
 
 }  // namespace organfit::geometry
