@@ -132,6 +132,15 @@ void for_each_speck(const LabelVolume& mask, int k, const IndexRange& r, Visit&&
 
 }  // namespace
 
+bool is_slice_speck(const LabelVolume& mask, int i, int j, int k, bool island) {
+  const ImageGeometry& g = mask.geometry;
+  if (i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2]) return false;
+  bool found = false;
+  const IndexRange one{{i, j, k}, {i, j, k}};
+  for_each_speck(mask, k, one, [&](int, int, bool is_island) { found = is_island == island; });
+  return found;
+}
+
 Topology topology_of(const LabelVolume& mask) {
   return Pieces(mask).topology();
 }

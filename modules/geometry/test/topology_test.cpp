@@ -85,11 +85,11 @@ TEST(SliceSpecks, CountOnePixelIslandsAndHolesPerSlice) {
 // restore_topology: a crevice one voxel wide that closed at its mouth (a sealed cavity), a
 // voxel left behind off the organ (an island in 3D and on its slice) and a one-pixel hole
 // are undone, and nothing else changes; what the planning organ has itself is kept.
-/// The identity's SpeckExplained: the speck is `planning`'s own when `planning` has its
-/// label at the same voxel.
+/// The identity's SpeckExplained: the speck is `planning`'s own when `planning` has a
+/// speck of the same kind at the same voxel.
 SpeckExplained in_place(const LabelVolume& planning) {
   return [&planning](int i, int j, int k, bool island) {
-    return (planning.at(i, j, k) == 1) == island;
+    return is_slice_speck(planning, i, j, k, island);
   };
 }
 
@@ -130,28 +130,32 @@ TEST(RestoreTopology, UndoesSamplingArtefactsTheMapCannotMake) {
   EXPECT_EQ(topology_of(lost).components, 1);
 }
 
-// A void of the planning organ moved by the map onto another slice (a vessel left out of
-// a grown liver, cut by a slice once the organ moved): a real hole, kept, and not counted
-// by slice_specks given the map; a hole the planning organ does not have at its pre-image
-// is the grid's, filled. The rule is the pre-image's, not the slice's: the slice the void
-// moved to had no hole before.
+// A one-pixel void of the planning organ moved by the map onto another slice (a vessel
+// left out of a grown liver, cut by a slice once the organ moved): a real hole, kept, and
+// not counted by slice_specks given the map; a hole the planning organ does not have at
+// its pre-image is the grid's, filled, and so is one whose pre-image is outside the organ
+// but no hole there (a crevice open to the outside whose mouth closed on the slice). The
+// rule is the pre-image's, not the slice's: the slice the void moved to had no hole before.
 TEST(RestoreTopology, KeepsAHoleThePlanningOrganHasWhereItCameFrom) {
   LabelVolume planning = box_mask(14);
   planning.at(6, 6, 5) = 0;  // a one-pixel void on slice 5
   LabelVolume moved = box_mask(14);
-  moved.at(6, 6, 6) = 0;  // the void moved up a slice
-  moved.at(9, 9, 6) = 0;  // and a hole the planning organ has not
+  moved.at(6, 6, 6) = 0;                               // the void moved up a slice
+  moved.at(9, 9, 6) = 0;                               // and a hole the planning organ has not
+  planning.at(2, 3, 5) = 0, planning.at(3, 3, 5) = 0;  // a crevice from the box's side
+  moved.at(3, 3, 6) = 0;  // its end, its mouth closed on the slice: a hole
   // The map moves everything up a slice: the pre-image of (i, j, k) is (i, j, k - 1).
   const SpeckExplained moved_up = [&planning](int i, int j, int k, bool island) {
-    return (planning.at(i, j, k - 1) == 1) == island;
+    return is_slice_speck(planning, i, j, k - 1, island);
   };
   const std::vector<SliceSpecks> unexplained = slice_specks(moved, moved_up);
   ASSERT_EQ(unexplained.size(), 1u);
   EXPECT_EQ(unexplained[0].k, 6);
-  EXPECT_EQ(unexplained[0].holes, 1);
+  EXPECT_EQ(unexplained[0].holes, 2);
   const TopologyRepair r = restore_topology(moved, topology_of(planning), moved_up);
-  EXPECT_EQ(r.slice_holes_filled, 1);
+  EXPECT_EQ(r.slice_holes_filled, 2);
   EXPECT_EQ(moved.at(9, 9, 6), 1);
+  EXPECT_EQ(moved.at(3, 3, 6), 1);
   EXPECT_EQ(moved.at(6, 6, 6), 0);  // kept
   EXPECT_TRUE(slice_specks(moved, moved_up).empty());
   EXPECT_EQ(topology_of(moved), topology_of(planning));

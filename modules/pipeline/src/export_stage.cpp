@@ -58,11 +58,14 @@ struct PlanningOnGrid {
   explicit PlanningOnGrid(geometry::LabelVolume m)
       : mask(std::move(m)), topology(geometry::topology_of(mask)) {}
   /// A one-pixel speck of `organ` on this grid is the planning organ's own when the
-  /// planning organ has the speck's label at its pre-image (the nearest voxel).
+  /// planning organ has a speck of the same kind at its pre-image (the nearest voxel).
   geometry::SpeckExplained explains(const fitting::EmbeddedBody& organ) const {
     return [this, &organ](int i, int j, int k, bool island) {
       const Eigen::Vector3d q = mask.geometry.index_to_physical(Eigen::Vector3d(i, j, k));
-      return (mask.at_physical(organ.pull_back(q)) == 1) == island;
+      const Eigen::Vector3d p = mask.geometry.physical_to_index(organ.pull_back(q));
+      return geometry::is_slice_speck(mask, static_cast<int>(std::lround(p.x())),
+                                      static_cast<int>(std::lround(p.y())),
+                                      static_cast<int>(std::lround(p.z())), island);
     };
   }
 };

@@ -35,11 +35,16 @@ struct SliceSpecks {
   int islands = 0, holes = 0;
 };
 
+/// Whether voxel (i, j, k) of `mask` is a one-pixel island (`island`) or hole of its slice,
+/// as slice_specks counts them; false outside the grid.
+bool is_slice_speck(const LabelVolume& mask, int i, int j, int k, bool island);
+
 /// Whether the one-pixel speck of a mask at voxel (i, j, k) is the planning organ's own,
-/// moved there (an island where the planning organ is, a hole where it is not), by the
-/// planning organ at the voxel's pre-image: the caller's map. A void of the planning organ
-/// between two slices (a vessel left out of a grown liver) is cut by a slice once moved: a
-/// real hole, where a speck the planning organ does not have at its pre-image is the grid's.
+/// moved there: the planning organ has a speck of the same kind at the voxel's pre-image
+/// (is_slice_speck there; the pre-image is the caller's map). A one-pixel void of the
+/// planning organ (a vessel left out of a grown liver) cut by another slice once the organ
+/// moved is a real hole; a speck the planning organ does not have at its pre-image is the
+/// grid's (a crevice whose mouth closed on the slice, a tip left behind).
 using SpeckExplained = std::function<bool(int i, int j, int k, bool island)>;
 
 /// The slices of label 1 of `mask` with at least one island or hole, by slice index; with
