@@ -4,6 +4,7 @@
 
 #include "organfit/evaluation/synthetic.h"
 #include "organfit/geometry/mask_ops.h"
+#include "organfit/geometry/topology.h"
 #include "organfit/particles/cohesion_force.h"
 #include "organfit/particles/diagnostics.h"
 #include "organfit/particles/lattice_fill.h"
@@ -187,6 +188,10 @@ ModelStageResult run_model_stage(const ModelStageOptions& options, const geometr
       {"kinetic_energy_per_particle", ke},
       {"capped_moves", integ.stats().capped_moves},
       {"components", particles::connected_components(result.state.x, 1.5 * cp.r0_mm)},
+      // The organ's own pieces (26-connected voxels of its mask; an analytic body is one),
+      // for the warning when the particles make more: parts of the organ thinner than
+      // about two lattice spacings hold no particles, so what they joined falls apart.
+      {"organ_components", shape.mask ? geometry::topology_of(*shape.mask).components : 1},
       {"skeleton_nodes", skeleton_nodes},
       {"skeleton_from", skeleton_source},
       {"body_volume_mm3", body_volume},

@@ -252,6 +252,14 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     if (!model->summary["relax_settled"].get<bool>()) {
       warn("model: relaxation did not settle within model.relax_steps");
     }
+    if (const int pieces = model->summary["components"].get<int>(),
+        organ_pieces = model->summary["organ_components"].get<int>();
+        pieces > organ_pieces)
+      warn(fmt::format(
+          "model: the particles make {} separate pieces where the organ is {}: parts of it "
+          "thinner than about two particles ({:.1f} mm) hold none (a smaller model.radius_mm "
+          "follows them; a grown organ may have leaked along them)",
+          pieces, organ_pieces, 2 * model->lattice_spacing_mm));
   } else if (!model) {
     spdlog::info("the scene names no model");
   }

@@ -160,6 +160,32 @@ TEST(ModelStage, ARodTwoParticlesThickKeepsItsShapeWhileTheSkeletonHoldsIt) {
   EXPECT_GT(free["relax_largest_move_mm"].get<double>(), spacing_mm);
 }
 
+// Two balls joined by a bridge one voxel thick (as a grown organ joins what it leaked
+// into): the mask is one piece, the particles at least two, and the summary says both
+// (the run warns of it).
+TEST(ModelStage, ABridgeThinnerThanTheParticlesLeavesTwoPiecesAndSaysSo) {
+  geometry::ImageGeometry g;
+  g.size = {60, 24, 24};
+  g.spacing_mm = Eigen::Vector3d::Ones();
+  g.origin_mm = Eigen::Vector3d(-30, -12, -12);
+  auto mask = std::make_shared<geometry::LabelVolume>(g);
+  for (int k = 0; k < 24; ++k)
+    for (int j = 0; j < 24; ++j)
+      for (int i = 0; i < 60; ++i) {
+        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
+        const bool balls = (p - Eigen::Vector3d(-17, 0, 0)).norm() <= 9 ||
+                           (p - Eigen::Vector3d(17, 0, 0)).norm() <= 9;
+        // One row of voxels between the lattice's rows (at y = -0.5 + 1.725 n mm).
+        const bool bridge = std::abs(p.y() - 2) < 0.5 && std::abs(p.z()) < 0.5;
+        mask->at(i, j, k) = balls || bridge;
+      }
+  const geometry::Shape organ = geometry::make_mask_shape(mask);
+  const ModelStageResult r = run_model_stage(
+      model_stage_options_from(parse("body:\nmodel:\n  radius_mm: 1.25\n")), &organ);
+  EXPECT_EQ(r.summary["organ_components"].get<int>(), 1);
+  EXPECT_GE(r.summary["components"].get<int>(), 2);  // the balls, and what the rim leaves
+}
+
 TEST(ModelStage, ABodyTooSmallForOneParticleIsABadInputNamingTheKey) {
   const config::Scene scene = parse("body:\n  size_mm: [1, 1, 1]\nmodel:\n  radius_mm: 5\n");
   try {
