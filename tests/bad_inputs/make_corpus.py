@@ -379,13 +379,17 @@ points_case('points_very_long_cell', 'x,y,z\n1,2,' + '7' * 50 + 'z' * 5000 + '\n
 case('segment_very_long_roi_name', IMPORT[:-3] + ['R' * 4000, '--out', '{case}/out/mask.nrrd'], "no ROI named '" + 'R' * 80 + "...'", rtstruct=True, cls='messages')
 
 # --- a planning model and the CT a session names -------------------------------------------------------
-planning = os.path.join(out, '_planning')
-os.makedirs(planning)
-open(os.path.join(planning, 'planning.yaml'), 'w').write(
+def shared_run(name, scene):
+    """A run several cases read (a planning model, a fitted one): OUT/NAME/out from `scene`."""
+    folder = os.path.join(out, name)
+    os.makedirs(folder)
+    open(os.path.join(folder, 'scene.yaml'), 'w').write(scene)
+    subprocess.run([organfit, '--quiet', 'run', os.path.join(folder, 'scene.yaml'), '--out', os.path.join(folder, 'out')],
+                   check=True, stdout=subprocess.DEVNULL)
+    return folder
+planning = shared_run('_planning',
     'phantom:\n  columns: 64\n  rows: 64\n  slices: 12\n  pixel_mm: 6\n  slice_mm: 5\n'
     'organ:\n  roi: Prostate\nmodel:\n  radius_mm: 3\nexport:\n  model: model.json\n')
-subprocess.run([organfit, '--quiet', 'run', os.path.join(planning, 'planning.yaml'), '--out', os.path.join(planning, 'out')],
-               check=True, stdout=subprocess.DEVNULL)
 SESSION = 'planning:\n  model: ../_planning/out/model.json\nct:\n  folder: ct\npoints:\n  count: 20\nfit:\n  method: spread\n'
 def other_series(ds):
     ds.SeriesInstanceUID = '1.2.826.0.1.3680043.2.1125.99.21'
@@ -398,24 +402,16 @@ d = case('export_ct_of_another_series', ['export', '--model', '{case}/../_planni
 edit_all(d, other_series)
 planned_ct = json.load(open(os.path.join(planning, 'out', 'model.json')))['ct']
 # A model of a body (no CT): a session exporting on the CT's grid is refused before its fit.
-body_planning = os.path.join(out, '_planning_body')
-os.makedirs(body_planning)
-open(os.path.join(body_planning, 'planning.yaml'), 'w').write(BODY_SCENE + 'export:\n  model: model.json\n')
-subprocess.run([organfit, '--quiet', 'run', os.path.join(body_planning, 'planning.yaml'), '--out', os.path.join(body_planning, 'out')],
-               check=True, stdout=subprocess.DEVNULL)
+shared_run('_planning_body', BODY_SCENE + 'export:\n  model: model.json\n')
 for key in ['labels: l.nrrd', 'uncertainty: s.nrrd']:
     scene_case('session_export_on_the_ct_of_a_body_model_' + key.split(':')[0],
                'planning:\n  model: ../_planning_body/out/model.json\npoints:\n  count: 20\nfit:\n  method: spread\nexport:\n  ' + key + '\n',
                'model.json: the model has no planning CT to export on', cls='disagree')
 # A fitted model's uncertainty: asked of a planning model, or one that does not hold together
 # (a residual short of its points), refused before anything is written.
-fitted = os.path.join(out, '_fitted')
-os.makedirs(fitted)
-open(os.path.join(fitted, 'session.yaml'), 'w').write(
+fitted = shared_run('_fitted',
     'planning:\n  model: ../_planning_body/out/model.json\npoints:\n  count: 20\nfit:\n  method: spread\n'
     'export:\n  model: fitted.json\n')
-subprocess.run([organfit, '--quiet', 'run', os.path.join(fitted, 'session.yaml'), '--out', os.path.join(fitted, 'out')],
-               check=True, stdout=subprocess.DEVNULL)
 case('export_uncertainty_of_a_planning_model',
      ['export', '--model', '{case}/../_planning_body/out/model.json', '--uncertainty', '{case}/out/s.nrrd'],
      "model.json: the model holds no fit's uncertainty", ct=False, cls='disagree')

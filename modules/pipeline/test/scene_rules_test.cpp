@@ -128,25 +128,32 @@ TEST(ModelStage, FillsAndRelaxesTheBodyIntoOneComponent) {
               0.9758, 5e-4);
 }
 
+// An organ given as a mask of 1 mm voxels over `size` from `origin_mm`, label 1 where
+// `inside` (a point in mm) holds.
+template <class Inside>
+geometry::Shape organ_of(const std::array<int, 3>& size, const Eigen::Vector3d& origin_mm,
+                         Inside&& inside) {
+  geometry::ImageGeometry g;
+  g.size = size;
+  g.spacing_mm = Eigen::Vector3d::Ones();
+  g.origin_mm = origin_mm;
+  auto mask = std::make_shared<geometry::LabelVolume>(g);
+  for (int k = 0; k < size[2]; ++k)
+    for (int j = 0; j < size[1]; ++j)
+      for (int i = 0; i < size[0]; ++i)
+        mask->at(i, j, k) = inside(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+  return geometry::make_mask_shape(mask);
+}
+
 // An organ with a part only two particles across (a ball and a rod 5 mm thick, as a
 // region grown along a vessel has): relaxed with the skeleton in place it settles with
 // every particle near its lattice site; the cohesion alone, a surface tension, makes the
 // rod flow.
 TEST(ModelStage, ARodTwoParticlesThickKeepsItsShapeWhileTheSkeletonHoldsIt) {
-  geometry::ImageGeometry g;
-  g.size = {90, 40, 40};
-  g.spacing_mm = Eigen::Vector3d::Ones();
-  g.origin_mm = Eigen::Vector3d(-20, -20, -20);
-  auto mask = std::make_shared<geometry::LabelVolume>(g);
-  for (int k = 0; k < 40; ++k)
-    for (int j = 0; j < 40; ++j)
-      for (int i = 0; i < 90; ++i) {
-        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
-        const bool ball = p.norm() <= 14,
-                   rod = p.x() > 0 && p.x() < 66 && p.tail<2>().norm() <= 2.5;
-        mask->at(i, j, k) = ball || rod;
-      }
-  const geometry::Shape organ = geometry::make_mask_shape(mask);
+  const geometry::Shape organ =
+      organ_of({90, 40, 40}, Eigen::Vector3d(-20, -20, -20), [](const Eigen::Vector3d& p) {
+        return p.norm() <= 14 || (p.x() > 0 && p.x() < 66 && p.tail<2>().norm() <= 2.5);
+      });
   auto relaxed = [&](bool skeleton) {
     ModelStageOptions o = model_stage_options_from(
         parse(fmt::format("body:\nmodel:\n  radius_mm: 1.25\n  skeleton: {}\n", skeleton)));
@@ -164,22 +171,13 @@ TEST(ModelStage, ARodTwoParticlesThickKeepsItsShapeWhileTheSkeletonHoldsIt) {
 // into): the mask is one piece, the particles at least two, and the summary says both
 // (the run warns of it).
 TEST(ModelStage, ABridgeThinnerThanTheParticlesLeavesTwoPiecesAndSaysSo) {
-  geometry::ImageGeometry g;
-  g.size = {60, 24, 24};
-  g.spacing_mm = Eigen::Vector3d::Ones();
-  g.origin_mm = Eigen::Vector3d(-30, -12, -12);
-  auto mask = std::make_shared<geometry::LabelVolume>(g);
-  for (int k = 0; k < 24; ++k)
-    for (int j = 0; j < 24; ++j)
-      for (int i = 0; i < 60; ++i) {
-        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
-        const bool balls = (p - Eigen::Vector3d(-17, 0, 0)).norm() <= 9 ||
-                           (p - Eigen::Vector3d(17, 0, 0)).norm() <= 9;
-        // One row of voxels between the lattice's rows (at y = -0.5 + 1.725 n mm).
-        const bool bridge = std::abs(p.y() - 2) < 0.5 && std::abs(p.z()) < 0.5;
-        mask->at(i, j, k) = balls || bridge;
-      }
-  const geometry::Shape organ = geometry::make_mask_shape(mask);
+  const geometry::Shape organ =
+      organ_of({60, 24, 24}, Eigen::Vector3d(-30, -12, -12), [](const Eigen::Vector3d& p) {
+        // The bridge: one row of voxels between the lattice's rows (y = -0.5 + 1.725 n mm).
+        return (p - Eigen::Vector3d(-17, 0, 0)).norm() <= 9 ||
+               (p - Eigen::Vector3d(17, 0, 0)).norm() <= 9 ||
+               (std::abs(p.y() - 2) < 0.5 && std::abs(p.z()) < 0.5);
+      });
   const ModelStageResult r = run_model_stage(
       model_stage_options_from(parse("body:\nmodel:\n  radius_mm: 1.25\n")), &organ);
   EXPECT_EQ(r.summary["organ_components"].get<int>(), 1);
