@@ -39,7 +39,8 @@ std::string volume_change_reason(double volume_ratio, double tolerance_pct) {
 
 /// Where the global maps `fits` disagree with `map`: at each surface sample's image by `map`,
 /// the mean over `fits` of the square of each one's image of it from `map`'s, along `map`'s
-/// normal there (its affine part's turn of the sample's normal), mm^2.
+/// normal there (its affine part's turn of the sample's normal), mm^2; empty where that is
+/// 0 at every sample.
 PriorVarianceField undecided_by(const GlobalMap& map, const std::vector<GlobalMap>& fits,
                                 const SurfaceSamples& surface) {
   const Eigen::Index n = surface.points.cols();
@@ -61,6 +62,9 @@ PriorVarianceField undecided_by(const GlobalMap& map, const std::vector<GlobalMa
     out.at_mm.col(j) = at;
     out.variance_mm2[j] = sum / static_cast<double>(fits.size());
   }
+  // No disagreement anywhere (the kept map alone, or fits that agree): u = 0, an empty
+  // field, which the uncertainty need not look up and a model file need not carry.
+  if (out.variance_mm2.maxCoeff() == 0) return PriorVarianceField{};
   return out;
 }
 
