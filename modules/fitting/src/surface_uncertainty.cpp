@@ -80,17 +80,28 @@ SurfaceUncertainty::SurfaceUncertainty(const std::vector<Eigen::Vector3d>& point
     scale_[i] = prior_sd_mm(points_.col(i));
   }
   if (local_) return;
-  const Eigen::Index m = points_.cols();
-  const double inv_2l2 = 1.0 / (2 * options.length_mm * options.length_mm);
-  Eigen::MatrixXd k(m, m);
-  for (Eigen::Index i = 0; i < m; ++i)
-    for (Eigen::Index j = 0; j <= i; ++j)
-      k(i, j) = k(j, i) = scale_[i] * scale_[j] *
-                          std::exp(-(points_.col(i) - points_.col(j)).squaredNorm() * inv_2l2);
-  k.diagonal() += noise2_;
-  const Eigen::LLT<Eigen::MatrixXd> llt(k);  // K + N is positive definite
+  const Eigen::LLT<Eigen::MatrixXd> llt(observed_covariance({}));  // positive definite
   lower_ = llt.matrixL();
   weights_ = llt.solve(y_);
+}
+
+double SurfaceUncertainty::covariance(double s_a, const Eigen::Vector3d& a, double s_b,
+                                      const Eigen::Vector3d& b) const {
+  const double inv_2l2 = 1.0 / (2 * options_.length_mm * options_.length_mm);
+  return s_a * s_b * std::exp(-(a - b).squaredNorm() * inv_2l2);
+}
+
+Eigen::MatrixXd SurfaceUncertainty::observed_covariance(const std::vector<int>& of) const {
+  auto at = [&of](Eigen::Index i) { return of.empty() ? i : of[static_cast<size_t>(i)]; };
+  const Eigen::Index m = of.empty() ? points_.cols() : static_cast<Eigen::Index>(of.size());
+  Eigen::MatrixXd k(m, m);
+  for (Eigen::Index i = 0; i < m; ++i) {
+    for (Eigen::Index j = 0; j <= i; ++j)
+      k(i, j) = k(j, i) =
+          covariance(scale_[at(i)], points_.col(at(i)), scale_[at(j)], points_.col(at(j)));
+    k(i, i) += noise2_[at(i)];
+  }
+  return k;
 }
 
 double SurfaceUncertainty::sd_mm(const Eigen::Vector3d& x) const {
@@ -121,30 +132,22 @@ double SurfaceUncertainty::prior_sd_mm(const Eigen::Vector3d& x) const {
 double SurfaceUncertainty::posterior_sd_mm(const Eigen::Vector3d& x,
                                            const std::vector<int>& of) const {
   const double sx = prior_sd_mm(x), s2 = sx * sx;
-  const double inv_2l2 = 1.0 / (2 * options_.length_mm * options_.length_mm);
   const double r2 = options_.resolution_sd_mm * options_.resolution_sd_mm;
   auto at = [&of](Eigen::Index i) { return of.empty() ? i : of[static_cast<size_t>(i)]; };
   const Eigen::Index m = of.empty() ? points_.cols() : static_cast<Eigen::Index>(of.size());
   Eigen::VectorXd kx(m);
   for (Eigen::Index i = 0; i < m; ++i)
-    kx[i] = sx * scale_[at(i)] * std::exp(-(points_.col(at(i)) - x).squaredNorm() * inv_2l2);
+    kx[i] = covariance(sx, x, scale_[at(i)], points_.col(at(i)));
   double mean = 0, explained = 0;
   if (of.empty()) {
     // k_x^T (L L^T)^-1 k_x = |L^-1 k_x|^2
     explained = lower_.triangularView<Eigen::Lower>().solve(kx).squaredNorm();
     mean = kx.dot(weights_);
   } else {
-    Eigen::MatrixXd k(m, m);
     Eigen::VectorXd y(m);
-    for (Eigen::Index i = 0; i < m; ++i) {
+    for (Eigen::Index i = 0; i < m; ++i)
       y[i] = y_[at(i)];
-      for (Eigen::Index j = 0; j <= i; ++j)
-        k(i, j) = k(j, i) =
-            scale_[at(i)] * scale_[at(j)] *
-            std::exp(-(points_.col(at(i)) - points_.col(at(j))).squaredNorm() * inv_2l2);
-      k(i, i) += noise2_[at(i)];
-    }
-    const Eigen::LLT<Eigen::MatrixXd> llt(k);
+    const Eigen::LLT<Eigen::MatrixXd> llt(observed_covariance(of));
     explained = llt.matrixL().solve(kx).squaredNorm();
     mean = kx.dot(llt.solve(y));
   }

@@ -103,6 +103,11 @@ class SurfaceUncertainty {
   // All observations at once (not local_):
   Eigen::MatrixXd lower_;    ///< Cholesky factor of K + N
   Eigen::VectorXd weights_;  ///< (K + N)^-1 y: m(x) = k_x^T weights_
+  /// k(a, b) = s(a) s(b) exp(-|a - b|^2 / (2 l^2)) (mm^2), with s(a) = s_a, s(b) = s_b.
+  double covariance(double s_a, const Eigen::Vector3d& a, double s_b,
+                    const Eigen::Vector3d& b) const;
+  /// K + N over the observations `of` (indices into points_; all when empty).
+  Eigen::MatrixXd observed_covariance(const std::vector<int>& of) const;
   /// The posterior given the observations `of` (indices into points_; all when empty and
   /// not local_): sqrt(m^2 + sigma^2 + r^2).
   double posterior_sd_mm(const Eigen::Vector3d& x_mm, const std::vector<int>& of) const;
