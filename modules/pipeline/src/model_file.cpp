@@ -23,7 +23,9 @@ nlohmann::json vec(const Eigen::Vector3d& v) {
   return {v.x(), v.y(), v.z()};
 }
 
-nlohmann::json flat(const Eigen::Matrix3Xd& m) {
+/// A dense matrix or vector's numbers in its storage order (column-major).
+template <class Derived>
+nlohmann::json flat(const Eigen::PlainObjectBase<Derived>& m) {
   return std::vector<double>(m.data(), m.data() + m.size());
 }
 
@@ -54,7 +56,7 @@ nlohmann::json mask_to_json(const geometry::LabelVolume& mask) {
   return {{"size", {crop.size[0], crop.size[1], crop.size[2]}},
           {"spacing_mm", vec(crop.spacing_mm)},
           {"origin_mm", vec(crop.origin_mm)},
-          {"direction", std::vector<double>(r.data(), r.data() + 9)},  // column-major
+          {"direction", flat(r)},  // column-major
           {"runs", runs}};
 }
 
@@ -73,10 +75,7 @@ nlohmann::json uncertainty_to_json(const fitting::SurfaceUncertainty& u) {
           {"points_mm", flat(u.points_mm())},
           {"residuals_mm", u.residuals_mm()},
           {"prior_variance",
-           {{"at_mm", flat(extra.at_mm)},
-            {"variance_mm2",
-             std::vector<double>(extra.variance_mm2.data(),
-                                 extra.variance_mm2.data() + extra.variance_mm2.size())}}}};
+           {{"at_mm", flat(extra.at_mm)}, {"variance_mm2", flat(extra.variance_mm2)}}}};
 }
 
 /// Throws std::invalid_argument naming the key on counts that do not match (the
@@ -109,8 +108,6 @@ std::shared_ptr<const fitting::SurfaceUncertainty> uncertainty_from_json(const n
   extra.at_mm = columns(at, "uncertainty.prior_variance.at_mm");
   extra.variance_mm2 = Eigen::Map<const Eigen::VectorXd>(
       variance.data(), static_cast<Eigen::Index>(variance.size()));
-  if (!extra.at_mm.allFinite())
-    throw std::invalid_argument("uncertainty.prior_variance.at_mm: not finite");
   try {
     return std::make_shared<const fitting::SurfaceUncertainty>(points_mm, o, residuals,
                                                                std::move(extra));
@@ -156,11 +153,10 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
     const auto& map = m.global_map;
     j["embedding"] = {
         {"placed_positions_mm", flat(m.placed)},
-        {"global_affine", std::vector<double>(map.affine.a.data(), map.affine.a.data() + 9)},
+        {"global_affine", flat(map.affine.a)},
         {"global_translation_mm", vec(map.affine.t)},
         {"global_shear_centre_mm", vec(map.shears.centre)},
-        {"global_shears",
-         std::vector<double>(map.shears.c.data(), map.shears.c.data() + map.shears.c.size())},
+        {"global_shears", flat(map.shears.c)},
         {"global_shear_fields",
          map.fields.empty()
              ? nlohmann::json(nullptr)
@@ -168,10 +164,7 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
                               {"origin_mm", vec(map.fields.origin_mm)},
                               {"count",
                                {map.fields.count.x(), map.fields.count.y(), map.fields.count.z()}},
-                              {"weights_mm",
-                               std::vector<double>(
-                                   map.fields.weights.data(),
-                                   map.fields.weights.data() + map.fields.weights.size())}}},
+                              {"weights_mm", flat(map.fields.weights)}}},
         {"global_flow",
          map.flow.empty()
              ? nlohmann::json(nullptr)
@@ -179,9 +172,7 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
                    {"sigma_mm", map.flow.sigma_mm},
                    {"origin_mm", vec(map.flow.origin_mm)},
                    {"count", {map.flow.count.x(), map.flow.count.y(), map.flow.count.z()}},
-                   {"potentials_mm", std::vector<double>(map.flow.potentials.data(),
-                                                         map.flow.potentials.data() +
-                                                             map.flow.potentials.size())}}}};
+                   {"potentials_mm", flat(map.flow.potentials)}}}};
   } else {
     j["embedding"] = nullptr;
   }
