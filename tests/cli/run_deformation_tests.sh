@@ -49,7 +49,8 @@ if command -v plastimatch >/dev/null; then
   # The planning organ's signed distance warped by plastimatch through our field gives our
   # organ voxel for voxel (up to the few voxels the export's topology repair may change).
   check prostate.plastimatch_warps_the_signed_distance_to_our_organ bash -c "mkdir -p '$tmp/wd' &&
-    $py '$src/tests/cli/warp_distance.py' '$tmp/plan/planning.nrrd' '$tmp/session/vf.mha' '$tmp/session/fit.nrrd' '$tmp/wd' 0.999"
+    $py '$src/tests/cli/warp_distance.py' '$tmp/plan/planning.nrrd' '$tmp/session/vf.mha' '$tmp/session/fit.nrrd' '$tmp/wd' 0.999 \
+      '$tmp/session/run.json'"
   check prostate.jacobian_positive_and_one_far_away bash -c "
 plastimatch stats '$tmp/session/jacobian.nrrd' | tee '$tmp/jac.txt' &&
 $py -c \"
@@ -174,7 +175,8 @@ for folder in ct-sts-002 ct-sts-004; do
     --set points.stretch=1.1 --set fit.measure_truth=false --set export.labels=fit.nrrd \
     --set export.displacement_field=vf.mha
   check "real.$folder.plastimatch_warps_the_signed_distance_to_our_organ" bash -c "mkdir -p '$tmp/$folder-wd' &&
-    $py '$src/tests/cli/warp_distance.py' '$tmp/$folder-plan/planning.nrrd' '$tmp/$folder-field/vf.mha' '$tmp/$folder-field/fit.nrrd' '$tmp/$folder-wd' 0.999"
+    $py '$src/tests/cli/warp_distance.py' '$tmp/$folder-plan/planning.nrrd' '$tmp/$folder-field/vf.mha' '$tmp/$folder-field/fit.nrrd' '$tmp/$folder-wd' 0.999 \
+      '$tmp/$folder-field/run.json'"
   check "real.$folder.plastimatch_warps_the_label_map_near_our_organ" warp_dice "$tmp/$folder-plan/planning.nrrd" \
     "$tmp/$folder-field/vf.mha" "$tmp/$folder-field/fit.nrrd" 0.98
 done

@@ -2,15 +2,17 @@
 structure is resampled between thick slices: its signed distance (written here, with
 scipy, to our definition in geometry/signed_distance.h: at a voxel centre the distance to
 the nearest centre across the boundary less half the smallest spacing, negative inside)
-warped linearly by `plastimatch convert --xf`, kept where < 0. Prints the Dice against our
-exported label map and asserts it is at least MIN_DICE.
+warped linearly by `plastimatch convert --xf`, kept where below the organ's level (run.json
+`export.organ_level_mm`). Prints the Dice against our exported label map and asserts it is
+at least MIN_DICE.
 
 A label map warped linearly and kept where >= 0.5 takes the union of two slices at their
 midplane, and warped by nearest neighbour gains or loses whole slices with the phase of
 the samples: on 2.5 mm slices they differ from the organ moved by the same field by a few
 percent of its volume (docs/decisions.md), which the signed distance does not.
 
-usage: warp_distance.py PLANNING_LABELS.nrrd FIELD.mha OURS.nrrd WORK_FOLDER MIN_DICE"""
+usage: warp_distance.py PLANNING_LABELS.nrrd FIELD.mha OURS.nrrd WORK_FOLDER MIN_DICE RUN_JSON"""
+import json
 import os
 import subprocess
 import sys
@@ -50,7 +52,7 @@ def plastimatch(*args):
     subprocess.run(["plastimatch", *args], check=True, stdout=subprocess.DEVNULL)
 
 
-def main(planning, field, ours, work, min_dice):
+def main(planning, field, ours, work, min_dice, level):
     plastimatch("convert", "--input", planning, "--output-img", os.path.join(work, "planning.mha"),
                 "--output-type", "uchar")
     plastimatch("convert", "--input", ours, "--output-img", os.path.join(work, "ours.mha"),
@@ -68,13 +70,14 @@ def main(planning, field, ours, work, min_dice):
                 "--default-value", "1000")
     warped, _ = read_mha(os.path.join(work, "warped.mha"))
     ours_mask, _ = read_mha(os.path.join(work, "ours.mha"))
-    a, b = warped < 0, ours_mask > 0
+    a, b = warped < level, ours_mask > 0
     dice = 2.0 * np.count_nonzero(a & b) / (np.count_nonzero(a) + np.count_nonzero(b))
     print(f"dice {dice:.5f} (warped {np.count_nonzero(a)} voxels, ours {np.count_nonzero(b)})")
     assert dice >= min_dice, dice
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 6:
+    if len(sys.argv) != 7:
         sys.exit(__doc__)
-    main(*sys.argv[1:5], float(sys.argv[5]))
+    main(*sys.argv[1:5], float(sys.argv[5]),
+         json.load(open(sys.argv[6]))["export"]["organ_level_mm"])

@@ -34,11 +34,12 @@ EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> referenc
       deformation_(std::move(deformation)) {
   if (!reference_ || !distance_) throw std::invalid_argument("embedded body: no reference body");
   if (!deformation_) throw std::invalid_argument("embedded body: no deformation");
+  level_mm_ = distance_->volume_level();
 }
 
 bool EmbeddedBody::inside(const Eigen::Vector3d& q) const {
   const Eigen::Vector3d r = pull_back(q);
-  return r.allFinite() && distance_->at(r) < 0;
+  return r.allFinite() && distance_->at(r) < level_mm_;
 }
 
 geometry::Aabb EmbeddedBody::bounds() const {
@@ -55,7 +56,8 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   geometry::LabelVolume out(grid);
   const geometry::IndexRange r = geometry::index_range(grid, bounds());
   if (r.empty()) return out;
-  // A voxel q is inside when D(q) = d(phi^-1(q)) < 0, d the reference's signed distance.
+  // A voxel q is inside when D(q) = d(phi^-1(q)) - level < 0, d the reference's signed
+  // distance.
   // Over a ball of radius h about c, |D(q) - D(c)| <= G (S h + slack), S and slack phi^-1's
   // stretch bound over the grid's part (pull_back_stretch) and G d's gradient bound about
   // phi^-1(c): where |D(c)| exceeds that, the whole ball has D(c)'s sign
@@ -72,7 +74,7 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   auto ball = [&](const Eigen::Vector3d& centre, double h) {
     if (!bounded) return geometry::BallSide::unknown;
     const Eigen::Vector3d y = pull_back(centre);
-    const double d = y.allFinite() ? distance_->at(y) : HUGE_VAL;
+    const double d = y.allFinite() ? distance_->at(y) - level_mm_ : HUGE_VAL;
     if (!std::isfinite(d)) return geometry::BallSide::unknown;
     const double reach = bound.stretch * h + bound.slack_mm;
     if (std::abs(d) > distance_->gradient_bound(y, reach) * reach)

@@ -341,7 +341,8 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   // show (the part beyond the global map), and place by place u(x)^2, where the equally good global
   // maps disagree (undecided_by). Its observations are the points the fit used: a rejected
   // point (an outlier) neither pins the surface nor shows a change. Each observes the fitted
-  // organ's residual there: the reference's signed distance d at phi^-1(p) (mm), over the
+  // organ's residual there: the reference's signed distance d at phi^-1(p) less the organ's
+  // level (mm), over the
   // stretch of its normal into today's space by the global map's affine part, |a^-T n|.
   std::vector<Eigen::Vector3d> point_positions;
   std::vector<double> point_residuals;
@@ -355,7 +356,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     point_positions.push_back(p);
     local_sq += (phi.global_map().apply(x) - p).squaredNorm();
     Eigen::Vector3d gradient;
-    const double d = organ_distance.at(x, &gradient);
+    const double d = organ_distance.at(x, &gradient) - out.after->level_mm();
     const double stretch =
         gradient.norm() > 1e-9 ? (normal_map * gradient.normalized()).norm() : 1.0;
     point_residuals.push_back(d / stretch);

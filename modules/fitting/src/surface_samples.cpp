@@ -2,6 +2,7 @@
 
 #include <cstdint>
 
+#include "organfit/geometry/counter_random.h"
 #include "organfit/geometry/mask_ops.h"
 
 namespace organfit::fitting {
@@ -42,11 +43,7 @@ namespace {
 /// (the samples' centre 4.9 mm off the 30 mm cube's).
 bool kept_one_in(int stride, std::uint64_t v) {
   if (stride <= 1) return true;
-  v += 0x9e3779b97f4a7c15ULL;
-  v = (v ^ (v >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  v = (v ^ (v >> 27)) * 0x94d049bb133111ebULL;
-  v ^= v >> 31;
-  return v % static_cast<std::uint64_t>(stride) == 0;
+  return geometry::splitmix64(v) % static_cast<std::uint64_t>(stride) == 0;
 }
 }  // namespace
 

@@ -3,27 +3,22 @@
 #include <cmath>
 #include <string>
 
+#include "organfit/geometry/counter_random.h"
 #include "organfit/particles/neighbour_list.h"
 
 namespace organfit::particles {
 namespace {
 
-// splitmix64: a counter-based generator, so noise is independent of thread order.
-std::uint64_t mix(std::uint64_t z) {
-  z += 0x9e3779b97f4a7c15ULL;
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
-}
-
-double uniform01(std::uint64_t key) {
-  return (static_cast<double>(mix(key) >> 11) + 0.5) * (1.0 / 9007199254740992.0);
-}
+// A counter-based generator (geometry/counter_random.h), so noise is independent of
+// thread order.
+using geometry::splitmix64;
+using geometry::uniform01;
 
 /// Standard normal from (seed, step, particle, component) via Box-Muller.
 double normal(std::uint64_t seed, long long step, int i, int d) {
   const std::uint64_t key =
-      mix(seed ^ mix(static_cast<std::uint64_t>(step) * 0x100000001b3ULL + i)) + 2 * d;
+      splitmix64(seed ^ splitmix64(static_cast<std::uint64_t>(step) * 0x100000001b3ULL + i)) +
+      2 * d;
   const double u1 = uniform01(key), u2 = uniform01(key + 1);
   return std::sqrt(-2.0 * std::log(u1)) * std::cos(2 * M_PI * u2);
 }

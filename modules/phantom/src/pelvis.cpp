@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "organfit/geometry/counter_random.h"
+
 namespace organfit::phantom {
 namespace {
 
@@ -122,14 +124,9 @@ Tissue tissue_at(const Eigen::Vector3d& p) {
 /// A standard normal deviate from (seed, index): splitmix64 then Box-Muller, so every
 /// voxel's noise is fixed whatever the thread count or order.
 double gaussian(std::uint64_t seed, std::uint64_t index) {
-  auto mix = [](std::uint64_t z) {
-    z += 0x9e3779b97f4a7c15ULL;
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-    return z ^ (z >> 31);
-  };
-  const std::uint64_t a = mix(seed * 0x100000001b3ULL ^ mix(2 * index)),
-                      b = mix(a ^ mix(2 * index + 1));
+  using geometry::splitmix64;
+  const std::uint64_t a = splitmix64(seed * 0x100000001b3ULL ^ splitmix64(2 * index)),
+                      b = splitmix64(a ^ splitmix64(2 * index + 1));
   const double u1 = (static_cast<double>(a >> 11) + 0.5) * 0x1.0p-53,
                u2 = static_cast<double>(b >> 11) * 0x1.0p-53;
   return std::sqrt(-2 * std::log(u1)) * std::cos(2 * kPi * u2);

@@ -246,6 +246,7 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
                              const dicom::CtSeries* ct, const ExportRequest& r) {
   PendingExport out;
   out.summary = nlohmann::json::object();
+  out.summary["organ_level_mm"] = organ.level_mm();
   const bool on_ct = r.on_ct_grid(), fields = r.deformation_files();
   const bool vectors = !r.displacement_field.empty() || !r.registration.empty();
   Progress progress("export", (on_ct ? 3 : 0) + (fields ? 1 : 0) + (r.mesh.empty() ? 0 : 1));

@@ -9,10 +9,12 @@
 //
 // A point q of the fitted configuration is inside when phi^-1(q), the fit's deformation
 // pulled back (deformation.h: defined at every point), is inside the reference mask: its
-// signed distance, unsmoothed and trilinear, is negative there (geometry/signed_distance.h).
-// At a voxel centre of the reference's grid that is the mask's own label; between slices
-// the surface is interpolated by shape, so that moving the organ by part of a slice
-// neither adds nor removes a slice's worth of volume.
+// signed distance, unsmoothed and trilinear, is below its volume level there
+// (geometry/signed_distance.h). At a voxel centre of the reference's grid that is the
+// mask's own label; between slices the surface is interpolated by shape, so that moving
+// the organ by part of a slice neither adds nor removes a slice's worth of volume; and
+// the level, not zero, so that the voxels' convex edges are not rounded off: moved by
+// parts of a voxel, the organ keeps its voxel count on average.
 #include <Eigen/Core>
 #include <memory>
 #include <vector>
@@ -46,6 +48,10 @@ class EmbeddedBody {
     return deformation_->pull_back(q_mm);
   }
   bool inside(const Eigen::Vector3d& q_mm) const;
+  /// The level of the reference's signed distance that bounds the body (mm; inside where
+  /// d(phi^-1(q)) < level): SignedDistance::volume_level, so that the body keeps its voxel
+  /// count on a grid it moves across by parts of a voxel.
+  double level_mm() const { return level_mm_; }
   /// A box holding the body (Deformation::particle_box; the reference's box for a
   /// deformation without particles).
   geometry::Aabb bounds() const;
@@ -72,6 +78,7 @@ class EmbeddedBody {
   std::shared_ptr<const geometry::LabelVolume> reference_;
   std::shared_ptr<const geometry::SignedDistance> distance_;
   std::shared_ptr<const Deformation> deformation_;
+  double level_mm_ = 0;  ///< distance_->volume_level()
 };
 
 /// Each particle's foot on a surface given by dense samples with outward normals: the
