@@ -57,10 +57,9 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   const geometry::IndexRange r = geometry::index_range(grid, bounds());
   if (r.empty()) return out;
   // A voxel q is inside when D(q) = d(phi^-1(q)) - level < 0, d the reference's signed
-  // distance.
-  // Over a ball of radius h about c, |D(q) - D(c)| <= G (S h + slack), S and slack phi^-1's
-  // stretch bound over the grid's part (pull_back_stretch) and G d's gradient bound about
-  // phi^-1(c): where |D(c)| exceeds that, the whole ball has D(c)'s sign
+  // distance. Over a ball of radius h about c, |D(q) - D(c)| <= G (S h + slack), S and
+  // slack phi^-1's stretch bound over the grid's part (pull_back_stretch) and G d's gradient
+  // bound about phi^-1(c): where |D(c)| exceeds that, the whole ball has D(c)'s sign
   // (geometry/label_by_blocks.h). The labels are those of evaluating every voxel; the
   // pull-backs are those of a band about the surface.
   const geometry::Aabb part{grid.index_to_physical(Eigen::Vector3d(r.lo[0], r.lo[1], r.lo[2])),

@@ -342,8 +342,8 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   // maps disagree (undecided_by). Its observations are the points the fit used: a rejected
   // point (an outlier) neither pins the surface nor shows a change. Each observes the fitted
   // organ's residual there: the reference's signed distance d at phi^-1(p) less the organ's
-  // level (mm), over the
-  // stretch of its normal into today's space by the global map's affine part, |a^-T n|.
+  // level (mm), over the stretch of its normal into today's space by the global map's affine
+  // part, |a^-T n|.
   std::vector<Eigen::Vector3d> point_positions;
   std::vector<double> point_residuals;
   double local_sq = 0;
