@@ -19,10 +19,12 @@ namespace {
 
 constexpr double kSpacing = 3.0;  // particle spacing (mm)
 
-/// An ellipsoid of semi-axes 20, 14, 11 mm centred at c, as a mask of 0.75 mm voxels.
-std::shared_ptr<const geometry::LabelVolume> ellipsoid_mask(const Eigen::Vector3d& c) {
-  const Eigen::Vector3d semi(20, 14, 11);
-  const geometry::ImageGeometry g = geometry::grid_covering({c - semi, c + semi}, 0.75, 3.0);
+const Eigen::Vector3d kSemiAxes(20, 14, 11);  // the ellipsoid's (mm)
+
+/// An ellipsoid of semi-axes kSemiAxes centred at c, as a mask on grid g.
+std::shared_ptr<const geometry::LabelVolume> ellipsoid_on(const geometry::ImageGeometry& g,
+                                                          const Eigen::Vector3d& c) {
+  const Eigen::Vector3d& semi = kSemiAxes;
   auto mask = std::make_shared<geometry::LabelVolume>(g);
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
@@ -31,6 +33,11 @@ std::shared_ptr<const geometry::LabelVolume> ellipsoid_mask(const Eigen::Vector3
         mask->at(i, j, k) = p.cwiseQuotient(semi).squaredNorm() <= 1.0;
       }
   return mask;
+}
+
+/// The same as a mask of 0.75 mm voxels.
+std::shared_ptr<const geometry::LabelVolume> ellipsoid_mask(const Eigen::Vector3d& c) {
+  return ellipsoid_on(geometry::grid_covering({c - kSemiAxes, c + kSemiAxes}, 0.75, 3.0), c);
 }
 
 /// Particles on a cubic lattice inside the mask, at least half a spacing in.
@@ -169,17 +176,11 @@ TEST(EmbeddedBody, OnGridIsEveryVoxelsInsideTest) {
 // and no shift loses a layer of voxels (exactly half a slice along z tied at every
 // boundary at the zero level: -10%).
 TEST(EmbeddedBody, KeepsItsVoxelCountOnItsGridMovedByPartOfAVoxel) {
-  const Eigen::Vector3d c(0.4, -0.3, 1.1), semi(20, 14, 11);
-  geometry::ImageGeometry g = geometry::grid_covering({c - semi, c + semi}, 1.0, 4.0);
+  const Eigen::Vector3d c(0.4, -0.3, 1.1);
+  geometry::ImageGeometry g = geometry::grid_covering({c - kSemiAxes, c + kSemiAxes}, 1.0, 4.0);
   g.spacing_mm.z() = 3.0;
   g.size[2] = (g.size[2] + 2) / 3;
-  auto mask = std::make_shared<geometry::LabelVolume>(g);
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i) {
-        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k)) - c;
-        mask->at(i, j, k) = p.cwiseQuotient(semi).squaredNorm() <= 1.0;
-      }
+  const auto mask = ellipsoid_on(g, c);
   const double planned = mask->volume_mm3(1);
   const particles::Positions x0 = fill(*mask);
   std::mt19937 rng(11);
