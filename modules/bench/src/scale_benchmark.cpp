@@ -184,6 +184,8 @@ nlohmann::json run_cases(const std::vector<const ScaleCase*>& chosen, const Scal
                         c->name, name, fs::absolute(dir / "planning" / "model.json").string(),
                         count));
         while (rate_s < kRateLeastS && rate_runs < kRateMostRuns) {
+          spdlog::info("bench scale: {}: the fit's steps timed again ({:.2f} of {} s so far)",
+                       c->name, rate_s, kRateLeastS);
           const fs::path again = dir / fmt::format("{}-timing-{}", name, rate_runs);
           const nlohmann::json t = run_child(dir / (name + "-timing.yaml"), again, o.threads);
           rate_steps += particle_steps(t);
