@@ -294,10 +294,13 @@ double SignedDistance::volume_level() const {
     // the volume: each voxel's share inside has a variance of at most 1 / (4 s^3), so the
     // volume's (in voxels) is at most band / (4 s^3). A sample below the gap is inside at
     // any level in it, one above outside; those within it are counted in bins across it.
+    constexpr double kStandardError = 1e-4;  // of the volume, relative
     const double wanted_samples =
-        band / (4 * 1e-8 * static_cast<double>(inside) * static_cast<double>(inside));
+        band / (4 * kStandardError * kStandardError * static_cast<double>(inside) *
+                static_cast<double>(inside));
     int sub = 1;
-    while (sub < 4 && sub * sub * sub < wanted_samples)
+    constexpr int kMostSub = 4;  // 64 samples a voxel at most
+    while (sub < kMostSub && sub * sub * sub < wanted_samples)
       ++sub;
     const int per_voxel = sub * sub * sub;
     constexpr int kBins = 4096;
@@ -318,7 +321,8 @@ double SignedDistance::volume_level() const {
               continue;
             }
             for (int sample = 0; sample < per_voxel; ++sample) {
-              const std::uint64_t key = 3 * (static_cast<std::uint64_t>(v) * 64 + sample);
+              const std::uint64_t key =
+                  3 * (static_cast<std::uint64_t>(v) * kMostSub * kMostSub * kMostSub + sample);
               const Eigen::Vector3d place(sample % sub + uniform01(key),
                                           (sample / sub) % sub + uniform01(key + 1),
                                           sample / (sub * sub) + uniform01(key + 2));
