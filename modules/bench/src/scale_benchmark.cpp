@@ -64,6 +64,17 @@ constexpr double kFlatFromParticles = 5000;
 constexpr double kRateLeastS = 1.0;
 constexpr int kRateMostRuns = 20;
 
+/// A session of `count` points on the planning model `model` (an absolute path) under the
+/// scale bench's known change (a stretch of 1.1 and a 2 mm bend), fitted by ours: the
+/// scene, planning, points and fit sections; a caller adds what it exports.
+std::string session_scene(const std::string& name, const std::string& description,
+                          const fs::path& model, int count, bool measure_truth) {
+  return fmt::format(
+      "scene:\n  name: {}\n  description: {}\nplanning:\n  model: '{}'\npoints:\n  count: "
+      "{}\n  stretch: 1.1\n  bend_mm: 2\nfit:\n  method: spread\n  measure_truth: {}\n",
+      name, description, model.string(), count, measure_truth);
+}
+
 /// The run.json of `organfit run scene --out folder`, run as a child process. The child's
 /// messages go to a file beside its folder, not to our stderr: stopped with us, it would
 /// report the stop too; otherwise they are passed on (its warnings), and its error, when it
@@ -147,15 +158,12 @@ nlohmann::json run_cases(const std::vector<const ScaleCase*>& chosen, const Scal
     for (int count : c->session_points) {
       const std::string name = fmt::format("session-{}", count);
       spdlog::info("bench scale: {}: session with {} points", c->name, count);
+      const fs::path model = fs::absolute(dir / "planning" / "model.json");
       write_file_atomically(
           dir / (name + ".yaml"),
-          fmt::format("scene:\n  name: {}-{}\n  description: {}, {} points\nplanning:\n  model: "
-                      "'{}'\npoints:\n  count: {}\n  stretch: 1.1\n  bend_mm: 2\nfit:\n  method: "
-                      "spread\n  measure_truth: {}\nexport:\n  mesh: fit.stl\nreport:\n  file: "
-                      "report.html\n",
-                      c->name, name, c->description, count,
-                      fs::absolute(dir / "planning" / "model.json").string(), count,
-                      c->measure_truth));
+          session_scene(c->name + "-" + name, fmt::format("{}, {} points", c->description, count),
+                        model, count, c->measure_truth) +
+              "export:\n  mesh: fit.stl\nreport:\n  file: report.html\n");
       clock.restart();
       const nlohmann::json s = run_child(dir / (name + ".yaml"), dir / name, o.threads);
       nlohmann::json entry = stages_of(s, clock.elapsed_s());
@@ -176,13 +184,9 @@ nlohmann::json run_cases(const std::vector<const ScaleCase*>& chosen, const Scal
       double rate_steps = particle_steps(s), rate_s = s["fit"]["steps_wall_s"].get<double>();
       int rate_runs = 1;
       if (rate_s < kRateLeastS && n >= kFlatFromParticles) {
-        write_file_atomically(
-            dir / (name + "-timing.yaml"),
-            fmt::format("scene:\n  name: {}-{}-timing\n  description: the fit's steps timed "
-                        "again\nplanning:\n  model: '{}'\npoints:\n  count: {}\n  stretch: "
-                        "1.1\n  bend_mm: 2\nfit:\n  method: spread\n  measure_truth: false\n",
-                        c->name, name, fs::absolute(dir / "planning" / "model.json").string(),
-                        count));
+        write_file_atomically(dir / (name + "-timing.yaml"),
+                              session_scene(c->name + "-" + name + "-timing",
+                                            "the fit's steps timed again", model, count, false));
         while (rate_s < kRateLeastS && rate_runs < kRateMostRuns) {
           spdlog::info("bench scale: {}: the fit's steps timed again ({:.2f} of {} s so far)",
                        c->name, rate_s, kRateLeastS);
