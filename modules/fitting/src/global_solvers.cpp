@@ -141,6 +141,75 @@ double nearest_sample_rms(const GlobalMap& map, const SurfaceSamples& surface,
   return nearest_sample_rms(map_samples(map, surface), points, mads);
 }
 
+MappedSampleSearch::MappedSampleSearch(const Eigen::Matrix3Xd& samples)
+    : samples_(samples),
+      grid_(std::make_unique<geometry::SampleGrid>(
+          samples, geometry::SampleGrid::surface_cell_mm(samples))) {}
+
+MappedSampleSearch::~MappedSampleSearch() = default;
+
+void MappedSampleSearch::nearest(const GlobalMap& map, const Eigen::Matrix3Xd& p,
+                                 std::vector<int>& match, std::vector<double>& r) const {
+  const Eigen::Index m = p.cols();
+  match.assign(static_cast<size_t>(m), -1);
+  r.assign(static_cast<size_t>(m), std::numeric_limits<double>::infinity());
+  if (m == 0 || samples_.cols() == 0) return;
+  GlobalMap f;  // the affine part and the quadratic shears alone
+  f.affine = map.affine;
+  f.shears = map.shears;
+  auto image = [&f](const Eigen::Vector3d& s) -> Eigen::Vector3d {
+    return f.shears.apply(f.affine.a * s + f.affine.t);
+  };
+  const Eigen::Matrix3d a_inverse = f.affine.a.inverse();
+  Eigen::Matrix3Xd q(3, m);
+  std::vector<double> reach(static_cast<size_t>(m));  // D + e, each point
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index k = 0; k < m; ++k) {
+    q.col(k) = f.inverse(p.col(k), a_inverse);
+    const double e = (image(q.col(k)) - p.col(k)).norm();
+    const int near = grid_->nearest(q.col(k)).first;
+    reach[static_cast<size_t>(k)] = (image(samples_.col(near)) - p.col(k)).norm() + e;
+  }
+  const double grow = *std::max_element(reach.begin(), reach.end());
+  const geometry::Aabb box{p.rowwise().minCoeff().array() - grow,
+                           p.rowwise().maxCoeff().array() + grow};
+  const StretchBound bound =
+      std::isfinite(grow) ? f.inverse_stretch(box) : StretchBound{HUGE_VAL, HUGE_VAL};
+  if (!std::isfinite(bound.stretch) || !std::isfinite(bound.slack_mm) || !q.allFinite()) {
+    // No bound: every sample moved, and a grid over them.
+    Eigen::Matrix3Xd moved(3, samples_.cols());
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index j = 0; j < samples_.cols(); ++j)
+      moved.col(j) = image(samples_.col(j));
+    const geometry::SampleGrid grid(moved, geometry::SampleGrid::surface_cell_mm(moved));
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index k = 0; k < m; ++k) {
+      const auto [j, d2] = grid.nearest(p.col(k));
+      match[static_cast<size_t>(k)] = j, r[static_cast<size_t>(k)] = std::sqrt(d2);
+    }
+    return;
+  }
+#pragma omp parallel
+  {
+    std::vector<int> around;
+#pragma omp for schedule(dynamic, 1)
+    for (Eigen::Index k = 0; k < m; ++k) {
+      // Widened by a relative 1e-9 for the rounding of the images.
+      const double radius =
+          (bound.stretch * reach[static_cast<size_t>(k)] + 2 * bound.slack_mm) * (1 + 1e-9) + 1e-9;
+      around.clear();
+      grid_->within(q.col(k), radius, around);  // ascending index: ties go to the first
+      int best = -1;
+      double best_d2 = std::numeric_limits<double>::infinity();
+      for (const int j : around) {
+        const double d2 = (image(samples_.col(j)) - p.col(k)).squaredNorm();
+        if (d2 < best_d2) best = j, best_d2 = d2;
+      }
+      match[static_cast<size_t>(k)] = best, r[static_cast<size_t>(k)] = std::sqrt(best_d2);
+    }
+  }
+}
+
 MappedDistance mapped_distance(const GlobalMap& map, const Eigen::Matrix3d& b,
                                const geometry::SignedDistance& distance, const Eigen::Vector3d& p) {
   MappedDistance out;
@@ -157,6 +226,7 @@ MappedDistance mapped_distance(const GlobalMap& map, const Eigen::Matrix3d& b,
 
 using detail::mapped_distance;
 using detail::MappedDistance;
+using detail::MappedSampleSearch;
 using detail::nearest_sample_rms;
 using detail::robust_weights;
 
@@ -177,15 +247,11 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
 
   std::vector<int> match(m);
   std::vector<double> r(m), w(m);
+  const MappedSampleSearch search(surface.points);
   auto correspond = [&](const Eigen::Matrix3d& a, const Eigen::Vector3d& t) {
-    const Eigen::Matrix3Xd moved = (a * surface.points).colwise() + t;
-    const geometry::SampleGrid grid(moved, geometry::SampleGrid::surface_cell_mm(moved));
-#pragma omp parallel for schedule(static)
-    for (int k = 0; k < m; ++k) {
-      const auto [j, d2] = grid.nearest(p.col(k));
-      r[k] = std::sqrt(d2);
-      match[k] = j;
-    }
+    GlobalMap affine;
+    affine.affine.a = a, affine.affine.t = t;
+    search.nearest(affine, p, match, r);
     return robust_weights(r, points, o.outlier_mads, w);
   };
   fit.rms_before_mm = correspond(fit.a, fit.t);
@@ -307,6 +373,7 @@ std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& su
 
   std::vector<int> match(m);
   std::vector<double> r(m), w;
+  const MappedSampleSearch search(surface.points);
   using Vec21 = Eigen::Matrix<double, 21, 1>;
   auto basis = [](const Eigen::Vector3d& u) {  // d(shear image)/dc at u: 3 x 9
     Eigen::Matrix<double, 3, 9> b = Eigen::Matrix<double, 3, 9>::Zero();
@@ -321,18 +388,7 @@ std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& su
   for (;; ++schedule.steps) {
     const double lambda_a = lambda_a_final * schedule.factor(),
                  lambda_c = lambda_c_final * schedule.factor();
-    const Eigen::Matrix3Xd affine_img = (map.affine.a * surface.points).colwise() + map.affine.t;
-    Eigen::Matrix3Xd moved(3, affine_img.cols());
-#pragma omp parallel for schedule(static)
-    for (Eigen::Index j = 0; j < affine_img.cols(); ++j)
-      moved.col(j) = map.shears.apply(affine_img.col(j));
-    const geometry::SampleGrid grid(moved, geometry::SampleGrid::surface_cell_mm(moved));
-#pragma omp parallel for schedule(static)
-    for (int k = 0; k < m; ++k) {
-      const auto [j, d2] = grid.nearest(p.col(k));
-      r[k] = std::sqrt(d2);
-      match[k] = j;
-    }
+    search.nearest(map, p, match, r);
     const double rms = robust_weights(r, points, o.outlier_mads, w);
     const bool settled = schedule.steps > 0 && std::abs(map.rms_after_mm - rms) < 1e-5 * (1 + rms);
     map.rms_after_mm = rms;
@@ -344,7 +400,9 @@ std::vector<GlobalMap> refine_global_map(GlobalMap map, const SurfaceSamples& su
     // Linearised image of sample s: a s + t + B(u) c, u = the current affine image - centre.
     const Vec21 theta = solve_matched_step<9>(
         surface, p, match, w, map.affine.a.inverse().transpose(), o.point_to_point, lambda_a,
-        lambda_c, [&](int j) { return basis(affine_img.col(j) - map.shears.centre); });
+        lambda_c, [&](int j) {
+          return basis(map.affine.a * surface.points.col(j) + map.affine.t - map.shears.centre);
+        });
     Eigen::Matrix3d a;
     a << theta.segment<3>(0).transpose(), theta.segment<3>(3).transpose(),
         theta.segment<3>(6).transpose();

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "../src/central_differences.h"
+#include "../src/global_solvers.h"
 #include "organfit/fitting/skin.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/sample_grid.h"
@@ -363,6 +364,69 @@ TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
   EXPECT_EQ(grid.nearest(Eigen::Vector3d::Zero(), 10.0).first, -1);  // 17 mm from the centre
   const Eigen::Matrix3Xd none(3, 0);
   EXPECT_EQ(geometry::SampleGrid(none).nearest(Eigen::Vector3d::Zero()).first, -1);
+}
+
+// The global fits' search of the nearest mapped sample (global_solvers.h) against every
+// sample mapped and scanned: the same sample and distance for points on, near, deep inside
+// and far from the surface (one 1 m away, the equidistant pair of a duplicated sample),
+// under maps from the identity to a strong stretch, twist and bend.
+TEST(MappedSampleSearch, FindsWhatEverySampleMappedAndScannedFinds) {
+  SurfaceSamples s = ellipsoid_mask_surface();
+  s.points.conservativeResize(Eigen::NoChange, s.points.cols() + 1);
+  s.points.col(s.points.cols() - 1) = s.points.col(7);
+  const detail::MappedSampleSearch search(s.points);
+  std::mt19937 rng(11);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  for (int trial = 0; trial < 6; ++trial) {
+    GlobalMap map;
+    if (trial > 0) {
+      const double strength = 0.05 * trial;  // up to a 25% stretch, shears of 0.005 / mm
+      Eigen::Matrix3d a = Eigen::Matrix3d::Identity();
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+          a(i, j) += strength * gauss(rng);
+      a /= std::cbrt(a.determinant());
+      map.affine.a = a;
+      map.affine.t = Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng)) * 3.0;
+      map.shears.centre = Eigen::Vector3d(1, -2, 0.5);
+      for (int c = 0; c < QuadraticShears::kCount; ++c)
+        map.shears.c(c) = 0.1 * strength * gauss(rng) / 10.0;
+    }
+    std::vector<Eigen::Vector3d> q;
+    for (Eigen::Index j = 0; j < s.points.cols(); j += 37) {
+      const Eigen::Vector3d on = map.shears.apply(map.affine.a * s.points.col(j) + map.affine.t);
+      q.push_back(on);
+      q.push_back(on + Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng)) * 2.0);
+    }
+    q.push_back(map.shears.apply(map.affine.a * s.points.col(7) + map.affine.t));  // a tie
+    q.push_back(map.affine.t);                                                     // deep inside
+    q.push_back(Eigen::Vector3d(1000, -20, 3));
+    Eigen::Matrix3Xd p(3, static_cast<Eigen::Index>(q.size()));
+    for (size_t k = 0; k < q.size(); ++k)
+      p.col(static_cast<Eigen::Index>(k)) = q[k];
+    std::vector<int> match;
+    std::vector<double> r;
+    search.nearest(map, p, match, r);
+    long differ = 0;
+    for (size_t k = 0; k < q.size(); ++k) {
+      int best = -1;
+      double best_d2 = std::numeric_limits<double>::infinity();
+      for (Eigen::Index j = 0; j < s.points.cols(); ++j) {
+        const Eigen::Vector3d image =
+            map.shears.apply(map.affine.a * s.points.col(j) + map.affine.t);
+        const double d2 = (image - q[k]).squaredNorm();
+        if (d2 < best_d2) best = static_cast<int>(j), best_d2 = d2;
+      }
+      differ += match[k] != best || r[k] != std::sqrt(best_d2);
+    }
+    EXPECT_EQ(differ, 0) << "trial " << trial;
+    EXPECT_EQ(match[q.size() - 3], 7) << "trial " << trial;  // the lower index of the tie
+  }
+  std::vector<int> match;
+  std::vector<double> r;
+  detail::MappedSampleSearch(Eigen::Matrix3Xd(3, 0))
+      .nearest(GlobalMap{}, Eigen::Matrix3Xd::Zero(3, 2), match, r);
+  EXPECT_EQ(match, std::vector<int>({-1, -1}));
 }
 
 TEST(SampleGrid, NearestEachGivesEveryQueryItsOwnSearchsAnswer) {
