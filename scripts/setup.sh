@@ -16,7 +16,7 @@ run_default=1
 packages=(
   build-essential cmake ninja-build ccache pkg-config
   libeigen3-dev libyaml-cpp-dev libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev zlib1g-dev
-  libgtest-dev libbenchmark-dev libomp-dev
+  libgtest-dev libbenchmark-dev libomp-dev libnanoflann-dev
   libinsighttoolkit5-dev libgdcm-dev libgdcm-tools libvtk9-dev libdcmtk-dev
 )
 # orthanc: a real DICOM node for the network tests (run in a network namespace of their

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <nanoflann.hpp>
 #include <stdexcept>
 
 #include "organfit/geometry/sample_grid.h"
@@ -413,29 +414,87 @@ std::vector<Eigen::Vector3i> surface_voxels(const LabelVolume& mask) {
   return out;
 }
 
-MaskSurface::MaskSurface(const LabelVolume& mask) {
+namespace {
+/// The surface voxels' centres (mm, 3 x N) as nanoflann reads a point set.
+struct VoxelCentres {
+  Eigen::Matrix3Xd points;
+  size_t kdtree_get_point_count() const { return static_cast<size_t>(points.cols()); }
+  double kdtree_get_pt(size_t i, size_t axis) const {
+    return points(static_cast<Eigen::Index>(axis), static_cast<Eigen::Index>(i));
+  }
+  template <class Box>
+  bool kdtree_get_bbox(Box&) const {
+    return false;  // the tree finds the box itself
+  }
+};
+using VoxelTree =
+    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, VoxelCentres>,
+                                        VoxelCentres, 3, std::uint32_t>;
+/// Points a leaf (nanoflann's default is 10): the distances between the truth's surfaces of
+/// a 1.5 L liver at 0.5 mm took the same time within 10% at 8, 16 and 32.
+constexpr size_t kLeafPoints = 16;
+/// How far (voxels) the grid searches before the tree is asked (below).
+constexpr double kGridReachVoxels = 4;
+}  // namespace
+
+// Two searches, each where it is fast; the distances are the same either way (exact
+// nearest neighbours). A grid of cells two voxels wide (SampleGrid) answers a query near
+// the surface from the few cells about it, but a far one only after every empty cell
+// within that distance, shell by shell: a 1.5 L liver left undeformed, 3.3 mm from its true
+// organ, took 1.0 s of its truth's 1.5 s of distances so. A k-d tree's boxes skip the empty
+// space, but its descent costs more than the grid near the surface. So the grid searches
+// within 4 voxels and the tree beyond (docs/decisions.md: 2, 4 and 8 alike).
+struct MaskSurface::Search {
+  VoxelCentres centres;
+  std::unique_ptr<SampleGrid> grid;  // none when the mask has no surface voxel
+  std::unique_ptr<VoxelTree> tree;
+  double grid_reach_mm = 0;
+};
+
+MaskSurface::MaskSurface(const LabelVolume& mask) : search_(std::make_unique<Search>()) {
   const ImageGeometry& g = mask.geometry;
   const std::vector<Eigen::Vector3i> voxels = surface_voxels(mask);
-  points_.resize(3, static_cast<Eigen::Index>(voxels.size()));
+  Eigen::Matrix3Xd& points = search_->centres.points;
+  points.resize(3, static_cast<Eigen::Index>(voxels.size()));
   for (size_t v = 0; v < voxels.size(); ++v)
-    points_.col(static_cast<Eigen::Index>(v)) =
+    points.col(static_cast<Eigen::Index>(v)) =
         g.origin_mm + voxels[v].cast<double>().cwiseProduct(g.spacing_mm);
-  // Cells of two voxels: the queries (the other surface's voxels) lie mostly within a
-  // few voxels of this surface, and a cell then holds a handful of its voxels (cbrt(S)
-  // cells a side held some 70 of a lung's 320,000).
-  search_ = std::make_unique<SampleGrid>(points_, 2 * g.spacing_mm.maxCoeff());
+  if (points.cols() == 0) return;
+  search_->grid_reach_mm = kGridReachVoxels * g.spacing_mm.maxCoeff();
+  search_->grid = std::make_unique<SampleGrid>(points, 2 * g.spacing_mm.maxCoeff());
+  search_->tree = std::make_unique<VoxelTree>(
+      3, search_->centres, nanoflann::KDTreeSingleIndexAdaptorParams(kLeafPoints));
 }
 
 MaskSurface::~MaskSurface() = default;
 MaskSurface::MaskSurface(MaskSurface&&) noexcept = default;
 MaskSurface& MaskSurface::operator=(MaskSurface&&) noexcept = default;
 
+const Eigen::Matrix3Xd& MaskSurface::points_mm() const {
+  return search_->centres.points;
+}
+
 std::vector<double> MaskSurface::distances_from(const Eigen::Matrix3Xd& q) const {
-  std::vector<double> d(static_cast<size_t>(q.cols()));
+  std::vector<double> d(static_cast<size_t>(q.cols()), std::numeric_limits<double>::infinity());
+  if (!search_->tree) return d;
+  const VoxelTree& tree = *search_->tree;
+  const SampleGrid& grid = *search_->grid;
+  const double reach = search_->grid_reach_mm;
 #pragma omp parallel for schedule(dynamic, 256)
-  for (long long k = 0; k < static_cast<long long>(d.size()); ++k)
-    d[static_cast<size_t>(k)] =
-        std::sqrt(search_->nearest(q.col(static_cast<Eigen::Index>(k))).second);
+  for (long long k = 0; k < static_cast<long long>(d.size()); ++k) {
+    const double near2 = grid.nearest(q.col(static_cast<Eigen::Index>(k)), reach).second;
+    if (near2 < HUGE_VAL) {
+      d[static_cast<size_t>(k)] = std::sqrt(near2);
+      continue;
+    }
+    std::uint32_t nearest = 0;
+    double d2 = std::numeric_limits<double>::infinity();
+    nanoflann::KNNResultSet<double, std::uint32_t> found(1);
+    found.init(&nearest, &d2);
+    tree.findNeighbors(found, q.col(static_cast<Eigen::Index>(k)).data(),
+                       nanoflann::SearchParams());
+    d[static_cast<size_t>(k)] = std::sqrt(d2);
+  }
   return d;
 }
 

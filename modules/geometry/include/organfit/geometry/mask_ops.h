@@ -66,26 +66,24 @@ struct SurfaceComparison {
   double volume_a_mm3 = 0, volume_b_mm3 = 0;
 };
 
-class SampleGrid;
-
 /// A mask's surface voxels made ready for distance queries: their centres (mm, 3 x N,
 /// ascending linear index; origin + index * spacing, the grid's axes taken as the
-/// patient's as the distance transform takes them) and a search grid over them. Made
-/// once for a mask that is compared with several others.
+/// patient's as the distance transform takes them) and a grid and a k-d tree over them.
+/// Made once for a mask that is compared with several others.
 class MaskSurface {
  public:
   explicit MaskSurface(const LabelVolume& mask);
   ~MaskSurface();
   MaskSurface(MaskSurface&&) noexcept;
   MaskSurface& operator=(MaskSurface&&) noexcept;
-  const Eigen::Matrix3Xd& points_mm() const { return points_; }
+  const Eigen::Matrix3Xd& points_mm() const;
   /// Distance (mm) from each of `q`'s columns to the nearest surface voxel centre
   /// (infinity when the mask has none).
   std::vector<double> distances_from(const Eigen::Matrix3Xd& q) const;
 
  private:
-  Eigen::Matrix3Xd points_;
-  std::unique_ptr<SampleGrid> search_;
+  struct Search;  // the centres and their tree, where the tree's view of them stays put
+  std::unique_ptr<Search> search_;
 };
 
 /// MSD and HD95 between two surfaces (the definitions above: the pooled distances of
