@@ -34,12 +34,11 @@ EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> referenc
       deformation_(std::move(deformation)) {
   if (!reference_ || !distance_) throw std::invalid_argument("embedded body: no reference body");
   if (!deformation_) throw std::invalid_argument("embedded body: no deformation");
-  level_mm_ = distance_->volume_level();
 }
 
 bool EmbeddedBody::inside(const Eigen::Vector3d& q) const {
   const Eigen::Vector3d r = pull_back(q);
-  return r.allFinite() && distance_->at(r) < level_mm_;
+  return r.allFinite() && distance_->at(r) < level_mm();
 }
 
 geometry::Aabb EmbeddedBody::bounds() const {
@@ -70,10 +69,11 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   // d's gradient bound, found here on threads rather than by the first block that asks.
   const bool bounded = std::isfinite(bound.stretch) && std::isfinite(bound.slack_mm) &&
                        std::isfinite(distance_->gradient_bound());
+  const double level = level_mm();
   auto ball = [&](const Eigen::Vector3d& centre, double h) {
     if (!bounded) return geometry::BallSide::unknown;
     const Eigen::Vector3d y = pull_back(centre);
-    const double d = y.allFinite() ? distance_->at(y) - level_mm_ : HUGE_VAL;
+    const double d = y.allFinite() ? distance_->at(y) - level : HUGE_VAL;
     if (!std::isfinite(d)) return geometry::BallSide::unknown;
     const double reach = bound.stretch * h + bound.slack_mm;
     if (std::abs(d) > distance_->gradient_bound(y, reach) * reach)

@@ -246,8 +246,9 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
                              const dicom::CtSeries* ct, const ExportRequest& r) {
   PendingExport out;
   out.summary = nlohmann::json::object();
-  out.summary["organ_level_mm"] = organ.level_mm();
   const bool on_ct = r.on_ct_grid(), fields = r.deformation_files();
+  // The organ's level where the organ itself is written (not for its deformation alone).
+  if (on_ct || !r.mesh.empty()) out.summary["organ_level_mm"] = organ.level_mm();
   const bool vectors = !r.displacement_field.empty() || !r.registration.empty();
   Progress progress("export", (on_ct ? 3 : 0) + (fields ? 1 : 0) + (r.mesh.empty() ? 0 : 1));
   int done = 0;
