@@ -4,6 +4,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -170,13 +171,10 @@ void MappedSampleSearch::nearest(const GlobalMap& map, const Eigen::Matrix3Xd& p
     const int near = grid_->nearest(q.col(k)).first;
     reach[static_cast<size_t>(k)] = (image(samples_.col(near)) - p.col(k)).norm() + e;
   }
-  const double grow = *std::max_element(reach.begin(), reach.end());
-  const geometry::Aabb box{p.rowwise().minCoeff().array() - grow,
-                           p.rowwise().maxCoeff().array() + grow};
-  const StretchBound bound =
-      std::isfinite(grow) ? f.inverse_stretch(box) : StretchBound{HUGE_VAL, HUGE_VAL};
-  if (!std::isfinite(bound.stretch) || !std::isfinite(bound.slack_mm) || !q.allFinite()) {
-    // No bound: every sample moved, and a grid over them.
+  // Every sample moved, and a grid over them: where there is no bound, and where the
+  // points' searches would examine more samples than that moves (10,000 points on a
+  // million particles' surface). The same images and ties either way: the same answers.
+  auto move_all = [&] {
     Eigen::Matrix3Xd moved(3, samples_.cols());
 #pragma omp parallel for schedule(static)
     for (Eigen::Index j = 0; j < samples_.cols(); ++j)
@@ -187,18 +185,30 @@ void MappedSampleSearch::nearest(const GlobalMap& map, const Eigen::Matrix3Xd& p
       const auto [j, d2] = grid.nearest(p.col(k));
       match[static_cast<size_t>(k)] = j, r[static_cast<size_t>(k)] = std::sqrt(d2);
     }
-    return;
-  }
+  };
+  if (!q.allFinite()) return move_all();
+  std::atomic<long long> examined{0};
+  const long long budget = samples_.cols();
 #pragma omp parallel
   {
     std::vector<int> around;
 #pragma omp for schedule(dynamic, 1)
     for (Eigen::Index k = 0; k < m; ++k) {
-      // Widened by a relative 1e-9 for the rounding of the images.
-      const double radius =
-          (bound.stretch * reach[static_cast<size_t>(k)] + 2 * bound.slack_mm) * (1 + 1e-9) + 1e-9;
+      if (examined.load(std::memory_order_relaxed) > budget) continue;  // moved all below
+      // The bound over the box about p holding f(q) and every image within D of p (one
+      // far point's box would loosen every other's bound), widened by a relative 1e-9 for
+      // the rounding of the images.
+      const double reach_k = reach[static_cast<size_t>(k)];
+      const StretchBound bound =
+          f.inverse_stretch({p.col(k).array() - reach_k, p.col(k).array() + reach_k});
+      const double radius = (bound.stretch * reach_k + 2 * bound.slack_mm) * (1 + 1e-9) + 1e-9;
+      if (!std::isfinite(radius)) {
+        examined.store(budget + 1);
+        continue;
+      }
       around.clear();
       grid_->within(q.col(k), radius, around);  // ascending index: ties go to the first
+      examined.fetch_add(static_cast<long long>(around.size()) + 1, std::memory_order_relaxed);
       int best = -1;
       double best_d2 = std::numeric_limits<double>::infinity();
       for (const int j : around) {
@@ -208,6 +218,7 @@ void MappedSampleSearch::nearest(const GlobalMap& map, const Eigen::Matrix3Xd& p
       match[static_cast<size_t>(k)] = best, r[static_cast<size_t>(k)] = std::sqrt(best_d2);
     }
   }
+  if (examined.load() > budget) move_all();
 }
 
 MappedDistance mapped_distance(const GlobalMap& map, const Eigen::Matrix3d& b,

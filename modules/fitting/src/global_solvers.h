@@ -74,8 +74,10 @@ double nearest_sample_rms(const GlobalMap& map, const SurfaceSamples& surface,
 /// moving them all: made once per surface, it moves only the samples about q = f^-1(p).
 /// With D the distance from p to the image of q's nearest sample and e = |f(q) - p| (what
 /// the computed inverse missed), every sample whose image lies within D of p lies within
-/// L (D + e) + 2 slack of q, (L, slack) f^-1's stretch bound over the points' box grown by
-/// D + e (GlobalMap::inverse_stretch). The fits' steps ask it once each with a few points:
+/// L (D + e) + 2 slack of q, (L, slack) f^-1's stretch bound over the box about p of
+/// half-width D + e (GlobalMap::inverse_stretch). Where the points' searches would examine
+/// more samples than there are (many points, or one far off), every sample is moved and
+/// gridded instead: the same answers. The fits' steps ask it once each with a few points:
 /// moving and gridding a 1.5 L liver's 96,000 samples afresh at each of its some 270
 /// steps took 0.5 s of the global stage's 0.8 s.
 class MappedSampleSearch {

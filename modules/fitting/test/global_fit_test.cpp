@@ -369,7 +369,7 @@ TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
 // The global fits' search of the nearest mapped sample (global_solvers.h) against every
 // sample mapped and scanned: the same sample and distance for points on, near, deep inside
 // and far from the surface (one 1 m away, the equidistant pair of a duplicated sample),
-// under maps from the identity to a strong stretch, twist and bend.
+// under maps from the identity to a strong stretch, twist and bend, by either of its ways.
 TEST(MappedSampleSearch, FindsWhatEverySampleMappedAndScannedFinds) {
   SurfaceSamples s = ellipsoid_mask_surface();
   s.points.conservativeResize(Eigen::NoChange, s.points.cols() + 1);
@@ -393,14 +393,18 @@ TEST(MappedSampleSearch, FindsWhatEverySampleMappedAndScannedFinds) {
         map.shears.c(c) = 0.1 * strength * gauss(rng) / 10.0;
     }
     std::vector<Eigen::Vector3d> q;
-    for (Eigen::Index j = 0; j < s.points.cols(); j += 37) {
+    // The last trial with a point at every sample, one deep inside and one 1 m off: their
+    // searches would examine more samples than there are, and all are moved instead.
+    for (Eigen::Index j = 0; j < s.points.cols(); j += trial == 5 ? 1 : 97) {
       const Eigen::Vector3d on = map.shears.apply(map.affine.a * s.points.col(j) + map.affine.t);
       q.push_back(on);
       q.push_back(on + Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng)) * 2.0);
     }
     q.push_back(map.shears.apply(map.affine.a * s.points.col(7) + map.affine.t));  // a tie
-    q.push_back(map.affine.t);                                                     // deep inside
-    q.push_back(Eigen::Vector3d(1000, -20, 3));
+    if (trial == 5) {
+      q.push_back(map.affine.t);  // deep inside
+      q.push_back(Eigen::Vector3d(1000, -20, 3));
+    }
     Eigen::Matrix3Xd p(3, static_cast<Eigen::Index>(q.size()));
     for (size_t k = 0; k < q.size(); ++k)
       p.col(static_cast<Eigen::Index>(k)) = q[k];
@@ -420,7 +424,7 @@ TEST(MappedSampleSearch, FindsWhatEverySampleMappedAndScannedFinds) {
       differ += match[k] != best || r[k] != std::sqrt(best_d2);
     }
     EXPECT_EQ(differ, 0) << "trial " << trial;
-    EXPECT_EQ(match[q.size() - 3], 7) << "trial " << trial;  // the lower index of the tie
+    EXPECT_EQ(match[q.size() - (trial == 5 ? 3 : 1)], 7) << "trial " << trial;  // the tie
   }
   std::vector<int> match;
   std::vector<double> r;
