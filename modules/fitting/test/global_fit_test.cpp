@@ -107,6 +107,14 @@ SurfaceSamples ellipsoid_mask_surface() {
   return reference_surface(ellipsoid_mask(), 2);
 }
 
+/// The ellipsoid's samples with sample 7 repeated last: a tie, which goes to the lower index.
+SurfaceSamples ellipsoid_with_a_duplicate() {
+  SurfaceSamples s = ellipsoid_mask_surface();
+  s.points.conservativeResize(Eigen::NoChange, s.points.cols() + 1);
+  s.points.col(s.points.cols() - 1) = s.points.col(7);
+  return s;
+}
+
 // A bend seen from one side (exact points on the +y half): the whole map follows it
 // with its shears, and the surface comes more than halfway to the truth.
 TEST(GlobalFit, RecoversABendFromPointsOnOneSide) {
@@ -325,9 +333,7 @@ TEST(GlobalFit, FollowsAShiftOfTheWholeOrgan) {
 TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
   // The ellipsoid's surface samples, one duplicated (ties go to the lower index); queries
   // on the surface, inside, 40 mm outside and 1 m away.
-  SurfaceSamples s = ellipsoid_mask_surface();
-  s.points.conservativeResize(Eigen::NoChange, s.points.cols() + 1);
-  s.points.col(s.points.cols() - 1) = s.points.col(7);
+  const SurfaceSamples s = ellipsoid_with_a_duplicate();
   const geometry::SampleGrid grid(s.points);
   std::mt19937 rng(5);
   std::normal_distribution<double> g(0.0, 1.0);
@@ -371,9 +377,7 @@ TEST(SampleGrid, FindsWhatAScanFindsNearAndFarFromTheSamples) {
 // and far from the surface (one 1 m away, the equidistant pair of a duplicated sample),
 // under maps from the identity to a strong stretch, twist and bend, by either of its ways.
 TEST(MappedSampleSearch, FindsWhatEverySampleMappedAndScannedFinds) {
-  SurfaceSamples s = ellipsoid_mask_surface();
-  s.points.conservativeResize(Eigen::NoChange, s.points.cols() + 1);
-  s.points.col(s.points.cols() - 1) = s.points.col(7);
+  const SurfaceSamples s = ellipsoid_with_a_duplicate();
   const detail::MappedSampleSearch search(s.points);
   std::mt19937 rng(11);
   std::normal_distribution<double> gauss(0.0, 1.0);
@@ -437,9 +441,7 @@ TEST(SampleGrid, NearestEachGivesEveryQueryItsOwnSearchsAnswer) {
   // A lattice of queries filling the ellipsoid and beyond it (the skeleton's depths: most
   // deep inside), points equidistant from the duplicated sample, one query 1 m away; boxes
   // smaller than the spacing, about it, and larger than the body.
-  SurfaceSamples s = ellipsoid_mask_surface();
-  s.points.conservativeResize(Eigen::NoChange, s.points.cols() + 1);
-  s.points.col(s.points.cols() - 1) = s.points.col(7);
+  const SurfaceSamples s = ellipsoid_with_a_duplicate();
   const geometry::SampleGrid grid(s.points);
   std::vector<Eigen::Vector3d> q;
   for (double z = -20; z <= 20; z += 1.7)
