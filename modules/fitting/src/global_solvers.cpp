@@ -155,21 +155,19 @@ void MappedSampleSearch::nearest(const GlobalMap& map, const Eigen::Matrix3Xd& p
   match.assign(static_cast<size_t>(m), -1);
   r.assign(static_cast<size_t>(m), std::numeric_limits<double>::infinity());
   if (m == 0 || samples_.cols() == 0) return;
-  GlobalMap f;  // the affine part and the quadratic shears alone
+  GlobalMap f;  // the affine part and the quadratic shears alone (f.apply: no fields, no flow)
   f.affine = map.affine;
   f.shears = map.shears;
-  auto image = [&f](const Eigen::Vector3d& s) -> Eigen::Vector3d {
-    return f.shears.apply(f.affine.a * s + f.affine.t);
-  };
   const Eigen::Matrix3d a_inverse = f.affine.a.inverse();
   Eigen::Matrix3Xd q(3, m);
   std::vector<double> reach(static_cast<size_t>(m));  // D + e, each point
 #pragma omp parallel for schedule(static)
   for (Eigen::Index k = 0; k < m; ++k) {
     q.col(k) = f.inverse(p.col(k), a_inverse);
-    const double e = (image(q.col(k)) - p.col(k)).norm();
+    if (!q.col(k).allFinite()) continue;  // no pre-image: every sample moved, below
+    const double e = (f.apply(q.col(k)) - p.col(k)).norm();
     const int near = grid_->nearest(q.col(k)).first;
-    reach[static_cast<size_t>(k)] = (image(samples_.col(near)) - p.col(k)).norm() + e;
+    reach[static_cast<size_t>(k)] = (f.apply(samples_.col(near)) - p.col(k)).norm() + e;
   }
   // Every sample moved, and a grid over them: where there is no bound, and where the
   // points' searches would examine more samples than that moves (10,000 points on a
@@ -178,7 +176,7 @@ void MappedSampleSearch::nearest(const GlobalMap& map, const Eigen::Matrix3Xd& p
     Eigen::Matrix3Xd moved(3, samples_.cols());
 #pragma omp parallel for schedule(static)
     for (Eigen::Index j = 0; j < samples_.cols(); ++j)
-      moved.col(j) = image(samples_.col(j));
+      moved.col(j) = f.apply(samples_.col(j));
     const geometry::SampleGrid grid(moved, geometry::SampleGrid::surface_cell_mm(moved));
 #pragma omp parallel for schedule(static)
     for (Eigen::Index k = 0; k < m; ++k) {
@@ -212,7 +210,7 @@ void MappedSampleSearch::nearest(const GlobalMap& map, const Eigen::Matrix3Xd& p
       int best = -1;
       double best_d2 = std::numeric_limits<double>::infinity();
       for (const int j : around) {
-        const double d2 = (image(samples_.col(j)) - p.col(k)).squaredNorm();
+        const double d2 = (f.apply(samples_.col(j)) - p.col(k)).squaredNorm();
         if (d2 < best_d2) best = j, best_d2 = d2;
       }
       match[static_cast<size_t>(k)] = best, r[static_cast<size_t>(k)] = std::sqrt(best_d2);
