@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <pthread.h>
 #include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -23,7 +24,10 @@ namespace {
 
 enum Stop : int { kRunning = 0, kSignalled = 1, kOutOfTime = 2 };
 std::atomic<int> g_stop{kRunning};
-std::atomic<bool> g_finishing{false};
+// Who ends a stopped process and prints its one line: the run's thread (kByRun, once it
+// is printing its message) or the watchdog (kByWatchdog, its forced exit). Claimed once.
+enum Ender : int { kNobody = 0, kByRun = 1, kByWatchdog = 2 };
+std::atomic<int> g_ender{kNobody};
 std::atomic<int> g_committing{0};
 std::atomic<double> g_deadline_s{0};  // on the steady clock; 0: none
 // Set while the watchdog removes partial outputs before it ends the process: a library
@@ -53,11 +57,19 @@ void stop_children(int sig = SIGTERM) {
     ::kill(-pid, sig);  // the child's whole process group: the shell and what it runs
 }
 
-/// Whether any child's process group still has a process (a zombie not yet reaped too).
+/// Reaps what has ended of the process group `pid` and tells whether any of it is left.
+/// Its members orphaned by the shell's end are ours to reap (we are their subreaper).
+bool group_left(pid_t pid) {
+  while (::waitpid(-pid, nullptr, WNOHANG) > 0) {
+  }
+  return ::kill(-pid, 0) == 0;
+}
+
+/// Whether any child's process group still has a process.
 bool children_left() {
   std::lock_guard<std::mutex> lock(g_children_mutex);
   for (pid_t pid : g_children)
-    if (::kill(-pid, 0) == 0) return true;
+    if (group_left(pid)) return true;
   return false;
 }
 
@@ -93,7 +105,9 @@ void watchdog(sigset_t signals) {
       stop_at = now_s() + kStopGrace;
       stop_children();
     }
-    if (now_s() < stop_at || g_finishing.load() || g_committing.load() > 0) continue;
+    if (now_s() < stop_at || g_committing.load() > 0) continue;
+    int nobody = kNobody;
+    if (!g_ender.compare_exchange_strong(nobody, kByWatchdog)) continue;  // the run ends itself
     // The run did not stop in time: remove what is partial, innermost first, and end.
     // A child still stopping could write into it again (a slow machine: a work folder
     // was left behind): it is killed first.
@@ -113,8 +127,9 @@ void watchdog(sigset_t signals) {
         // Moved aside first, then removed: the run's thread may still be writing into it
         // (a file made between remove_all's listing and its last rmdir left the folder
         // behind), and a path it opens after the move no longer leads there.
+        // Named for this process: one left by an earlier crash would make the move fail.
         std::filesystem::path aside = path;
-        aside += ".removing";
+        aside += ".removing-" + std::to_string(::getpid());
         std::filesystem::rename(path, aside, ec);
         std::filesystem::remove_all(ec ? path : aside, ec);
       }
@@ -140,6 +155,10 @@ void install_interrupt_handlers() {
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);  // inherited by every later thread
+  // run_command's shell may end before what it runs (dash forks a command rather than exec
+  // it): the orphans come to us rather than to init, which in a container may never reap
+  // them, so that the end of the whole group can be seen.
+  ::prctl(PR_SET_CHILD_SUBREAPER, 1);
   std::thread(watchdog, signals).detach();
 }
 
@@ -177,6 +196,12 @@ int run_command(const std::string& shell_command) {
   int status = -1;
   {
     std::lock_guard<std::mutex> lock(g_children_mutex);
+    // Not once stopped: the watchdog signals the children it knows (under this lock), and
+    // one spawned after it did would outlive the stop.
+    if (interrupted()) {
+      posix_spawnattr_destroy(&attr);
+      throw_if_interrupted();
+    }
     const int rc =
         posix_spawn(&pid, "/bin/sh", nullptr, &attr, const_cast<char* const*>(argv), environ);
     posix_spawnattr_destroy(&attr);
@@ -188,9 +213,12 @@ int run_command(const std::string& shell_command) {
     if (interrupted() && !told) ::kill(-pid, SIGTERM), told = true;
     ::usleep(20'000);
   }
-  // What the shell ran may outlive it by its own clean-up: wait for the group to go.
-  for (int i = 0; interrupted() && i < 20 && ::kill(-pid, 0) == 0; ++i)
-    ::usleep(20'000);
+  // What the shell ran may outlive it by its own clean-up (dash forks a command rather
+  // than exec it): wait for the whole group to go before the caller removes what it wrote
+  // into. Not bounded here: kStopGrace after the stop the watchdog kills the group and ends
+  // the process itself.
+  while (group_left(pid) && interrupted())
+    ::usleep(10'000);
   {
     std::lock_guard<std::mutex> lock(g_children_mutex);
     g_children.erase(pid);
@@ -200,7 +228,12 @@ int run_command(const std::string& shell_command) {
 }
 
 void mark_finishing() {
-  g_finishing.store(true);
+  int nobody = kNobody;
+  if (g_ender.compare_exchange_strong(nobody, kByRun)) return;
+  // The watchdog is ending the process (its forced exit prints the stop's one line): a
+  // second line from here would repeat it.
+  for (;;)
+    ::pause();
 }
 
 PartialPath::PartialPath(std::filesystem::path path, bool only_if_empty) {

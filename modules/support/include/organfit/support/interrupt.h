@@ -30,8 +30,10 @@ void throw_if_interrupted();
 /// The whole command's wall budget (s) from now; 0: none. When it runs out the command
 /// stops as on a signal, exit 3, the message naming `what` (e.g. "scene.max_wall_s").
 void set_wall_budget(double seconds, const char* what);
-/// Tells the watchdog that the command is ending by itself (its message is being printed):
-/// it no longer steps in.
+/// Tells the watchdog that the command is ending by itself (its message is about to be
+/// printed): it no longer steps in. If the watchdog has already begun its forced exit, this
+/// does not return (the watchdog prints the one line and ends the process), so a stop
+/// never prints two lines.
 void mark_finishing();
 
 /// A path that is partial while this lives (a staging folder, a temporary file, a folder
@@ -51,7 +53,9 @@ class PartialPath {
 /// Runs `shell_command` with /bin/sh as a child that takes SIGINT and SIGTERM as usual
 /// (its signals are not blocked as this process's are) and returns its wait status, as
 /// std::system does. On a stop the child gets SIGTERM at once (from the watchdog, or here
-/// when this thread sees the stop first), so that no child outlives the command.
+/// when this thread sees the stop first), and this returns (throwing the stop) only once
+/// every process of its group has ended, so that none writes after the caller has removed
+/// its partial outputs; one that outlasts kStopGrace is killed by the watchdog.
 int run_command(const std::string& shell_command);
 
 /// While alive, the watchdog waits instead of stopping the process (outputs being moved
