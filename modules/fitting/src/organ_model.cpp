@@ -78,6 +78,8 @@ void make_planning_organ(const OrganModel& m) {
   m.planning_mask =
       m.shape.mask ? m.shape.mask : std::make_shared<const geometry::LabelVolume>(m.reference);
   m.planning_distance = std::make_shared<const geometry::SignedDistance>(*m.planning_mask, false);
+  if (m.saved_planning_level_mm)
+    m.planning_distance->adopt_volume_level(*m.saved_planning_level_mm);
 }
 }  // namespace
 
@@ -93,6 +95,11 @@ EmbeddedBody organ_body(const OrganModel& m) {
 EmbeddedBody organ_body(const OrganModel& m, std::shared_ptr<const Deformation> deformation) {
   make_planning_organ(m);
   return EmbeddedBody(m.planning_mask, m.planning_distance, std::move(deformation));
+}
+
+double planning_volume_level_mm(const OrganModel& m) {
+  make_planning_organ(m);
+  return m.planning_distance->volume_level();
 }
 
 void add_skeleton_term(OrganModel& model, const particles::Skeleton& skeleton) {
@@ -125,6 +132,7 @@ OrganModel copy_model(const OrganModel& m) {
   c.placed = m.placed;
   c.planning_mask = m.planning_mask;  // the same shape and reference: the same cache
   c.planning_distance = m.planning_distance;
+  c.saved_planning_level_mm = m.saved_planning_level_mm;
   std::optional<particles::Skeleton> skeleton;
   if (m.skeleton) skeleton = m.skeleton->skeleton();
   build_model_terms(c, skeleton ? &*skeleton : nullptr);

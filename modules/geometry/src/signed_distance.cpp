@@ -357,6 +357,13 @@ double SignedDistance::volume_level() const {
   return volume_level_->value;
 }
 
+void SignedDistance::adopt_volume_level(double level_mm) const {
+  if (!std::isfinite(level_mm) || std::abs(level_mm) > geometry_.spacing_mm.maxCoeff())
+    throw std::invalid_argument("signed distance: a volume level of " + std::to_string(level_mm) +
+                                " mm is not one of this grid's");
+  std::call_once(volume_level_->found, [this, level_mm] { volume_level_->value = level_mm; });
+}
+
 std::vector<double> signed_distance_at(const LabelVolume& mask, const Eigen::Matrix3Xd& points_mm) {
   const ImageGeometry& g = mask.geometry;
   const Eigen::Matrix3d to_index = index_map(g);

@@ -8,6 +8,8 @@
 #include <cmath>
 #include <fstream>
 
+#include "organfit/fitting/organ_model.h"
+#include "organfit/geometry/signed_distance.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
 
@@ -203,6 +205,17 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
   EXPECT_FALSE(back.ct.has_value());
   EXPECT_EQ(back.model.shape.mask->count(1), mask->count(1));
   EXPECT_EQ(back.model.reference.labels, m.reference.labels);
+  // The organ's volume level is saved as a session would find it on the organ it loads
+  // (not on the uncropped mask: 1e-4 of the volume apart), to the bit; adopted, not found.
+  ASSERT_TRUE(back.model.saved_planning_level_mm.has_value());
+  const double found = geometry::SignedDistance(*back.model.shape.mask, false).volume_level();
+  EXPECT_EQ(*back.model.saved_planning_level_mm, found);
+  EXPECT_GT(std::abs(found), 0.01);  // this organ's is not 0: the check above means something
+  EXPECT_EQ(fitting::planning_volume_level_mm(back.model), found);
+  // Saved again (a fitted model is), the level is kept, not found again.
+  save_model(dir_ / "m2.json", back.model, "X", OrganLook{}, std::nullopt,
+             nlohmann::json::object());
+  EXPECT_EQ(load_model(dir_ / "m2.json").model.saved_planning_level_mm, found);
 }
 
 TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
@@ -224,6 +237,10 @@ TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
   j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
   j["settings"]["radius_mm"] = -1;
   EXPECT_NE(error_of(j.dump()).find(f + ": invalid model:"), std::string::npos);
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["organ"]["volume_level_mm"] = 40.0;  // farther than a voxel: not this organ's level
+  EXPECT_EQ(error_of(j.dump()),
+            f + ": organ.volume_level_mm: not finite, or farther from 0 than a voxel");
   EXPECT_NE(error_of("").find(f + ": not an organfit model"), std::string::npos);
 }
 

@@ -6,6 +6,7 @@
 // (a global map, then where the particles were placed; fitting/embedded_body.h).
 #include <cstdint>
 #include <memory>
+#include <optional>
 
 #include "organfit/fitting/embedded_body.h"
 #include "organfit/fitting/global_fit.h"
@@ -53,6 +54,9 @@ struct OrganModel {
   /// every organ_body of this model (a cache, hence mutable; copies share it).
   mutable std::shared_ptr<const geometry::LabelVolume> planning_mask;
   mutable std::shared_ptr<const geometry::SignedDistance> planning_distance;
+  /// The planning organ's volume level (mm, geometry::SignedDistance::volume_level) as a
+  /// saved model recorded it: its distance takes it rather than finding it again.
+  std::optional<double> saved_planning_level_mm;
 };
 
 /// The particle radius (mm) that fills `shape` with about `count` particles at the law's
@@ -94,5 +98,9 @@ OrganModel copy_model(const OrganModel& model);
 EmbeddedBody organ_body(const OrganModel& model);
 /// The same through a deformation already made (the fit's), not made again.
 EmbeddedBody organ_body(const OrganModel& model, std::shared_ptr<const Deformation> deformation);
+
+/// The planning organ's volume level (mm): where its exported organ is cut
+/// (geometry::SignedDistance::volume_level), found once per planning organ.
+double planning_volume_level_mm(const OrganModel& model);
 
 }  // namespace organfit::fitting
