@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <mutex>
 #include <nanoflann.hpp>
 #include <stdexcept>
 
@@ -443,10 +444,12 @@ constexpr double kGridReachVoxels = 4;
 // within that distance, shell by shell: a 1.5 L liver left undeformed, 3.3 mm from its true
 // organ, took 1.0 s of its truth's 1.5 s of distances so. A k-d tree's boxes skip the empty
 // space, but its descent costs more than the grid near the surface. So the grid searches
-// within 4 voxels and the tree beyond (docs/decisions.md: 2, 4 and 8 alike).
+// within 4 voxels and the tree beyond (docs/decisions.md: 2, 4 and 8 alike). The tree is
+// built when a query first goes beyond the grid's reach: two surfaces that close need none.
 struct MaskSurface::Search {
   VoxelCentres centres;
   std::unique_ptr<SampleGrid> grid;  // none when the mask has no surface voxel
+  std::once_flag tree_built;
   std::unique_ptr<VoxelTree> tree;
   double grid_reach_mm = 0;
 };
@@ -462,8 +465,6 @@ MaskSurface::MaskSurface(const LabelVolume& mask) : search_(std::make_unique<Sea
   if (points.cols() == 0) return;
   search_->grid_reach_mm = kGridReachVoxels * g.spacing_mm.maxCoeff();
   search_->grid = std::make_unique<SampleGrid>(points, 2 * g.spacing_mm.maxCoeff());
-  search_->tree = std::make_unique<VoxelTree>(
-      3, search_->centres, nanoflann::KDTreeSingleIndexAdaptorParams(kLeafPoints));
 }
 
 MaskSurface::~MaskSurface() = default;
@@ -476,17 +477,27 @@ const Eigen::Matrix3Xd& MaskSurface::points_mm() const {
 
 std::vector<double> MaskSurface::distances_from(const Eigen::Matrix3Xd& q) const {
   std::vector<double> d(static_cast<size_t>(q.cols()), std::numeric_limits<double>::infinity());
-  if (!search_->tree) return d;
-  const VoxelTree& tree = *search_->tree;
+  if (!search_->grid) return d;
   const SampleGrid& grid = *search_->grid;
   const double reach = search_->grid_reach_mm;
-#pragma omp parallel for schedule(dynamic, 256)
+  long long far = 0;  // queries beyond the grid's reach (left at infinity)
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : far)
   for (long long k = 0; k < static_cast<long long>(d.size()); ++k) {
     const double near2 = grid.nearest(q.col(static_cast<Eigen::Index>(k)), reach).second;
-    if (near2 < HUGE_VAL) {
+    if (near2 < HUGE_VAL)
       d[static_cast<size_t>(k)] = std::sqrt(near2);
-      continue;
-    }
+    else
+      ++far;
+  }
+  if (far == 0) return d;
+  std::call_once(search_->tree_built, [this] {
+    search_->tree = std::make_unique<VoxelTree>(
+        3, search_->centres, nanoflann::KDTreeSingleIndexAdaptorParams(kLeafPoints));
+  });
+  const VoxelTree& tree = *search_->tree;
+#pragma omp parallel for schedule(dynamic, 256)
+  for (long long k = 0; k < static_cast<long long>(d.size()); ++k) {
+    if (d[static_cast<size_t>(k)] < HUGE_VAL) continue;
     std::uint32_t nearest = 0;
     double d2 = std::numeric_limits<double>::infinity();
     nanoflann::KNNResultSet<double, std::uint32_t> found(1);
