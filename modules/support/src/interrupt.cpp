@@ -228,8 +228,8 @@ int run_command(const std::string& shell_command) {
 }
 
 void mark_finishing() {
-  int nobody = kNobody;
-  if (g_ender.compare_exchange_strong(nobody, kByRun)) return;
+  int ender = kNobody;
+  if (g_ender.compare_exchange_strong(ender, kByRun) || ender == kByRun) return;
   // The watchdog is ending the process (its forced exit prints the stop's one line): a
   // second line from here would repeat it.
   for (;;)
