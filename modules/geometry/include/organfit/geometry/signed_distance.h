@@ -63,8 +63,8 @@ class SignedDistance {
   /// without boundary.
   double volume_level() const;
   /// Takes `level_mm` as volume_level(): the level found before for this same mask (a
-  /// saved model's: the liver's took 0.28 s to find, at every session). No effect once
-  /// the level is known. Throws std::invalid_argument unless it is finite and within the
+  /// saved model's; finding it again takes 0.28 s on a 1.5 L liver). No effect once the
+  /// level is known. Throws std::invalid_argument unless it is finite and within the
   /// largest spacing of zero (a level lies in the values' gap about zero).
   void adopt_volume_level(double level_mm) const;
 
