@@ -216,6 +216,13 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
   save_model(dir_ / "m2.json", back.model, "X", OrganLook{}, std::nullopt,
              nlohmann::json::object());
   EXPECT_EQ(load_model(dir_ / "m2.json").model.saved_planning_level_mm, found);
+  // A file written before the level was kept: the session finds the same level itself.
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["organ"].erase("volume_level_mm");
+  std::ofstream(dir_ / "old.json") << j.dump();
+  const SavedModel old = load_model(dir_ / "old.json");
+  EXPECT_FALSE(old.model.saved_planning_level_mm.has_value());
+  EXPECT_EQ(fitting::planning_volume_level_mm(old.model), found);
 }
 
 TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
