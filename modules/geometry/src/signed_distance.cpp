@@ -2,6 +2,7 @@
 
 #include <Eigen/LU>
 #include <algorithm>
+#include <climits>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -294,6 +295,27 @@ double SignedDistance::volume_level() const {
     // the volume: each voxel's share inside has a variance of at most 1 / (4 s^3), so the
     // volume's (in voxels) is at most band / (4 s^3). A sample below the gap is inside at
     // any level in it, one above outside; those within it are counted in bins across it.
+    // The samples are keyed by a voxel's place from the inside voxels' box grown by one
+    // voxel (every voxel of the band lies in it), not by its index in the grid: the level
+    // is the organ's, the same on a mask cropped about it (a model file's) as on the whole.
+    int lo_i = INT_MAX, lo_j = INT_MAX, lo_k = INT_MAX, hi_i = INT_MIN, hi_j = INT_MIN;
+#pragma omp parallel for schedule(static) collapse(2) reduction(min                 \
+                                                                : lo_i, lo_j, lo_k) \
+    reduction(max                                                                   \
+              : hi_i, hi_j)
+    for (int k = 0; k < g.size[2]; ++k)
+      for (int j = 0; j < g.size[1]; ++j)
+        for (int i = 0; i < g.size[0]; ++i)
+          if (values_[static_cast<size_t>(g.linear_index(i, j, k))] < 0) {
+            lo_i = std::min(lo_i, i), hi_i = std::max(hi_i, i);
+            lo_j = std::min(lo_j, j), hi_j = std::max(hi_j, j);
+            lo_k = std::min(lo_k, k);
+          }
+    const long long box_x = hi_i - lo_i + 3, box_y = hi_j - lo_j + 3;
+    auto key_of = [&](int i, int j, int k) {
+      return (static_cast<std::uint64_t>(k - lo_k + 1) * box_y + (j - lo_j + 1)) * box_x +
+             (i - lo_i + 1);
+    };
     constexpr double kStandardError = 1e-4;  // of the volume, relative
     const double wanted_samples =
         band / (4 * kStandardError * kStandardError * static_cast<double>(inside) *
@@ -322,7 +344,7 @@ double SignedDistance::volume_level() const {
             }
             for (int sample = 0; sample < per_voxel; ++sample) {
               const std::uint64_t key =
-                  3 * (static_cast<std::uint64_t>(v) * kMostSub * kMostSub * kMostSub + sample);
+                  3 * (key_of(i, j, k) * kMostSub * kMostSub * kMostSub + sample);
               const Eigen::Vector3d place(sample % sub + uniform01(key),
                                           (sample / sub) % sub + uniform01(key + 1),
                                           sample / (sub * sub) + uniform01(key + 2));

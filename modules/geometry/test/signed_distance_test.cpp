@@ -182,6 +182,21 @@ TEST(SignedDistance, VolumeLevelEnclosesTheVoxelsVolume) {
   EXPECT_NEAR(box * at_level / n / voxels, 1.0, 0.004);
   EXPECT_LT(box * at_zero / n / voxels, 0.985);
 
+  // The level is the organ's, not the grid's: the egg on a grid grown by 2, 5 and 3 voxels
+  // (low side) and 4, 1 and 2 (high side) has the same level to the bit (a saved model
+  // keeps its organ cropped about it).
+  ImageGeometry wide = g;
+  const int grow_lo[3] = {2, 5, 3}, grow_hi[3] = {4, 1, 2};
+  for (int a = 0; a < 3; ++a)
+    wide.size[a] += grow_lo[a] + grow_hi[a];
+  wide.origin_mm = g.index_to_physical(Eigen::Vector3d(-grow_lo[0], -grow_lo[1], -grow_lo[2]));
+  LabelVolume wide_egg(wide);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        wide_egg.at(i + grow_lo[0], j + grow_lo[1], k + grow_lo[2]) = egg.at(i, j, k);
+  EXPECT_EQ(SignedDistance(wide_egg, false).volume_level(), level);
+
   ImageGeometry c =
       grid_covering({Eigen::Vector3d::Constant(-12), Eigen::Vector3d::Constant(12)}, 0.5, 0.0);
   LabelVolume cube(c);

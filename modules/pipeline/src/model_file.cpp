@@ -144,9 +144,9 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
                           {"size_mm", vec(m.shape.size_mm)},
                           {"centre_mm", vec(m.shape.centre_mm)}};
   // The planning organ's volume level, found once at planning rather than at every session
-  // (0.28 s on a 1.5 L liver), on the organ a session loads: the level's jittered samples
-  // are keyed by voxel index, so the uncropped mask's would differ within its error. A
-  // loaded model's organ is that one (cropping it again changes nothing): its level is kept.
+  // (0.28 s on a 1.5 L liver). It is the organ's whatever the grid about it, so it is found
+  // on the cropped mask, whose distance costs less than the whole planning grid's; a loaded
+  // model's level is kept.
   if (m.shape.mask) {
     const geometry::LabelVolume crop = cropped_organ(*m.shape.mask);
     shape["mask"] = mask_to_json(crop);

@@ -205,11 +205,12 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
   EXPECT_FALSE(back.ct.has_value());
   EXPECT_EQ(back.model.shape.mask->count(1), mask->count(1));
   EXPECT_EQ(back.model.reference.labels, m.reference.labels);
-  // The organ's volume level is saved as a session would find it on the organ it loads
-  // (not on the uncropped mask: 1e-4 of the volume apart), to the bit; adopted, not found.
+  // The organ's volume level is saved as a session would find it on the organ it loads,
+  // and as the planning run finds it on the uncropped mask, to the bit; adopted, not found.
   ASSERT_TRUE(back.model.saved_planning_level_mm.has_value());
   const double found = geometry::SignedDistance(*back.model.shape.mask, false).volume_level();
   EXPECT_EQ(*back.model.saved_planning_level_mm, found);
+  EXPECT_EQ(fitting::planning_volume_level_mm(m), found);
   EXPECT_GT(std::abs(found), 0.01);  // this organ's is not 0: the check above means something
   EXPECT_EQ(fitting::planning_volume_level_mm(back.model), found);
   // Saved again (a fitted model is), the level is kept, not found again.

@@ -58,9 +58,10 @@ class SignedDistance {
   /// way); where the gap is too narrow to reach the volume, at its end. The volume is
   /// measured by jittered samples in each voxel whose 27 neighbours are not all on one
   /// side (elsewhere the interpolant keeps their side), enough for a standard error of
-  /// 1e-4 of it. Found on the first call (passes over the grid, on threads: make that call
-  /// outside a parallel region), then kept; copies of this distance share it. 0 for a mask
-  /// without boundary.
+  /// 1e-4 of it, each voxel's samples drawn by its place about the organ (not in the
+  /// grid): the same level on any grid that holds the organ and a voxel about it. Found on
+  /// the first call (passes over the grid, on threads: make that call outside a parallel
+  /// region), then kept; copies of this distance share it. 0 for a mask without boundary.
   double volume_level() const;
   /// Takes `level_mm` as volume_level(): the level found before for this same mask (a
   /// saved model's; finding it again takes 0.28 s on a 1.5 L liver). No effect once the
