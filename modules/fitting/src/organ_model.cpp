@@ -98,6 +98,7 @@ EmbeddedBody organ_body(const OrganModel& m, std::shared_ptr<const Deformation> 
 }
 
 double planning_volume_level_mm(const OrganModel& m) {
+  if (m.saved_planning_level_mm) return *m.saved_planning_level_mm;
   make_planning_organ(m);
   return m.planning_distance->volume_level();
 }

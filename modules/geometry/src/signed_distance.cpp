@@ -299,10 +299,7 @@ double SignedDistance::volume_level() const {
     // voxel (every voxel of the band lies in it), not by its index in the grid: the level
     // is the organ's, the same on a mask cropped about it (a model file's) as on the whole.
     int lo_i = INT_MAX, lo_j = INT_MAX, lo_k = INT_MAX, hi_i = INT_MIN, hi_j = INT_MIN;
-#pragma omp parallel for schedule(static) collapse(2) reduction(min                 \
-                                                                : lo_i, lo_j, lo_k) \
-    reduction(max                                                                   \
-              : hi_i, hi_j)
+#pragma omp parallel for collapse(2) reduction(min : lo_i, lo_j, lo_k) reduction(max : hi_i, hi_j)
     for (int k = 0; k < g.size[2]; ++k)
       for (int j = 0; j < g.size[1]; ++j)
         for (int i = 0; i < g.size[0]; ++i)
@@ -380,10 +377,14 @@ double SignedDistance::volume_level() const {
 }
 
 void SignedDistance::adopt_volume_level(double level_mm) const {
-  if (!std::isfinite(level_mm) || std::abs(level_mm) > geometry_.spacing_mm.maxCoeff())
+  if (!could_be_volume_level(level_mm, geometry_))
     throw std::invalid_argument("signed distance: a volume level of " + std::to_string(level_mm) +
                                 " mm is not one of this grid's");
   std::call_once(volume_level_->found, [this, level_mm] { volume_level_->value = level_mm; });
+}
+
+bool could_be_volume_level(double level_mm, const ImageGeometry& grid) {
+  return std::isfinite(level_mm) && std::abs(level_mm) <= grid.spacing_mm.maxCoeff();
 }
 
 std::vector<double> signed_distance_at(const LabelVolume& mask, const Eigen::Matrix3Xd& points_mm) {

@@ -144,18 +144,17 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
                           {"size_mm", vec(m.shape.size_mm)},
                           {"centre_mm", vec(m.shape.centre_mm)}};
   // The planning organ's volume level, found once at planning rather than at every session
-  // (0.28 s on a 1.5 L liver). It is the organ's whatever the grid about it, so it is found
-  // on the cropped mask, whose distance costs less than the whole planning grid's; a loaded
-  // model's level is kept.
+  // (0.28 s on a 1.5 L liver). It is the organ's whatever the grid about it: a level kept or
+  // a distance already made gives it; else it is found on the cropped mask, whose distance
+  // costs less than the whole planning grid's.
+  std::optional<geometry::LabelVolume> crop;
   if (m.shape.mask) {
-    const geometry::LabelVolume crop = cropped_organ(*m.shape.mask);
-    shape["mask"] = mask_to_json(crop);
-    j["organ"]["volume_level_mm"] = m.saved_planning_level_mm
-                                        ? *m.saved_planning_level_mm
-                                        : geometry::SignedDistance(crop, false).volume_level();
-  } else {
-    j["organ"]["volume_level_mm"] = fitting::planning_volume_level_mm(m);
+    crop = cropped_organ(*m.shape.mask);
+    shape["mask"] = mask_to_json(*crop);
   }
+  j["organ"]["volume_level_mm"] = crop && !m.saved_planning_level_mm && !m.planning_distance
+                                      ? geometry::SignedDistance(*crop, false).volume_level()
+                                      : fitting::planning_volume_level_mm(m);
   j["shape"] = shape;
   j["ct"] = ct ? nlohmann::json{{"folder", ct->folder},
                                 {"series_instance_uid", ct->series_instance_uid},
@@ -362,9 +361,8 @@ SavedModel load_model(const fs::path& file) {
     }
     if (organ.contains("volume_level_mm")) {  // files written before it was kept have none
       const double level = organ.at("volume_level_mm").get<double>();
-      const geometry::ImageGeometry& g =
-          m.shape.mask ? m.shape.mask->geometry : m.reference.geometry;
-      if (!std::isfinite(level) || std::abs(level) > g.spacing_mm.maxCoeff())
+      if (!geometry::could_be_volume_level(
+              level, m.shape.mask ? m.shape.mask->geometry : m.reference.geometry))
         fail("organ.volume_level_mm: not finite, or farther from 0 than a voxel");
       m.saved_planning_level_mm = level;
     }

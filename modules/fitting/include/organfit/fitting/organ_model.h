@@ -100,7 +100,8 @@ EmbeddedBody organ_body(const OrganModel& model);
 EmbeddedBody organ_body(const OrganModel& model, std::shared_ptr<const Deformation> deformation);
 
 /// The planning organ's volume level (mm): where its exported organ is cut
-/// (geometry::SignedDistance::volume_level), found once per planning organ.
+/// (geometry::SignedDistance::volume_level); the saved one when a model file gave it, else
+/// found once per planning organ.
 double planning_volume_level_mm(const OrganModel& model);
 
 }  // namespace organfit::fitting

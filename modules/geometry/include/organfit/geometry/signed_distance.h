@@ -65,8 +65,7 @@ class SignedDistance {
   double volume_level() const;
   /// Takes `level_mm` as volume_level(): the level found before for this same mask (a
   /// saved model's; finding it again takes 0.28 s on a 1.5 L liver). No effect once the
-  /// level is known. Throws std::invalid_argument unless it is finite and within the
-  /// largest spacing of zero (a level lies in the values' gap about zero).
+  /// level is known. Throws std::invalid_argument unless could_be_volume_level.
   void adopt_volume_level(double level_mm) const;
 
   const ImageGeometry& geometry() const { return geometry_; }
@@ -96,5 +95,9 @@ class SignedDistance {
 /// transform sums it. For a few thousand points on a grid of millions of voxels (the
 /// transforms' cost is the grid's; this one's, the points' and the boundary's).
 std::vector<double> signed_distance_at(const LabelVolume& mask, const Eigen::Matrix3Xd& points_mm);
+
+/// Whether `level_mm` can be a volume level of a mask on `grid`: finite and within the
+/// largest spacing of zero (a level lies in the unsmoothed values' gap about zero).
+bool could_be_volume_level(double level_mm, const ImageGeometry& grid);
 
 }  // namespace organfit::geometry
