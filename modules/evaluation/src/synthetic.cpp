@@ -210,7 +210,10 @@ std::vector<fitting::AttractivePoint> sample_deformed_surface(const geometry::Sh
   std::mt19937_64 rng(o.seed);
   std::normal_distribution<double> gauss(0.0, 1.0);
   std::uniform_real_distribution<double> uni(0.0, 1.0);
-  const double reach = 0.5 * shape.size_mm.norm() + 1.0;
+  // Rays from a point inside (geometry::ray_origin_mm); from anywhere inside, the surface
+  // is within the extents' diagonal.
+  const Eigen::Vector3d origin = geometry::ray_origin_mm(shape);
+  const double reach = shape.size_mm.norm() + 1.0;
   std::vector<fitting::AttractivePoint> points;
   while (static_cast<int>(points.size()) < o.count) {
     Eigen::Vector3d dir(gauss(rng), gauss(rng), gauss(rng));
@@ -219,7 +222,7 @@ std::vector<fitting::AttractivePoint> sample_deformed_surface(const geometry::Sh
     // March out from the centre to the first exit, then bisect to 0.01 mm.
     double inside_t = 0, outside_t = -1;
     for (double t = 0.25; t <= reach; t += 0.25) {
-      if (!shape.inside(shape.centre_mm + t * dir)) {
+      if (!shape.inside(origin + t * dir)) {
         outside_t = t;
         break;
       }
@@ -228,9 +231,9 @@ std::vector<fitting::AttractivePoint> sample_deformed_surface(const geometry::Sh
     if (outside_t < 0) continue;
     while (outside_t - inside_t > 0.01) {
       const double mid = 0.5 * (inside_t + outside_t);
-      (shape.inside(shape.centre_mm + mid * dir) ? inside_t : outside_t) = mid;
+      (shape.inside(origin + mid * dir) ? inside_t : outside_t) = mid;
     }
-    Eigen::Vector3d p = deformation.apply(shape.centre_mm + 0.5 * (inside_t + outside_t) * dir);
+    Eigen::Vector3d p = deformation.apply(origin + 0.5 * (inside_t + outside_t) * dir);
     p += o.noise_mm * Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng));
     points.push_back({p, 1.0});
   }

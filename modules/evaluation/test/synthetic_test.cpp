@@ -156,6 +156,45 @@ TEST(Sampling, PointsLieOnTheDeformedSurfaceWithinTheNoise) {
   EXPECT_EQ(a[17].p_mm, b[17].p_mm);  // deterministic for a seed
 }
 
+// A mask whose centroid is outside it (a horseshoe, as a kidney's centroid lies in its
+// sinus): every point on its surface, in the ring, none at the centroid. Rays from the centroid
+// ended at once, and most points were the centroid itself.
+TEST(Sampling, PointsOfAMaskWhoseCentroidIsOutsideLieOnItsSurface) {
+  geometry::ImageGeometry g;
+  g.size = {40, 40, 8};
+  g.spacing_mm = {1, 1, 2};
+  g.origin_mm = {-19.5, -19.5, -7};
+  auto mask = std::make_shared<geometry::LabelVolume>(g);
+  for (int k = 1; k <= 6; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
+        const double r = std::hypot(p.x(), p.y());
+        if (r >= 8 && r <= 16 && !(p.x() > 0 && p.y() > 0)) mask->at(i, j, k) = 1;
+      }
+  const Shape s = geometry::make_mask_shape(mask);
+  ASSERT_FALSE(s.inside(s.centre_mm));
+  const Eigen::Vector3d origin = geometry::ray_origin_mm(s);
+  SamplingOptions o;
+  o.noise_mm = 0.0;
+  o.count = 300;
+  for (const bool half : {false, true}) {
+    o.half_coverage = half;
+    for (const auto& p : sample_deformed_surface(s, Deformation{}, o)) {
+      const Eigen::Vector3d dir = (p.p_mm - origin).normalized();
+      EXPECT_TRUE(s.inside(p.p_mm - 0.006 * dir));  // bisected to 0.01 mm
+      EXPECT_FALSE(s.inside(p.p_mm + 0.006 * dir));
+      const double r = std::hypot(p.p_mm.x(), p.p_mm.y());  // the ring's: 8 to 16 mm
+      EXPECT_GT(r, 7.0);
+      EXPECT_LT(r, 17.0);
+      EXPECT_GT((p.p_mm - s.centre_mm).norm(), 2.0);
+      if (half) {
+        EXPECT_GE(dir.y(), -1e-9);
+      }
+    }
+  }
+}
+
 // The truth of a case against a ball of known radius: the surfaces are concentric
 // spheres 2 mm apart, the volumes and Dice analytic (to the 0.5 mm lattice's sampling).
 TEST(KnownBody, MeasuresConcentricSpheresAnalytically) {

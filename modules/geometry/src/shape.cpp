@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
+#include <vector>
 
 namespace organfit::geometry {
 
@@ -190,6 +192,42 @@ LabelVolume shape_on_grid(const Shape& shape, const ImageGeometry& grid, const I
       out, range, [&](const Eigen::Vector3d& c, double r) { return shape.inside_ball(c, r); },
       [&](const Eigen::Vector3d& p) { return shape.inside(p); });
   return out;
+}
+
+Eigen::Vector3d ray_origin_mm(const Shape& shape) {
+  if (!shape.mask || shape.inside(shape.centre_mm)) return shape.centre_mm;
+  const LabelVolume& mask = *shape.mask;
+  const ImageGeometry& g = mask.geometry;
+  // The label-1 voxels' index box, grown by one voxel: the distance transform then sees the
+  // outside all round, even where the organ touches its grid's faces.
+  int lo[3] = {g.size[0], g.size[1], g.size[2]}, hi[3] = {-1, -1, -1};
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        if (mask.at(i, j, k) == 1) {
+          const int at[3] = {i, j, k};
+          for (int a = 0; a < 3; ++a)
+            lo[a] = std::min(lo[a], at[a]), hi[a] = std::max(hi[a], at[a]);
+        }
+  if (hi[0] < 0) throw std::invalid_argument("the organ mask is empty");
+  ImageGeometry box = g;
+  for (int a = 0; a < 3; ++a)
+    box.size[a] = hi[a] - lo[a] + 3;
+  box.origin_mm = g.index_to_physical(Eigen::Vector3d(lo[0] - 1, lo[1] - 1, lo[2] - 1));
+  std::vector<std::uint8_t> outside(static_cast<size_t>(box.voxel_count()), 1);
+  for (int k = 1; k + 1 < box.size[2]; ++k)
+    for (int j = 1; j + 1 < box.size[1]; ++j)
+      for (int i = 1; i + 1 < box.size[0]; ++i)
+        outside[static_cast<size_t>(box.linear_index(i, j, k))] =
+            mask.at(lo[0] - 1 + i, lo[1] - 1 + j, lo[2] - 1 + k) != 1;
+  const GridBuffer<double> depth2 = squared_distance_transform(outside, box);
+  long long deepest = 0;
+  for (long long v = 1; v < box.voxel_count(); ++v)
+    if (depth2[static_cast<size_t>(v)] > depth2[static_cast<size_t>(deepest)]) deepest = v;
+  const long long nx = box.size[0], ny = box.size[1];
+  return box.index_to_physical(Eigen::Vector3d(static_cast<double>(deepest % nx),
+                                               static_cast<double>(deepest / nx % ny),
+                                               static_cast<double>(deepest / (nx * ny))));
 }
 
 double shape_volume_mm3(const Shape& shape, double voxel_mm) {

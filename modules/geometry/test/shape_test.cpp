@@ -18,6 +18,62 @@ TEST(Shapes, LungHasItsNotchAndUnknownShapesAreRefused) {
   EXPECT_THROW(make_shape("donut", {1, 1, 1}, {0, 0, 0}), std::invalid_argument);
 }
 
+// A horseshoe (a ring of radii 8 and 16 mm with a quarter cut away, 6 slices of 2 mm): its
+// centroid lies in the hole. Rays start from its deepest voxel, the centre of its largest
+// inscribed ball, found here by brute force over every pair of voxels; from the centroid
+// of a mask that holds it.
+TEST(Shapes, RaysStartFromAMasksDeepestVoxelNotItsCentroid) {
+  ImageGeometry g;
+  g.size = {40, 40, 8};
+  g.spacing_mm = {1, 1, 2};
+  g.origin_mm = {-19.5, -19.5, -7};
+  auto mask = std::make_shared<LabelVolume>(g);
+  for (int k = 1; k <= 6; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
+        const double r = std::hypot(p.x(), p.y());
+        if (r >= 8 && r <= 16 && !(p.x() > 0 && p.y() > 0)) mask->at(i, j, k) = 1;
+      }
+  const Shape s = make_mask_shape(mask);
+  ASSERT_FALSE(s.inside(s.centre_mm));  // the centroid: in the hole
+  const Eigen::Vector3d origin = ray_origin_mm(s);
+  EXPECT_TRUE(s.inside(origin));
+  // Each voxel's depth: the distance to the nearest voxel outside (or beyond the grid).
+  auto depth = [&](const Eigen::Vector3d& p) {
+    double best = 1e300;
+    for (int k = -1; k <= g.size[2]; ++k)
+      for (int j = -1; j <= g.size[1]; ++j)
+        for (int i = -1; i <= g.size[0]; ++i) {
+          const bool beyond =
+              i < 0 || j < 0 || k < 0 || i >= g.size[0] || j >= g.size[1] || k >= g.size[2];
+          if (!beyond && mask->at(i, j, k) == 1) continue;
+          best = std::min(best, (g.index_to_physical(Eigen::Vector3d(i, j, k)) - p).norm());
+        }
+    return best;
+  };
+  double deepest = 0;
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; j += 3)  // every third row: the depths repeat round the ring
+      for (int i = 0; i < g.size[0]; ++i)
+        if (mask->at(i, j, k) == 1)
+          deepest = std::max(deepest, depth(g.index_to_physical(Eigen::Vector3d(i, j, k))));
+  EXPECT_NEAR(depth(origin), deepest, 1e-9);
+  EXPECT_GE(depth(origin), 4.0);  // the middle of a 8 mm wall, the middle of 6 slices
+  // A shape that holds its centre: the centre (an analytic body's; the horseshoe made whole).
+  const Shape ellipsoid = make_shape("ellipsoid", {10, 20, 30}, {1, 2, 3});
+  EXPECT_EQ(ray_origin_mm(ellipsoid), ellipsoid.centre_mm);
+  auto ring = std::make_shared<LabelVolume>(*mask);
+  for (int k = 1; k <= 6; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        if ((g.index_to_physical(Eigen::Vector3d(i, j, k)) - s.centre_mm).norm() < 12)
+          ring->at(i, j, k) = 1;
+  const Shape filled = make_mask_shape(ring);
+  ASSERT_TRUE(filled.inside(filled.centre_mm));
+  EXPECT_EQ(ray_origin_mm(filled), filled.centre_mm);
+}
+
 TEST(Shapes, AMaskShapeHasItsVoxelsBoundsAndCentroid) {
   ImageGeometry g;
   g.size = {10, 10, 10};

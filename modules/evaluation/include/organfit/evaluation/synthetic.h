@@ -82,9 +82,10 @@ struct SamplingOptions {
   unsigned seed = 1;
 };
 
-/// Points on the deformed surface: boundary points of `shape` found along rays from its
-/// centre (uniform directions; bisection to 0.01 mm), mapped by `deformation`, then noise
-/// and outliers. Deterministic for a seed.
+/// Points on the deformed surface: boundary points of `shape` found along rays from a point
+/// inside it (geometry::ray_origin_mm: its centre, or a mask's deepest voxel if it lies out;
+/// uniform directions, the first exit, bisection to 0.01 mm; half coverage: directions with
+/// y >= 0), mapped by `deformation`, then noise and outliers. Deterministic for a seed.
 std::vector<fitting::AttractivePoint> sample_deformed_surface(const geometry::Shape& shape,
                                                               const Deformation& deformation,
                                                               const SamplingOptions& options);

@@ -50,4 +50,12 @@ LabelVolume shape_on_grid(const Shape& shape, const ImageGeometry& grid, const I
 /// Volume of a shape by counting the voxel centres of a grid of `voxel_mm` inside it (mm^3).
 double shape_volume_mm3(const Shape& shape, double voxel_mm);
 
+/// A point inside the shape from which rays find its surface (mm): its centre (a mask's
+/// centroid, about which the known deformations are defined) when the shape holds it, as an
+/// analytic body always does; otherwise (a mask) its deepest voxel centre, the centre of
+/// its largest inscribed ball by the voxels' distance transform (of ties, the first in
+/// index order). A mask's centroid can lie outside it: a kidney's lies in its sinus, and
+/// rays from there end at once (its generated points: 64 of 87 within 3 mm of it).
+Eigen::Vector3d ray_origin_mm(const Shape& shape);
+
 }  // namespace organfit::geometry
