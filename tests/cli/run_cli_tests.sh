@@ -213,6 +213,14 @@ assert m['relax_settled'] and m['relax_steps'] < 1000 and m['relax_largest_move_
 import json; d = json.load(open('$tmp/kidney_session/run.json')); t, f = d['truth'], d['fit']
 assert t['msd_mm'] <= 1 and t['hd95_mm'] <= 2.5 and abs(f['volume_change_pct']) <= 1, (t, f['volume_change_pct'])
 assert t['msd_mm'] < t['msd_undeformed_mm'] - 0.5, t"
+  # Its simulated ultrasound is segmented by rays from the same point inside it (from the
+  # centroid, the points' median distance to the true surface was 19 mm).
+  sed -e '/^export:/,$d' "$tmp/kidney.yaml" >"$tmp/kidney_us.yaml"
+  printf 'points:\n  source: ultrasound\n  count: 87\n  stretch: 1.1\n  bend_mm: 2\nultrasound:\n  source: simulate\nfit:\n  method: spread\n' >>"$tmp/kidney_us.yaml"
+  expect real.kidney_ultrasound_session 0 "" -- --quiet run "$tmp/kidney_us.yaml" --out "$tmp/kidney_us"
+  check real.kidney_ultrasound_points_on_its_surface /usr/bin/python3 -c "
+import json; p = json.load(open('$tmp/kidney_us/run.json'))['points']
+assert p['median_distance_to_true_surface_mm'] <= 1.0 and p['fraction_within_1_5_mm'] >= 0.8, p"
 fi
 expect segment.needs_one_source 2 "give either --rtstruct and --roi, or --seed and --hu" -- segment --ct /tmp --out "$tmp/x.nrrd"
 printf 'x,y,z\n1,2,nan\n' > "$tmp/bad_points.csv"
