@@ -9,7 +9,6 @@
 #include <optional>
 
 #include "organfit/dicom/us_image.h"
-#include "organfit/geometry/shape.h"
 #include "organfit/itkbridge/itk_images.h"
 #include "organfit/phantom/pelvis.h"
 #include "organfit/pipeline/scene_schema.h"
@@ -224,12 +223,8 @@ UltrasoundStageResult run_ultrasound_stage(const UltrasoundStageOptions& options
   }
   Stopwatch clock;
   ultrasound::BoundaryOptions bo = options.boundary;
-  // Rays from a point inside the organ (a mask's centroid may lie outside it), reaching its
-  // far side.
-  const Eigen::Vector3d origin = geometry::ray_origin_mm(model.shape);
-  bo.centre_mm = origin;
-  bo.r_max_mm =
-      0.5 * model.shape.size_mm.maxCoeff() + (origin - model.shape.centre_mm).norm() + bo.band_mm;
+  bo.centre_mm = model.shape.centre_mm;
+  bo.r_max_mm = 0.5 * model.shape.size_mm.maxCoeff() + bo.band_mm;
   const geometry::Shape& prior = model.shape;
   bo.prior_inside = [&prior](const Eigen::Vector3d& p) { return prior.inside(p); };
   ultrasound::BoundaryResult found;
@@ -240,7 +235,7 @@ UltrasoundStageResult run_ultrasound_stage(const UltrasoundStageOptions& options
       // A volume is searched in its own frame: the organ and its prior mapped into it.
       const Eigen::Matrix4d to_volume = source == "volume" ? Eigen::Matrix4d(registration.inverse())
                                                            : Eigen::Matrix4d::Identity();
-      bo.centre_mm = (to_volume * origin.homogeneous()).head<3>();
+      bo.centre_mm = (to_volume * model.shape.centre_mm.homogeneous()).head<3>();
       const Eigen::Matrix4d to_ct = to_volume.inverse();
       bo.prior_inside = [&prior, to_ct](const Eigen::Vector3d& p) {
         return prior.inside((to_ct * p.homogeneous()).head<3>());
