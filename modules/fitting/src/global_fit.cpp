@@ -36,7 +36,7 @@ bool plausible(const GlobalMap& map, const MappedSamples& mapped, const SurfaceS
                const AffineFitOptions& o) {
   const double size =
       (surface.points.rowwise().maxCoeff() - surface.points.rowwise().minCoeff()).norm();
-  const LargestMoves moves = largest_moves_of(mapped);
+  const LargestMoves& moves = mapped.moves;
   return within_stretch(map.affine.a, o) && moves.shears_mm <= o.max_shear_mm * size &&
          moves.fields_mm <= o.max_shear_mm * size && moves.flow_mm <= o.max_shear_mm * size;
 }

@@ -567,7 +567,7 @@ double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface) {
 }
 
 LargestMoves largest_moves(const GlobalMap& map, const SurfaceSamples& surface) {
-  return largest_moves_of(map_samples(map, surface));
+  return map_samples(map, surface).moves;
 }
 
 }  // namespace organfit::fitting

@@ -218,7 +218,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     preparing(4, "the body re-filled in its mapped shape (" + std::to_string(passes) + " passes)");
     global.principal_stretches = Eigen::JacobiSVD<Eigen::Matrix3d>(map.affine.a).singularValues();
     const MappedSamples mapped = map_samples(map, samples);  // once, for both measures
-    global.moves = largest_moves_of(mapped);
+    global.moves = mapped.moves;
     global.shape_change_mm = shape_change_of(mapped.full, samples.points);
     global.refill_passes = passes;
     global.particles_after_refill = state.size();
