@@ -127,7 +127,7 @@ assert ours('1') <= unmoved('1') + 0.1, (ours('1'), unmoved('1'))
 assert unmoved('5') > 2 and ours('5') < 0.5 * unmoved('5'), (ours('5'), unmoved('5'))
 assert ours('44') < unmoved('44'), (ours('44'), unmoved('44'))
 j = json.load(open('$tmp/sessions.json'))
-assert j['grid_cases'] == 70 and j['do_no_harm']['spread']['worse_than_undeformed_plus_0_1mm'] == 0, j['do_no_harm']
+assert j['grid_cases'] == 140 and j['do_no_harm']['spread']['worse_than_undeformed_plus_0_1mm'] == 0, j['do_no_harm']
 assert j['do_no_harm']['spread_worse_than_tps'] == 0
 assert '## Do no harm' in open('$tmp/sessions/RESULTS.md').read()"
 # An unknown method or a case beyond the grid: a one-line usage error (exit 2) that
