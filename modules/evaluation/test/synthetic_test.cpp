@@ -156,21 +156,20 @@ TEST(Sampling, PointsLieOnTheDeformedSurfaceWithinTheNoise) {
   EXPECT_EQ(a[17].p_mm, b[17].p_mm);  // deterministic for a seed
 }
 
-// A mask whose centroid is outside it (a horseshoe, as a kidney's centroid lies in its
-// sinus): every point on its surface, in the ring, none at the centroid. Rays from the centroid
-// ended at once, and most points were the centroid itself.
+// A hollow organ, as a bladder's wall: an ellipsoidal shell whose centroid lies in its
+// cavity, outside it. Every point lies on its surface (outer or inner), none at the
+// centroid; rays from the centroid ended at once, and most points were the centroid itself.
 TEST(Sampling, PointsOfAMaskWhoseCentroidIsOutsideLieOnItsSurface) {
-  geometry::ImageGeometry g;
-  g.size = {40, 40, 8};
-  g.spacing_mm = {1, 1, 2};
-  g.origin_mm = {-19.5, -19.5, -7};
+  const geometry::ImageGeometry g = geometry::grid_covering(
+      {Eigen::Vector3d(-22, -18, -16), Eigen::Vector3d(22, 18, 16)}, 1.0, 0);
+  const Shape outer = make_shape("ellipsoid", {40, 32, 28}, {0, 0, 0});
+  const Shape inner = make_shape("ellipsoid", {24, 18, 14}, {0, 0, 0});
   auto mask = std::make_shared<geometry::LabelVolume>(g);
-  for (int k = 1; k <= 6; ++k)
+  for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
       for (int i = 0; i < g.size[0]; ++i) {
         const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
-        const double r = std::hypot(p.x(), p.y());
-        if (r >= 8 && r <= 16 && !(p.x() > 0 && p.y() > 0)) mask->at(i, j, k) = 1;
+        mask->at(i, j, k) = outer.inside(p) && !inner.inside(p);
       }
   const Shape s = geometry::make_mask_shape(mask);
   ASSERT_FALSE(s.inside(s.centre_mm));
@@ -184,10 +183,7 @@ TEST(Sampling, PointsOfAMaskWhoseCentroidIsOutsideLieOnItsSurface) {
       const Eigen::Vector3d dir = (p.p_mm - origin).normalized();
       EXPECT_TRUE(s.inside(p.p_mm - 0.006 * dir));  // bisected to 0.01 mm
       EXPECT_FALSE(s.inside(p.p_mm + 0.006 * dir));
-      const double r = std::hypot(p.p_mm.x(), p.p_mm.y());  // the ring's: 8 to 16 mm
-      EXPECT_GT(r, 7.0);
-      EXPECT_LT(r, 17.0);
-      EXPECT_GT((p.p_mm - s.centre_mm).norm(), 2.0);
+      EXPECT_GT((p.p_mm - s.centre_mm).norm(), 5.0);  // the cavity's nearest wall: 7 mm out
       if (half) {
         EXPECT_GE(dir.y(), -1e-9);
       }
