@@ -1,0 +1,47 @@
+#!/bin/bash
+# Real organs under the session's deformations: the left and right kidneys and a vertebra
+# grown from seeds on ct-crlm-1004 (5 mm slices), and the GTVs of ct-sts-002 and ct-sts-004
+# from their structure sets (3.27 mm slices), each planned once and fitted to 87 points on
+# half its surface (0.5 mm noise) of seven known deformations. One line per session: exit
+# code, MSD and HD95 against the truth, the organ left as it was, the volume change, and
+# HARM where ours is over the undeformed organ's MSD + 0.1 mm (issue 27's do-no-harm).
+#   scripts/real_organs_sweep.sh [ORGANFIT] [WORKDIR]
+set -u
+bin="${1:-$(dirname "$0")/../build/bin/organfit}"
+work="${2:-$(mktemp -d)}"
+data="$(cd "$(dirname "$0")/../.." && pwd)/shared/data"
+[[ -d "$data/ct-crlm-1004" ]] || { echo "real_organs_sweep: $data is absent" >&2; exit 2; }
+mkdir -p "$work"
+seeded() {  # NAME SEED_MM HU_LOW HU_HIGH BOX_MM
+  printf 'ct:\n  folder: %s\norgan:\n  source: seed\n  roi: %s\n  seed_mm: [%s]\n  hu_low: %s\n  hu_high: %s\n  search_box_mm: %s\nmodel:\n  radius_mm: 1.5\nexport:\n  model: m.json\n' \
+    "$data/ct-crlm-1004/ct" "$1" "$2" "$3" "$4" "$5" >"$work/plan_$1.yaml"
+}
+imported() {  # NAME CASE
+  printf 'ct:\n  folder: %s\norgan:\n  rtstruct: %s\n  roi: GTV_Mass_CT\nmodel:\n  radius_mm: 2.0\nexport:\n  model: m.json\n' \
+    "$data/$2/ct" "$data/$2/rtstruct.dcm" >"$work/plan_$1.yaml"
+}
+seeded kidney_left "66.6, 29.2, -303.7" 150 400 140
+seeded kidney_right "-58.8, 3.7, -326" 150 400 140
+seeded vertebra "-3.3, 37.0, -272.5" 150 400 160
+imported gtv_sts002 ct-sts-002
+imported gtv_sts004 ct-sts-004
+deformations=("none:" "stretch_1.1:  stretch: 1.1" "bend_5:  bend_mm: 5" "twist_10:  twist_deg: 10"
+  "probe_5:  indent_mm: -5" "push_5:  push_mm: 5" "default:  stretch: 1.15\n  bend_mm: 2")
+for organ in kidney_left kidney_right vertebra gtv_sts002 gtv_sts004; do
+  "$bin" --quiet run "$work/plan_$organ.yaml" --out "$work/plan_$organ" >/dev/null 2>&1 ||
+    { echo "$organ: planning failed"; continue; }
+  for d in "${deformations[@]}"; do
+    name=${d%%:*}
+    printf "planning:\n  model: %s\npoints:\n  count: 87\n  noise_mm: 0.5\n  coverage: half\n${d#*:}\nfit:\n  method: spread\n" \
+      "$work/plan_$organ/m.json" >"$work/session.yaml"
+    rm -rf "$work/session"
+    "$bin" --quiet run "$work/session.yaml" --out "$work/session" >/dev/null 2>&1
+    code=$?
+    /usr/bin/python3 -c "
+import json; d = json.load(open('$work/session/run.json')); t, f = d['truth'], d['fit']
+print('$organ $name exit $code msd %.3f undeformed %.3f hd95 %.2f volume %.2f%%%s' % (t['msd_mm'],
+      t['msd_undeformed_mm'], t['hd95_mm'], f['volume_change_pct'],
+      ' HARM' if t['msd_mm'] > t['msd_undeformed_mm'] + 0.1 else ''))" 2>/dev/null ||
+      echo "$organ $name exit $code (no run.json)"
+  done
+done
