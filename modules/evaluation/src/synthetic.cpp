@@ -219,7 +219,7 @@ std::vector<fitting::AttractivePoint> sample_deformed_surface(const geometry::Sh
     Eigen::Vector3d dir(gauss(rng), gauss(rng), gauss(rng));
     dir.normalize();
     if (o.half_coverage && dir.y() < 0) dir.y() = -dir.y();
-    // March out from the centre to the first exit, then bisect to 0.01 mm.
+    // March out from the origin to the first exit, then bisect to 0.01 mm.
     double inside_t = 0, outside_t = -1;
     for (double t = 0.25; t <= reach; t += 0.25) {
       if (!shape.inside(origin + t * dir)) {
