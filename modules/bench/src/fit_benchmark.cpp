@@ -274,6 +274,12 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
       {"phantom_prostate", model_of(1.92), phantom_prostate()},
       {"cube", model_of(1.75, "box", Eigen::Vector3d(30, 30, 30)), std::nullopt}};
   std::vector<std::string> families = {"stretch", "bend", "twist", "indent", "push"};
+  // The GTVs of ct-sts-004 and ct-sts-002 (where ../shared/data has them), after the shapes.
+  auto add_real_gtvs = [&shapes] {
+    for (const std::string sts : {"004", "002"})
+      if (auto gtv = real_gtv(ORGANFIT_SHARED_DATA_DIR_STRING, "ct-sts-" + sts))
+        shapes.push_back({"real_gtv_sts" + sts, model_of(3.0), std::move(gtv)});
+  };
   std::vector<double> magnitudes = {5, 10};
   std::vector<int> counts = {87};
   std::vector<double> noises = {0.5}, outliers = {0.0};
@@ -282,17 +288,13 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
     throw InputError("bench fit: --fem excludes --quick and --sessions");
   if (o.fem) {
     shapes.erase(shapes.begin() + 1);  // the cube: no organ a probe presses
-    for (const std::string sts : {"004", "002"})
-      if (auto gtv = real_gtv(ORGANFIT_SHARED_DATA_DIR_STRING, "ct-sts-" + sts))
-        shapes.push_back({"real_gtv_sts" + sts, model_of(3.0), std::move(gtv)});
+    add_real_gtvs();
     families = {"fem_probe", "fem_bladder"};
     magnitudes = {2, 5, 8, 12};
   } else if (o.sessions) {
     // The real GTVs too (cases 71 on): an organ on 3.27 mm slices, whose staircase no
     // analytic shape has, where noise alone can move a fit most.
-    for (const std::string sts : {"004", "002"})
-      if (auto gtv = real_gtv(ORGANFIT_SHARED_DATA_DIR_STRING, "ct-sts-" + sts))
-        shapes.push_back({"real_gtv_sts" + sts, model_of(3.0), std::move(gtv)});
+    add_real_gtvs();
     families = {"shift", "rotate", "stretch", "bend", "twist", "indent", "push"};
     magnitudes = {0, 0.5, 1, 2, 5};
   } else if (!o.quick) {

@@ -1,6 +1,7 @@
 #include "organfit/geometry/shape.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
@@ -200,16 +201,9 @@ Eigen::Vector3d ray_origin_mm(const Shape& shape) {
   const ImageGeometry& g = mask.geometry;
   // The label-1 voxels' index box, grown by one voxel: the distance transform then sees the
   // outside all round, even where the organ touches its grid's faces.
-  int lo[3] = {g.size[0], g.size[1], g.size[2]}, hi[3] = {-1, -1, -1};
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        if (mask.at(i, j, k) == 1) {
-          const int at[3] = {i, j, k};
-          for (int a = 0; a < 3; ++a)
-            lo[a] = std::min(lo[a], at[a]), hi[a] = std::max(hi[a], at[a]);
-        }
-  if (hi[0] < 0) throw std::invalid_argument("the organ mask is empty");
+  const IndexRange organ = mask.range(1);
+  if (organ.empty()) throw std::invalid_argument("the organ mask is empty");
+  const std::array<int, 3>&lo = organ.lo, &hi = organ.hi;
   ImageGeometry box = g;
   for (int a = 0; a < 3; ++a)
     box.size[a] = hi[a] - lo[a] + 3;
