@@ -4,6 +4,8 @@
 # on any failure.
 set -u
 src="$1"
+# The part to run: all (the default), real_data (the real scans alone) or scenes (the rest).
+part="${2:-all}"
 bin="${ORGANFIT:?set ORGANFIT to the organfit binary}"
 scenes="$src/tests/scenes"
 tmp="$(mktemp -d)"
@@ -40,90 +42,10 @@ check() {  # check NAME CONDITION...
   if "$@"; then echo "ok   $name"; passed=$((passed + 1)); else echo "FAIL $name"; failed=$((failed + 1)); fi
 }
 
-# validate: each config error with its own file:line message and exit code 2
-expect validate.misspelled_key 2 "bad-misspelled-key.yaml:5: model.raduis_mm: unknown key (did you mean 'radius_mm'?)" -- validate "$scenes/bad-misspelled-key.yaml"
-expect validate.string_for_number 2 "bad-string-for-number.yaml:4: model.radius_mm: expected a number, got 'two'" -- validate "$scenes/bad-string-for-number.yaml"
-expect validate.negative_radius 2 "bad-negative-radius.yaml:5: model.radius_mm: -1.5 is out of range (0, 100] mm" -- validate "$scenes/bad-negative-radius.yaml"
-expect validate.m_not_below_n 2 "bad-m-not-below-n.yaml:5: model.exponent_n: the repulsive exponent n (6) must exceed the attractive m (12)" -- validate "$scenes/bad-m-not-below-n.yaml"
-expect validate.unknown_section 2 "bad-unknown-section.yaml:3: modle: unknown section (did you mean 'model'?)" -- validate "$scenes/bad-unknown-section.yaml"
-expect validate.yaml_syntax 2 "bad-yaml-syntax.yaml:" -- validate "$scenes/bad-yaml-syntax.yaml"
-expect validate.model_without_body 2 "model.radius_mm: the model needs a body" -- validate "$scenes/bad-model-without-body.yaml"
-expect validate.missing_file 2 "no-such-scene.yaml: cannot read the scene file" -- validate "$scenes/no-such-scene.yaml"
-expect validate.good 0 "" -- validate "$scenes/small-model.yaml"
-# --set section.key=value: validated as the file is, errors naming --set, recorded.
-expect set.out_of_range 2 "--set model.radius_mm=-1: -1 is out of range (0, 100] mm" -- validate "$scenes/small-model.yaml" --set model.radius_mm=-1
-expect set.unknown_key 2 "--set model.raduis_mm=2: unknown key (did you mean 'radius_mm'?)" -- validate "$scenes/small-model.yaml" --set model.raduis_mm=2
-expect set.not_key_value 2 "--set model.radius_mm: expected section.key=value" -- validate "$scenes/small-model.yaml" --set model.radius_mm
-expect set.twice 2 "--set model.radius_mm=3: the key is set twice" -- validate "$scenes/small-model.yaml" --set model.radius_mm=2 --set model.radius_mm=3
-expect set.cross_key_rule 2 "--set model.exponent_n=6: the repulsive exponent n (6) must exceed the attractive m (12)" -- validate "$scenes/small-model.yaml" --set model.exponent_m=12 --set model.exponent_n=6
-expect set.ignored_key 2 "not used when points.source is 'generate'" -- validate "$scenes/small-model.yaml" --set "points.file=$scenes/small-model.yaml"
-expect set.run 0 "" -- --quiet run "$scenes/small-model.yaml" --set model.radius_mm=2.5 --set "points.count=20" --out "$tmp/set_out"
-check set.recorded_in_resolved_yaml bash -c "grep -q '^  radius_mm: 2.5 ' '$tmp/set_out/resolved.yaml' && grep -q '^# Set on the command line: --set model.radius_mm=2.5' '$tmp/set_out/resolved.yaml' && grep -q '^  count: 20 ' '$tmp/set_out/resolved.yaml'"
-check set.resolved_yaml_reruns_the_same "$bin" --quiet validate "$tmp/set_out/resolved.yaml"
-expect validate.default_scene 0 "" -- validate "$src/pipelines/default.yaml"
-
-# usage errors are exit 2; help is 0
-expect usage.no_subcommand 2 "organfit: usage:" --
-expect usage.unknown_subcommand 2 "organfit: usage:" -- frobnicate
-expect usage.run_without_out 2 "--out" -- run "$scenes/small-model.yaml"
-expect usage.help 0 "" -- --help
-expect usage.run_help 0 "" -- run --help
-
-# schema and version
-expect schema.text 0 "" -- schema
-check schema.lists_keys grep -q "radius_mm .*mm .*(0, 100]" "$tmp/out"
-expect schema.json 0 "" -- schema --json
-check schema.json_parses python3 -c "import json,sys; d=json.load(open('$tmp/out')); assert any(s['section']=='model' for s in d)"
-expect version 0 "" -- version
-check version.prints grep -qE "^organfit [0-9]+\.[0-9]+\.[0-9]+$" "$tmp/out"
-
-# run: outputs, refusals
-expect run.small 0 "" -- --quiet run "$scenes/small-model.yaml" --out "$tmp/run1"
-check run.writes_run_json_and_resolved_yaml test -s "$tmp/run1/run.json" -a -s "$tmp/run1/resolved.yaml"
-check run.json_has_model_and_stage_times python3 -c "
-import json; d = json.load(open('$tmp/run1/run.json'))
-assert d['scene']['name'] == 'small' and d['status'] == 'ok'
-assert d['model']['particles'] > 50 and d['model']['components'] == 1
-assert d['stages'][0]['name'] == 'model' and d['stages'][0]['wall_s'] > 0
-assert not d.get('stages_not_built_yet')"
-expect run.resolved_yaml_is_a_valid_scene 0 "" -- validate "$tmp/run1/resolved.yaml"
-check run.no_temporary_files_left test -z "$(find "$tmp/run1" -name '.*tmp*')"
-expect run.scene_without_scene_section 0 "" -- --quiet run "$scenes/no-scene-section.yaml" --out "$tmp/run3"
-check run.default_name_is_the_file_stem grep -q '"name": "no-scene-section"' "$tmp/run3/run.json"
-mkdir -p "$tmp/scene_dir" && cp "$scenes/small-model.yaml" "$tmp/scene_dir/s.yaml"
-expect run.out_equal_to_scene_folder 2 "--out is the folder of input" -- run "$tmp/scene_dir/s.yaml" --out "$tmp/scene_dir"
-check run.scene_folder_untouched test "$(ls "$tmp/scene_dir")" = "s.yaml"
-expect run.unwritable_out 2 "/dev/null/out: cannot create the output folder" -- run "$scenes/small-model.yaml" --out /dev/null/out
-expect run.bad_scene_writes_nothing 2 "unknown key" -- run "$scenes/bad-misspelled-key.yaml" --out "$tmp/run2"
-check run.bad_scene_left_no_outputs test ! -e "$tmp/run2/run.json"
-
-# fit: our method converges on the paper's prostate scene; the literal one stops with 3
-expect fit.spread_converges 0 "" -- --quiet run "$src/pipelines/paper-prostate.yaml" --out "$tmp/fit1"
-check fit.run_json_has_fit_and_truth_keys python3 -c "
-import json; d = json.load(open('$tmp/fit1/run.json'))
-f, t = d['fit'], d['truth']
-for k in ['attractive_points', 'iterations', 'wall_s', 'converged', 'residual_mean_mm', 'residual_max_mm', 'volume_change_pct', 'method']: assert k in f, k
-for k in ['msd_mm', 'hd95_mm', 'msd_undeformed_mm', 'msd_floor_mm', 'recovery']: assert k in t, k
-assert f['converged'] and f['method'] == 'spread' and d['model']['skin_particles'] > 0
-assert t['msd_mm'] < t['msd_undeformed_mm']"
-# fit.measure_truth: false leaves the truth out (the same fit), and is refused where the
-# points have no truth to measure against.
-expect fit.without_truth_runs 0 "" -- --quiet run "$src/pipelines/paper-prostate.yaml" --set fit.measure_truth=false --out "$tmp/fit1b"
-check fit.without_truth_same_fit_no_truth python3 -c "
-import json; a = json.load(open('$tmp/fit1/run.json')); b = json.load(open('$tmp/fit1b/run.json'))
-assert 'truth' not in b and 'truth' not in [s['name'] for s in b['stages']]
-assert a['fit']['residual_mean_mm'] == b['fit']['residual_mean_mm'] and a['fit']['volume_change_pct'] == b['fit']['volume_change_pct']"
-printf 'x_mm,y_mm,z_mm\n0,0,0\n' > "$tmp/p.csv"
-printf 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\npoints:\n  source: file\n  file: p.csv\nfit:\n  measure_truth: false\n' > "$tmp/truth_file.yaml"
-expect fit.measure_truth_refused_for_points_from_a_file 2 "truth_file.yaml:9: fit.measure_truth: not used when points.source is 'file'" -- validate "$tmp/truth_file.yaml"
-check fit.history_csv_has_rows python3 -c "
-rows = open('$tmp/fit1/history.csv').read().splitlines()
-assert rows[0] == 'step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,kinetic_energy_per_particle' and len(rows) > 2"
-# A fit that does not converge (the literal method within a step budget it cannot meet):
-# exit 3, and its results still written.
-expect fit.literal_not_converged_is_exit_3 3 "fit did not converge (step budget)" -- --quiet run "$src/pipelines/paper-prostate-literal.yaml" --out "$tmp/fit2" --set fit.max_steps=30
-check fit.not_converged_still_writes_results python3 -c "
-import json; d = json.load(open('$tmp/fit2/run.json')); assert d['status'] == 'target_not_met' and not d['fit']['converged']"
+# The real scans of ../shared/data (CT + structure set -> model -> fit; organs grown from
+# seeds): a part of their own (`real_data`, ctest cli.real_data), so that neither part
+# nears four minutes.
+real_data_tests() {
 # real data: CT + structure set -> model -> fit (skipped where ../shared/data is absent)
 if [[ -d "$src/../shared/data/ct-sts-002" ]]; then
   expect real.sts002_runs 0 "" -- --quiet run "$src/pipelines/real-sts-002.yaml" --out "$tmp/real"
@@ -222,6 +144,100 @@ assert t['msd_mm'] < t['msd_undeformed_mm'] - 0.5, t"
 import json; p = json.load(open('$tmp/kidney_us/run.json'))['points']
 assert p['median_distance_to_true_surface_mm'] <= 1.0 and p['fraction_within_1_5_mm'] >= 0.8, p"
 fi
+}
+if [[ $part == real_data ]]; then  # the real scans alone
+  real_data_tests
+  echo "$passed passed, $failed failed"
+  [[ $failed -eq 0 ]]
+  exit
+fi
+
+# validate: each config error with its own file:line message and exit code 2
+expect validate.misspelled_key 2 "bad-misspelled-key.yaml:5: model.raduis_mm: unknown key (did you mean 'radius_mm'?)" -- validate "$scenes/bad-misspelled-key.yaml"
+expect validate.string_for_number 2 "bad-string-for-number.yaml:4: model.radius_mm: expected a number, got 'two'" -- validate "$scenes/bad-string-for-number.yaml"
+expect validate.negative_radius 2 "bad-negative-radius.yaml:5: model.radius_mm: -1.5 is out of range (0, 100] mm" -- validate "$scenes/bad-negative-radius.yaml"
+expect validate.m_not_below_n 2 "bad-m-not-below-n.yaml:5: model.exponent_n: the repulsive exponent n (6) must exceed the attractive m (12)" -- validate "$scenes/bad-m-not-below-n.yaml"
+expect validate.unknown_section 2 "bad-unknown-section.yaml:3: modle: unknown section (did you mean 'model'?)" -- validate "$scenes/bad-unknown-section.yaml"
+expect validate.yaml_syntax 2 "bad-yaml-syntax.yaml:" -- validate "$scenes/bad-yaml-syntax.yaml"
+expect validate.model_without_body 2 "model.radius_mm: the model needs a body" -- validate "$scenes/bad-model-without-body.yaml"
+expect validate.missing_file 2 "no-such-scene.yaml: cannot read the scene file" -- validate "$scenes/no-such-scene.yaml"
+expect validate.good 0 "" -- validate "$scenes/small-model.yaml"
+# --set section.key=value: validated as the file is, errors naming --set, recorded.
+expect set.out_of_range 2 "--set model.radius_mm=-1: -1 is out of range (0, 100] mm" -- validate "$scenes/small-model.yaml" --set model.radius_mm=-1
+expect set.unknown_key 2 "--set model.raduis_mm=2: unknown key (did you mean 'radius_mm'?)" -- validate "$scenes/small-model.yaml" --set model.raduis_mm=2
+expect set.not_key_value 2 "--set model.radius_mm: expected section.key=value" -- validate "$scenes/small-model.yaml" --set model.radius_mm
+expect set.twice 2 "--set model.radius_mm=3: the key is set twice" -- validate "$scenes/small-model.yaml" --set model.radius_mm=2 --set model.radius_mm=3
+expect set.cross_key_rule 2 "--set model.exponent_n=6: the repulsive exponent n (6) must exceed the attractive m (12)" -- validate "$scenes/small-model.yaml" --set model.exponent_m=12 --set model.exponent_n=6
+expect set.ignored_key 2 "not used when points.source is 'generate'" -- validate "$scenes/small-model.yaml" --set "points.file=$scenes/small-model.yaml"
+expect set.run 0 "" -- --quiet run "$scenes/small-model.yaml" --set model.radius_mm=2.5 --set "points.count=20" --out "$tmp/set_out"
+check set.recorded_in_resolved_yaml bash -c "grep -q '^  radius_mm: 2.5 ' '$tmp/set_out/resolved.yaml' && grep -q '^# Set on the command line: --set model.radius_mm=2.5' '$tmp/set_out/resolved.yaml' && grep -q '^  count: 20 ' '$tmp/set_out/resolved.yaml'"
+check set.resolved_yaml_reruns_the_same "$bin" --quiet validate "$tmp/set_out/resolved.yaml"
+expect validate.default_scene 0 "" -- validate "$src/pipelines/default.yaml"
+
+# usage errors are exit 2; help is 0
+expect usage.no_subcommand 2 "organfit: usage:" --
+expect usage.unknown_subcommand 2 "organfit: usage:" -- frobnicate
+expect usage.run_without_out 2 "--out" -- run "$scenes/small-model.yaml"
+expect usage.help 0 "" -- --help
+expect usage.run_help 0 "" -- run --help
+
+# schema and version
+expect schema.text 0 "" -- schema
+check schema.lists_keys grep -q "radius_mm .*mm .*(0, 100]" "$tmp/out"
+expect schema.json 0 "" -- schema --json
+check schema.json_parses python3 -c "import json,sys; d=json.load(open('$tmp/out')); assert any(s['section']=='model' for s in d)"
+expect version 0 "" -- version
+check version.prints grep -qE "^organfit [0-9]+\.[0-9]+\.[0-9]+$" "$tmp/out"
+
+# run: outputs, refusals
+expect run.small 0 "" -- --quiet run "$scenes/small-model.yaml" --out "$tmp/run1"
+check run.writes_run_json_and_resolved_yaml test -s "$tmp/run1/run.json" -a -s "$tmp/run1/resolved.yaml"
+check run.json_has_model_and_stage_times python3 -c "
+import json; d = json.load(open('$tmp/run1/run.json'))
+assert d['scene']['name'] == 'small' and d['status'] == 'ok'
+assert d['model']['particles'] > 50 and d['model']['components'] == 1
+assert d['stages'][0]['name'] == 'model' and d['stages'][0]['wall_s'] > 0
+assert not d.get('stages_not_built_yet')"
+expect run.resolved_yaml_is_a_valid_scene 0 "" -- validate "$tmp/run1/resolved.yaml"
+check run.no_temporary_files_left test -z "$(find "$tmp/run1" -name '.*tmp*')"
+expect run.scene_without_scene_section 0 "" -- --quiet run "$scenes/no-scene-section.yaml" --out "$tmp/run3"
+check run.default_name_is_the_file_stem grep -q '"name": "no-scene-section"' "$tmp/run3/run.json"
+mkdir -p "$tmp/scene_dir" && cp "$scenes/small-model.yaml" "$tmp/scene_dir/s.yaml"
+expect run.out_equal_to_scene_folder 2 "--out is the folder of input" -- run "$tmp/scene_dir/s.yaml" --out "$tmp/scene_dir"
+check run.scene_folder_untouched test "$(ls "$tmp/scene_dir")" = "s.yaml"
+expect run.unwritable_out 2 "/dev/null/out: cannot create the output folder" -- run "$scenes/small-model.yaml" --out /dev/null/out
+expect run.bad_scene_writes_nothing 2 "unknown key" -- run "$scenes/bad-misspelled-key.yaml" --out "$tmp/run2"
+check run.bad_scene_left_no_outputs test ! -e "$tmp/run2/run.json"
+
+# fit: our method converges on the paper's prostate scene; the literal one stops with 3
+expect fit.spread_converges 0 "" -- --quiet run "$src/pipelines/paper-prostate.yaml" --out "$tmp/fit1"
+check fit.run_json_has_fit_and_truth_keys python3 -c "
+import json; d = json.load(open('$tmp/fit1/run.json'))
+f, t = d['fit'], d['truth']
+for k in ['attractive_points', 'iterations', 'wall_s', 'converged', 'residual_mean_mm', 'residual_max_mm', 'volume_change_pct', 'method']: assert k in f, k
+for k in ['msd_mm', 'hd95_mm', 'msd_undeformed_mm', 'msd_floor_mm', 'recovery']: assert k in t, k
+assert f['converged'] and f['method'] == 'spread' and d['model']['skin_particles'] > 0
+assert t['msd_mm'] < t['msd_undeformed_mm']"
+# fit.measure_truth: false leaves the truth out (the same fit), and is refused where the
+# points have no truth to measure against.
+expect fit.without_truth_runs 0 "" -- --quiet run "$src/pipelines/paper-prostate.yaml" --set fit.measure_truth=false --out "$tmp/fit1b"
+check fit.without_truth_same_fit_no_truth python3 -c "
+import json; a = json.load(open('$tmp/fit1/run.json')); b = json.load(open('$tmp/fit1b/run.json'))
+assert 'truth' not in b and 'truth' not in [s['name'] for s in b['stages']]
+assert a['fit']['residual_mean_mm'] == b['fit']['residual_mean_mm'] and a['fit']['volume_change_pct'] == b['fit']['volume_change_pct']"
+printf 'x_mm,y_mm,z_mm\n0,0,0\n' > "$tmp/p.csv"
+printf 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\npoints:\n  source: file\n  file: p.csv\nfit:\n  measure_truth: false\n' > "$tmp/truth_file.yaml"
+expect fit.measure_truth_refused_for_points_from_a_file 2 "truth_file.yaml:9: fit.measure_truth: not used when points.source is 'file'" -- validate "$tmp/truth_file.yaml"
+check fit.history_csv_has_rows python3 -c "
+rows = open('$tmp/fit1/history.csv').read().splitlines()
+assert rows[0] == 'step,wall_s,residual_mean_mm,residual_max_mm,volume_change_pct,kinetic_energy_per_particle' and len(rows) > 2"
+# A fit that does not converge (the literal method within a step budget it cannot meet):
+# exit 3, and its results still written.
+expect fit.literal_not_converged_is_exit_3 3 "fit did not converge (step budget)" -- --quiet run "$src/pipelines/paper-prostate-literal.yaml" --out "$tmp/fit2" --set fit.max_steps=30
+check fit.not_converged_still_writes_results python3 -c "
+import json; d = json.load(open('$tmp/fit2/run.json')); assert d['status'] == 'target_not_met' and not d['fit']['converged']"
+# real data (real_data_tests above), here when the whole script runs
+[[ $part == all ]] && real_data_tests
 expect segment.needs_one_source 2 "give either --rtstruct and --roi, or --seed and --hu" -- segment --ct /tmp --out "$tmp/x.nrrd"
 printf 'x,y,z\n1,2,nan\n' > "$tmp/bad_points.csv"
 printf 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\npoints:\n  source: file\n  file: bad_points.csv\nfit:\n  method: paper\n' > "$tmp/nan_points.yaml"
