@@ -1,6 +1,7 @@
 #!/bin/bash
-# Real organs under the session's deformations: the left and right kidneys and a vertebra
-# grown from seeds on ct-crlm-1004 (5 mm slices), and the GTVs of ct-sts-002 and ct-sts-004
+# Real organs under the session's deformations: the left and right kidneys, a vertebra and
+# the liver grown from seeds on ct-crlm-1004 (5 mm slices; radius 1.5 mm, the liver's 1.8
+# mm: 49,000 particles), and the GTVs of ct-sts-002 and ct-sts-004
 # from their structure sets (3.27 mm slices), each planned once and fitted to 87 points on
 # half its surface (0.5 mm noise) of seven known deformations. One line per session: exit
 # code, MSD and HD95 against the truth, the organ left as it was, the volume change, and
@@ -12,9 +13,9 @@ work="${2:-$(mktemp -d)}"
 data="$(cd "$(dirname "$0")/../.." && pwd)/shared/data"
 [[ -d "$data/ct-crlm-1004" ]] || { echo "real_organs_sweep: $data is absent" >&2; exit 2; }
 mkdir -p "$work"
-seeded() {  # NAME SEED_MM HU_LOW HU_HIGH BOX_MM
-  printf 'ct:\n  folder: %s\norgan:\n  source: seed\n  roi: %s\n  seed_mm: [%s]\n  hu_low: %s\n  hu_high: %s\n  search_box_mm: %s\nmodel:\n  radius_mm: 1.5\nexport:\n  model: m.json\n' \
-    "$data/ct-crlm-1004/ct" "$1" "$2" "$3" "$4" "$5" >"$work/plan_$1.yaml"
+seeded() {  # NAME SEED_MM HU_LOW HU_HIGH BOX_MM [RADIUS_MM]
+  printf 'ct:\n  folder: %s\norgan:\n  source: seed\n  roi: %s\n  seed_mm: [%s]\n  hu_low: %s\n  hu_high: %s\n  search_box_mm: %s\nmodel:\n  radius_mm: %s\nexport:\n  model: m.json\n' \
+    "$data/ct-crlm-1004/ct" "$1" "$2" "$3" "$4" "$5" "${6:-1.5}" >"$work/plan_$1.yaml"
 }
 imported() {  # NAME CASE
   printf 'ct:\n  folder: %s\norgan:\n  rtstruct: %s\n  roi: GTV_Mass_CT\nmodel:\n  radius_mm: 2.0\nexport:\n  model: m.json\n' \
@@ -23,11 +24,12 @@ imported() {  # NAME CASE
 seeded kidney_left "66.6, 29.2, -303.7" 150 400 140
 seeded kidney_right "-58.8, 3.7, -326" 150 400 140
 seeded vertebra "-3.3, 37.0, -272.5" 150 400 160
+seeded liver "-86.6, -28.7, -275" 95 165 260 1.8
 imported gtv_sts002 ct-sts-002
 imported gtv_sts004 ct-sts-004
 deformations=("none:" "stretch_1.1:  stretch: 1.1" "bend_5:  bend_mm: 5" "twist_10:  twist_deg: 10"
   "probe_5:  indent_mm: -5" "push_5:  push_mm: 5" "default:  stretch: 1.15\n  bend_mm: 2")
-for organ in kidney_left kidney_right vertebra gtv_sts002 gtv_sts004; do
+for organ in kidney_left kidney_right vertebra liver gtv_sts002 gtv_sts004; do
   "$bin" --quiet run "$work/plan_$organ.yaml" --out "$work/plan_$organ" >/dev/null 2>&1 ||
     { echo "$organ: planning failed"; continue; }
   for d in "${deformations[@]}"; do

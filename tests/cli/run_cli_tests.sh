@@ -121,6 +121,21 @@ if [[ -d "$src/../shared/data/ct-crlm-1004" ]]; then
   check real.liver_relaxation_settles /usr/bin/python3 -c "
 import json; m = json.load(open('$tmp/liver/run.json'))['model']
 assert m['relax_settled'] and m['relax_steps'] < 1000 and m['relax_largest_move_mm'] < 5, m"
+  # The liver planned at radius 1.8 mm (49,000 particles), then a session with no change
+  # of shape: 87 points on half its surface, 0.5 mm noise. Past its thin surface layers the
+  # displacement was extrapolated with the particles' jitter amplified (up to 4 mm moves of
+  # single surface particles), and it folded: the local stage undone, exit 3. Each node's
+  # answer is now at least as certain as one particle's displacement.
+  printf 'ct:\n  folder: %s\norgan:\n  source: seed\n  roi: Liver\n  seed_mm: [-86.6, -28.7, -275]\n  hu_low: 95\n  hu_high: 165\n  search_box_mm: 260\nmodel:\n  radius_mm: 1.8\nexport:\n  model: liver_model.json\n' \
+    "$src/../shared/data/ct-crlm-1004/ct" >"$tmp/liver_plan.yaml"
+  expect real.liver_planning 0 "" -- --quiet run "$tmp/liver_plan.yaml" --out "$tmp/liver_plan"
+  printf 'planning:\n  model: %s\npoints:\n  count: 87\n  noise_mm: 0.5\n  coverage: half\nfit:\n  method: spread\n' \
+    "$tmp/liver_plan/liver_model.json" >"$tmp/liver_unchanged.yaml"
+  expect real.liver_unchanged_session_converges 0 "" -- --quiet run "$tmp/liver_unchanged.yaml" --out "$tmp/liver_unchanged"
+  check real.liver_unchanged_session_does_no_harm /usr/bin/python3 -c "
+import json; d = json.load(open('$tmp/liver_unchanged/run.json')); t, f = d['truth'], d['fit']
+assert not f['local_stage_undone'] and f['deformation']['min_volume_ratio'] > 0, f['deformation']
+assert t['msd_mm'] <= t['msd_undeformed_mm'] + 0.1 and abs(f['volume_change_pct']) <= 1, (t, f['volume_change_pct'])"
   # A kidney's centroid lies in its sinus, outside it. Generated points are found along rays
   # from its deepest voxel (from the centroid, 64 of 87 were the centroid itself), so they
   # lie on its surface, and the session on the default scene's deformation (stretch 1.15,

@@ -70,14 +70,15 @@ struct SortedParticles {
 };
 
 /// The moving least squares' answer at q: u(q), and whether it is kept (well posed, and
-/// the neighbours weigh at least one particle at q).
+/// no less certain than one particle's displacement at q).
 struct LocalFit {
   Eigen::Vector3d u = Eigen::Vector3d::Zero();
   bool kept = false;
 };
 
-/// `least_weight`: the sum of the weights at q below which there is no answer;
-/// `first_widen`: the support to start from (0: h, 1: 1.5 h, 2: 2 h).
+/// `least_weight`: the weight of one particle at q, which the neighbours' sum must reach
+/// (else no answer) and whose certainty the answer must reach (else a wider support;
+/// 0: neither asked); `first_widen`: the support to start from (0: h, 1: 1.5 h, 2: 2 h).
 LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& sorted,
                               const Buckets& b, double h0, double least_weight, int first_widen) {
   LocalFit out;
@@ -129,7 +130,15 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& s
     if (spread.eigenvalues()(0) < 1e-2) continue;  // a cap of particles: no slope to be had
     if (m(0, 0) < least_weight) return out;        // too few near q to trust
     m.bottomRightCorner<3, 3>() += 1e-9 * m(0, 0) * Eigen::Matrix3d::Identity();
-    const Eigen::Matrix<double, 4, 3> coef = m.ldlt().solve(r);
+    const Eigen::LDLT<Eigen::Matrix4d> solve = m.ldlt();
+    // The answer's variance as the weights state it (a particle of weight w known to
+    // s^2 / w): s^2 (M^-1)_00. That is s^2 / sum w at the neighbours' centroid, and
+    // grows as q lies farther from them along a direction they spread little in (a
+    // gradient from a thin layer, extrapolated past the surface: the particles' jitter
+    // amplified, and folds on a real liver with no change of shape). At most one
+    // particle's at q, or a wider support.
+    if (least_weight > 0 && solve.solve(Eigen::Vector4d::UnitX())(0) * least_weight > 1) continue;
+    const Eigen::Matrix<double, 4, 3> coef = solve.solve(r);
     out.u = coef.row(0).transpose();
     out.kept = out.u.allFinite();
     return out;
