@@ -121,16 +121,27 @@ if [[ -d "$src/../shared/data/ct-crlm-1004" ]]; then
   check real.liver_relaxation_settles /usr/bin/python3 -c "
 import json; m = json.load(open('$tmp/liver/run.json'))['model']
 assert m['relax_settled'] and m['relax_steps'] < 1000 and m['relax_largest_move_mm'] < 5, m"
+  # NAME ROI SEED_MM HU_LOW HU_HIGH BOX_MM RADIUS_MM: $tmp/NAME.yaml, an organ grown from a
+  # seed on ct-crlm-1004, its model written as NAME_model.json into --out.
+  seeded_planning() {
+    printf 'ct:\n  folder: %s\norgan:\n  source: seed\n  roi: %s\n  seed_mm: [%s]\n  hu_low: %s\n  hu_high: %s\n  search_box_mm: %s\nmodel:\n  radius_mm: %s\nexport:\n  model: %s_model.json\n' \
+      "$src/../shared/data/ct-crlm-1004/ct" "$2" "$3" "$4" "$5" "$6" "$7" "$1" >"$tmp/$1.yaml"
+  }
+  # PLANNED SESSION DEFORMATION: $tmp/SESSION.yaml, PLANNED's model (planned into
+  # $tmp/PLANNED) fitted to 87 points on half its surface, 0.5 mm noise, DEFORMATION's
+  # points keys (printf escapes; empty: no change).
+  session_on() {
+    printf "planning:\n  model: %s\npoints:\n  count: 87\n  noise_mm: 0.5\n  coverage: half\n$3fit:\n  method: spread\n" \
+      "$tmp/$1/$1_model.json" >"$tmp/$2.yaml"
+  }
   # The liver planned at radius 1.8 mm (49,000 particles), then a session with no change
   # of shape: 87 points on half its surface, 0.5 mm noise. Past its thin surface layers the
   # displacement was extrapolated with the particles' jitter amplified (up to 4 mm moves of
   # single surface particles), and it folded: the local stage undone, exit 3. Each node's
   # answer is now at least as certain as one particle's displacement.
-  printf 'ct:\n  folder: %s\norgan:\n  source: seed\n  roi: Liver\n  seed_mm: [-86.6, -28.7, -275]\n  hu_low: 95\n  hu_high: 165\n  search_box_mm: 260\nmodel:\n  radius_mm: 1.8\nexport:\n  model: liver_model.json\n' \
-    "$src/../shared/data/ct-crlm-1004/ct" >"$tmp/liver_plan.yaml"
+  seeded_planning liver_plan Liver "-86.6, -28.7, -275" 95 165 260 1.8
   expect real.liver_planning 0 "" -- --quiet run "$tmp/liver_plan.yaml" --out "$tmp/liver_plan"
-  printf 'planning:\n  model: %s\npoints:\n  count: 87\n  noise_mm: 0.5\n  coverage: half\nfit:\n  method: spread\n' \
-    "$tmp/liver_plan/liver_model.json" >"$tmp/liver_unchanged.yaml"
+  session_on liver_plan liver_unchanged ""
   expect real.liver_unchanged_session_converges 0 "" -- --quiet run "$tmp/liver_unchanged.yaml" --out "$tmp/liver_unchanged"
   check real.liver_unchanged_session_does_no_harm /usr/bin/python3 -c "
 import json; d = json.load(open('$tmp/liver_unchanged/run.json')); t, f = d['truth'], d['fit']
@@ -140,11 +151,9 @@ assert t['msd_mm'] <= t['msd_undeformed_mm'] + 0.1 and abs(f['volume_change_pct'
   # from its deepest voxel (from the centroid, 64 of 87 were the centroid itself), so they
   # lie on its surface, and the session on the default scene's deformation (stretch 1.15,
   # bend 2 mm, 87 points on half the surface) meets the targets against the known truth.
-  printf 'ct:\n  folder: %s\norgan:\n  source: seed\n  roi: Kidney\n  seed_mm: [66.6, 29.2, -303.7]\n  hu_low: 150\n  hu_high: 400\n  search_box_mm: 140\nmodel:\n  radius_mm: 1.5\nexport:\n  model: kidney_model.json\n' \
-    "$src/../shared/data/ct-crlm-1004/ct" >"$tmp/kidney.yaml"
+  seeded_planning kidney Kidney "66.6, 29.2, -303.7" 150 400 140 1.5
   expect real.kidney_planning 0 "" -- --quiet run "$tmp/kidney.yaml" --out "$tmp/kidney"
-  printf 'planning:\n  model: %s\npoints:\n  count: 87\n  noise_mm: 0.5\n  coverage: half\n  stretch: 1.15\n  bend_mm: 2\nfit:\n  method: spread\n' \
-    "$tmp/kidney/kidney_model.json" >"$tmp/kidney_session.yaml"
+  session_on kidney kidney_session "  stretch: 1.15\n  bend_mm: 2\n"
   expect real.kidney_session_converges 0 "" -- --quiet run "$tmp/kidney_session.yaml" --out "$tmp/kidney_session"
   check real.kidney_session_meets_the_targets /usr/bin/python3 -c "
 import json; d = json.load(open('$tmp/kidney_session/run.json')); t, f = d['truth'], d['fit']
