@@ -133,10 +133,9 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& s
     const Eigen::LDLT<Eigen::Matrix4d> solve = m.ldlt();
     // The answer's variance as the weights state it (a particle of weight w known to
     // s^2 / w): s^2 (M^-1)_00. That is s^2 / sum w at the neighbours' centroid, and
-    // grows as q lies farther from them along a direction they spread little in (a
-    // gradient from a thin layer, extrapolated past the surface: the particles' jitter
-    // amplified, and folds on a real liver with no change of shape). At most one
-    // particle's at q, or a wider support.
+    // grows as q lies farther from them along a direction they spread little in: a
+    // gradient from a thin layer, extrapolated past the surface, amplifies the particles'
+    // jitter into folds. At most one particle's at q, or a wider support.
     if (least_weight > 0 && solve.solve(Eigen::Vector4d::UnitX())(0) * least_weight > 1) continue;
     const Eigen::Matrix<double, 4, 3> coef = solve.solve(r);
     out.u = coef.row(0).transpose();

@@ -111,9 +111,9 @@ TEST(Deformation, FallsToTheGlobalMapFarAwayWithoutFolding) {
 TEST(Deformation, ExtrapolatesNoFoldFromTheParticlesJitter) {
   // No change of shape, the particles jittered about their places (sd 0.2 of their
   // spacing on each axis). Past the outermost particles the field is extrapolated from
-  // neighbours spread thinly across the surface, which amplifies their jitter: answers
-  // kept where no more certain than one particle's displacement folded it (det(grad phi)
-  // <= 0 beyond the surface).
+  // neighbours spread thinly across the surface, which amplifies their jitter into folds
+  // beyond the surface unless each answer is at least as certain as one particle's
+  // displacement.
   const particles::Positions x0 = ellipsoid();
   std::mt19937 rng(7);
   std::normal_distribution<double> jitter(0.0, 0.2 * kSpacing);

@@ -12,9 +12,10 @@
 //    reproduced exactly, and the field extrapolates past the outermost particles to the
 //    surface, which lies beyond them. This answer is kept where it is well posed (4
 //    particles or more, spread in every direction), the particles near q weigh at least
-//    as much as one particle at q (sum of w >= 1), and the answer is as certain as one
-//    particle's displacement at q ((M^-1)_00 <= 1, M the fit's weighted normal matrix:
-//    beyond a thin layer of particles their jitter is amplified); else from 1.5 h or 2 h;
+//    as much as one particle at q (sum of w >= 1), and the answer is at least as certain
+//    as one particle's displacement at q ((M^-1)_00 <= 1, M the fit's weighted normal
+//    matrix: beyond a thin layer of particles their jitter is amplified); else from a
+//    support of 1.5 h or 2 h;
 //  - everywhere else (beyond the particles, or where the model tore apart inside), u is
 //    harmonic (the Laplace equation), matching the kept values and zero at
 //    D = max(2 h, 2 max|u|) beyond the particles. A harmonic field has no interior
