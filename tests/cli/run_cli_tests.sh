@@ -76,6 +76,43 @@ assert [list(map(int, c.ROIDisplayColor)) for c in d.ROIContourSequence] == [[10
 import json; e = json.load(open('$tmp/real/run.json'))['export']; m = e['mesh']
 assert m['boundary_edges'] == 0 and m['non_manifold_edges'] == 0 and m['outward'], m
 assert abs(m['enclosed_volume_mm3'] - e['model_volume_mm3']) < 0.03 * e['model_volume_mm3'], e"
+  # Points that ask for the GTV 60 mm superior, beyond the cropped CT's last slice (it
+  # ends 52 mm above the GTV): 87 vertices of the fitted mesh's posterior half, moved. The
+  # fit follows them; the export says that the organ on the CT's grid is cut at its edge.
+  check real.points_beyond_the_ct_written /usr/bin/python3 -c "
+import struct, random
+b = open('$tmp/real/gtv_fit.stl', 'rb').read(); n = struct.unpack_from('<I', b, 80)[0]
+v = sorted({struct.unpack_from('<3f', b, 84 + 50 * t + 12 + 12 * c) for t in range(n) for c in range(3)})
+y = sum(p[1] for p in v) / len(v)
+half = [p for p in v if p[1] >= y]; random.seed(1)
+rows = ['%.3f,%.3f,%.3f' % (p[0], p[1], p[2] + 60) for p in random.sample(half, 87)]
+open('$tmp/beyond.csv', 'w').write('\\n'.join(['x,y,z'] + rows) + '\\n')"
+  cat > "$tmp/beyond.yaml" <<EOF
+scene:
+  name: sts002-beyond-the-ct
+  description: points 60 mm superior, beyond the planning CT's field of view
+ct:
+  folder: $src/../shared/data/ct-sts-002/ct
+organ:
+  rtstruct: $src/../shared/data/ct-sts-002/rtstruct.dcm
+  roi: GTV_Mass_CT
+model:
+  radius_mm: 2.0
+points:
+  source: file
+  file: $tmp/beyond.csv
+fit:
+  method: spread
+export:
+  rtstruct: fit.dcm
+EOF
+  expect real.organ_beyond_the_ct_warned 0 "the fitted organ reaches the planning CT's edge: superior" -- --quiet run "$tmp/beyond.yaml" --out "$tmp/beyond"
+  check real.organ_beyond_the_ct_in_run_json /usr/bin/python3 -c "
+import json; c = json.load(open('$tmp/beyond/run.json'))['export']['checks']
+cut = c['cut_by_ct_edge']
+assert [f['side'] for f in cut] == ['superior'] and cut[0]['voxels'] > 100 and cut[0]['planning_voxels'] == 0, cut
+assert c['volume_difference_cm3'] < -1, c
+assert json.load(open('$tmp/real/run.json'))['export']['checks']['cut_by_ct_edge'] == []"
   expect real.exported_rtstruct_reads_back 0 "" -- --quiet segment --ct "$src/../shared/data/ct-sts-002/ct" --rtstruct "$tmp/real/gtv_fit_rtstruct.dcm" --roi GTV_Mass_CT_fit --out "$tmp/back.nrrd"
   check real.read_back_volume_equals_exported /usr/bin/python3 -c "
 import json, re; d = json.load(open('$tmp/real/run.json'))
