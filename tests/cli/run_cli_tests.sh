@@ -113,6 +113,15 @@ cut = c['cut_by_ct_edge']
 assert [f['side'] for f in cut] == ['superior'] and cut[0]['voxels'] > 100 and cut[0]['planning_voxels'] == 0, cut
 assert c['volume_difference_cm3'] < -1, c
 assert json.load(open('$tmp/real/run.json'))['export']['checks']['cut_by_ct_edge'] == []"
+  # The same points 300 mm to the left (another frame's coordinates): refused, nothing
+  # written.
+  awk -F, 'NR == 1 { print; next } { printf "%.3f,%s,%s\n", $1 + 300, $2, $3 }' "$tmp/beyond.csv" >"$tmp/far.csv"
+  sed "s|$tmp/beyond.csv|$tmp/far.csv|" "$tmp/beyond.yaml" >"$tmp/far.yaml"
+  # (Exit 2 and one error line; the import's matched-by-position warning comes before it.)
+  check real.organ_off_the_ct_refused bash -c "'$bin' --quiet run '$tmp/far.yaml' --out '$tmp/far' 2>'$tmp/far.err'; [[ \$? -eq 2 ]] &&
+    [[ \$(grep -c '^organfit: error: ' '$tmp/far.err') -eq 1 ]] &&
+    grep -q \"export: the fitted organ lies wholly outside the planning CT's field of view, 3[0-9][0-9] mm from where\" '$tmp/far.err'"
+  check real.organ_off_the_ct_wrote_nothing test ! -e "$tmp/far"
   expect real.exported_rtstruct_reads_back 0 "" -- --quiet segment --ct "$src/../shared/data/ct-sts-002/ct" --rtstruct "$tmp/real/gtv_fit_rtstruct.dcm" --roi GTV_Mass_CT_fit --out "$tmp/back.nrrd"
   check real.read_back_volume_equals_exported /usr/bin/python3 -c "
 import json, re; d = json.load(open('$tmp/real/run.json'))

@@ -311,8 +311,14 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     auto mask = std::make_shared<geometry::LabelVolume>(organ.on_grid(ct->geometry));
     progress.update(++done, "the organ on the planning CT's grid");
     out.organ_on_ct = mask;
-    if (mask->count(1) == 0)
-      throw InputError("export: the model lies outside the planning CT's grid");
+    if (mask->count(1) == 0) {  // the points, most likely, in other coordinates
+      const geometry::Aabb now = organ.bounds(), then = organ.reference().geometry.bounds_mm();
+      throw InputError(fmt::format(
+          "export: the fitted organ lies wholly outside the planning CT's field of view, {:.0f} "
+          "mm from where the planning organ was: are the points in the planning CT's patient "
+          "coordinates?",
+          (0.5 * (now.min_mm + now.max_mm) - 0.5 * (then.min_mm + then.max_mm)).norm()));
+    }
     // The planning organ on the same grid; phi is one-to-one (a folding one is never
     // exported), so the sampled organ's extra pieces, cavities and one-pixel specks are
     // the grid's, not the fit's: undone before anything is written.
