@@ -164,6 +164,11 @@ if [[ -d "$src/../shared/data/ct-crlm-1004" ]]; then
   printf 'ct:\n  folder: %s\norgan:\n  source: seed\n  roi: Liver\n  seed_mm: [-86.6, -28.7, -275]\n  hu_low: 80\n  hu_high: 180\n  search_box_mm: 300\nmodel:\n  radius_mm: 2.5\n' \
     "$src/../shared/data/ct-crlm-1004/ct" >"$tmp/liver.yaml"
   expect real.liver_in_pieces_is_said 0 "the particles make 4 separate pieces where the organ is 1" -- --quiet run "$tmp/liver.yaml" --out "$tmp/liver"
+  # ct-crlm-1004's 41 slices of 5 mm do not hold the whole liver: cut at both ends.
+  check real.liver_cut_by_the_ct_is_said bash -c "grep -q \"organ: 'Liver' reaches the CT's edge: inferior (\" '$tmp/err' && /usr/bin/python3 -c \"
+import json; e = json.load(open('$tmp/liver/run.json'))['organ']['at_ct_edge']
+assert [f['side'] for f in e] == ['inferior', 'superior'] and min(f['voxels'] for f in e) > 100, e
+assert json.load(open('$tmp/real/run.json'))['organ']['at_ct_edge'] == []\""
   check real.liver_relaxation_settles /usr/bin/python3 -c "
 import json; m = json.load(open('$tmp/liver/run.json'))['model']
 assert m['relax_settled'] and m['relax_steps'] < 1000 and m['relax_largest_move_mm'] < 5, m"

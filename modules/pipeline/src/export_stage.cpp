@@ -8,6 +8,7 @@
 
 #include "organfit/dicom/registration_writer.h"
 #include "organfit/dicom/rtstruct_writer.h"
+#include "organfit/geometry/grid_edges.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/slice_contours.h"
 #include "organfit/geometry/topology.h"
@@ -71,34 +72,6 @@ struct PlanningOnGrid {
   }
 };
 
-/// The organ's voxels on each face of its grid (-i, +i, -j, +j, -k, +k).
-std::array<long long, 6> voxels_on_faces(const geometry::LabelVolume& m) {
-  std::array<long long, 6> on{};
-  const geometry::ImageGeometry& g = m.geometry;
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i) {
-        if (m.at(i, j, k) != 1) continue;
-        const int at[3] = {i, j, k};
-        for (int a = 0; a < 3; ++a) {
-          on[static_cast<size_t>(2 * a)] += at[a] == 0;
-          on[static_cast<size_t>(2 * a + 1)] += at[a] == g.size[a] - 1;
-        }
-      }
-  return on;
-}
-
-/// The patient side a face of the grid looks towards (LPS: +x left, +y posterior, +z
-/// superior), by its outward axis's largest component.
-const char* side_of_face(const geometry::ImageGeometry& g, int face) {
-  const Eigen::Vector3d outward = (face % 2 ? 1.0 : -1.0) * g.direction.col(face / 2);
-  Eigen::Index a = 0;
-  outward.cwiseAbs().maxCoeff(&a);
-  static const char* const names[3][2] = {
-      {"right", "left"}, {"anterior", "posterior"}, {"inferior", "superior"}};
-  return names[a][outward[a] > 0];
-}
-
 /// The checks of the exported organ (after `repair`) against the planning organ on the
 /// same grid.
 void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume& exported,
@@ -144,14 +117,14 @@ void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume
   checks["volume_kept"] = std::abs(exported_cm3 - expected_cm3) <= tolerance_cm3;
   // The organ on a face of the CT's grid, more than the planning organ was: it goes on
   // beyond the CT's field of view, which cannot hold it, and what is written is cut there.
-  const std::array<long long, 6> on_faces = voxels_on_faces(exported),
-                                 planning_on_faces = voxels_on_faces(planning);
+  const std::array<long long, 6> on_faces = geometry::voxels_on_faces(exported),
+                                 planning_on_faces = geometry::voxels_on_faces(planning);
   nlohmann::json cut = nlohmann::json::array();
   std::string sides;
   for (int face = 0; face < 6; ++face) {
     const auto f = static_cast<size_t>(face);
     if (on_faces[f] <= planning_on_faces[f]) continue;
-    const char* side = side_of_face(exported.geometry, face);
+    const char* side = geometry::side_of_face(exported.geometry, face);
     cut.push_back(
         {{"side", side}, {"voxels", on_faces[f]}, {"planning_voxels", planning_on_faces[f]}});
     sides += fmt::format("{}{} ({} voxels on the CT's last plane there, the planning organ {})",

@@ -1,8 +1,12 @@
 #include "organfit/pipeline/organ_stage.h"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <array>
+
 #include "organfit/dicom/structure_set.h"
+#include "organfit/geometry/grid_edges.h"
 #include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
 #include "organfit/support/resources.h"
@@ -70,6 +74,25 @@ OrganStageResult run_organ_stage(const OrganStageOptions& options, const dicom::
   }
   if (mask.count(1) == 0)
     options.roi_key.fail("the organ '" + echo(roi) + "' covers no voxel of the CT");
+  // On the CT's last plane along an axis: the CT does not show whether the organ ends
+  // there, and the model holds only the part it shows.
+  const std::array<long long, 6> on_faces = geometry::voxels_on_faces(mask);
+  nlohmann::json at_edge = nlohmann::json::array();
+  std::string sides;
+  for (int face = 0; face < 6; ++face) {
+    const long long voxels = on_faces[static_cast<size_t>(face)];
+    if (voxels == 0) continue;
+    const char* side = geometry::side_of_face(mask.geometry, face);
+    at_edge.push_back({{"side", side}, {"voxels", voxels}});
+    sides +=
+        fmt::format("{}{} ({} voxels on its last plane)", sides.empty() ? "" : ", ", side, voxels);
+  }
+  r.summary["at_ct_edge"] = at_edge;
+  if (!at_edge.empty())
+    r.warnings.push_back(fmt::format(
+        "organ: '{}' reaches the CT's edge: {}. It may go on beyond the CT's field of view; the "
+        "model holds only the part the CT shows",
+        echo(roi), sides));
   r.shape =
       geometry::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(mask)));
   return r;
