@@ -169,6 +169,7 @@ if [[ -d "$src/../shared/data/ct-crlm-1004" ]]; then
 import json; e = json.load(open('$tmp/liver/run.json'))['organ']['at_ct_edge']
 assert [f['side'] for f in e] == ['inferior', 'superior'] and min(f['voxels'] for f in e) > 100, e
 assert json.load(open('$tmp/real/run.json'))['organ']['at_ct_edge'] == []\""
+  expect segment.liver_cut_by_the_ct_is_said 0 "segment: the organ reaches the CT's edge: inferior (" -- segment --ct "$src/../shared/data/ct-crlm-1004/ct" --seed -86.6,-28.7,-275 --hu 80,180 --search-box 300 --out "$tmp/liver_seg.nrrd"
   check real.liver_relaxation_settles /usr/bin/python3 -c "
 import json; m = json.load(open('$tmp/liver/run.json'))['model']
 assert m['relax_settled'] and m['relax_steps'] < 1000 and m['relax_largest_move_mm'] < 5, m"

@@ -15,6 +15,7 @@
 #include "commands.h"
 #include "organfit/dicom/structure_set.h"
 #include "organfit/itkbridge/itk_images.h"
+#include "organfit/pipeline/organ_stage.h"
 #include "organfit/support/error.h"
 #include "organfit/support/output_folder.h"
 
@@ -72,6 +73,9 @@ SegmentResult run_segment(const SegmentRequest& r) {
     result.warnings.insert(result.warnings.end(), organ.warnings.begin(), organ.warnings.end());
     mask = std::move(organ.mask);
   }
+  const pipeline::OrganAtCtEdge edge =
+      pipeline::organ_at_ct_edge(mask, "segment", import ? r.roi : std::string());
+  if (!edge.warning.empty()) result.warnings.push_back(edge.warning);
   result.volume_cm3 = mask.volume_mm3(1) / 1000.0;
   CreatedFolders folders(r.out.parent_path().empty() ? std::filesystem::path(".")
                                                      : r.out.parent_path());

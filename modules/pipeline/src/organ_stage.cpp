@@ -32,6 +32,27 @@ OrganStageOptions organ_stage_options_from(const config::Scene& scene) {
   return o;
 }
 
+OrganAtCtEdge organ_at_ct_edge(const geometry::LabelVolume& mask, const std::string& stage,
+                               const std::string& roi) {
+  OrganAtCtEdge out;
+  const std::array<long long, 6> on_faces = geometry::voxels_on_faces(mask);
+  std::string sides;
+  for (int face = 0; face < 6; ++face) {
+    const long long voxels = on_faces[static_cast<size_t>(face)];
+    if (voxels == 0) continue;
+    const char* side = geometry::side_of_face(mask.geometry, face);
+    out.faces.push_back({{"side", side}, {"voxels", voxels}});
+    sides +=
+        fmt::format("{}{} ({} voxels on its last plane)", sides.empty() ? "" : ", ", side, voxels);
+  }
+  if (!sides.empty())
+    out.warning = fmt::format(
+        "{}: {} reaches the CT's edge: {}. It may go on beyond the CT's field of view; only "
+        "the part the CT shows is taken",
+        stage, roi.empty() ? std::string("the organ") : "'" + echo(roi) + "'", sides);
+  return out;
+}
+
 OrganStageResult run_organ_stage(const OrganStageOptions& options, const dicom::CtSeries& ct,
                                  const fs::path& rtstruct_file, const fs::path& staging,
                                  const fs::path& out_dir) {
@@ -74,25 +95,9 @@ OrganStageResult run_organ_stage(const OrganStageOptions& options, const dicom::
   }
   if (mask.count(1) == 0)
     options.roi_key.fail("the organ '" + echo(roi) + "' covers no voxel of the CT");
-  // On the CT's last plane along an axis: the CT does not show whether the organ ends
-  // there, and the model holds only the part it shows.
-  const std::array<long long, 6> on_faces = geometry::voxels_on_faces(mask);
-  nlohmann::json at_edge = nlohmann::json::array();
-  std::string sides;
-  for (int face = 0; face < 6; ++face) {
-    const long long voxels = on_faces[static_cast<size_t>(face)];
-    if (voxels == 0) continue;
-    const char* side = geometry::side_of_face(mask.geometry, face);
-    at_edge.push_back({{"side", side}, {"voxels", voxels}});
-    sides +=
-        fmt::format("{}{} ({} voxels on its last plane)", sides.empty() ? "" : ", ", side, voxels);
-  }
-  r.summary["at_ct_edge"] = at_edge;
-  if (!at_edge.empty())
-    r.warnings.push_back(fmt::format(
-        "organ: '{}' reaches the CT's edge: {}. It may go on beyond the CT's field of view; the "
-        "model holds only the part the CT shows",
-        echo(roi), sides));
+  const OrganAtCtEdge edge = organ_at_ct_edge(mask, "organ", roi);
+  r.summary["at_ct_edge"] = edge.faces;
+  if (!edge.warning.empty()) r.warnings.push_back(edge.warning);
   r.shape =
       geometry::make_mask_shape(std::make_shared<const geometry::LabelVolume>(std::move(mask)));
   return r;

@@ -43,6 +43,17 @@ struct OrganStageOptions {
 };
 OrganStageOptions organ_stage_options_from(const config::Scene& scene);
 
+/// An organ on the CT's last plane along an axis: the CT does not show whether it ends
+/// there. `faces`: one {side, voxels} per such face of the grid (run.json organ.at_ct_edge,
+/// empty when none); `warning`: what says so, from `stage` (its prefix: "organ", "segment"),
+/// naming `roi` when there is one (empty when none).
+struct OrganAtCtEdge {
+  nlohmann::json faces = nlohmann::json::array();
+  std::string warning;
+};
+OrganAtCtEdge organ_at_ct_edge(const geometry::LabelVolume& mask, const std::string& stage,
+                               const std::string& roi);
+
 /// Makes the organ. `rtstruct_file`: the structure set to import from (the scene's or the
 /// phantom's; ignored for a seed or a pull); `staging`/`out_dir` as for the ct stage.
 /// Fails naming organ.roi when the organ covers no voxel.
