@@ -405,6 +405,16 @@ import json; m = json.load(open('$tmp/wf/out/prostate-planning/prostate_model.js
 json.dump(m, open('$tmp/wf/no_rtss_model.json', 'w'))"
 expect workflow.session_copy_needs_a_structure_set_in_the_model 2 "the planning model records no structure set" -- --quiet run "$tmp/wf/pipelines/prostate-session.yaml" --set "planning.model=$tmp/wf/no_rtss_model.json" --set export.copy_other_rois=true --out "$tmp/wf/out/no-copy"
 check workflow.refused_copy_wrote_nothing test ! -e "$tmp/wf/out/no-copy"
+# The planning CT moved after planning: said before the fit, with the key that says where
+# it is now; with it, the session runs.
+/usr/bin/python3 -c "
+import json; m = json.load(open('$tmp/wf/out/prostate-planning/prostate_model.json')); m['ct']['folder'] = '$tmp/wf/moved_ct'
+json.dump(m, open('$tmp/wf/moved_ct_model.json', 'w'))"
+expect workflow.session_with_the_planning_ct_gone_is_refused 2 "moved_ct_model.json: the planning CT it records, $tmp/wf/moved_ct, is not there: give the session scene ct.folder" -- --quiet run "$tmp/wf/pipelines/prostate-session.yaml" --set "planning.model=$tmp/wf/moved_ct_model.json" --out "$tmp/wf/out/moved"
+check workflow.refused_moved_ct_wrote_nothing test ! -e "$tmp/wf/out/moved"
+expect export.with_the_planning_ct_gone_is_refused 2 "moved_ct_model.json: the planning CT it records, $tmp/wf/moved_ct, is not there: give --ct" -- export --model "$tmp/wf/moved_ct_model.json" --rtstruct "$tmp/moved_export/moved.dcm"
+check export.refused_moved_ct_wrote_nothing test ! -e "$tmp/moved_export"
+expect workflow.session_given_where_the_ct_is_now 0 "" -- --quiet run "$tmp/wf/pipelines/prostate-session.yaml" --set "planning.model=$tmp/wf/moved_ct_model.json" --set "ct.folder=$tmp/wf/out/prostate-planning/phantom/ct" --out "$tmp/wf/out/moved2"
 expect export.needs_an_output 2 "name at least one output" -- export --model "$tmp/wf/out/prostate-planning/prostate_model.json"
 expect export.uncertainty_needs_a_fitted_model 2 "holds no fit's uncertainty" -- export --model "$tmp/wf/out/prostate-planning/prostate_model.json" --uncertainty "$tmp/wf/sigma.nrrd"
 check export.uncertainty_refused_writes_nothing test ! -e "$tmp/wf/sigma.nrrd"

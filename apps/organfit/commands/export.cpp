@@ -75,6 +75,11 @@ nlohmann::json run_export_command(const ExportCommand& c) {
     if (c.ct.empty() && !saved.ct)
       throw InputError(c.model.string() + ": the model names no planning CT; give --ct");
     const fs::path folder = c.ct.empty() ? fs::path(saved.ct->folder) : c.ct;
+    std::error_code gone;
+    if (c.ct.empty() && !fs::is_directory(folder, gone))
+      throw InputError(fmt::format(
+          "{}: the planning CT it records, {}, is not there: give --ct (where that CT is now)",
+          c.model.string(), folder.string()));
     // The model's own series when its folder is used; a folder given with --ct must hold
     // one CT series, and it must be the model's (series and Frame of Reference).
     dicom::CtReadOptions o;

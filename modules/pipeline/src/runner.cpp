@@ -134,9 +134,20 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     planning_ct = saved.ct;
     if (ct_reference) check_output_location(out_dir, {ct_reference->folder}, "--out");
     // Exports on the CT's grid need the planning CT: said now, not after the fit.
-    if (!ct_reference && !scene.has_section("ct") && scene.has_section("export") &&
-        export_request_from(scene, staging, organ_name, organ_look).needs_ct())
-      throw no_planning_ct();
+    const bool exports_on_ct =
+        scene.has_section("export") &&
+        export_request_from(scene, staging, organ_name, organ_look).needs_ct();
+    if (!ct_reference && !scene.has_section("ct") && exports_on_ct) throw no_planning_ct();
+    // The planning CT the model records, read after the fit: where it is gone (moved, or
+    // another machine), said now.
+    std::error_code gone;
+    if (ct_reference && !scene.has_section("ct") &&
+        (exports_on_ct || scene.has_section("report")) &&
+        !fs::is_directory(ct_reference->folder, gone))
+      throw InputError(fmt::format(
+          "{}: the planning CT it records, {}, is not there: give the session scene ct.folder "
+          "(where that CT is now)",
+          file.string(), ct_reference->folder));
     planning_modelling_s = saved.provenance.value("modelling_wall_s", -1.0);
     model->summary = {
         {"particles", model->state.size()},
