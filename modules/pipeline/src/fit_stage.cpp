@@ -318,17 +318,21 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
       worst.push_back({report.fit.residuals_mm[k], static_cast<int>(k)});
     std::sort(worst.rbegin(), worst.rend());
     const double far_mm = report.residual_p95_tolerance_mm;
-    int far = 0;
+    // Which side of the fitted organ the points farther than the tolerance lie on: all
+    // inside (or all outside) is what an organ smaller (or larger) than the planning one
+    // leaves, since the fit keeps its volume.
+    int far = 0, far_inside = 0;
     for (const auto& [r, k] : worst)
-      far += r > far_mm;
+      if (r > far_mm) ++far, far_inside += organ_after.inside(points[static_cast<size_t>(k)].p_mm);
     std::string list;
     for (size_t w = 0; w < std::min<size_t>(5, worst.size()); ++w)
       list += fmt::format("{}#{} ({:.2f} mm)", w ? ", " : "", worst[w].second, worst[w].first);
     out.not_converged_message = fmt::format(
         "fit did not converge ({}): mean residual {:.2f} mm (tolerance {:.2f}), 95th percentile "
-        "{:.2f} mm (tolerance {:.2f}: {} of {} points farther); worst: {}",
+        "{:.2f} mm (tolerance {:.2f}: {} of {} points farther{}); worst: {}",
         report.fit.stop_reason, report.fit.residual_mean_mm, report.residual_tolerance_mm,
-        report.fit.residual_p95_mm, far_mm, far, points.size(), list);
+        report.fit.residual_p95_mm, far_mm, far, points.size(),
+        far > 0 ? fmt::format(", {} of them inside the fitted organ", far_inside) : "", list);
   }
   if (out.deformation_folds)
     out.not_converged_message =
