@@ -138,11 +138,13 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
         scene.has_section("export") &&
         export_request_from(scene, staging, organ_name, organ_look).needs_ct();
     if (!ct_reference && !scene.has_section("ct") && exports_on_ct) throw no_planning_ct();
-    // The planning CT the model records, read after the fit: where it is gone (moved, or
+    // The planning CT the model records, read by the export stage after the fit (for its
+    // files on the CT's grid, or for the report's slices): where it is gone (moved, or
     // another machine), said now.
     std::error_code gone;
-    if (ct_reference && !scene.has_section("ct") &&
-        (exports_on_ct || scene.has_section("report")) &&
+    const bool export_reads_ct =
+        exports_on_ct || (scene.has_section("export") && scene.has_section("report"));
+    if (ct_reference && !scene.has_section("ct") && export_reads_ct &&
         !fs::is_directory(ct_reference->folder, gone))
       throw InputError(fmt::format(
           "{}: the planning CT it records, {}, is not there: give the session scene ct.folder "
