@@ -77,6 +77,7 @@ std::string one_line(const char* what) {
 }
 
 int main(int argc, char** argv) {
+  organfit::request_huge_pages(argv);
   organfit::keep_freed_memory();
   int code = 0;
   try {

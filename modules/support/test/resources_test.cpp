@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cstddef>
+#include <optional>
+#include <string>
 #include <vector>
 
 #if defined(__GLIBC__)
@@ -40,6 +42,23 @@ TEST(KeepFreedMemory, ALargeBlockComesFromTheHeapAndStaysThereWhenFreed) {
 #else
   GTEST_SKIP() << "glibc's allocator only";
 #endif
+}
+
+TEST(RequestHugePages, AskedOnlyWhereTheKernelGivesThemOnRequestAndNobodyAnswered) {
+  const std::string madvise = "always [madvise] never";
+  EXPECT_EQ(huge_page_tunables(nullptr, madvise), "glibc.malloc.hugetlb=1");
+  EXPECT_EQ(huge_page_tunables("", madvise), "glibc.malloc.hugetlb=1");
+  // The user's other tunables are kept.
+  EXPECT_EQ(huge_page_tunables("glibc.malloc.arena_max=2", madvise),
+            "glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1");
+  // Answered already (by the user, or by the run that started this one): as it is.
+  EXPECT_EQ(huge_page_tunables("glibc.malloc.hugetlb=0", madvise), std::nullopt);
+  EXPECT_EQ(huge_page_tunables("glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1", madvise),
+            std::nullopt);
+  // Given anyway, never given, or no such file (another kernel): nothing to ask.
+  EXPECT_EQ(huge_page_tunables(nullptr, "[always] madvise never"), std::nullopt);
+  EXPECT_EQ(huge_page_tunables(nullptr, "always madvise [never]"), std::nullopt);
+  EXPECT_EQ(huge_page_tunables(nullptr, ""), std::nullopt);
 }
 
 }  // namespace
