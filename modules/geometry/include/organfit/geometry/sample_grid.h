@@ -33,22 +33,28 @@ class SampleGrid {
     }
     for (int c = 0; c < 3; ++c)
       dim_[c] = std::min(1024, static_cast<int>(extent[c] / h_) + 1);
-    start_.assign(static_cast<size_t>(dim_[0]) * dim_[1] * dim_[2] + 1, 0);
+    const size_t cells = static_cast<size_t>(dim_[0]) * dim_[1] * dim_[2];
+    start_.assign(cells + 1, 0);
     std::vector<int> cell(static_cast<size_t>(n));
-    for (Eigen::Index j = 0; j < n; ++j) {
-      const Eigen::Vector3i c = cell_of(samples.col(j));
-      cell[static_cast<size_t>(j)] = linear(c);
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index j = 0; j < n; ++j)
+      cell[static_cast<size_t>(j)] = linear(cell_of(samples.col(j)));
+    for (Eigen::Index j = 0; j < n; ++j)
       ++start_[static_cast<size_t>(cell[static_cast<size_t>(j)]) + 1];
-    }
-    for (size_t c = 1; c < start_.size(); ++c)
+    for (size_t c = 1; c <= cells; ++c)
       start_[c] += start_[c - 1];
+    // By cell, ascending index within a cell: start_[c] advances to cell c's end, which is
+    // cell c + 1's start, so one shift restores the starts (no copy of them: a surface's
+    // grid has 10 cells or more a sample).
     order_.resize(static_cast<size_t>(n));
-    std::vector<int> fill(start_.begin(), start_.end() - 1);
-    for (Eigen::Index j = 0; j < n; ++j)  // by cell, ascending index within a cell
-      order_[static_cast<size_t>(fill[static_cast<size_t>(cell[static_cast<size_t>(j)])]++)] =
+    for (Eigen::Index j = 0; j < n; ++j)
+      order_[static_cast<size_t>(start_[static_cast<size_t>(cell[static_cast<size_t>(j)])]++)] =
           static_cast<int>(j);
+    std::copy_backward(start_.begin(), start_.end() - 2, start_.end() - 1);
+    start_[0] = 0;
     // The samples themselves in that order: a cell's are read one after another.
     points_.resize(3, n);
+#pragma omp parallel for schedule(static)
     for (Eigen::Index k = 0; k < n; ++k)
       points_.col(k) = samples.col(order_[static_cast<size_t>(k)]);
   }
@@ -203,7 +209,9 @@ class SampleGrid {
           std::clamp(std::floor((q[a] - lo_[a]) / h_), 0.0, static_cast<double>(dim_[a] - 1)));
     return c;
   }
-  int linear(const Eigen::Vector3i& c) const { return (c.z() * dim_[1] + c.y()) * dim_[0] + c.x(); }
+  int linear(const Eigen::Vector3i& c) const {
+    return (c.z() * dim_[1] + c.y()) * dim_[0] + c.x();
+  }
   Eigen::Matrix3Xd points_;  // the samples by cell: points_.col(k) is sample order_[k]
   Eigen::Vector3d lo_ = Eigen::Vector3d::Zero();
   double h_ = 1;
