@@ -3,6 +3,10 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#if defined(__linux__)
+#include <sys/auxv.h>
+#endif
+
 #include <cstdlib>
 #include <fstream>
 #include <string>
@@ -29,6 +33,7 @@ std::optional<std::string> huge_page_tunables(const char* present, const std::st
 
 void request_huge_pages(char** argv) {
 #if defined(__GLIBC__) && defined(__linux__)
+  if (getauxval(AT_SECURE) != 0) return;
   const char* present = std::getenv("GLIBC_TUNABLES");
   std::ifstream mode_file("/sys/kernel/mm/transparent_hugepage/enabled");
   std::string mode;

@@ -16,14 +16,15 @@ namespace organfit {
 void keep_freed_memory();
 
 /// Asks glibc's malloc for transparent huge pages (2 MiB) where the kernel gives them only
-/// on request (`/sys/kernel/mm/transparent_hugepage/enabled` is "madvise", Debian's and
-/// most distributions' default): a run touches 60 to 4,000 MB once, and with 4 KiB pages
+/// on request (`/sys/kernel/mm/transparent_hugepage/enabled` is "madvise", as on the machine
+/// the benchmarks ran on): a run touches 60 to 4,000 MB once, and with 4 KiB pages
 /// each first touch is a page fault (51,000 in a 2.2 L lung's session; in a virtual machine
 /// a fault costs microseconds: 0.27 s of its 2.2 s). glibc reads the request
 /// (GLIBC_TUNABLES=glibc.malloc.hugetlb=1) only when a program starts, so this re-executes
 /// the program with it set, once (same process, same arguments); it returns when nothing
 /// is to be done: another C library or kernel mode, GLIBC_TUNABLES already naming
-/// glibc.malloc.hugetlb (=0 declines it), or an exec that fails. Call first thing in
+/// glibc.malloc.hugetlb (=0 declines it), a set-user-ID start (glibc drops the request
+/// there, and asking again would never end), or an exec that fails. Call first thing in
 /// main(), before any thread or file is opened.
 void request_huge_pages(char** argv);
 /// request_huge_pages' decision: the GLIBC_TUNABLES value to start again with, given the
