@@ -113,12 +113,19 @@ cut = c['cut_by_ct_edge']
 assert [f['side'] for f in cut] == ['superior'] and cut[0]['voxels'] > 100 and cut[0]['planning_voxels'] == 0, cut
 assert c['volume_difference_cm3'] < -1, c
 assert json.load(open('$tmp/real/run.json'))['export']['checks']['cut_by_ct_edge'] == []"
-  # The same points 300 mm to the left (another frame's coordinates): refused, nothing
-  # written.
+  # The same points 300 mm to the left (another frame's coordinates): refused by the fit,
+  # which would move the whole organ that far (fit.spread.max_global_shift_mm, 100 mm), with
+  # how far; nothing written. (Exit 3 and one error line; the import's matched-by-position
+  # warning comes before it.)
   awk -F, 'NR == 1 { print; next } { printf "%.3f,%s,%s\n", $1 + 300, $2, $3 }' "$tmp/beyond.csv" >"$tmp/far.csv"
   sed "s|$tmp/beyond.csv|$tmp/far.csv|" "$tmp/beyond.yaml" >"$tmp/far.yaml"
-  # (Exit 2 and one error line; the import's matched-by-position warning comes before it.)
-  check real.organ_off_the_ct_refused bash -c "'$bin' --quiet run '$tmp/far.yaml' --out '$tmp/far' 2>'$tmp/far.err'; [[ \$? -eq 2 ]] &&
+  check real.points_far_away_refused_by_the_fit bash -c "'$bin' --quiet run '$tmp/far.yaml' --out '$tmp/far_fit' 2>'$tmp/far_fit.err'; [[ \$? -eq 3 ]] &&
+    [[ \$(grep -c '^organfit: error: ' '$tmp/far_fit.err') -eq 1 ]] &&
+    grep -q \"fit: the points ask for an implausible change of the whole organ: their best fit moves it 3[0-9][0-9]\\.[0-9] mm and stretches it 1\\.0[0-9]x\" '$tmp/far_fit.err'"
+  check real.points_far_away_wrote_nothing test ! -e "$tmp/far_fit"
+  # With that bound lifted, the fitted organ lies wholly off the CT: refused by the export
+  # (exit 2), nothing written.
+  check real.organ_off_the_ct_refused bash -c "'$bin' --quiet run '$tmp/far.yaml' --set fit.spread.max_global_shift_mm=1000 --out '$tmp/far' 2>'$tmp/far.err'; [[ \$? -eq 2 ]] &&
     [[ \$(grep -c '^organfit: error: ' '$tmp/far.err') -eq 1 ]] &&
     grep -q \"export: the fitted organ lies wholly outside the planning CT's field of view, 3[0-9][0-9] mm from where\" '$tmp/far.err'"
   check real.organ_off_the_ct_wrote_nothing test ! -e "$tmp/far"

@@ -23,9 +23,21 @@ using detail::refine_global_map;
 using detail::robust_weights;
 
 /// Principal stretches within [1 / max_stretch, max_stretch].
+/// The largest of a's principal stretches and their inverses (1: none).
+double largest_stretch(const Eigen::Matrix3d& a) {
+  const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(a).singularValues();
+  return std::max(sv[0], 1.0 / sv[2]);
+}
+
 bool within_stretch(const Eigen::Matrix3d& a, const AffineFitOptions& o) {
   const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(a).singularValues();
   return sv[0] <= o.max_stretch && sv[2] >= 1.0 / o.max_stretch;
+}
+
+/// How far a map moves the organ (mm): its surface samples' mean displacement.
+double organ_move_mm(const MappedSamples& mapped, const SurfaceSamples& surface) {
+  if (surface.points.cols() == 0) return 0;
+  return (mapped.full - surface.points).rowwise().mean().norm();
 }
 
 /// Stretches within bounds, and none of the quadratic shears, the shear fields and the flow
@@ -38,7 +50,8 @@ bool plausible(const GlobalMap& map, const MappedSamples& mapped, const SurfaceS
       (surface.points.rowwise().maxCoeff() - surface.points.rowwise().minCoeff()).norm();
   const LargestMoves& moves = mapped.moves;
   return within_stretch(map.affine.a, o) && moves.shears_mm <= o.max_shear_mm * size &&
-         moves.fields_mm <= o.max_shear_mm * size && moves.flow_mm <= o.max_shear_mm * size;
+         moves.fields_mm <= o.max_shear_mm * size && moves.flow_mm <= o.max_shear_mm * size &&
+         organ_move_mm(mapped, surface) <= o.max_shift_mm;
 }
 
 /// Robust RMS (mm) of the points' distances to the tangent planes of their nearest mapped
@@ -166,11 +179,19 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   auto by_fit = [](const GlobalMap& l, const GlobalMap& r) {
     return l.rms_after_mm < r.rms_after_mm;
   };
-  // The best fit of the points asks for a stretch beyond the limit: refused, whatever a
-  // worse fit within it would say.
+  // The best fit of the points asks for a stretch or a move beyond the limits: refused,
+  // whatever a worse fit within them would say.
   const std::vector<GlobalMap>& judged = fits.empty() ? affine_fits : fits;
-  if (!within_stretch(std::min_element(judged.begin(), judged.end(), by_fit)->affine.a, o))
-    return refused();
+  const GlobalMap& best_fit = *std::min_element(judged.begin(), judged.end(), by_fit);
+  const double best_move_mm = organ_move_mm(map_samples(best_fit, surface), surface);
+  auto refused_with_best = [&] {
+    GlobalMap out = refused();
+    out.refused_move_mm = best_move_mm;
+    out.refused_stretch = largest_stretch(best_fit.affine.a);
+    return out;
+  };
+  if (!within_stretch(best_fit.affine.a, o) || best_move_mm > o.max_shift_mm)
+    return refused_with_best();
   // The plausible fits. Shears can swing out of range (a bulge seen from one side can do
   // that); when every fit of the whole map does, the affine part alone is what is left.
   std::vector<const GlobalMap*> candidates;
@@ -184,7 +205,7 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   const bool shears_dropped = !fits.empty() && candidates.empty();
   for (const GlobalMap& fit : affine_fits)
     keep_if_plausible(fit);
-  if (candidates.empty()) return refused();
+  if (candidates.empty()) return refused_with_best();
   // Points on part of the surface leave the rest free: fits from different starts and
   // stiffnesses often explain them equally well and differ by a millimetre elsewhere.
   // Of those within `equally_good_dof` / m of the noise's mean square of the best (the best's

@@ -172,6 +172,8 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
         fit_global_map(samples, points, global_options, &reference_distance, &equally_good);
     if (map.refused) {
       report.refused = true;
+      report.refused_move_mm = map.refused_move_mm;
+      report.refused_stretch = map.refused_stretch;
       out.before.reset();
       out.model = std::move(model);
       return out;

@@ -114,9 +114,32 @@ TEST(FitSpread, RefusesAStretchBeyondThePlausibleAndReturnsTheModelAsItCame) {
   const FittedOrgan fitted =
       fit_spread(copy_model(planning), stretched_surface(2.5, 87), default_spread_options());
   EXPECT_TRUE(fitted.report.refused);
+  EXPECT_GT(fitted.report.refused_stretch, 1.5);
   EXPECT_FALSE(fitted.after.has_value());
   EXPECT_EQ(fitted.model.state.x, planning.state.x);
   EXPECT_EQ(fitted.model.model->terms().size(), planning.model->terms().size());
+}
+
+TEST(FitSpread, RefusesAMoveOfTheWholeOrganBeyondThePlausibleAndSaysHowFar) {
+  const OrganModel planning = ellipsoid_model();
+  auto shifted = [](double dz_mm) {
+    std::vector<AttractivePoint> points = stretched_surface(1.0, 87);
+    for (AttractivePoint& p : points)
+      p.p_mm.z() += dz_mm;
+    return points;
+  };
+  // 150 mm: points in other coordinates (the default bound is 100 mm).
+  const FittedOrgan far = fit_spread(copy_model(planning), shifted(150), default_spread_options());
+  EXPECT_TRUE(far.report.refused);
+  EXPECT_NEAR(far.report.refused_move_mm, 150, 1.0);
+  EXPECT_NEAR(far.report.refused_stretch, 1.0, 0.02);
+  EXPECT_EQ(far.model.state.x, planning.state.x);
+  // 30 mm: a move an organ can make between sessions, followed.
+  const FittedOrgan near = fit_spread(copy_model(planning), shifted(30), default_spread_options());
+  ASSERT_FALSE(near.report.refused);
+  ASSERT_TRUE(near.report.global.has_value());
+  EXPECT_NEAR(near.report.global->map.affine.t.z(), 30, 1.0);
+  EXPECT_TRUE(near.report.fit.converged) << near.report.fit.stop_reason;
 }
 
 // Residuals of mean m that are a noise's are half-normal: 95th percentile 2.46 m.

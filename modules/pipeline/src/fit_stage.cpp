@@ -226,11 +226,14 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
   if (progress) progress->finish();
   if (fitted.report.refused)
     throw TargetNotMetError(fmt::format(
-        "fit: the points ask for an implausible change of the whole organ (a stretch beyond {}x, "
-        "fit.spread.max_global_stretch, or a bend beyond {} of its size, "
-        "fit.spread.global_max_shear); check that they belong to this organ and are in the same "
-        "patient coordinates",
-        options.spread.global.max_stretch, options.spread.global.max_shear_mm));
+        "fit: the points ask for an implausible change of the whole organ: their best fit moves "
+        "it {:.1f} mm and stretches it {:.2f}x (the bounds: a move of {} mm, "
+        "fit.spread.max_global_shift_mm; a stretch of {}x, fit.spread.max_global_stretch; a bend "
+        "of {} of its size, fit.spread.global_max_shear); check that they belong to this organ and "
+        "are in the planning CT's patient coordinates, in mm",
+        fitted.report.refused_move_mm, fitted.report.refused_stretch,
+        options.spread.global.max_shift_mm, options.spread.global.max_stretch,
+        options.spread.global.max_shear_mm));
   if (fitted.report.local_stage_undone())  // the stop reason says why (tore or folded)
     spdlog::warn("fit: {}", fitted.report.fit.stop_reason);
   static_cast<fitting::OrganModel&>(out.model) = std::move(fitted.model);

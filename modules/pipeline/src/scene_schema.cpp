@@ -76,6 +76,10 @@ const config::Binding<fitting::AffineFitOptions>& fit_spread_global() {
                   "... or whose shears, shear fields or flow move the surface by more than this "
                   "x the body's size",
                   true)
+          .number("max_global_shift_mm", &O::max_shift_mm, "mm", 0.0, 1000.0,
+                  "... or that move the whole organ (its surface's mean move) further than this: "
+                  "points in other coordinates or units",
+                  true)
           .number("global_shear_field_mm", &O::field_sigma_mm, "mm", 0.0, 100.0,
                   "width and spacing of the smooth shear fields the global map may add (0 = "
                   "none)")

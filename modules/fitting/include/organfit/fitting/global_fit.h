@@ -66,6 +66,11 @@ struct AffineFitOptions {
   /// ... and one whose quadratic shears, or whose shear fields, move any sample by more
   /// than this x the body's size (each on its own)
   double max_shear_mm = 0.25;
+  /// ... and one moving the organ (its surface's mean displacement) by more than this (mm).
+  /// Organs move between sessions by centimetres (setup error, breathing, filling); a fit
+  /// that moves one by decimetres has points in other coordinates or units (a points file
+  /// in cm put them 600 mm from a GTV, where a patch of its surface fitted them at 0.7 mm).
+  double max_shift_mm = 100.0;
 };
 
 /// Robust ICP for x -> a x + t with det(a) = 1 matching the surface to the points:
@@ -107,9 +112,10 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
 /// shears, as stated and held stiffer: few_points_shear_stiffness): the RMS over all points of
 /// their distances capped at `distance_scale_mm` (judged over only the points each keeps, a fit
 /// that drops a third of them looked as good as one that explains them).
-///  * When the best fit of the points (robust RMS) stretches beyond max_stretch, it is
-///    refused (the identity, marked so): points that can only be explained by crushing
-///    the organ are not data to follow globally.
+///  * When the best fit of the points (robust RMS) stretches beyond max_stretch, or moves
+///    the organ further than max_shift_mm, it is refused (the identity, marked so, with the
+///    best fit's move and stretch): points that can only be explained by crushing the organ,
+///    or by carrying it off, are not data to follow globally.
 ///  * Fits whose shears or fields are out of range (either moving the surface by more than
 ///    max_shear_mm x its size) are dropped; when that drops every fit of the whole map, the affine
 ///    part alone is what is left (marked shears_dropped); when nothing is left, refused.

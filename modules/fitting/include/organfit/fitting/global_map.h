@@ -149,8 +149,11 @@ struct GlobalMap {
   QuadraticShears shears;
   ShearFields fields;
   IncompressibleFlow flow;
-  double rms_after_mm = 0;      ///< point-to-surface over the kept points
-  bool refused = false;         ///< no plausible map: the identity instead
+  double rms_after_mm = 0;  ///< point-to-surface over the kept points
+  bool refused = false;     ///< no plausible map: the identity instead
+  /// When refused: the best fit's move of the organ (its surface's mean displacement, mm) and
+  /// its largest stretch (the largest of its principal stretches and their inverses).
+  double refused_move_mm = 0, refused_stretch = 1;
   bool shears_dropped = false;  ///< the shears were implausible: the affine part alone
   /// which fit of fit_global_map's it is: "affine", "whole map", "whole map annealed",
   /// "signed distance", "signed distance (shears)", "signed distance (stiffer shears)"

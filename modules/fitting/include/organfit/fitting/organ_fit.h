@@ -94,8 +94,10 @@ struct FitReport {
   std::string method;  ///< "paper" or "spread"
   FitResult fit;       ///< the fit loop (wall_s includes the global stage)
   /// fit_spread: the points asked for a change of the whole organ beyond the plausible
-  /// (global_fit.h, GlobalMap::refused): nothing was fitted, the model is as it came.
+  /// (global_fit.h, GlobalMap::refused): nothing was fitted, the model is as it came; with
+  /// the best fit's move of the organ (mm) and largest stretch.
   bool refused = false;
+  double refused_move_mm = 0, refused_stretch = 1;
   int points = 0, rejected_points = 0;
   int pieces = 1;                   ///< > 1: the local stage tore the organ; it was undone
   bool local_stage_folded = false;  ///< the local stage folded the organ; it was undone
