@@ -123,6 +123,11 @@ assert json.load(open('$tmp/real/run.json'))['export']['checks']['cut_by_ct_edge
     [[ \$(grep -c '^organfit: error: ' '$tmp/far_fit.err') -eq 1 ]] &&
     grep -q \"fit: the points ask for an implausible change of the whole organ: their best fit moves it 3[0-9][0-9]\\.[0-9] mm and stretches it 1\\.0[0-9]x\" '$tmp/far_fit.err'"
   check real.points_far_away_wrote_nothing test ! -e "$tmp/far_fit"
+  # The paper's fit has no global stage: every point lies beyond its outlier distance and is
+  # rejected, which is no fit (exit 3), not a fit converged at residual 0.
+  check real.points_far_away_all_rejected_is_no_fit bash -c "'$bin' --quiet run '$tmp/far.yaml' --set fit.method=paper --out '$tmp/far_paper' 2>'$tmp/far_paper.err'; [[ \$? -eq 3 ]] &&
+    [[ \$(grep -c '^organfit: error: ' '$tmp/far_paper.err') -eq 1 ]] &&
+    grep -q 'fit: all 87 points were rejected as outliers (fit.paper.outlier_distance_mm): nothing was fitted' '$tmp/far_paper.err' && test ! -e '$tmp/far_paper'"
   # With that bound lifted, the fitted organ lies wholly off the CT: refused by the export
   # (exit 2), nothing written.
   check real.organ_off_the_ct_refused bash -c "'$bin' --quiet run '$tmp/far.yaml' --set fit.spread.max_global_shift_mm=1000 --out '$tmp/far' 2>'$tmp/far.err'; [[ \$? -eq 2 ]] &&

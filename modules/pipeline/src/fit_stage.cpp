@@ -234,6 +234,14 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
         fitted.report.refused_move_mm, fitted.report.refused_stretch,
         options.spread.global.max_shift_mm, options.spread.global.max_stretch,
         options.spread.global.max_shear_mm));
+  // A fit that kept none of its points fitted nothing: no result, whatever its loop said
+  // (the paper's fit of points 600 mm off "converged" at residual 0, every point rejected).
+  if (fitted.report.points > 0 && fitted.report.rejected_points == fitted.report.points)
+    throw TargetNotMetError(fmt::format(
+        "fit: all {} points were rejected as outliers (fit.{}.outlier_distance_mm): nothing was "
+        "fitted; check that they belong to this organ and are in the planning CT's patient "
+        "coordinates, in mm",
+        fitted.report.points, fitted.report.method));
   if (fitted.report.local_stage_undone())  // the stop reason says why (tore or folded)
     spdlog::warn("fit: {}", fitted.report.fit.stop_reason);
   static_cast<fitting::OrganModel&>(out.model) = std::move(fitted.model);
