@@ -22,16 +22,15 @@ using detail::nearest_sample_rms;
 using detail::refine_global_map;
 using detail::robust_weights;
 
-/// Principal stretches within [1 / max_stretch, max_stretch].
 /// The largest of a's principal stretches and their inverses (1: none).
 double largest_stretch(const Eigen::Matrix3d& a) {
   const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(a).singularValues();
   return std::max(sv[0], 1.0 / sv[2]);
 }
 
+/// Principal stretches within [1 / max_stretch, max_stretch].
 bool within_stretch(const Eigen::Matrix3d& a, const AffineFitOptions& o) {
-  const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(a).singularValues();
-  return sv[0] <= o.max_stretch && sv[2] >= 1.0 / o.max_stretch;
+  return largest_stretch(a) <= o.max_stretch;
 }
 
 /// How far a map moves the organ (mm): its surface samples' mean displacement.
