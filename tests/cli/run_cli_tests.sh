@@ -347,6 +347,14 @@ printf 'x,y,z\n1,2,nan\n' > "$tmp/bad_points.csv"
 printf 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\npoints:\n  source: file\n  file: bad_points.csv\nfit:\n  method: paper\n' > "$tmp/nan_points.yaml"
 expect fit.nan_point_is_exit_2 2 "bad_points.csv:2: non-finite coordinate" -- --quiet run "$tmp/nan_points.yaml" --out "$tmp/fit3"
 check fit.nan_point_leaves_no_outputs test ! -e "$tmp/fit3/run.json"
+# One position written three times is one observation: fitted once, and said.
+printf 'x,y,z\n10,0,0\n10,0,0\n-10,0,0\n0,8,0\n10,0,0\n' > "$tmp/repeated.csv"
+printf 'body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\npoints:\n  source: file\n  file: repeated.csv\nfit:\n  method: spread\n' > "$tmp/repeated.yaml"
+expect fit.repeated_points_fitted_once 0 "repeated.csv: 2 of its 5 points repeat an earlier point's position exactly; each position is fitted once (3 points)" -- --quiet run "$tmp/repeated.yaml" --out "$tmp/fit4"
+check fit.repeated_points_in_run_json python3 -c "
+import json; d = json.load(open('$tmp/fit4/run.json'))
+assert d['points'] == {'count': 3, 'read': 5, 'repeated': 2, 'source': 'file'} and d['fit']['attractive_points'] == 3, d['points']
+assert any('repeat an earlier' in w for w in d['warnings'])"
 
 # synth pelvis: a DICOM CT and structure set that dicom3tools accept, byte-reproducible
 expect synth.pelvis 0 "" -- --quiet synth pelvis --out "$tmp/pelvis" --columns 128 --rows 128 --pixel-mm 3.2 --slices 24 --slice-mm 5

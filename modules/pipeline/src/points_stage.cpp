@@ -1,6 +1,11 @@
 #include "organfit/pipeline/points_stage.h"
 
+#include <fmt/format.h>
+
+#include <algorithm>
 #include <cmath>
+#include <numeric>
+#include <tuple>
 
 #include "organfit/meshing/surface.h"
 #include "organfit/pipeline/scene_schema.h"
@@ -23,6 +28,25 @@ PointsTable read_points_file(const fs::path& file) {
   }
   if (table.points.empty()) throw InputError(file.string() + ": no points in the file");
   return table;
+}
+
+size_t drop_repeated_points(std::vector<fitting::AttractivePoint>& points) {
+  auto less = [&points](size_t a, size_t b) {
+    const Eigen::Vector3d &p = points[a].p_mm, &q = points[b].p_mm;
+    return std::tie(p.x(), p.y(), p.z(), a) < std::tie(q.x(), q.y(), q.z(), b);
+  };
+  std::vector<size_t> order(points.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::sort(order.begin(), order.end(), less);
+  std::vector<char> repeat(points.size(), 0);
+  for (size_t k = 1; k < order.size(); ++k)
+    repeat[order[k]] = points[order[k]].p_mm == points[order[k - 1]].p_mm;
+  size_t kept = 0;
+  for (size_t i = 0; i < points.size(); ++i)
+    if (!repeat[i]) points[kept++] = points[i];
+  const size_t dropped = points.size() - kept;
+  points.resize(kept);
+  return dropped;
 }
 
 evaluation::Deformation deformation_about(evaluation::Deformation d, const geometry::Shape& shape) {
@@ -60,7 +84,17 @@ PointsStageResult run_points_stage(const PointsOptions& o, const ModelStageResul
     PointsTable table = read_points_file(o.file);
     r.points = std::move(table.points);
     r.declared_ct = table.ct;
+    const size_t read = r.points.size();
+    const size_t repeated = drop_repeated_points(r.points);
     r.summary = {{"source", "file"}, {"count", r.points.size()}};
+    if (repeated > 0) {
+      r.summary["read"] = read;
+      r.summary["repeated"] = repeated;
+      r.warnings.push_back(fmt::format(
+          "{}: {} of its {} points repeat an earlier point's position exactly; each position is "
+          "fitted once ({} point{})",
+          o.file.string(), repeated, read, r.points.size(), r.points.size() == 1 ? "" : "s"));
+    }
     return r;
   }
   // The shape the points come from: the body itself, or another of the same volume.

@@ -303,6 +303,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
       }
     } else {
       points = run_points_stage(points_options_from(scene), *model);
+      for (const auto& w : points->warnings)
+        warn(w);
       // Points declared in another CT than the planning CT are in other coordinates.
       if (ct_reference) {
         const PointsCt& declared = points->declared_ct;

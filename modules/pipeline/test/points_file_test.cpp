@@ -5,6 +5,7 @@
 
 #include <fstream>
 
+#include "organfit/pipeline/points_stage.h"
 #include "organfit/support/error.h"
 
 namespace fs = std::filesystem;
@@ -107,6 +108,47 @@ TEST_F(PointsFile, RefusesMoreThanTheLimit) {
   EXPECT_EQ(error_of(many), ": more than 100000 points (the most a points file may hold)");
   many.resize(many.size() - 6);
   EXPECT_EQ(read_points_csv(write(many)).size(), static_cast<size_t>(kMaxPointsInFile));
+}
+
+TEST(RepeatedPoints, EachPositionIsKeptOnceInTheFilesOrderWithItsFirstConfidence) {
+  using fitting::AttractivePoint;
+  std::vector<AttractivePoint> points = {{{1, 2, 3}, 0.5},   {{4, 5, 6}, 1.0}, {{1, 2, 3}, 1.0},
+                                         {{1, 2, 3.001}, 1}, {{4, 5, 6}, 0.2}, {{-0.0, 0, 0}, 1},
+                                         {{0, 0, 0}, 0.7}};
+  EXPECT_EQ(drop_repeated_points(points), 3u);
+  ASSERT_EQ(points.size(), 4u);
+  EXPECT_EQ(points[0].p_mm, Eigen::Vector3d(1, 2, 3));
+  EXPECT_EQ(points[0].confidence, 0.5);
+  EXPECT_EQ(points[1].p_mm, Eigen::Vector3d(4, 5, 6));
+  EXPECT_EQ(points[1].confidence, 1.0);
+  EXPECT_EQ(points[2].p_mm, Eigen::Vector3d(1, 2, 3.001));  // near is not the same
+  EXPECT_EQ(points[3].confidence, 1.0);                     // -0 and 0: one position
+  std::vector<AttractivePoint> none;
+  EXPECT_EQ(drop_repeated_points(none), 0u);
+}
+
+TEST_F(PointsFile, ARunFitsEachPositionOnceAndSaysHowManyRepeated) {
+  std::string text = "x,y,z\n";
+  for (int i = 0; i < 87; ++i)
+    text += "-122.603,67.413,741.608\n";
+  text += "-120,67.413,741.608\n";
+  const ModelStageResult no_model;  // a file's points do not depend on the model
+  PointsOptions o;
+  o.source = "file";
+  o.file = write(text);
+  const PointsStageResult r = run_points_stage(o, no_model);
+  ASSERT_EQ(r.points.size(), 2u);
+  EXPECT_EQ(r.summary["count"], 2);
+  EXPECT_EQ(r.summary["read"], 88);
+  EXPECT_EQ(r.summary["repeated"], 86);
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_EQ(r.warnings[0], o.file.string() +
+                               ": 86 of its 88 points repeat an earlier point's position exactly; "
+                               "each position is fitted once (2 points)");
+  o.file = write("1,2,3\n4,5,6\n");
+  const PointsStageResult distinct = run_points_stage(o, no_model);
+  EXPECT_TRUE(distinct.warnings.empty());
+  EXPECT_FALSE(distinct.summary.contains("repeated"));
 }
 
 }  // namespace

@@ -23,12 +23,20 @@ struct PointsStageResult {
   geometry::Shape truth_shape;                   ///< the shape they were sampled on
   PointsCt declared_ct;                          ///< the CT a points file declares
   nlohmann::json summary;
+  std::vector<std::string> warnings;  ///< what the user should know about the points read
 };
 
 /// A point set by extension: a table (read_points_table, with the CT it declares), or the
 /// vertices of a .ply, .vtk or .vtp. Throws InputError naming the file on bad content or
 /// no points.
 PointsTable read_points_file(const std::filesystem::path& file);
+
+/// Drops every point at exactly the position (the same coordinates, as read) of an earlier
+/// one, keeping the first of each position in the file's order, and returns how many were
+/// dropped. One position read twice is one observation: counted twice, the fit would take
+/// it for more evidence than it is (87 copies of one point were fitted as 87 points, their
+/// uncertainty as if 87 places had been seen).
+size_t drop_repeated_points(std::vector<fitting::AttractivePoint>& points);
 
 /// What the points section asks for (its keys; units and docs in scene_schema.cpp).
 struct PointsOptions {
