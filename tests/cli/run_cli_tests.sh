@@ -134,16 +134,17 @@ assert json.load(open('$tmp/real/run.json'))['export']['checks']['cut_by_ct_edge
     [[ \$(grep -c '^organfit: error: ' '$tmp/far.err') -eq 1 ]] &&
     grep -q \"export: the fitted organ lies wholly outside the planning CT's field of view, 3[0-9][0-9] mm from where\" '$tmp/far.err'"
   check real.organ_off_the_ct_wrote_nothing test ! -e "$tmp/far"
-  # The GTV's posterior half shrunk to 0.6 of its size about the organ's centre (78% of its
-  # volume gone): the fit keeps the volume and does not converge; most of the points it
-  # cannot reach lie inside the fitted organ, and the message says how many.
+  # The GTV shrunk to 0.6 of its size about its centre (78% of its volume gone), points all
+  # round: the fit keeps the volume and does not converge; most of the points it cannot
+  # reach lie inside the fitted organ, and the message says how many. (Points on one half
+  # alone can be explained by an organ of the same volume elongated.)
   /usr/bin/python3 -c "
 import struct, random
 b = open('$tmp/real/gtv_fit.stl', 'rb').read(); n = struct.unpack_from('<I', b, 80)[0]
 v = sorted({struct.unpack_from('<3f', b, 84 + 50 * t + 12 + 12 * c) for t in range(n) for c in range(3)})
 c = [sum(p[a] for p in v) / len(v) for a in range(3)]
-half = [p for p in v if p[1] >= c[1]]; random.seed(1)
-rows = ['%.3f,%.3f,%.3f' % tuple(c[a] + 0.6 * (p[a] - c[a]) for a in range(3)) for p in random.sample(half, 87)]
+random.seed(1)
+rows = ['%.3f,%.3f,%.3f' % tuple(c[a] + 0.6 * (p[a] - c[a]) for a in range(3)) for p in random.sample(v, 87)]
 open('$tmp/shrunk.csv', 'w').write('\\n'.join(['x,y,z'] + rows) + '\\n')"
   sed "s|$tmp/beyond.csv|$tmp/shrunk.csv|" "$tmp/beyond.yaml" >"$tmp/shrunk.yaml"
   check real.shrunk_organ_points_inside_are_said bash -c "'$bin' --quiet run '$tmp/shrunk.yaml' --out '$tmp/shrunk' 2>'$tmp/shrunk.err'; [[ \$? -eq 3 ]] && /usr/bin/python3 -c \"
@@ -191,7 +192,7 @@ fi
 if [[ -d "$src/../shared/data/ct-crlm-1004" ]]; then
   printf 'ct:\n  folder: %s\norgan:\n  source: seed\n  roi: Liver\n  seed_mm: [-86.6, -28.7, -275]\n  hu_low: 80\n  hu_high: 180\n  search_box_mm: 300\nmodel:\n  radius_mm: 2.5\n' \
     "$src/../shared/data/ct-crlm-1004/ct" >"$tmp/liver.yaml"
-  expect real.liver_in_pieces_is_said 0 "the particles make 4 separate pieces where the organ is 1" -- --quiet run "$tmp/liver.yaml" --out "$tmp/liver"
+  expect real.liver_in_pieces_is_said 0 "separate pieces where the organ is 1" -- --quiet run "$tmp/liver.yaml" --out "$tmp/liver"
   # ct-crlm-1004's 41 slices of 5 mm do not hold the whole liver: cut at both ends.
   check real.liver_cut_by_the_ct_is_said bash -c "grep -q \"organ: 'Liver' reaches the CT's edge: inferior (\" '$tmp/err' && /usr/bin/python3 -c \"
 import json; e = json.load(open('$tmp/liver/run.json'))['organ']['at_ct_edge']

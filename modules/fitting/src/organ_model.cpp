@@ -75,8 +75,12 @@ namespace {
 /// voxel for voxel); an analytic body as its reference mask. Made once per model.
 void make_planning_organ(const OrganModel& m) {
   if (m.planning_mask) return;
-  m.planning_mask =
-      m.shape.mask ? m.shape.mask : std::make_shared<const geometry::LabelVolume>(m.reference);
+  if (m.shape.mask) {  // the shape's own organ: its distance at its level
+    m.planning_mask = m.shape.mask;
+    m.planning_distance = m.shape.distance;
+    return;
+  }
+  m.planning_mask = std::make_shared<const geometry::LabelVolume>(m.reference);
   m.planning_distance = std::make_shared<const geometry::SignedDistance>(*m.planning_mask, false);
   if (m.saved_planning_level_mm)
     m.planning_distance->adopt_volume_level(*m.saved_planning_level_mm);

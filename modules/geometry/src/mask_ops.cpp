@@ -568,6 +568,24 @@ SurfaceComparison compare_particle_bodies(const Eigen::Matrix3Xd& a, const Eigen
                        closed_body_on_grid(b, radius_mm, closing_mm, g));
 }
 
+LabelVolume cropped_organ(const LabelVolume& mask) {
+  const ImageGeometry& g = mask.geometry;
+  const IndexRange box = mask.range(1);
+  std::array<int, 3> lo = box.lo, hi = box.hi;
+  ImageGeometry crop = g;
+  for (int d = 0; d < 3; ++d) {
+    lo[d] = std::max(0, lo[d] - 1), hi[d] = std::min(g.size[d] - 1, hi[d] + 1);
+    crop.size[d] = hi[d] - lo[d] + 1;
+  }
+  crop.origin_mm = g.index_to_physical(Eigen::Vector3d(lo[0], lo[1], lo[2]));
+  LabelVolume out(crop);
+  for (int k = lo[2]; k <= hi[2]; ++k)
+    for (int j = lo[1]; j <= hi[1]; ++j)
+      for (int i = lo[0]; i <= hi[0]; ++i)
+        out.at(i - lo[0], j - lo[1], k - lo[2]) = mask.at(i, j, k) == 1;
+  return out;
+}
+
 bool inside_interpolated(const LabelVolume& mask, const Eigen::Vector3d& p_mm) {
   const auto& g = mask.geometry;
   const Eigen::Vector3d idx = g.physical_to_index(p_mm);

@@ -28,7 +28,7 @@ Notch lung_notch(const Eigen::Vector3d& semi) {
 }  // namespace
 
 bool Shape::inside(const Eigen::Vector3d& p) const {
-  if (mask) return inside_interpolated(*mask, p);
+  if (mask) return distance->at(p) < level_mm;
   const Eigen::Vector3d semi = 0.5 * size_mm;
   const Eigen::Vector3d q = p - centre_mm;
   if (kind == Kind::box) return (q.cwiseAbs().array() <= semi.array()).all();
@@ -55,40 +55,16 @@ BallSide ellipsoid_ball(const Eigen::Vector3d& q, double r, const Eigen::Vector3
   if (f - reach > 1 + kRounding) return BallSide::outside;
   return BallSide::unknown;
 }
-/// Where a ball of radius r about p lies against a mask's 0.5 level of its trilinear
-/// interpolation (inside_interpolated): every point of the ball interpolates among the
-/// voxels of an index box (its reach r / spacing along each grid axis, the direction being
-/// orthonormal, and the cell corners about it). All of label 1 and on the grid: each point
-/// interpolates 1, inside; none of label 1: each interpolates 0, outside.
-BallSide mask_ball(const LabelVolume& mask, const Eigen::Vector3d& p, double r) {
-  const ImageGeometry& g = mask.geometry;
-  const Eigen::Vector3d idx = g.physical_to_index(p);
-  if (!idx.allFinite()) return BallSide::unknown;
-  int lo[3], hi[3];
-  bool on_grid = true;
-  for (int a = 0; a < 3; ++a) {
-    const double reach = r / g.spacing_mm[a] + 1e-6;  // and a margin for rounding
-    const double first = std::floor(idx[a] - reach), last = std::floor(idx[a] + reach) + 1;
-    on_grid = on_grid && first >= 0 && last <= g.size[a] - 1;
-    lo[a] = static_cast<int>(std::clamp(first, 0.0, static_cast<double>(g.size[a])));
-    hi[a] = static_cast<int>(std::clamp(last, -1.0, static_cast<double>(g.size[a] - 1)));
-    if (lo[a] > hi[a]) return BallSide::outside;  // wholly beyond the grid
-  }
-  bool any_in = false, any_out = false;
-  for (int k = lo[2]; k <= hi[2]; ++k)
-    for (int j = lo[1]; j <= hi[1]; ++j)
-      for (int i = lo[0]; i <= hi[0]; ++i) {
-        (mask.at(i, j, k) == 1 ? any_in : any_out) = true;
-        if (any_in && any_out) return BallSide::unknown;
-      }
-  if (!any_in) return BallSide::outside;
-  return on_grid ? BallSide::inside : BallSide::unknown;
-}
 }  // namespace
 
 BallSide Shape::inside_ball(const Eigen::Vector3d& p, double radius_mm) const {
   if (!(radius_mm >= 0) || !p.allFinite()) return BallSide::unknown;
-  if (mask) return mask_ball(*mask, p, radius_mm);
+  if (mask) {
+    constexpr double kRounding = 1e-9;  // mm
+    const double v = distance->at(p) - level_mm;
+    const double reach = distance->gradient_bound(p, radius_mm) * radius_mm + kRounding;
+    return v < -reach ? BallSide::inside : v > reach ? BallSide::outside : BallSide::unknown;
+  }
   const Eigen::Vector3d semi = 0.5 * size_mm;
   const Eigen::Vector3d q = p - centre_mm;
   const double r = radius_mm;
@@ -165,7 +141,7 @@ Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
   return shape;
 }
 
-Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask) {
+Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask, std::optional<double> level_mm) {
   const auto& g = mask->geometry;
   Shape s;
   s.kind = Shape::Kind::mask;
@@ -180,10 +156,18 @@ Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask) {
         lo = lo.cwiseMin(p - half), hi = hi.cwiseMax(p + half), sum += p, ++n;
       }
   if (n == 0) throw std::invalid_argument("the organ mask is empty");
-  s.mask = std::move(mask);
-  s.box = {lo, hi};
   s.centre_mm = sum / static_cast<double>(n);
   s.size_mm = hi - lo;
+  // The level lies between a voxel of label 1 and its neighbour across the boundary.
+  s.box = {lo - half, hi + half};
+  // The distance on the organ's voxels and one about them (cropped_organ): a CT's whole grid
+  // would take 8 bytes a voxel.
+  auto distance = std::make_shared<SignedDistance>(cropped_organ(*mask), false);
+  if (level_mm) distance->adopt_volume_level(*level_mm);
+  s.level_mm = distance->volume_level();
+  (void)distance->gradient_bound();  // found here, not by the first of many threads asking
+  s.distance = std::move(distance);
+  s.mask = std::move(mask);
   return s;
 }
 

@@ -86,13 +86,42 @@ TEST(Shapes, AMaskShapeHasItsVoxelsBoundsAndCentroid) {
         mask->at(i, j, k) = 1;
   const Shape s = make_mask_shape(mask);
   EXPECT_STREQ(s.kind_name(), "mask");
-  // Voxel centres 1..4, 8..12, 6..9 mm; bounds half a voxel beyond them.
-  EXPECT_TRUE(s.bounds().min_mm.isApprox(Eigen::Vector3d(0.5, 7, 4.5)));
-  EXPECT_TRUE(s.bounds().max_mm.isApprox(Eigen::Vector3d(4.5, 13, 10.5)));
+  // Voxel centres 1..4, 8..12, 6..9 mm; the organ's level lies up to a voxel beyond them.
+  EXPECT_TRUE(s.bounds().min_mm.isApprox(Eigen::Vector3d(0, 6, 3)));
+  EXPECT_TRUE(s.bounds().max_mm.isApprox(Eigen::Vector3d(5, 14, 12)));
+  EXPECT_TRUE(s.size_mm.isApprox(Eigen::Vector3d(4, 6, 6)));  // the voxels' extent
   EXPECT_TRUE(s.centre_mm.isApprox(Eigen::Vector3d(2.5, 10, 7.5)));
   EXPECT_TRUE(s.inside({2.5, 10, 7.5}));
   EXPECT_FALSE(s.inside({8, 10, 7.5}));
   EXPECT_THROW(make_mask_shape(std::make_shared<LabelVolume>(g)), std::invalid_argument);
+}
+
+// Between thick slices a mask's organ is interpolated by shape (its signed distance at the
+// level with the voxels' volume), as the fit's organ and the exports are: a disk of radius
+// 10 mm under one of 6 mm, 3 mm apart, is about 8 mm across at the midplane, not the union
+// that the 0.5 level of the mask's trilinear interpolation holds there.
+TEST(Shapes, AMasksOrganBetweenThickSlicesIsInterpolatedByShape) {
+  ImageGeometry g;
+  g.size = {40, 40, 6};
+  g.spacing_mm = {0.5, 0.5, 3};
+  g.origin_mm = {-10, -10, -6};  // slices at z = -6, -3, 0, 3, 6, 9
+  auto mask = std::make_shared<LabelVolume>(g);
+  for (int k = 1; k <= 4; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
+        mask->at(i, j, k) = std::hypot(p.x(), p.y()) <= (p.z() < 1 ? 9.0 : 5.0);
+      }
+  const Shape s = make_mask_shape(mask);
+  EXPECT_EQ(s.level_mm, s.distance->volume_level());
+  EXPECT_TRUE(inside_interpolated(*mask, {8, 0, 1.5}));  // the union at the midplane
+  EXPECT_FALSE(s.inside({8, 0, 1.5}));
+  EXPECT_TRUE(s.inside({6, 0, 1.5}));
+  EXPECT_TRUE(s.inside({8.9, 0, 0}));  // on a slice, its contour
+  EXPECT_FALSE(s.inside({9.6, 0, 0}));
+  // A saved level is taken as it is.
+  const double level = 0.5 * s.level_mm;
+  EXPECT_EQ(make_mask_shape(mask, level).level_mm, level);
 }
 
 // inside_ball is never wrong: for balls about each analytic shape, every point sampled in
@@ -174,7 +203,9 @@ TEST(Shapes, AMasksBallTestIsNeverWrong) {
             BallSide::inside);  // the hole
   const Eigen::Vector3d edge = g.index_to_physical(Eigen::Vector3d(0.5, 18, 6));
   EXPECT_TRUE(s.inside(edge));
-  EXPECT_FALSE(s.inside(edge - 1.0 * g.direction.col(0)));  // beyond the grid: 0
+  // Beyond the grid the organ goes on as its distance says (as the planning organ does: an
+  // organ on the CT's last plane may go on beyond it).
+  EXPECT_TRUE(s.inside(edge - 1.0 * g.direction.col(0)));
   EXPECT_EQ(s.inside_ball(edge, 1.0), BallSide::unknown);
 }
 

@@ -46,6 +46,11 @@ void close_mask(LabelVolume& mask, double radius_mm);
 LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm,
                                 double closing_mm, const ImageGeometry& grid);
 
+/// The mask cropped to its voxels of label 1 and one voxel about them (within its grid),
+/// labels 0 and 1: what a model file keeps of an organ, and where its signed distance is
+/// made (one voxel about the organ holds every voxel's nearest across the boundary).
+LabelVolume cropped_organ(const LabelVolume& mask);
+
 /// Whether `p_mm` lies inside the surface of a mask taken as the 0.5 level of the
 /// trilinear interpolation of its indicator (label 1 = 1, else 0; 0 off the grid). On a
 /// CT mask with thick slices the surface then runs straight from slice to slice instead
