@@ -97,9 +97,9 @@ TEST(Shapes, AMaskShapeHasItsVoxelsBoundsAndCentroid) {
 }
 
 // Between thick slices a mask's organ is interpolated by shape (its signed distance at the
-// level with the voxels' volume), as the fit's organ and the exports are: a disk of radius
-// 10 mm under one of 6 mm, 3 mm apart, is about 8 mm across at the midplane, not the union
-// that the 0.5 level of the mask's trilinear interpolation holds there.
+// level with the voxels' volume), as the fit's organ and the exports are: between a disk of
+// radius 9 mm and one of 5 mm 3 mm above it, its radius at the midplane is about 7 mm, not
+// the union that the 0.5 level of the mask's trilinear interpolation holds there.
 TEST(Shapes, AMasksOrganBetweenThickSlicesIsInterpolatedByShape) {
   ImageGeometry g;
   g.size = {40, 40, 6};

@@ -20,11 +20,11 @@ struct Shape {
   Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();  ///< centre (a mask: its centroid)
   std::shared_ptr<const LabelVolume> mask;              ///< kind "mask": label 1 is inside
   /// kind "mask": the organ is {distance < level_mm}: the mask's signed distance
-  /// (unsmoothed, on geometry::cropped_organ of it) at its volume level, the
-  /// surface the fit's organ and every export have (fitting::organ_body). Not the 0.5 level
-  /// of the mask's trilinear interpolation, which holds a contour to the midplane between
-  /// thick slices: with that as the organ, points on the exported organ read 0.2 mm (RMS) off
-  /// the fit's reference on ct-sts-004's 3.27 mm slices, and the fit moved it to match.
+  /// (unsmoothed, on geometry::cropped_organ of it) at its volume level, the surface the
+  /// fit's organ and every export have (fitting::organ_body), so that the reference the fit
+  /// measures points against, generated points and a benchmark's truth are that organ too.
+  /// Not the 0.5 level of the mask's trilinear interpolation, which holds a contour to the
+  /// midplane between thick slices (docs/decisions.md, "A mask organ is one surface").
   std::shared_ptr<const SignedDistance> distance;
   double level_mm = 0;
   Aabb box;  ///< kind "mask": bounds of its voxels, half a voxel more (where the level lies)
