@@ -213,6 +213,18 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
   EXPECT_EQ(fitting::planning_volume_level_mm(m), found);
   EXPECT_GT(std::abs(found), 0.01);  // this organ's is not 0: the check above means something
   EXPECT_EQ(fitting::planning_volume_level_mm(back.model), found);
+  // The organ a session loads is the organ planned: the same level, the same inside test
+  // (its distance made on the saved crop, the planning one's on the whole grid).
+  EXPECT_EQ(organ.level_mm, found);
+  EXPECT_EQ(back.model.shape.level_mm, found);
+  int inside = 0, tried = 0;
+  for (double x = -10; x <= 10; x += 0.37)
+    for (const double z : {-10.2, -9.0, -7.4, -3.3, 0.0, 2.9, 4.6}) {
+      ASSERT_EQ(back.model.shape.inside({x, 0.4, z}), organ.inside({x, 0.4, z})) << x << " " << z;
+      inside += organ.inside({x, 0.4, z}), ++tried;
+    }
+  EXPECT_GT(inside, tried / 2);  // both sides of the surface asked
+  EXPECT_LT(inside, tried);
   // Saved again (a fitted model is), the level is kept, not found again.
   save_model(dir_ / "m2.json", back.model, "X", OrganLook{}, std::nullopt,
              nlohmann::json::object());
