@@ -182,7 +182,8 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   // whatever a worse fit within them would say.
   const std::vector<GlobalMap>& judged = fits.empty() ? affine_fits : fits;
   const GlobalMap& best_fit = *std::min_element(judged.begin(), judged.end(), by_fit);
-  const double best_move_mm = organ_move_mm(map_samples(best_fit, surface), surface);
+  MappedSamples best_mapped = map_samples(best_fit, surface);  // judged again below
+  const double best_move_mm = organ_move_mm(best_mapped, surface);
   auto refused_with_best = [&] {
     GlobalMap out = refused();
     out.refused_move_mm = best_move_mm;
@@ -196,7 +197,7 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   std::vector<const GlobalMap*> candidates;
   std::vector<MappedSamples> mapped;
   auto keep_if_plausible = [&](const GlobalMap& fit) {
-    MappedSamples m = map_samples(fit, surface);
+    MappedSamples m = &fit == &best_fit ? std::move(best_mapped) : map_samples(fit, surface);
     if (plausible(fit, m, surface, o)) candidates.push_back(&fit), mapped.push_back(std::move(m));
   };
   for (const GlobalMap& fit : fits)
