@@ -2,9 +2,8 @@
 
 #include <fmt/format.h>
 
-#include <algorithm>
 #include <cmath>
-#include <numeric>
+#include <set>
 #include <tuple>
 
 #include "organfit/meshing/surface.h"
@@ -31,19 +30,12 @@ PointsTable read_points_file(const fs::path& file) {
 }
 
 size_t drop_repeated_points(std::vector<fitting::AttractivePoint>& points) {
-  auto less = [&points](size_t a, size_t b) {
-    const Eigen::Vector3d &p = points[a].p_mm, &q = points[b].p_mm;
-    return std::tie(p.x(), p.y(), p.z(), a) < std::tie(q.x(), q.y(), q.z(), b);
-  };
-  std::vector<size_t> order(points.size());
-  std::iota(order.begin(), order.end(), size_t{0});
-  std::sort(order.begin(), order.end(), less);
-  std::vector<char> repeat(points.size(), 0);
-  for (size_t k = 1; k < order.size(); ++k)
-    repeat[order[k]] = points[order[k]].p_mm == points[order[k - 1]].p_mm;
+  std::set<std::tuple<double, double, double>> seen;  // -0 and 0: one position
   size_t kept = 0;
-  for (size_t i = 0; i < points.size(); ++i)
-    if (!repeat[i]) points[kept++] = points[i];
+  for (size_t i = 0; i < points.size(); ++i) {
+    const Eigen::Vector3d& p = points[i].p_mm;
+    if (seen.emplace(p.x(), p.y(), p.z()).second) points[kept++] = points[i];
+  }
   const size_t dropped = points.size() - kept;
   points.resize(kept);
   return dropped;
