@@ -212,6 +212,15 @@ SavedModel load_model(const fs::path& file) {
     auto read_vec = [](const nlohmann::json& v) {
       return Eigen::Vector3d(v.at(0), v.at(1), v.at(2));
     };
+    // The organ's level as planned (files written before it was kept have none), checked on
+    // the grid it lies on: the mask's, else the reference body's.
+    std::optional<double> level;
+    if (j.at("organ").contains("volume_level_mm"))
+      level = j.at("organ").at("volume_level_mm").get<double>();
+    auto check_level = [&](const geometry::ImageGeometry& grid) {
+      if (level && !geometry::could_be_volume_level(*level, grid))
+        fail("organ.volume_level_mm: not finite, or farther from 0 than a voxel");
+    };
     if (shape.contains("mask")) {
       const auto& mj = shape.at("mask");
       geometry::ImageGeometry g;
@@ -236,12 +245,7 @@ SavedModel load_model(const fs::path& file) {
         value ^= 1;
       }
       if (v != mask->labels.size()) fail("shape.mask runs do not cover the grid");
-      // The organ's level as planned (checked below, before it is taken).
-      std::optional<double> level;
-      if (j.at("organ").contains("volume_level_mm")) {
-        level = j.at("organ").at("volume_level_mm").get<double>();
-        if (!geometry::could_be_volume_level(*level, mask->geometry)) level.reset();
-      }
+      check_level(mask->geometry);
       m.shape = geometry::make_mask_shape(std::move(mask), level);
     } else {
       m.shape =
@@ -250,6 +254,8 @@ SavedModel load_model(const fs::path& file) {
     }
     const particles::CohesionParams cp = cohesion_params_from(m.settings);
     m.reference = fitting::reference_body(m.shape, cp.r0_mm);
+    if (!m.shape.mask) check_level(m.reference.geometry);
+    m.saved_planning_level_mm = level;
     std::optional<particles::Skeleton> skeleton;
     if (!j.at("skeleton").is_null()) {
       const auto nodes = j.at("skeleton").at("nodes_mm").get<std::vector<double>>();
@@ -338,13 +344,6 @@ SavedModel load_model(const fs::path& file) {
       if (c.size() != 3 || std::any_of(c.begin(), c.end(), [](int v) { return v < 0 || v > 255; }))
         fail("organ.colour: three integers from 0 to 255");
       saved.organ_look.colour = {c[0], c[1], c[2]};
-    }
-    if (organ.contains("volume_level_mm")) {  // files written before it was kept have none
-      const double level = organ.at("volume_level_mm").get<double>();
-      if (!geometry::could_be_volume_level(
-              level, m.shape.mask ? m.shape.mask->geometry : m.reference.geometry))
-        fail("organ.volume_level_mm: not finite, or farther from 0 than a voxel");
-      m.saved_planning_level_mm = level;
     }
     if (organ.contains("interpreted_type"))
       saved.organ_look.interpreted_type = organ.at("interpreted_type").get<std::string>();
