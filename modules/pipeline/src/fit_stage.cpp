@@ -224,24 +224,26 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
     throw InputError(std::string("points: ") + e.what());
   }
   if (progress) progress->finish();
+  // What points that fit nothing usually are, said by both refusals below.
+  constexpr const char* kCheckPoints =
+      "check that they belong to this organ and are in the planning CT's patient coordinates, "
+      "in mm";
   if (fitted.report.refused)
     throw TargetNotMetError(fmt::format(
         "fit: the points ask for an implausible change of the whole organ: their best fit moves "
         "it {:.1f} mm and stretches it {:.2f}x (the bounds: a move of {} mm, "
         "fit.spread.max_global_shift_mm; a stretch of {}x, fit.spread.max_global_stretch; a bend "
-        "of {} of its size, fit.spread.global_max_shear); check that they belong to this organ and "
-        "are in the planning CT's patient coordinates, in mm",
+        "of {} of its size, fit.spread.global_max_shear); {}",
         fitted.report.refused_move_mm, fitted.report.refused_stretch,
         options.spread.global.max_shift_mm, options.spread.global.max_stretch,
-        options.spread.global.max_shear_mm));
+        options.spread.global.max_shear_mm, kCheckPoints));
   // A fit that kept none of its points fitted nothing: no result, whatever its loop said
   // (the paper's fit of points 600 mm off "converged" at residual 0, every point rejected).
   if (fitted.report.points > 0 && fitted.report.rejected_points == fitted.report.points)
     throw TargetNotMetError(fmt::format(
         "fit: all {} points were rejected as outliers (fit.{}.outlier_distance_mm): nothing was "
-        "fitted; check that they belong to this organ and are in the planning CT's patient "
-        "coordinates, in mm",
-        fitted.report.points, fitted.report.method));
+        "fitted; {}",
+        fitted.report.points, fitted.report.method, kCheckPoints));
   if (fitted.report.local_stage_undone())  // the stop reason says why (tore or folded)
     spdlog::warn("fit: {}", fitted.report.fit.stop_reason);
   static_cast<fitting::OrganModel&>(out.model) = std::move(fitted.model);
