@@ -357,6 +357,18 @@ import json; d = json.load(open('$tmp/fit4/run.json'))
 assert d['points'] == {'count': 3, 'read': 5, 'repeated': 2, 'source': 'file'} and d['fit']['attractive_points'] == 3, d['points']
 assert any('repeat an earlier' in w for w in d['warnings'])"
 
+# Points written in cm about an organ near the patient origin lie inside it, and the fit
+# moved the organ onto them: refused, naming the file, nothing written; the same places in
+# mm are fitted.
+printf 'x,y,z\n2,0,0\n-2,0,0\n0,1.5,0\n0,-1.5,0\n0,0,1.2\n0,0,-1.2\n1.2,0.9,0.5\n' > "$tmp/in_cm.csv"
+python3 -c "
+rows = open('$tmp/in_cm.csv').read().split()[1:]
+print('x,y,z'); [print(','.join(str(10 * float(v)) for v in r.split(','))) for r in rows]" > "$tmp/in_mm.csv"
+printf 'body:\n  size_mm: [40, 30, 24]\nmodel:\n  radius_mm: 2\npoints:\n  source: file\n  file: in_cm.csv\nfit:\n  method: spread\n' > "$tmp/in_cm.yaml"
+expect fit.points_in_cm_refused 2 "in_cm.csv: the points look written in centimetres: times 10 they lie a median 0." -- --quiet run "$tmp/in_cm.yaml" --out "$tmp/fit5"
+check fit.points_in_cm_leave_no_outputs test ! -e "$tmp/fit5"
+expect fit.points_in_mm_same_places_fitted 0 "" -- --quiet run "$tmp/in_cm.yaml" --set "points.file=$tmp/in_mm.csv" --out "$tmp/fit6"
+
 # synth pelvis: a DICOM CT and structure set that dicom3tools accept, byte-reproducible
 expect synth.pelvis 0 "" -- --quiet synth pelvis --out "$tmp/pelvis" --columns 128 --rows 128 --pixel-mm 3.2 --slices 24 --slice-mm 5
 check synth.prints_prostate_volume grep -qE "prostate 3[0-9.]* cm3" "$tmp/out"

@@ -107,6 +107,16 @@ double planning_volume_level_mm(const OrganModel& m) {
   return m.planning_distance->volume_level();
 }
 
+std::vector<double> planning_surface_distance_mm(const OrganModel& m,
+                                                 const Eigen::Matrix3Xd& points_mm) {
+  make_planning_organ(m);
+  const double level = planning_volume_level_mm(m);
+  std::vector<double> d(static_cast<size_t>(points_mm.cols()));
+  for (Eigen::Index k = 0; k < points_mm.cols(); ++k)
+    d[static_cast<size_t>(k)] = std::abs(m.planning_distance->at(points_mm.col(k)) - level);
+  return d;
+}
+
 void add_skeleton_term(OrganModel& model, const particles::Skeleton& skeleton) {
   model.skeleton = &model.model->add(
       std::make_unique<particles::SkeletonForce>(skeleton, model.state.x, model.skeleton_params));

@@ -2,9 +2,12 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <set>
 #include <tuple>
+#include <utility>
 
 #include "organfit/meshing/surface.h"
 #include "organfit/pipeline/scene_schema.h"
@@ -39,6 +42,36 @@ size_t drop_repeated_points(std::vector<fitting::AttractivePoint>& points) {
   const size_t dropped = points.size() - kept;
   points.resize(kept);
   return dropped;
+}
+
+void check_points_unit(const std::vector<fitting::AttractivePoint>& points,
+                       const fitting::OrganModel& model, const fs::path& file) {
+  if (points.empty() || model.state.size() == 0) return;
+  auto median_distance_mm = [&](double scale) {
+    Eigen::Matrix3Xd p(3, static_cast<Eigen::Index>(points.size()));
+    for (size_t k = 0; k < points.size(); ++k)
+      p.col(static_cast<Eigen::Index>(k)) = scale * points[k].p_mm;
+    std::vector<double> d = fitting::planning_surface_distance_mm(model, p);
+    std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(d.size() / 2), d.end());
+    return d[d.size() / 2];
+  };
+  // mm, cm and m: the unit whose points lie nearest the surface, if it is not mm and they lie
+  // nearer the surface than halfway to the organ's middle.
+  const geometry::Aabb box = model.shape.bounds();
+  const double halfway_mm = 0.25 * box.size_mm().minCoeff();
+  const std::array<std::pair<double, const char*>, 3> units = {
+      {{1.0, "mm"}, {10.0, "centimetres"}, {1000.0, "metres"}}};
+  std::array<double, 3> distance_mm{};
+  for (size_t u = 0; u < units.size(); ++u)
+    distance_mm[u] = median_distance_mm(units[u].first);
+  const size_t nearest = static_cast<size_t>(
+      std::min_element(distance_mm.begin(), distance_mm.end()) - distance_mm.begin());
+  if (nearest != 0 && distance_mm[nearest] <= halfway_mm)
+    throw InputError(fmt::format(
+        "{}: the points look written in {}: times {:g} they lie a median {:.1f} mm from the "
+        "planning organ's surface, as given {:.1f} mm; patient coordinates are in mm",
+        file.string(), units[nearest].second, units[nearest].first, distance_mm[nearest],
+        distance_mm[0]));
 }
 
 evaluation::Deformation deformation_about(evaluation::Deformation d, const geometry::Shape& shape) {

@@ -303,6 +303,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
       }
     } else {
       points = run_points_stage(points_options_from(scene), *model);
+      if (!points->truth) check_points_unit(points->points, *model, scene.path("points", "file"));
       for (const auto& w : points->warnings)
         warn(w);
       // Points declared in another CT than the planning CT are in other coordinates.

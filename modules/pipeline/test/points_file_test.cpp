@@ -3,9 +3,11 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <fstream>
 
 #include "organfit/pipeline/points_stage.h"
+#include "organfit/pipeline/scene_schema.h"
 #include "organfit/support/error.h"
 
 namespace fs = std::filesystem;
@@ -149,6 +151,83 @@ TEST_F(PointsFile, ARunFitsEachPositionOnceAndSaysHowManyRepeated) {
   const PointsStageResult distinct = run_points_stage(o, no_model);
   EXPECT_TRUE(distinct.warnings.empty());
   EXPECT_FALSE(distinct.summary.contains("repeated"));
+}
+
+/// A body of the given centre (mm), an egg of 40 x 30 x 50 mm, and 87 points on the +y half
+/// of its surface (mm), found along rays from its centre by bisection to 1e-3 mm.
+struct EggAndPoints {
+  ModelStageResult model;
+  std::vector<fitting::AttractivePoint> points;
+};
+EggAndPoints egg_and_points(const Eigen::Vector3d& centre_mm) {
+  const std::string c = std::to_string(centre_mm.x()) + ", " + std::to_string(centre_mm.y()) +
+                        ", " + std::to_string(centre_mm.z());
+  const config::Scene scene =
+      config::parse_scene("body:\n  shape: egg\n  size_mm: [40, 30, 50]\n  centre_mm: [" + c +
+                              "]\nmodel:\n  radius_mm: 2.5\n",
+                          fs::temp_directory_path() / "units.yaml", scene_schema());
+  check_scene_rules(scene);
+  EggAndPoints e{run_model_stage(model_stage_options_from(scene)), {}};
+  for (int k = 0; k < 87; ++k) {
+    // A Fibonacci spiral over the half sphere y > 0.
+    const double y = (k + 0.5) / 87.0, r = std::sqrt(1 - y * y), a = k * 2.399963229728653;
+    const Eigen::Vector3d dir(r * std::cos(a), y, r * std::sin(a));
+    double in = 0, out = 60;
+    while (out - in > 1e-3) {
+      const double mid = 0.5 * (in + out);
+      (e.model.shape.inside(centre_mm + mid * dir) ? in : out) = mid;
+    }
+    e.points.push_back({centre_mm + in * dir, 1.0});
+  }
+  return e;
+}
+
+std::vector<fitting::AttractivePoint> scaled(
+    std::vector<fitting::AttractivePoint> points, double by,
+    const Eigen::Vector3d& shift_mm = Eigen::Vector3d::Zero()) {
+  for (auto& p : points)
+    p.p_mm = by * (p.p_mm + shift_mm);
+  return points;
+}
+
+std::string unit_error(const std::vector<fitting::AttractivePoint>& points,
+                       const fitting::OrganModel& model) {
+  try {
+    check_points_unit(points, model, "today.csv");
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+TEST(PointsUnit, CentimetresAndMetresAreRefusedWhereTheOrganIsNearTheOrigin) {
+  // An organ about the patient origin: points in cm lie inside it, and a fit would move the
+  // organ onto them (the global stage's reach is 100 mm).
+  const EggAndPoints e = egg_and_points({2, -3, 4});
+  EXPECT_EQ(unit_error(e.points, e.model), "no error");
+  const std::string cm = unit_error(scaled(e.points, 0.1), e.model);
+  EXPECT_EQ(cm.rfind("today.csv: the points look written in centimetres: times 10 they lie a "
+                     "median 0.",
+                     0),
+            0u)
+      << cm;
+  EXPECT_NE(cm.find("patient coordinates are in mm"), std::string::npos);
+  EXPECT_NE(unit_error(scaled(e.points, 0.001), e.model).find("written in metres: times 1000"),
+            std::string::npos);
+  // Today's organ moved 12 mm and the points in cm: still refused.
+  EXPECT_NE(unit_error(scaled(e.points, 0.1, {6, -8, 7}), e.model).find("centimetres"),
+            std::string::npos);
+  // The same move in mm is a change to fit, not a unit.
+  EXPECT_EQ(unit_error(scaled(e.points, 1, {6, -8, 7}), e.model), "no error");
+  // A cluster in the organ's middle is at no unit's scale: not called one.
+  EXPECT_EQ(unit_error(scaled(e.points, 1.0 / 30), e.model), "no error");
+}
+
+TEST(PointsUnit, CentimetresAreRefusedFarFromTheOriginToo) {
+  const EggAndPoints e = egg_and_points({-101, 44, 720});  // ct-sts-004's GTV's place
+  EXPECT_EQ(unit_error(e.points, e.model), "no error");
+  EXPECT_NE(unit_error(scaled(e.points, 0.1), e.model).find("centimetres"), std::string::npos);
+  EXPECT_EQ(unit_error(scaled(e.points, 1, {5, 5, -5}), e.model), "no error");
 }
 
 }  // namespace

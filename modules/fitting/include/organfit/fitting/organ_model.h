@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <vector>
 
 #include "organfit/fitting/embedded_body.h"
 #include "organfit/fitting/global_fit.h"
@@ -103,5 +104,12 @@ EmbeddedBody organ_body(const OrganModel& model, std::shared_ptr<const Deformati
 /// (geometry::SignedDistance::volume_level); the saved one when a model file gave it, else
 /// found once per planning organ.
 double planning_volume_level_mm(const OrganModel& model);
+
+/// The unsigned distance (mm) of each column of `points_mm` (3 x n, patient mm) to the
+/// planning organ's surface: |d(p) - level| of its signed distance at its volume level (the
+/// surface organ_body exports at phi = identity). Beyond the distance's grid, its value at
+/// the grid's nearest point plus the way there.
+std::vector<double> planning_surface_distance_mm(const OrganModel& model,
+                                                 const Eigen::Matrix3Xd& points_mm);
 
 }  // namespace organfit::fitting
