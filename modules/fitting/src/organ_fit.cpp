@@ -328,6 +328,12 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   report.deformation = out.after->shared_deformation();
   for (const auto& st : *status)
     report.rejected_points += st.rejected;
+  // A fit that kept none of its points fitted nothing, whatever its loop said: the paper's
+  // fit of points 600 mm off stopped "converged" at residual 0, every point rejected.
+  if (!points.empty() && report.rejected_points == static_cast<int>(points.size())) {
+    report.fit.converged = false;
+    report.fit.stop_reason = "every point rejected as an outlier: nothing was fitted";
+  }
   report.particle_body_volume_change_pct = 100.0 * (v1 - v0) / v0;
   // The spread fit counted the pieces of this state already, unless its local stage was
   // undone (the state then is the global stage's).

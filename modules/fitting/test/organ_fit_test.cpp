@@ -225,6 +225,19 @@ TEST(FitSpread, UndoesALocalStageThatTearsFoldsOrSwellsTheOrgan) {
   }
 }
 
+TEST(FitPaper, AFitThatRejectedEveryPointHasNotConverged) {
+  // The points of a stretched ellipsoid 600 mm away: every one beyond the paper's outlier
+  // distance, so its loop sees no residual at all.
+  std::vector<AttractivePoint> points = stretched_surface(1.15, 87);
+  for (auto& p : points)
+    p.p_mm += Eigen::Vector3d(600, 0, 0);
+  const FittedOrgan fitted = fit_paper(copy_model(ellipsoid_model()), points, {});
+  const FitReport& r = fitted.report;
+  ASSERT_EQ(r.rejected_points, 87);
+  EXPECT_FALSE(r.fit.converged);
+  EXPECT_EQ(r.fit.stop_reason, "every point rejected as an outlier: nothing was fitted");
+}
+
 TEST(FitSpread, LeavesARejectedPointOutOfTheUncertainty) {
   // 87 points on the stretched ellipsoid and one lone point 5 mm above its top, among
   // points on the surface: rejected, it is not an observation: neither pinning the surface

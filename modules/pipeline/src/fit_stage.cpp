@@ -237,8 +237,8 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
         fitted.report.refused_move_mm, fitted.report.refused_stretch,
         options.spread.global.max_shift_mm, options.spread.global.max_stretch,
         options.spread.global.max_shear_mm, kCheckPoints));
-  // A fit that kept none of its points fitted nothing: no result, whatever its loop said
-  // (the paper's fit of points 600 mm off "converged" at residual 0, every point rejected).
+  // A fit that kept none of its points fitted nothing (not converged, its report says): no
+  // result to write, refused before anything is.
   if (fitted.report.points > 0 && fitted.report.rejected_points == fitted.report.points)
     throw TargetNotMetError(fmt::format(
         "fit: all {} points were rejected as outliers (fit.{}.outlier_distance_mm): nothing was "
