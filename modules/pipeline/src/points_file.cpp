@@ -2,9 +2,11 @@
 
 #include <fmt/format.h>
 
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <fstream>
+#include <initializer_list>
 #include <iterator>
 #include <limits>
 #include <string>
@@ -169,6 +171,41 @@ std::string points_ct_comment(const PointsCt& ct) {
   return out;
 }
 
+namespace {
+/// What a header line's coordinate column names say of its unit and frame: nothing, or why
+/// the points are not in mm LPS. Its words are its runs of letters, lower-cased ("X (cm)":
+/// x, cm; "pos_x_metres": pos, x, metres); a column names a unit by a word of its own, so
+/// "x", "xmm" or "index" name none.
+std::string header_mismatch(const std::vector<std::string>& cells) {
+  std::vector<std::string> words;
+  for (size_t c = 0; c < cells.size() && c < 3; ++c) {
+    std::string word;
+    for (const char ch : cells[c] + " ") {
+      if (std::isalpha(static_cast<unsigned char>(ch))) {
+        word += static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+      } else if (!word.empty()) {
+        words.push_back(word);
+        word.clear();
+      }
+    }
+  }
+  auto said = [&](std::initializer_list<const char*> any) {
+    for (const std::string& w : words)
+      for (const char* a : any)
+        if (w == a) return true;
+    return false;
+  };
+  if (said({"cm", "centimeter", "centimeters", "centimetre", "centimetres"}))
+    return "its columns are named in centimetres";
+  if (said({"m", "meter", "meters", "metre", "metres"})) return "its columns are named in metres";
+  if (said({"inch", "inches"})) return "its columns are named in inches";
+  if (said({"ras"}) || (cells.size() >= 3 && words.size() >= 3 && words[0] == "r" &&
+                        words[1] == "a" && words[2] == "s"))
+    return "its columns are named in RAS (as 3D Slicer's are): x and y point the other way";
+  return "";
+}
+}  // namespace
+
 std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
   return read_points_table(file).points;
 }
@@ -202,8 +239,16 @@ PointsTable read_points_table(const fs::path& file) {
     for (const auto& c : cells) {
       double d = 0;
       if (!parse_number(c, d)) {
-        // One line of column names may come before the first point.
-        if (points.empty() && v.empty() && !header_seen) break;
+        // One line of column names may come before the first point; what it says of the
+        // unit and frame is not ignored.
+        if (points.empty() && v.empty() && !header_seen) {
+          const std::string mismatch = header_mismatch(cells);
+          if (!mismatch.empty())
+            fail(mismatch +
+                 "; points are read in mm, in the planning CT's patient coordinates "
+                 "(LPS)");
+          break;
+        }
         fail(fmt::format("'{}' is not a number", echo(c)));
       }
       if (!std::isfinite(d)) fail("non-finite coordinate");

@@ -87,6 +87,28 @@ TEST_F(PointsFile, RefusesWhatNoPatientHasNamingTheRow) {
             ":2: '" + std::string(80, 'a') + "...' is not a number");
 }
 
+// A header's unit and frame are read, not ignored: the numbers are taken as mm LPS, so a
+// header saying otherwise is refused on its line.
+TEST_F(PointsFile, RefusesAHeaderNamingAnotherUnitOrFrame) {
+  const std::string why = "; points are read in mm, in the planning CT's patient coordinates (LPS)";
+  EXPECT_EQ(error_of("x_cm,y_cm,z_cm\n1,2,3\n"), ":1: its columns are named in centimetres" + why);
+  EXPECT_EQ(error_of("# probe\nX (m);Y (m);Z (m)\n1;2;3\n"),
+            ":2: its columns are named in metres" + why);
+  EXPECT_EQ(error_of("pos_x_metres,pos_y_metres,pos_z_metres,confidence\n1,2,3,1\n"),
+            ":1: its columns are named in metres" + why);
+  EXPECT_EQ(error_of("x inches,y inches,z inches\n1,2,3\n"),
+            ":1: its columns are named in inches" + why);
+  const std::string ras =
+      ": its columns are named in RAS (as 3D Slicer's are): x and y point the other way" + why;
+  EXPECT_EQ(error_of("R,A,S\n1,2,3\n"), ":1" + ras);
+  EXPECT_EQ(error_of("x_ras,y_ras,z_ras\n1,2,3\n"), ":1" + ras);
+  // mm, LPS, or no unit at all: read.
+  for (const std::string header : {"x_mm,y_mm,z_mm,confidence", "X (mm),Y (mm),Z (mm)", "x,y,z",
+                                   "L,P,S", "x in mm,y in mm,z in mm", "xmm,ymm,zmm",
+                                   "x,y,z,m"})  // a fourth column is not a coordinate
+    EXPECT_EQ(read_points_csv(write(header + "\n1,2,3\n")).size(), 1u) << header;
+}
+
 TEST_F(PointsFile, ReadsTheCtItDeclaresWithItsPointsInOnePass) {
   const PointsCt ct{"1.2.3.4", "1.2.3.5"};
   for (const std::string ends : {"\n", "\r\n", "\r"}) {
