@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cctype>
 #include <charconv>
 #include <cmath>
@@ -177,30 +178,33 @@ namespace {
 /// x, cm; "pos_x_metres": pos, x, metres); a column names a unit by a word of its own, so
 /// "x", "xmm" or "index" name none.
 std::string header_mismatch(const std::vector<std::string>& cells) {
-  std::vector<std::string> words;
-  for (size_t c = 0; c < cells.size() && c < 3; ++c) {
+  std::vector<std::vector<std::string>> words(std::min<size_t>(cells.size(), 3));  // per column
+  for (size_t c = 0; c < words.size(); ++c) {
     std::string word;
     for (const char ch : cells[c] + " ") {
       if (std::isalpha(static_cast<unsigned char>(ch))) {
         word += static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
       } else if (!word.empty()) {
-        words.push_back(word);
+        words[c].push_back(word);
         word.clear();
       }
     }
   }
   auto said = [&](std::initializer_list<const char*> any) {
-    for (const std::string& w : words)
-      for (const char* a : any)
-        if (w == a) return true;
+    for (const auto& column : words)
+      for (const std::string& w : column)
+        for (const char* a : any)
+          if (w == a) return true;
     return false;
+  };
+  auto first_word = [&](size_t c, const char* w) {
+    return c < words.size() && !words[c].empty() && words[c][0] == w;
   };
   if (said({"cm", "centimeter", "centimeters", "centimetre", "centimetres"}))
     return "its columns are named in centimetres";
   if (said({"m", "meter", "meters", "metre", "metres"})) return "its columns are named in metres";
   if (said({"inch", "inches"})) return "its columns are named in inches";
-  if (said({"ras"}) || (cells.size() >= 3 && words.size() >= 3 && words[0] == "r" &&
-                        words[1] == "a" && words[2] == "s"))
+  if (said({"ras"}) || (first_word(0, "r") && first_word(1, "a") && first_word(2, "s")))
     return "its columns are named in RAS (as 3D Slicer's are): x and y point the other way";
   return "";
 }

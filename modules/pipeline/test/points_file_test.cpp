@@ -102,6 +102,7 @@ TEST_F(PointsFile, RefusesAHeaderNamingAnotherUnitOrFrame) {
       ": its columns are named in RAS (as 3D Slicer's are): x and y point the other way" + why;
   EXPECT_EQ(error_of("R,A,S\n1,2,3\n"), ":1" + ras);
   EXPECT_EQ(error_of("x_ras,y_ras,z_ras\n1,2,3\n"), ":1" + ras);
+  EXPECT_EQ(error_of("R (mm),A (mm),S (mm)\n1,2,3\n"), ":1" + ras);
   // mm, LPS, or no unit at all: read.
   for (const std::string header : {"x_mm,y_mm,z_mm,confidence", "X (mm),Y (mm),Z (mm)", "x,y,z",
                                    "L,P,S", "x in mm,y in mm,z in mm", "xmm,ymm,zmm",

@@ -42,13 +42,13 @@ size_t drop_repeated_points(std::vector<fitting::AttractivePoint>& points);
 /// patient coordinates): throws InputError naming `file` when, of the points as given and
 /// scaled by 10 and by 1000 about the patient origin, a scaled set lies nearest the planning
 /// organ's surface (median distances), nearer than halfway to the organ's middle (a quarter
-/// of its box's smallest side). Points in mm never do: scaling moves a point 9 (999) times
-/// its distance from the origin, which takes points spread over a surface off it by about
-/// the organ's size or more; points at a scale of no unit (a cluster in the organ's middle)
-/// lie as far from the surface at every one of the three. Where
-/// the organ lies within the global fit's reach of the origin (fit.spread.max_global_shift_mm:
-/// the planning CT's origin is often set near the target), a centimetre point set lies
-/// inside it, and the fit moved the organ onto it without a word (a prostate 15 mm, exit 0).
+/// of its box's smallest side). Why: where the organ lies within the global fit's reach of
+/// the origin (fit.spread.max_global_shift_mm; planning CTs often put the origin near the
+/// target), a centimetre point set lies inside it, and a fit moves the organ onto it and
+/// converges. Points in mm never pass: scaling moves a point 9 (999) times its distance from
+/// the origin, which takes points spread over a surface off it by about the organ's size or
+/// more; points at no unit's scale (a cluster in the organ's middle) lie as far from the
+/// surface at each of the three scales.
 void check_points_unit(const std::vector<fitting::AttractivePoint>& points,
                        const fitting::OrganModel& model, const std::filesystem::path& file);
 
