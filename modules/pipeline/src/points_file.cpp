@@ -206,6 +206,19 @@ std::string header_mismatch(const std::vector<std::string>& cells) {
   if (said({"inch", "inches"})) return "its columns are named in inches";
   if (said({"ras"}) || (first_word(0, "r") && first_word(1, "a") && first_word(2, "s")))
     return "its columns are named in RAS (as 3D Slicer's are): x and y point the other way";
+  if (first_word(0, "i") && first_word(1, "j") && first_word(2, "k"))
+    return "its columns are named i, j, k: voxel indices, not positions";
+  // The axes named in another order (z, y, x): read as x, y, z they would be swapped.
+  for (const char* axes : {"xyz", "lps"}) {
+    std::string named;
+    for (size_t c = 0; c < words.size(); ++c)
+      if (!words[c].empty() && words[c][0].size() == 1 &&
+          std::string(axes).find(words[c][0][0]) != std::string::npos)
+        named += words[c][0];
+    if (named.size() == 3 && named != axes && std::is_permutation(named.begin(), named.end(), axes))
+      return fmt::format("its columns are named {}, {}, {}: they are read as {}, {}, {}", named[0],
+                         named[1], named[2], axes[0], axes[1], axes[2]);
+  }
   return "";
 }
 }  // namespace

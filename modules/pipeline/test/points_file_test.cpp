@@ -103,9 +103,17 @@ TEST_F(PointsFile, RefusesAHeaderNamingAnotherUnitOrFrame) {
   EXPECT_EQ(error_of("R,A,S\n1,2,3\n"), ":1" + ras);
   EXPECT_EQ(error_of("x_ras,y_ras,z_ras\n1,2,3\n"), ":1" + ras);
   EXPECT_EQ(error_of("R (mm),A (mm),S (mm)\n1,2,3\n"), ":1" + ras);
+  EXPECT_EQ(error_of("z,y,x\n1,2,3\n"),
+            ":1: its columns are named z, y, x: they are read as x, y, z" + why);
+  EXPECT_EQ(error_of("Y (mm),X (mm),Z (mm),confidence\n1,2,3,1\n"),
+            ":1: its columns are named y, x, z: they are read as x, y, z" + why);
+  EXPECT_EQ(error_of("S,P,L\n1,2,3\n"),
+            ":1: its columns are named s, p, l: they are read as l, p, s" + why);
+  EXPECT_EQ(error_of("i,j,k\n1,2,3\n"),
+            ":1: its columns are named i, j, k: voxel indices, not positions" + why);
   // mm, LPS, or no unit at all: read.
   for (const std::string header : {"x_mm,y_mm,z_mm,confidence", "X (mm),Y (mm),Z (mm)", "x,y,z",
-                                   "L,P,S", "x in mm,y in mm,z in mm", "xmm,ymm,zmm",
+                                   "L,P,S", "x in mm,y in mm,z in mm", "xmm,ymm,zmm", "a,b,c",
                                    "x,y,z,m"})  // a fourth column is not a coordinate
     EXPECT_EQ(read_points_csv(write(header + "\n1,2,3\n")).size(), 1u) << header;
 }

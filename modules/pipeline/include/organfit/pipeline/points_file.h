@@ -5,9 +5,10 @@
 // as Excel's "Unicode text" writes it); line ends LF, CRLF or CR. Columns x, y, z in mm
 // (patient coordinates) and an optional confidence in (0, 1], separated by commas,
 // semicolons (then a decimal comma is allowed: "1,5;2;3"), tabs or spaces; cells may
-// be quoted. '#' starts a comment line; one header line of text may come first: a
-// coordinate column named in another unit ("x_cm", "Y (m)", "z inches") or the columns
-// named R, A, S (or RAS) are refused, since the numbers are read as mm LPS.
+// be quoted. '#' starts a comment line; one header line of text may come first. The
+// numbers are read as x, y, z in mm LPS, so a header saying otherwise is refused: a
+// coordinate column named in another unit ("x_cm", "Y (m)", "z inches"), the columns named
+// R, A, S (or RAS), i, j, k (voxel indices), or the axes in another order ("z,y,x").
 //
 // The CT the points are in may be declared in comment lines, as `organfit us-points --ct`
 // writes them: "# series_instance_uid: UID" and "# frame_of_reference_uid: UID". A run
