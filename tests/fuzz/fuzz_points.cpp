@@ -1,6 +1,6 @@
 // The point-set CSV reader on arbitrary bytes.
 #include "fuzz_util.h"
-#include "organfit/pipeline/fit_stage.h"
+#include "organfit/pipeline/points_file.h"
 #include "organfit/support/error.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -449,7 +449,9 @@ double ShearFields::largest_weight(int a) const {
 
 double ShearFields::largest_gradient(int a, const geometry::Aabb& box) const {
   if (empty()) return 0;
-  const auto [b, c] = other_axes(a);
+  // Plain ints, not a structured binding: the loop's OpenMP region below reads them, and
+  // clang (the fuzzing build) cannot capture a binding before C++20.
+  const int b = other_axes(a).first, c = other_axes(a).second;
   const double w = largest_weight(a);
   if (w == 0) return 0;
   const auto& sums = bump_sum_bounds();
