@@ -330,7 +330,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     report.rejected_points += st.rejected;
   // A fit that kept none of its points fitted nothing, whatever its loop said: the paper's
   // fit of points 600 mm off stopped "converged" at residual 0, every point rejected.
-  if (!points.empty() && report.rejected_points == static_cast<int>(points.size())) {
+  if (report.rejected_every_point()) {
     report.fit.converged = false;
     report.fit.stop_reason = "every point rejected as an outlier: nothing was fitted";
   }

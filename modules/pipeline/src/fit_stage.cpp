@@ -239,7 +239,7 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
         options.spread.global.max_shear_mm, kCheckPoints));
   // A fit that kept none of its points fitted nothing (not converged, its report says): no
   // result to write, refused before anything is.
-  if (fitted.report.points > 0 && fitted.report.rejected_points == fitted.report.points)
+  if (fitted.report.rejected_every_point())
     throw TargetNotMetError(fmt::format(
         "fit: all {} points were rejected as outliers (fit.{}.outlier_distance_mm): nothing was "
         "fitted; {}",

@@ -197,28 +197,24 @@ std::string header_mismatch(const std::vector<std::string>& cells) {
           if (w == a) return true;
     return false;
   };
-  auto first_word = [&](size_t c, const char* w) {
-    return c < words.size() && !words[c].empty() && words[c][0] == w;
-  };
+  // The three columns' first words when each is one letter ("S (mm),P,L": "spl"), else "".
+  std::string letters;
+  for (const auto& column : words)
+    if (!column.empty() && column[0].size() == 1) letters += column[0];
+  if (letters.size() != 3) letters.clear();
   if (said({"cm", "centimeter", "centimeters", "centimetre", "centimetres"}))
     return "its columns are named in centimetres";
   if (said({"m", "meter", "meters", "metre", "metres"})) return "its columns are named in metres";
   if (said({"inch", "inches"})) return "its columns are named in inches";
-  if (said({"ras"}) || (first_word(0, "r") && first_word(1, "a") && first_word(2, "s")))
+  if (said({"ras"}) || letters == "ras")
     return "its columns are named in RAS (as 3D Slicer's are): x and y point the other way";
-  if (first_word(0, "i") && first_word(1, "j") && first_word(2, "k"))
-    return "its columns are named i, j, k: voxel indices, not positions";
+  if (letters == "ijk") return "its columns are named i, j, k: voxel indices, not positions";
   // The axes named in another order (z, y, x): read as x, y, z they would be swapped.
-  for (const char* axes : {"xyz", "lps"}) {
-    std::string named;
-    for (size_t c = 0; c < words.size(); ++c)
-      if (!words[c].empty() && words[c][0].size() == 1 &&
-          std::string(axes).find(words[c][0][0]) != std::string::npos)
-        named += words[c][0];
-    if (named.size() == 3 && named != axes && std::is_permutation(named.begin(), named.end(), axes))
-      return fmt::format("its columns are named {}, {}, {}: they are read as {}, {}, {}", named[0],
-                         named[1], named[2], axes[0], axes[1], axes[2]);
-  }
+  for (const std::string axes : {"xyz", "lps"})
+    if (!letters.empty() && letters != axes &&
+        std::is_permutation(letters.begin(), letters.end(), axes.begin(), axes.end()))
+      return fmt::format("its columns are named {}, {}, {}: they are read as {}, {}, {}",
+                         letters[0], letters[1], letters[2], axes[0], axes[1], axes[2]);
   return "";
 }
 }  // namespace

@@ -99,6 +99,8 @@ struct FitReport {
   bool refused = false;
   double refused_move_mm = 0, refused_stretch = 1;
   int points = 0, rejected_points = 0;
+  /// Every point rejected as an outlier: nothing was fitted, whatever the loop said.
+  bool rejected_every_point() const { return points > 0 && rejected_points == points; }
   int pieces = 1;                   ///< > 1: the local stage tore the organ; it was undone
   bool local_stage_folded = false;  ///< the local stage folded the organ; it was undone
   /// The local stage changed the organ's volume by more than volume_tolerance_pct; undone.
