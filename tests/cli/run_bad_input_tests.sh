@@ -76,6 +76,16 @@ for f in "$src"/tests/fuzz/regressions/*.mha; do
   if [[ $code -eq 2 && $(grep -c . "$tmp/err.txt") -eq 1 ]]; then echo "ok   fuzz_regression.$(basename "$f")"; passed=$((passed + 1));
   else echo "FAIL fuzz_regression.$(basename "$f"): exit $code"; failed=$((failed + 1)); fi
 done
+for f in "$src"/tests/fuzz/regressions/*.yaml; do
+  for cmd in validate run; do
+    rm -rf "$tmp/yout"
+    if [[ $cmd == run ]]; then args=(--out "$tmp/yout"); else args=(); fi
+    timeout 60 "$bin" $cmd "$f" "${args[@]}" > /dev/null 2> "$tmp/err.txt"
+    code=$?
+    if [[ $code -eq 2 && $(grep -c . "$tmp/err.txt") -eq 1 && ! -e "$tmp/yout" ]]; then echo "ok   fuzz_regression.$cmd.$(basename "$f")"; passed=$((passed + 1));
+    else echo "FAIL fuzz_regression.$cmd.$(basename "$f"): exit $code"; failed=$((failed + 1)); fi
+  done
+done
 printf '%s\n' "${classes[@]}" | sort | uniq -c | sed 's/^/cases by class: /'
 echo "$passed passed, $failed failed"
 [[ $failed -eq 0 && $passed -ge 100 ]]

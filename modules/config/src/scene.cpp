@@ -125,7 +125,10 @@ class Parser {
         // A path on the command line is the user's, from where they are.
         if (p.is_relative())
           p = (overrides.count(key) ? fs::current_path() : file_.parent_path()) / p;
-        if (!fs::exists(p))
+        std::error_code ec;  // a name too long or a folder not searchable: the user's to fix
+        const bool exists = fs::exists(p, ec);
+        if (ec) fail(line, key, fmt::format("{}: {}", ec.message(), echo(p.string(), 200)));
+        if (!exists)
           fail(line, key, fmt::format("no such file or folder: {}", echo(p.string(), 200)));
         return fs::absolute(p).lexically_normal().string();
       }

@@ -98,6 +98,15 @@ TEST(SceneParse, MissingRequiredKeyAndMissingFile) {
             "/scenes/s.yaml:2: points.file: no such file or folder: /scenes/nowhere.csv");
 }
 
+TEST(SceneParse, APathTheSystemCannotLookUpIsTheKeysError) {
+  // A name longer than the file system allows (found by fuzz_scene: it escaped as a
+  // std::filesystem error, "internal error"), with bytes that are not UTF-8 in it.
+  const std::string name = std::string(300, 'e') + "\xff\xfe";
+  const std::string e = error_of("points:\n  file: /o" + name + "\n");
+  EXPECT_EQ(e.rfind("/scenes/s.yaml:2: points.file: File name too long: /o", 0), 0u) << e;
+  EXPECT_EQ(e.find('\xff'), std::string::npos) << "a byte that is not UTF-8 echoed as it is";
+}
+
 TEST(SceneParse, DuplicatesSyntaxAndShapeErrors) {
   EXPECT_EQ(error_of("model:\n  radius_mm: 1\n  radius_mm: 2\n"),
             "/scenes/s.yaml:3: model.radius_mm: key given twice");

@@ -9,7 +9,7 @@
 #include "organfit/dicomnet/node.h"
 #include "organfit/pipeline/export_stage.h"
 #include "organfit/pipeline/fit_stage.h"
-#include "organfit/pipeline/ultrasound_stage.h"
+#include "organfit/pipeline/ultrasound_defaults.h"
 
 namespace organfit::pipeline {
 namespace keys {

@@ -5,12 +5,30 @@ namespace organfit {
 std::string echo(const std::string& value, size_t max_chars) {
   std::string out;
   size_t chars = 0;
-  for (size_t i = 0; i < value.size(); ++i) {
+  for (size_t i = 0; i < value.size();) {
+    if (chars == max_chars) return out + "...";
+    ++chars;
     const auto c = static_cast<unsigned char>(value[i]);
-    const bool continuation = (c & 0xC0) == 0x80;
-    if (!continuation && chars == max_chars) return out + "...";
-    if (!continuation) ++chars;
-    out += (c < 0x20 || c == 0x7f) ? '?' : value[i];
+    // A UTF-8 character's length from its lead byte; a byte that starts none, or a
+    // sequence cut short, is one '?' (a file's bytes echoed raw can garble a terminal).
+    const size_t length = c < 0x80             ? 1
+                          : (c & 0xE0) == 0xC0 ? 2
+                          : (c & 0xF0) == 0xE0 ? 3
+                          : (c & 0xF8) == 0xF0 ? 4
+                                               : 0;
+    bool whole = length > 0 && i + length <= value.size();
+    for (size_t k = 1; whole && k < length; ++k)
+      whole = (static_cast<unsigned char>(value[i + k]) & 0xC0) == 0x80;
+    if (!whole) {
+      out += '?';
+      ++i;
+    } else if (length == 1) {
+      out += (c < 0x20 || c == 0x7f) ? '?' : value[i];
+      ++i;
+    } else {
+      out.append(value, i, length);
+      i += length;
+    }
   }
   return out;
 }

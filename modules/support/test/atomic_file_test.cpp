@@ -61,5 +61,15 @@ TEST(ExitCode, MapsErrorsToTheirCodesAndOthersToInternal) {
   EXPECT_EQ(exit_code_of(std::runtime_error("x")), ExitCode::kInternal);
 }
 
+TEST(Echo, ShowsControlBytesAndBytesThatAreNotUtf8AsQuestionMarks) {
+  EXPECT_EQ(echo("a\nb\x7f"), "a?b?");
+  EXPECT_EQ(echo("caf\xc3\xa9 \xe2\x86\x92"), "caf\xc3\xa9 \xe2\x86\x92");  // kept whole
+  EXPECT_EQ(echo("\xff\xfe"), "??");                                        // no lead byte
+  EXPECT_EQ(echo("x\xc3"), "x?");                                           // cut short
+  EXPECT_EQ(echo("\xe2\x86z"), "??z");                                    // a continuation missing
+  EXPECT_EQ(echo("\xc3\xa9\xc3\xa9\xc3\xa9", 2), "\xc3\xa9\xc3\xa9...");  // counted by character
+  EXPECT_EQ(echo("abc", 3), "abc");
+}
+
 }  // namespace
 }  // namespace organfit

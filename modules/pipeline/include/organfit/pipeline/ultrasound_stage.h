@@ -8,6 +8,7 @@
 #include "organfit/config/scene.h"
 #include "organfit/dicom/ct_series.h"
 #include "organfit/pipeline/points_stage.h"
+#include "organfit/pipeline/ultrasound_defaults.h"
 #include "organfit/ultrasound/boundary_points.h"
 #include "organfit/ultrasound/simulator.h"
 
@@ -29,14 +30,6 @@ geometry::LabelVolume tissue_classes(const geometry::ImageGeometry& ct,
 /// The same classes from the pelvis phantom's true labels (no partial-volume voxels:
 /// classes from HU put a dark "fluid" rim between the gland and fat, -26 HU being half way).
 geometry::LabelVolume pelvis_tissue_classes(const geometry::LabelVolume& phantom_labels);
-
-/// The simulator's settings for tissue classes (echogenicity per class; the organ is 7)
-/// and a transrectal probe (its face 12 mm from its centre): the scene's defaults.
-ultrasound::SimulatorOptions tissue_class_simulator_options();
-
-/// A transrectal probe's pose relative to the prostate's centre (mm, patient LPS): 38 mm
-/// posterior, the beam anterior, the image's lateral direction along x.
-ultrasound::ProbePose transrectal_probe_pose();
 
 /// Today's anatomy for the simulator: `organ` deformed by `deformation`, the rest as the
 /// planning CT has it (tissue classes and HU on its grid), fat where the organ was.

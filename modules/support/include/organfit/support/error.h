@@ -41,8 +41,8 @@ class TargetNotMetError : public Error {
 };
 
 /// A value echoed in a message: at most `max_chars` characters (longer ones end in "..."),
-/// control characters shown as '?', so that an error stays one readable line whatever a
-/// file holds. Cut on a UTF-8 character boundary.
+/// control characters and bytes that are not UTF-8 shown as '?', so that an error stays one
+/// readable line whatever a file holds. Cut on a UTF-8 character boundary.
 std::string echo(const std::string& value, size_t max_chars = 80);
 
 /// Maps an exception escaping a command to its exit code (Error: its own; else kInternal).
