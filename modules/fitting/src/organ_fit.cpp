@@ -81,6 +81,9 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   auto preparing = [&observer](int step, const std::string& done) {
     if (observer.preparing) observer.preparing(step, 6, done);
   };
+  auto finishing = [&observer](int step, const std::string& done) {
+    if (observer.finishing) observer.finishing(step, 4, done);
+  };
   validate_points(points);
   particles::Model& m = *model.model;
   particles::State& state = model.state;
@@ -259,6 +262,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   model.placed = state.x;
   report.fit = run_fit(m, state, opt, points, skin_of, status, fo, observer.row, while_reaching);
   if (report.global) report.fit.wall_s += report.global->wall_s;
+  finishing(0, "the fit loop");
 
   // A local stage that tears the organ apart, or folds it (det(grad phi) <= 0 somewhere),
   // is undone: the organ the global stage made (placed: one piece, its volume kept, phi
@@ -287,6 +291,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
       (pieces = particles::connected_components(state.x, 1.5 * law.r0())) > 1)
     undo_local_stage("the local stage tore the organ into " + std::to_string(pieces) + " pieces");
   report.pieces = pieces;
+  finishing(1, "the pieces");
   auto make_organ_after = [&] {
     try {
       out.after.emplace(organ_body(model));
@@ -300,6 +305,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     report.local_stage_folded = true;
     make_organ_after();
   }
+  finishing(2, "the deformation");
   // The organ's volume change from the deformation's Jacobian over the fitted organ
   // (EmbeddedBody::volume_ratio: the grid's sampling cancels); the voxel count beside it.
   auto measure_organ_after = [&] {
@@ -320,6 +326,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     make_organ_after();
     measure_organ_after();
   }
+  finishing(3, "the organ's volume");
   // The fit stopped right after a row that measured it, unless the local stage was undone.
   const double v1 = !report.local_stage_undone() && std::isfinite(report.fit.volume_at_end_mm3)
                         ? report.fit.volume_at_end_mm3
@@ -378,6 +385,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   uo.resolution_sd_mm = report.residual_floor_mm;
   report.uncertainty =
       std::make_shared<const SurfaceUncertainty>(point_positions, uo, point_residuals, undecided);
+  finishing(4, "the uncertainty");
   // The data term is the fit's, not the model's: the model leaves with its own terms.
   m.remove(*data_term);
   out.model = std::move(model);

@@ -20,8 +20,12 @@
 namespace organfit::pipeline {
 
 void PendingExport::commit() {
-  for (auto& write : writes_)
+  Progress progress("export: writing", static_cast<long long>(writes_.size()));
+  long long written = 0;
+  for (auto& write : writes_) {
     write(summary);
+    progress.update(++written);
+  }
   writes_.clear();
 }
 

@@ -190,22 +190,28 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
                              const PointsStageResult& pts) {
   FitStageResult out;
   const std::string& method = options.method;
-  const fitting::OrganFitOptions& common =
-      method == "paper" ? options.paper.fit : options.spread.fit;
   const auto& points = pts.points;
   const double rho = model.model->radius_mm();
   const double truth_voxel = evaluation::kTruthVoxelMm;
-  // The steps before the fit loop (seconds on a large organ), shown as one progress;
-  // then the loop's.
+  // The steps before the fit loop and after it (seconds each on a large organ), each shown
+  // as one progress; between them the loop's, by its steps (its step budget, 20,000 by
+  // default, is no measure of how far it has come).
   Progress preparing("fit: preparing", 6);
-  std::optional<Progress> progress;
-  const long long max_steps = common.max_steps;
+  std::optional<Progress> progress, finishing;
   fitting::FitObserver observer;
   observer.preparing = [&](int step, int, const std::string& done) {
     preparing.update(step, done);
     if (step == 6) {
       preparing.finish();
-      progress.emplace("fit", max_steps);
+      progress.emplace("fit: steps", 0);
+    }
+  };
+  observer.finishing = [&](int step, int steps, const std::string& done) {
+    if (step == 0) {
+      if (progress) progress->finish();
+      finishing.emplace("fit: finishing", steps);
+    } else if (finishing) {
+      finishing->update(step, done);
     }
   };
   observer.row = [&](const fitting::HistoryRow& h) {
@@ -224,6 +230,7 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
     throw InputError(std::string("points: ") + e.what());
   }
   if (progress) progress->finish();
+  if (finishing) finishing->finish();
   // What points that fit nothing usually are, said by both refusals below.
   constexpr const char* kCheckPoints =
       "check that they belong to this organ and are in the planning CT's patient coordinates, "

@@ -27,27 +27,49 @@ Progress::Progress(std::string stage, long long total)
       total_(total),
       start_(std::chrono::steady_clock::now()),
       last_draw_(start_),
-      tty_(!g_force_plain && isatty(fileno(stderr))) {}
+      tty_(!g_force_plain && isatty(fileno(stderr))) {
+  interval_ = std::chrono::duration<double>(tty_ ? kTtyIntervalS : g_plain_interval_s);
+  if (g_enabled && interval_.count() > 0) heartbeat_ = std::thread([this] { beat(); });
+}
 
 Progress::~Progress() {
   finish();
 }
 
+void Progress::beat() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  while (!finished_) {
+    const auto due =
+        last_draw_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(interval_);
+    wake_.wait_until(lock, due);
+    const auto now = std::chrono::steady_clock::now();
+    if (finished_ || now - last_draw_ < interval_) continue;  // an update drew meanwhile
+    last_draw_ = now;
+    draw(last_done_, last_status_, false);
+  }
+}
+
 void Progress::update(long long done, const std::string& status) {
+  std::lock_guard<std::mutex> lock(mutex_);
   last_done_ = done;
+  last_status_ = status;
   if (!g_enabled || finished_) return;
   const auto now = std::chrono::steady_clock::now();
-  const double since = std::chrono::duration<double>(now - last_draw_).count();
-  if (since < (tty_ ? kTtyIntervalS : g_plain_interval_s)) return;
+  if (now - last_draw_ < interval_) return;
   last_draw_ = now;
   draw(done, status, false);
 }
 
 void Progress::finish() {
-  if (finished_) return;
-  finished_ = true;
-  // Only close a display that was shown: a quick stage prints nothing.
-  if (g_enabled && drawn_) draw(last_done_, "done", true);
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (finished_) return;
+    finished_ = true;
+    // Only close a display that was shown: a quick stage prints nothing.
+    if (g_enabled && drawn_) draw(last_done_, "done", true);
+  }
+  wake_.notify_all();
+  if (heartbeat_.joinable()) heartbeat_.join();
 }
 
 void Progress::draw(long long done, const std::string& status, bool final_line) {

@@ -71,6 +71,9 @@ struct FitObserver {
   std::function<void(int step, int steps, const std::string& done)> preparing;
   /// Each history row of the fit loop; may throw to stop the fit (an interrupt).
   std::function<void(const HistoryRow&)> row;
+  /// Step `step` of the `steps` after the fit loop is done (0: the loop itself; then the
+  /// pieces, the deformation phi, the organ's volume, the uncertainty).
+  std::function<void(int step, int steps, const std::string& done)> finishing;
 };
 
 /// The global stage of fit_spread.
