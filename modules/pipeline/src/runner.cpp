@@ -23,7 +23,6 @@
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 #include "organfit/support/output_folder.h"
-#include "organfit/support/progress.h"
 #include "organfit/support/resources.h"
 
 namespace fs = std::filesystem;
