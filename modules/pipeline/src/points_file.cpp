@@ -176,9 +176,11 @@ namespace {
 /// What a header line's coordinate column names say of its unit and frame: nothing, or why
 /// the points are not in mm LPS. Its words are its runs of letters, lower-cased ("X (cm)":
 /// x, cm; "pos_x_metres": pos, x, metres); a column names a unit by a word of its own, so
-/// "x", "xmm" or "index" name none.
+/// "x", "xmm" or "index" name none; nor does a word a digit follows ("m1": a marker's
+/// number, not metres).
 std::string header_mismatch(const std::vector<std::string>& cells) {
   std::vector<std::vector<std::string>> words(std::min<size_t>(cells.size(), 3));  // per column
+  std::vector<std::string> unit_words;
   for (size_t c = 0; c < words.size(); ++c) {
     std::string word;
     for (const char ch : cells[c] + " ") {
@@ -186,15 +188,15 @@ std::string header_mismatch(const std::vector<std::string>& cells) {
         word += static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
       } else if (!word.empty()) {
         words[c].push_back(word);
+        if (!std::isdigit(static_cast<unsigned char>(ch))) unit_words.push_back(word);
         word.clear();
       }
     }
   }
   auto said = [&](std::initializer_list<const char*> any) {
-    for (const auto& column : words)
-      for (const std::string& w : column)
-        for (const char* a : any)
-          if (w == a) return true;
+    for (const std::string& w : unit_words)
+      for (const char* a : any)
+        if (w == a) return true;
     return false;
   };
   // The three columns' first words when each is one letter ("S (mm),P,L": "spl"), else "".

@@ -114,7 +114,8 @@ TEST_F(PointsFile, RefusesAHeaderNamingAnotherUnitOrFrame) {
   // mm, LPS, or no unit at all: read.
   for (const std::string header : {"x_mm,y_mm,z_mm,confidence", "X (mm),Y (mm),Z (mm)", "x,y,z",
                                    "L,P,S", "x in mm,y in mm,z in mm", "xmm,ymm,zmm", "a,b,c",
-                                   "x,y,z,m"})  // a fourth column is not a coordinate
+                                   "x,y,z,m",  // a fourth column is not a coordinate
+                                   "m1,m2,m3", "P1 (mm),P2 (mm),P3 (mm)"})  // numbered, not m
     EXPECT_EQ(read_points_csv(write(header + "\n1,2,3\n")).size(), 1u) << header;
 }
 
