@@ -260,7 +260,7 @@ fi
 # validate: each config error with its own file:line message and exit code 2
 expect validate.misspelled_key 2 "bad-misspelled-key.yaml:5: model.raduis_mm: unknown key (did you mean 'radius_mm'?)" -- validate "$scenes/bad-misspelled-key.yaml"
 expect validate.string_for_number 2 "bad-string-for-number.yaml:4: model.radius_mm: expected a number, got 'two'" -- validate "$scenes/bad-string-for-number.yaml"
-expect validate.negative_radius 2 "bad-negative-radius.yaml:5: model.radius_mm: -1.5 is out of range (0, 100] mm" -- validate "$scenes/bad-negative-radius.yaml"
+expect validate.negative_radius 2 "bad-negative-radius.yaml:5: model.radius_mm: -1.5 is out of range [0, 100] mm" -- validate "$scenes/bad-negative-radius.yaml"
 expect validate.m_not_below_n 2 "bad-m-not-below-n.yaml:5: model.exponent_n: the repulsive exponent n (6) must exceed the attractive m (12)" -- validate "$scenes/bad-m-not-below-n.yaml"
 expect validate.unknown_section 2 "bad-unknown-section.yaml:3: modle: unknown section (did you mean 'model'?)" -- validate "$scenes/bad-unknown-section.yaml"
 expect validate.yaml_syntax 2 "bad-yaml-syntax.yaml:" -- validate "$scenes/bad-yaml-syntax.yaml"
@@ -268,7 +268,7 @@ expect validate.model_without_body 2 "model.radius_mm: the model needs a body" -
 expect validate.missing_file 2 "no-such-scene.yaml: cannot read the scene file" -- validate "$scenes/no-such-scene.yaml"
 expect validate.good 0 "" -- validate "$scenes/small-model.yaml"
 # --set section.key=value: validated as the file is, errors naming --set, recorded.
-expect set.out_of_range 2 "--set model.radius_mm=-1: -1 is out of range (0, 100] mm" -- validate "$scenes/small-model.yaml" --set model.radius_mm=-1
+expect set.out_of_range 2 "--set model.radius_mm=-1: -1 is out of range [0, 100] mm" -- validate "$scenes/small-model.yaml" --set model.radius_mm=-1
 expect set.unknown_key 2 "--set model.raduis_mm=2: unknown key (did you mean 'radius_mm'?)" -- validate "$scenes/small-model.yaml" --set model.raduis_mm=2
 expect set.not_key_value 2 "--set model.radius_mm: expected section.key=value" -- validate "$scenes/small-model.yaml" --set model.radius_mm
 expect set.twice 2 "--set model.radius_mm=3: the key is set twice" -- validate "$scenes/small-model.yaml" --set model.radius_mm=2 --set model.radius_mm=3
@@ -288,7 +288,7 @@ expect usage.run_help 0 "" -- run --help
 
 # schema and version
 expect schema.text 0 "" -- schema
-check schema.lists_keys grep -q "radius_mm .*mm .*(0, 100]" "$tmp/out"
+check schema.lists_keys grep -q "radius_mm .*mm .*\[0, 100\]" "$tmp/out"
 expect schema.json 0 "" -- schema --json
 check schema.json_parses python3 -c "import json,sys; d=json.load(open('$tmp/out')); assert any(s['section']=='model' for s in d)"
 expect version 0 "" -- version

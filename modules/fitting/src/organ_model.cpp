@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <optional>
+#include <stdexcept>
 
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/particles/cohesion_force.h"
@@ -10,6 +11,10 @@
 namespace organfit::fitting {
 
 particles::CohesionParams cohesion_params_from(const ModelSettings& s) {
+  if (!(s.radius_mm > 0.0))
+    throw std::invalid_argument(
+        "model settings: radius_mm must be positive (0 is set from a "
+        "particle count, radius_for_count, before a model is built)");
   particles::CohesionParams p;
   p.E0 = s.cohesion_energy;
   p.r0_mm = 2.0 * s.radius_mm;

@@ -77,7 +77,7 @@ ModelStageOptions model_stage_options_from(const config::Scene& scene) {
     o.body_size_mm = scene.vec3("body", "size_mm");
     o.body_centre_mm = scene.vec3("body", "centre_mm");
   }
-  o.radius_key = scene.key("model", "radius_mm");
+  o.radius_key = scene.key("model", o.settings.radius_mm > 0.0 ? "radius_mm" : "particles");
   o.body_size_key = scene.key("body", "size_mm");
   return o;
 }
@@ -88,9 +88,12 @@ ModelStageResult run_model_stage(const ModelStageOptions& options, const geometr
       organ
           ? *organ
           : geometry::make_shape(options.body_shape, options.body_size_mm, options.body_centre_mm);
-  if (const long long count = options.particles; count > 0) {
-    settings.radius_mm = radius_for_count(settings, shape, count);
-    spdlog::info("model: radius {:.4f} mm for about {} particles", settings.radius_mm, count);
+  if (settings.radius_mm == 0.0) {  // the radius follows the body's volume
+    if (options.particles < 2)
+      throw std::invalid_argument("model stage: no radius and fewer than 2 particles asked");
+    settings.radius_mm = radius_for_count(settings, shape, options.particles);
+    spdlog::info("model: radius {:.4f} mm for about {} particles", settings.radius_mm,
+                 options.particles);
   }
   const particles::CohesionParams cp = cohesion_params_from(settings);
   const particles::LennardJones law(cp);

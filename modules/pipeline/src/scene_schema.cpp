@@ -9,6 +9,7 @@
 #include "organfit/dicomnet/node.h"
 #include "organfit/pipeline/export_stage.h"
 #include "organfit/pipeline/fit_stage.h"
+#include "organfit/pipeline/model_stage.h"
 #include "organfit/pipeline/ultrasound_defaults.h"
 
 namespace organfit::pipeline {
@@ -144,8 +145,8 @@ const config::Binding<fitting::ModelSettings>& model() {
   static const auto b =
       config::Binding<O>("model")
           .number("radius_mm", &O::radius_mm, "mm", 0.0, 100.0,
-                  "particle radius rho; the LJ equilibrium distance r0 is 2 rho", true)
-          .used_when({{"model.particles", {"0"}}})
+                  "particle radius rho; the LJ equilibrium distance r0 is 2 rho (0: it follows "
+                  "the body's volume, for model.particles)")
           .number("cohesion_energy", &O::cohesion_energy, "E", 0.0, none,
                   "well depth E0 of the LJ potential", true)
           .integer("exponent_m", &O::exponent_m, 1, 63, "attractive exponent m of the LJ law")
@@ -374,9 +375,10 @@ config::Schema build_schema() {
       .vec3("centre_mm", Vector3d(0, 0, 0), "mm", none, "centre, in patient coordinates");
 
   s.section("model", "the particle model: cohesion (paper eq. 1-4), fill and relaxation")
-      .integer("particles", 0, 0, 20000000,
-               "about this many particles instead of radius_mm: the radius follows the body's "
-               "volume (0: radius_mm sets it)");
+      .integer("particles", pipeline::kDefaultParticleCount, 2, 20000000,
+               "about this many particles, whatever the organ's size: the radius follows its "
+               "volume (the default's accuracy and time: docs/benchmarks.md)")
+      .used_when({{"model.radius_mm", {"0"}}});
   keys::model().declare(s);
   s.section("points", "attractive points: generated on a known deformation of the body, or read")
       .choice("source", "generate", {"generate", "file", "ultrasound"},
@@ -620,11 +622,9 @@ void check_scene_rules(const config::Scene& scene) {
                              rmin, m, n));
     }
     if (!scene.has_section("body") && !scene.has_section("organ")) {
-      scene.fail("model", "radius_mm",
+      scene.fail("model", scene.is_given("model", "radius_mm") ? "radius_mm" : "particles",
                  "the model needs a body to fill: add an 'organ' or a 'body' section");
     }
-    if (scene.integer("model", "particles") == 1)  // 0 is "radius_mm sets it"
-      scene.fail("model", "particles", "a model needs at least 2 particles");
   }
   const bool has_model = scene.has_section("model") || scene.has_section("planning");
   if (scene.has_section("phantom") && scene.has_section("ct"))

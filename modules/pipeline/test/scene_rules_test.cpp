@@ -88,8 +88,8 @@ TEST(SceneSchema, EveryKeyHasADocAndDefaultsPassTheirOwnRules) {
 }
 
 // model.particles sets the radius from the body's volume: rounded bodies of different
-// sizes get the count asked for within 5%, and radius_mm beside it is a key the run
-// would ignore.
+// sizes get the count asked for within 5%; without either key a model holds the default
+// count; particles beside a radius_mm is a key the run would ignore.
 TEST(ModelStage, ParticlesSetTheRadiusFromTheBodysVolume) {
   for (const char* body :
        {"  shape: ellipsoid\n  size_mm: [60, 40, 30]\n", "  shape: egg\n  size_mm: [90, 50, 40]\n"})
@@ -100,13 +100,24 @@ TEST(ModelStage, ParticlesSetTheRadiusFromTheBodysVolume) {
       EXPECT_NEAR(r.state.size(), count, 0.05 * count) << body << count;
       EXPECT_NEAR(r.summary["radius_mm"].get<double>(), r.settings.radius_mm, 1e-12);
     }
+  const ModelStageResult by_default = run_model_stage(model_stage_options_from(
+      parse("body:\n  size_mm: [40, 30, 20]\nmodel:\n  skeleton: false\n")));
+  EXPECT_NEAR(by_default.state.size(), kDefaultParticleCount, 0.05 * kDefaultParticleCount);
+  const ModelStageResult by_radius = run_model_stage(model_stage_options_from(
+      parse("body:\n  size_mm: [40, 30, 20]\nmodel:\n  radius_mm: 2\n  skeleton: false\n")));
+  EXPECT_EQ(by_radius.settings.radius_mm, 2.0);
+  EXPECT_LT(by_radius.state.size(), 1000);  // 12.6 cm3 at r0 = 4 mm: about 300
   EXPECT_EQ(error_of("body:\nmodel:\n  particles: 5000\n  radius_mm: 2\n"),
-            "/s.yaml:4: model.radius_mm: not used when model.particles is '5000': the run would "
-            "ignore it (it is used with model.particles: 0)");
-  const config::Scene resolved_again = parse(
-      parse("body:\nmodel:\n  particles: 5000\n").resolved_yaml());  // radius_mm commented out
+            "/s.yaml:3: model.particles: not used when model.radius_mm is '2': the run would "
+            "ignore it (it is used with model.radius_mm: 0)");
+  const config::Scene resolved_again =
+      parse(parse("body:\nmodel:\n  particles: 5000\n").resolved_yaml());
   EXPECT_EQ(resolved_again.integer("model", "particles"), 5000);
-  EXPECT_FALSE(resolved_again.is_given("model", "radius_mm"));
+  EXPECT_EQ(resolved_again.number("model", "radius_mm"), 0.0);  // 0: the count sets it
+  const config::Scene resolved_radius =
+      parse(parse("body:\nmodel:\n  radius_mm: 2\n").resolved_yaml());  // particles commented out
+  EXPECT_EQ(resolved_radius.number("model", "radius_mm"), 2.0);
+  EXPECT_FALSE(resolved_radius.is_given("model", "particles"));
 }
 
 TEST(ModelStage, FillsAndRelaxesTheBodyIntoOneComponent) {

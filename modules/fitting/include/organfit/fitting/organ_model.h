@@ -23,7 +23,9 @@ namespace organfit::fitting {
 /// pipeline/scene_schema.cpp, their defaults these), kept with the model so that a saved
 /// model rebuilds the same terms.
 struct ModelSettings {
-  double radius_mm = 1.85;  ///< particle radius rho; r0 = 2 rho
+  /// Particle radius rho (mm); r0 = 2 rho. 0: not chosen yet, set from a particle count
+  /// (radius_for_count) before a model is built.
+  double radius_mm = 0.0;
   double cohesion_energy = 1.0;
   int exponent_m = 6, exponent_n = 12;
   double cutoff_r0 = 2.5, floor_r0 = 0.5, mass = 1.0, damping_ratio = 0.5, pair_damping = 0.0;

@@ -23,15 +23,24 @@ struct ModelStageResult : fitting::OrganModel {
   nlohmann::json summary;
 };
 
+/// The particles a model holds when its scene gives no radius (model.particles' default).
+/// Chosen on organs apart from those the benchmarks report on (scripts/particle_count_sweep.sh
+/// tune: an ellipsoid of 5 cm3, both kidneys, a vertebra, the liver, an ellipsoid of 3 L) as
+/// the least of 1,000, 3,000, 10,000 and 30,000 at which every one of them is within 0.05 mm
+/// MSD of its best count; its update is 0.5 to 1.2 s there (docs/benchmarks.md).
+constexpr long long kDefaultParticleCount = 10000;
+
 /// The model stage's settings: the model's, the particle count asked for, and the
 /// analytic body to fill when there is no organ.
 struct ModelStageOptions {
   ModelSettings settings;
-  long long particles = 0;  ///< model.particles: about this many (the radius follows); 0: radius_mm
-  std::string body_shape;   ///< body.shape ("" without a body section)
+  /// About this many particles (the radius follows the body's volume) when settings.radius_mm
+  /// is 0; ignored otherwise.
+  long long particles = kDefaultParticleCount;
+  std::string body_shape;  ///< body.shape ("" without a body section)
   Eigen::Vector3d body_size_mm = Eigen::Vector3d::Ones(), body_centre_mm = Eigen::Vector3d::Zero();
-  /// The keys a body too small for two particles is blamed on: an organ's model.radius_mm,
-  /// an analytic body's body.size_mm.
+  /// The keys a body too small for two particles is blamed on: an organ's model.radius_mm
+  /// (or model.particles when the count sets the radius), an analytic body's body.size_mm.
   config::KeyRef radius_key, body_size_key;
 };
 ModelStageOptions model_stage_options_from(const config::Scene& scene);
