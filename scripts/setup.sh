@@ -22,9 +22,10 @@ packages=(
 # orthanc: a real DICOM node for the network tests (run in a network namespace of their
 # own: iproute2 brings its loopback up); dcmtk: storescu loads it independently of us.
 # python3-getfem, tetgen, python3-scipy: the FEM ground truth (testdata/fem/fem_cases.py),
-# with OpenBLAS under its MUMPS solver (3x faster than the reference BLAS).
+# with OpenBLAS under its MUMPS solver (3x faster than the reference BLAS). time: GNU
+# time's peak memory of a run (the fuzz regressions' bound).
 test_tools=(lammps python3 plastimatch dicom3tools python3-pydicom chromium clang-format
-  orthanc dcmtk iproute2 curl python3-getfem python3-scipy tetgen libopenblas0-pthread)
+  orthanc dcmtk iproute2 curl python3-getfem python3-scipy tetgen libopenblas0-pthread time)
 
 missing=()
 for p in "${packages[@]}" "${test_tools[@]}"; do

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -143,6 +144,29 @@ long long walk(const std::vector<unsigned char>& b, long long at, long long end,
   return at;
 }
 
+/// How a raw data set (no preamble, no File Meta group) is encoded.
+struct RawEncoding {
+  bool implicit = false, big = false;
+};
+
+/// The encoding GDCM 3.0 reads a raw data set in, from its first 8 bytes as
+/// gdcm::FileMetaInformation::ReadCompat guesses it: the first tag read little endian; a
+/// group 0008 (or 0800, big endian) or an element 0010 (a private creator) is explicit when
+/// a VR follows, implicit otherwise; any other tag followed by a VR is explicit, big endian
+/// when its group or element exceeds 0xff as read. None when GDCM gives up (no VR after
+/// another tag) or cannot read it (implicit big endian), and for a first element (0000,0000)
+/// that GDCM reads past to guess again (not a structure set's).
+std::optional<RawEncoding> raw_data_set_encoding(const std::vector<unsigned char>& b) {
+  if (b.size() < 8) return std::nullopt;
+  const unsigned group = b[0] | (b[1] << 8), element = b[2] | (b[3] << 8);
+  const bool vr = known_vr(&b[4]) || (b[4] == '?' && b[5] == '?');  // GDCM: "??" is a VR
+  if (group == 0x0008) return RawEncoding{!vr, false};
+  if (group == 0x0800) return vr ? std::optional(RawEncoding{false, true}) : std::nullopt;
+  if (element == 0x0010) return RawEncoding{!vr, false};
+  if (!vr) return std::nullopt;
+  return RawEncoding{false, group > 0xff || element > 0xff};
+}
+
 /// Inflates a raw deflate stream (RFC 1951, as the Deflated Explicit VR Little Endian
 /// transfer syntax stores the data set). False when it is not one, or would exceed 2 GiB.
 bool inflate_raw(const unsigned char* data, size_t size, std::vector<unsigned char>& out) {
@@ -224,16 +248,15 @@ bool safe_for_gdcm(const std::string& file) {
   std::vector<unsigned char> b((std::istreambuf_iterator<char>(in)), {});
   const long long size = static_cast<long long>(b.size());
   if (size < 132 || std::memcmp(b.data() + 128, "DICM", 4) != 0) {
-    // Not Part 10: a raw data set, which GDCM reads in whichever encoding fits. It must
-    // walk cleanly in one of them (a 29-byte file made GDCM allocate 2.4 GB: fuzzing).
-    // A File Meta group (0002) without the Part 10 preamble made GDCM abort (fuzzing).
+    // Not Part 10: a raw data set, which GDCM reads in the encoding its first element
+    // suggests. It must walk cleanly in that one (a 29-byte file made GDCM allocate 2.4 GB,
+    // and a 180-byte one that walks as explicit little endian, read as big endian, 2.8 GB:
+    // fuzzing). A File Meta group (0002) without the preamble made GDCM abort (fuzzing).
     if (size >= 2 && b[0] == 0x02 && b[1] == 0x00) return false;
-    for (const auto& [implicit, big] :
-         {std::pair{false, false}, std::pair{true, false}, std::pair{false, true}}) {
-      bool ok = true;
-      if (walk(b, 0, size, 0, ok, implicit, false, big) == size && ok && size > 0) return true;
-    }
-    return false;
+    const std::optional<RawEncoding> encoding = raw_data_set_encoding(b);
+    bool ok = true;
+    return encoding && walk(b, 0, size, 0, ok, encoding->implicit, false, encoding->big) == size &&
+           ok;
   }
   // The File Meta group: (0002,0000) UL 4 <length> first, then group-2 elements that must
   // each be well formed and end inside the group (GDCM 3.0 aborts on an assertion there).

@@ -10,9 +10,11 @@ namespace organfit::dicom::detail {
 /// GDCM's own warnings and errors off: organfit reports every problem itself, in one line.
 void quiet_gdcm();
 
-/// False when `file` cannot be handed to GDCM safely: shorter than its DICOM preamble
-/// says, or with a File Meta group (0002) that runs past the end of the file (GDCM 3.0
-/// aborts on an assertion there instead of failing).
+/// False when `file` cannot be handed to GDCM safely: an element that is not well formed
+/// in the encoding GDCM will read it in (its File Meta group's transfer syntax; for a raw
+/// data set, the encoding GDCM guesses from the first element), a declared length past the
+/// end of the file, or bytes after the last element. GDCM 3.0 allocates by declared
+/// length before reading, and aborts on assertions on some of these (found by fuzzing).
 bool safe_for_gdcm(const std::string& file);
 
 using dicom::is_part10;  // organfit/dicom/part10.h

@@ -1,6 +1,7 @@
 #include "organfit/dicom/structure_set.h"
 
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <cstdlib>
@@ -254,6 +255,56 @@ TEST(StructureSet, PlastimatchSynthFolderCtChosenByModalityRoisMatchPlastimatch)
   ASSERT_GT(theirs[0], 0);
   EXPECT_NEAR(static_cast<double>(body), static_cast<double>(theirs[0]), 0.02 * theirs[0]);
   EXPECT_NEAR(static_cast<double>(lung), static_cast<double>(theirs[1]), 0.02 * theirs[1]);
+}
+
+/// `bytes` written to a file of its own; the error read_rtstruct gives on it ("" if none).
+std::string error_reading(const std::string& bytes) {
+  const fs::path file = fs::path(::testing::TempDir()) / "raw_data_set.dcm";
+  std::ofstream(file, std::ios::binary) << bytes;
+  try {
+    read_rtstruct(file);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// A data set without preamble nor File Meta group is read in the encoding GDCM guesses from
+// its first element, so it must be well formed in that one: a file well formed only in
+// another was read as big endian by GDCM, a value's bytes taken as a length of 2.8 GB
+// (fuzzing). Every one here is one element (0008,0060) Modality "RTSTRUCT", or a private
+// element (0009,1001) LO "ABCD" before it.
+TEST(StructureSet, ARawDataSetIsCheckedInTheEncodingGdcmReadsItIn) {
+  using namespace std::string_literals;
+  const std::string cannot = "cannot read as DICOM";
+  const std::string modality_le = "\x08\x00\x60\x00"s + "CS\x08\x00"s + "RTSTRUCT";
+  const std::string modality_implicit = "\x08\x00\x60\x00\x08\x00\x00\x00"s + "RTSTRUCT";
+  const std::string private_le = "\x09\x00\x01\x10"s + "LO\x04\x00"s + "ABCD";
+  const std::string private_be = "\x00\x09\x10\x01"s + "LO\x00\x04"s + "ABCD";
+  const std::string modality_be = "\x00\x08\x00\x60"s + "CS\x00\x08"s + "RTSTRUCT";
+  // Read (the structure set's other modules are missing: refused for that, not as unreadable).
+  EXPECT_EQ(error_reading(modality_le).find(cannot), std::string::npos);
+  EXPECT_EQ(error_reading(modality_implicit).find(cannot), std::string::npos);
+  EXPECT_EQ(error_reading(private_be + modality_be).find(cannot), std::string::npos);
+  // Element 0x1001 read little endian: GDCM takes big endian, where this is not well formed.
+  EXPECT_NE(error_reading(private_le + modality_le).find(cannot), std::string::npos);
+  // The fuzzer's case: a UC of 168 bytes, whose length read big endian is 0xa8000000 bytes.
+  const long peak_kb = [] {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return u.ru_maxrss;
+  }();
+  EXPECT_NE(error_reading("\xff\x48\xd6\x22UC\x00\x00\xa8\x00\x00\x00"s + std::string(168, 'x'))
+                .find(cannot),
+            std::string::npos);
+  rusage after{};
+  getrusage(RUSAGE_SELF, &after);
+  EXPECT_LT(after.ru_maxrss - peak_kb, 100 * 1024) << "kB more at its peak";
+  // A first element GDCM finds no encoding for, and one it takes for implicit big endian.
+  EXPECT_NE(error_reading("\x10\x00\x20\x00\x04\x00\x00\x00"s + "ABCD").find(cannot),
+            std::string::npos);
+  EXPECT_NE(error_reading("\x00\x08\x00\x60\x00\x00\x00\x08"s + "RTSTRUCT").find(cannot),
+            std::string::npos);
 }
 
 TEST(StructureSet, ReadingSomethingElseIsRefused) {
