@@ -34,10 +34,11 @@ body() {  # NAME SHAPE SIZE_MM
 }
 case "$set_name" in
   tune)
-    seeded kidney_left "66.6, 29.2, -303.7" 150 400 140
-    seeded kidney_right "-58.8, 3.7, -326" 150 400 140
-    seeded vertebra "-3.3, 37.0, -272.5" 150 400 160
-    seeded liver "-86.6, -28.7, -275" 95 165 260
+    source "$(dirname "$0")/ct_crlm_1004_organs.sh"
+    for organ in "${ct_crlm_1004_organs[@]}"; do
+      IFS='|' read -r name seed low high box <<<"$organ"
+      seeded "$name" "$seed" "$low" "$high" "$box"
+    done
     body ellipsoid_5cm3 ellipsoid "25, 20, 19"
     body ellipsoid_3L ellipsoid "210, 170, 160"
     names=(ellipsoid_5cm3 kidney_left kidney_right vertebra liver ellipsoid_3L)

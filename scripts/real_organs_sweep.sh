@@ -23,10 +23,11 @@ imported() {  # NAME CASE
   printf 'ct:\n  folder: %s\norgan:\n  rtstruct: %s\n  roi: GTV_Mass_CT\nmodel:\n  radius_mm: 2.0\nexport:\n  model: m.json\n' \
     "$data/$2/ct" "$data/$2/rtstruct.dcm" >"$work/plan_$1.yaml"
 }
-seeded kidney_left "66.6, 29.2, -303.7" 150 400 140
-seeded kidney_right "-58.8, 3.7, -326" 150 400 140
-seeded vertebra "-3.3, 37.0, -272.5" 150 400 160
-seeded liver "-86.6, -28.7, -275" 95 165 260 1.8
+source "$(dirname "$0")/ct_crlm_1004_organs.sh"
+for organ in "${ct_crlm_1004_organs[@]}"; do
+  IFS='|' read -r name seed low high box <<<"$organ"
+  seeded "$name" "$seed" "$low" "$high" "$box" "$([[ $name == liver ]] && echo 1.8)"
+done
 imported gtv_sts002 ct-sts-002
 imported gtv_sts004 ct-sts-004
 deformations=("none:" "stretch_1.1:  stretch: 1.1" "bend_5:  bend_mm: 5" "twist_10:  twist_deg: 10"
