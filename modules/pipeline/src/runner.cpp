@@ -113,10 +113,10 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   std::optional<ModelStageResult> model;
   std::string organ_name = scene.has_section("organ") ? scene.text("organ", "roi") : "organ";
   OrganLook organ_look;  // the source ROI's colour and type, kept by the exported ROI
+  // The CT the organ is on: a session's, as its planning model records it (loaded first:
+  // the CT a session scene names is checked against it before anything else is done); a
+  // planning run's, once read.
   std::optional<CtReference> ct_reference;
-  // A session starts from its planning model (loaded first: the CT a session scene names
-  // is checked against it before anything else is done).
-  std::optional<CtReference> planning_ct;
   double planning_modelling_s = -1;  // the saved model's own modelling time, for a session
   // A session whose exports need the planning CT, and whose model names none.
   auto no_planning_ct = [&scene] {
@@ -131,7 +131,6 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     organ_name = saved.organ_name;
     organ_look = saved.organ_look;
     ct_reference = saved.ct;
-    planning_ct = saved.ct;
     if (ct_reference) check_output_location(out_dir, {ct_reference->folder}, "--out");
     // Exports on the CT's grid need the planning CT: said now, not after the fit.
     const bool exports_on_ct =
@@ -194,8 +193,8 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     ct_home = read.home;
     // A session's CT, when the scene names one, must be the one the model was built on.
     if (scene.has_section("planning") &&
-        (!planning_ct || ct->series_instance_uid != planning_ct->series_instance_uid ||
-         ct->frame_of_reference_uid != planning_ct->frame_of_reference_uid))
+        (!ct_reference || ct->series_instance_uid != ct_reference->series_instance_uid ||
+         ct->frame_of_reference_uid != ct_reference->frame_of_reference_uid))
       throw InputError(fmt::format(
           "{}: the planning model was built on another CT series (or Frame of Reference) than "
           "the scene's CT {}",
