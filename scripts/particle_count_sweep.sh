@@ -15,29 +15,19 @@ set_name="${1:?usage: particle_count_sweep.sh tune|report [ORGANFIT] [WORKDIR] [
 bin="${2:-$(dirname "$0")/../build/bin/organfit}"
 work="${3:-$(mktemp -d)}"
 shift $(($# < 3 ? $# : 3))
-counts=("${@:-1000 3000 10000 30000}")
-read -r -a counts <<<"${counts[*]}"
+if (($#)); then counts=("$@"); else counts=(1000 3000 10000 30000); fi
 data="$(cd "$(dirname "$0")/../.." && pwd)/shared/data"
 [[ -d "$data/ct-crlm-1004" ]] || { echo "particle_count_sweep: $data is absent" >&2; exit 2; }
 mkdir -p "$work"
-declare -A organ
-seeded() {  # NAME SEED_MM HU_LOW HU_HIGH BOX_MM
-  organ[$1]=$(printf 'ct:\n  folder: %s\norgan:\n  source: seed\n  roi: %s\n  seed_mm: [%s]\n  hu_low: %s\n  hu_high: %s\n  search_box_mm: %s\n' \
-    "$data/ct-crlm-1004/ct" "$1" "$2" "$3" "$4" "$5")
-}
-imported() {  # NAME CASE
-  organ[$1]=$(printf 'ct:\n  folder: %s\norgan:\n  rtstruct: %s\n  roi: GTV_Mass_CT\n' \
-    "$data/$2/ct" "$data/$2/rtstruct.dcm")
-}
+source "$(dirname "$0")/real_organs.sh"
+declare -A organ  # NAME -> the scene's sections that make the organ
 body() {  # NAME SHAPE SIZE_MM
   organ[$1]=$(printf 'body:\n  shape: %s\n  size_mm: [%s]\n' "$2" "$3")
 }
 case "$set_name" in
   tune)
-    source "$(dirname "$0")/ct_crlm_1004_organs.sh"
-    for organ in "${ct_crlm_1004_organs[@]}"; do
-      IFS='|' read -r name seed low high box <<<"$organ"
-      seeded "$name" "$seed" "$low" "$high" "$box"
+    for name in kidney_left kidney_right vertebra liver; do
+      organ[$name]=$(real_organ_sections "$name" "$data")
     done
     body ellipsoid_5cm3 ellipsoid "25, 20, 19"
     body ellipsoid_3L ellipsoid "210, 170, 160"
@@ -46,8 +36,9 @@ case "$set_name" in
   report)
     body egg egg "24, 20, 20"
     organ[prostate]=$(printf 'phantom:\n  kind: pelvis\norgan:\n  roi: Prostate\n')
-    imported gtv_sts002 ct-sts-002
-    imported gtv_sts004 ct-sts-004
+    for name in gtv_sts002 gtv_sts004; do
+      organ[$name]=$(real_organ_sections "$name" "$data")
+    done
     body lung lung "250, 115, 165"
     names=(egg prostate gtv_sts002 gtv_sts004 lung)
     ;;

@@ -15,21 +15,12 @@ work="${2:-$(mktemp -d)}"
 data="$(cd "$(dirname "$0")/../.." && pwd)/shared/data"
 [[ -d "$data/ct-crlm-1004" ]] || { echo "real_organs_sweep: $data is absent" >&2; exit 2; }
 mkdir -p "$work"
-seeded() {  # NAME SEED_MM HU_LOW HU_HIGH BOX_MM [RADIUS_MM]
-  printf 'ct:\n  folder: %s\norgan:\n  source: seed\n  roi: %s\n  seed_mm: [%s]\n  hu_low: %s\n  hu_high: %s\n  search_box_mm: %s\nmodel:\n  radius_mm: %s\nexport:\n  model: m.json\n' \
-    "$data/ct-crlm-1004/ct" "$1" "$2" "$3" "$4" "$5" "${6:-1.5}" >"$work/plan_$1.yaml"
-}
-imported() {  # NAME CASE
-  printf 'ct:\n  folder: %s\norgan:\n  rtstruct: %s\n  roi: GTV_Mass_CT\nmodel:\n  radius_mm: 2.0\nexport:\n  model: m.json\n' \
-    "$data/$2/ct" "$data/$2/rtstruct.dcm" >"$work/plan_$1.yaml"
-}
-source "$(dirname "$0")/ct_crlm_1004_organs.sh"
-for organ in "${ct_crlm_1004_organs[@]}"; do
-  IFS='|' read -r name seed low high box <<<"$organ"
-  seeded "$name" "$seed" "$low" "$high" "$box" "$([[ $name == liver ]] && echo 1.8)"
+source "$(dirname "$0")/real_organs.sh"
+for organ in kidney_left kidney_right vertebra liver gtv_sts002 gtv_sts004; do
+  case $organ in liver) radius=1.8 ;; gtv_*) radius=2.0 ;; *) radius=1.5 ;; esac
+  { real_organ_sections "$organ" "$data"
+    printf 'model:\n  radius_mm: %s\nexport:\n  model: m.json\n' "$radius"; } >"$work/plan_$organ.yaml"
 done
-imported gtv_sts002 ct-sts-002
-imported gtv_sts004 ct-sts-004
 deformations=("none:" "stretch_1.1:  stretch: 1.1" "bend_5:  bend_mm: 5" "twist_10:  twist_deg: 10"
   "probe_5:  indent_mm: -5" "push_5:  push_mm: 5" "default:  stretch: 1.15\n  bend_mm: 2")
 : >"$work/lines.txt"
