@@ -3,6 +3,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -180,7 +181,116 @@ void or_shifted(const Word* row, int words, int s, Word* out) {
   }
 }
 
-/// The voxels of g within `radius_mm` of a voxel of `set` (nonzero), 1, else 0: what a
+/// Bytes as bits and back, 8 voxels at a time where the machine is little-endian (a
+/// word's byte b is the voxel at b), else one by one.
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+constexpr bool kBytesInOrder = true;
+#else
+constexpr bool kBytesInOrder = false;
+#endif
+
+/// Bit i of the result: whether in[i] is nonzero, for i < n (n <= 64).
+Word pack_bits(const std::uint8_t* in, int n) {
+  Word w = 0;
+  int i = 0;
+  if (kBytesInOrder) {
+    for (; i + 8 <= n; i += 8) {
+      std::uint64_t x;
+      std::memcpy(&x, in + i, 8);
+      x |= x >> 4, x |= x >> 2, x |= x >> 1;  // each byte's bits into its lowest
+      x &= 0x0101010101010101ULL;
+      w |= Word((x * 0x0102040810204080ULL) >> 56) << i;  // the 8 lowest bits gathered
+    }
+  }
+  for (; i < n; ++i)
+    w |= Word(in[i] != 0) << i;
+  return w;
+}
+
+/// The 8 bytes (0 or 1) of each byte value's bits, lowest bit first.
+constexpr std::array<std::uint64_t, 256> byte_spreads() {
+  std::array<std::uint64_t, 256> t{};
+  for (int v = 0; v < 256; ++v)
+    for (int b = 0; b < 8; ++b)
+      t[static_cast<size_t>(v)] |= std::uint64_t((v >> b) & 1) << (8 * b);
+  return t;
+}
+
+/// out[i] = bit i of w (0 or 1), for i < n (n <= 64).
+void unpack_bits(Word w, int n, std::uint8_t* out) {
+  static constexpr std::array<std::uint64_t, 256> kSpread = byte_spreads();
+  int i = 0;
+  if (kBytesInOrder)
+    for (; i + 8 <= n; i += 8)
+      std::memcpy(out + i, &kSpread[static_cast<size_t>((w >> i) & 0xff)], 8);
+  for (; i < n; ++i)
+    out[i] = (w >> i) & 1;
+}
+
+/// A grid's voxels as rows of bits along x (bit i of a row: voxel i, 64 to a word, zero
+/// past the row's end), with which rows hold any. The closing stays in bits from the
+/// mask's bytes to its result, with no bytes made, complemented and read between its two
+/// dilations: a 2.3 L lung's particle body on its truth's 0.5 mm lattice (39M voxels)
+/// closed in 0.03 s, against 0.25 s with them.
+struct BitRows {
+  int nx = 0, rows = 0, words = 0;
+  std::vector<Word> bits;
+  std::vector<std::uint8_t> any;
+
+  BitRows() = default;
+  /// The nonzero voxels of `set` (a grid's labels, i fastest).
+  BitRows(const std::vector<std::uint8_t>& set, const ImageGeometry& g)
+      : nx(g.size[0]),
+        rows(g.size[1] * g.size[2]),
+        words((nx + 63) / 64),
+        bits(static_cast<size_t>(rows) * words),
+        any(static_cast<size_t>(rows)) {
+#pragma omp parallel for schedule(static)
+    for (int row = 0; row < rows; ++row) {
+      const std::uint8_t* in = set.data() + 1LL * row * nx;
+      Word* b = bits.data() + 1LL * row * words;
+      Word hit = 0;
+      for (int q = 0; q < words; ++q)
+        hit |= b[q] = pack_bits(in + 64 * q, std::min(64, nx - 64 * q));
+      any[static_cast<size_t>(row)] = hit != 0;
+    }
+  }
+  /// No voxel set, on `other`'s grid.
+  static BitRows empty_like(const BitRows& other) {
+    BitRows out;
+    out.nx = other.nx, out.rows = other.rows, out.words = other.words;
+    out.bits.assign(other.bits.size(), 0);
+    out.any.assign(other.any.size(), 0);
+    return out;
+  }
+  /// Every voxel flipped (the bits past a row's end left zero).
+  void complement() {
+    const int tail = nx % 64;
+    const Word last = tail ? (Word{1} << tail) - 1 : ~Word{0};
+#pragma omp parallel for schedule(static)
+    for (int row = 0; row < rows; ++row) {
+      Word* b = bits.data() + 1LL * row * words;
+      Word hit = 0;
+      for (int q = 0; q < words; ++q) {
+        b[q] = ~b[q] & (q + 1 < words ? ~Word{0} : last);
+        hit |= b[q];
+      }
+      any[static_cast<size_t>(row)] = hit != 0;
+    }
+  }
+  /// The voxels as bytes, 1 or 0, into `out` (the grid's size).
+  void to_bytes(std::vector<std::uint8_t>& out) const {
+#pragma omp parallel for schedule(static)
+    for (int row = 0; row < rows; ++row) {
+      const Word* b = bits.data() + 1LL * row * words;
+      std::uint8_t* o = out.data() + 1LL * row * nx;
+      for (int q = 0; q < words; ++q)
+        unpack_bits(b[q], std::min(64, nx - 64 * q), o + 64 * q);
+    }
+  }
+};
+
+/// The voxels of g within `radius_mm` of a voxel of `set`, as bits: what a
 /// distance transform of `set` thresholded at radius_mm^2 gives, at a cost set by the
 /// rows the set reaches rather than the voxels. The ball is a set of runs along x: for
 /// each (dz, dy) a half-width w, dx in [-w, w], each offset's squared length summed as
@@ -189,12 +299,10 @@ void or_shifted(const Word* row, int words, int s, Word* out) {
 /// (j - dy, k - dz) of the set widened by w along x: rows held as bits, each set row
 /// widened once for each half-width (within a block of slices), the unions taken 64
 /// voxels at a time.
-std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
-                                           const ImageGeometry& g, double radius_mm) {
-  const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
-  const long long nxy = 1LL * nx * ny;
-  std::vector<std::uint8_t> out(set.size(), 0);
-  if (set.empty()) return out;
+BitRows within_radius_of(const BitRows& set, const ImageGeometry& g, double radius_mm) {
+  const int ny = g.size[1], nz = g.size[2];
+  BitRows out = BitRows::empty_like(set);
+  if (set.bits.empty()) return out;
   const double r2 = radius_mm * radius_mm;
   int reach[3];
   for (int d = 0; d < 3; ++d)
@@ -220,19 +328,9 @@ std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
   std::vector<int> slot(static_cast<size_t>(reach[0]) + 1, -1);  // a half-width's place
   for (size_t s = 0; s < widths.size(); ++s)
     slot[static_cast<size_t>(widths[s])] = static_cast<int>(s);
-  const int words = (nx + 63) / 64, nw = static_cast<int>(widths.size());
-  // The set's rows as bits, and which rows hold any.
-  std::vector<Word> bits(static_cast<size_t>(ny) * nz * words, 0);
-  std::vector<std::uint8_t> any(static_cast<size_t>(ny) * nz, 0);
-#pragma omp parallel for schedule(static)
-  for (long long row = 0; row < 1LL * ny * nz; ++row) {
-    const std::uint8_t* in = set.data() + row * nx;
-    Word* b = bits.data() + row * words;
-    bool hit = false;
-    for (int i = 0; i < nx; ++i)
-      if (in[i]) b[i / 64] |= Word{1} << (i % 64), hit = true;
-    any[static_cast<size_t>(row)] = hit;
-  }
+  const int words = set.words, nw = static_cast<int>(widths.size());
+  const std::vector<Word>& bits = set.bits;
+  const std::vector<std::uint8_t>& any = set.any;
   // Blocks of output slices; each widens the set's rows of the slices it reaches.
   constexpr int kBlock = 16;
   const int blocks = (nz + kBlock - 1) / kBlock;
@@ -280,9 +378,9 @@ std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
             }
           }
           if (!hit) continue;
-          std::uint8_t* o = out.data() + k * nxy + 1LL * j * nx;
-          for (int i = 0; i < nx; ++i)
-            o[i] = (union_row[static_cast<size_t>(i / 64)] >> (i % 64)) & 1;
+          const long long row = 1LL * k * ny + j;
+          std::copy_n(union_row.data(), words, out.bits.data() + row * words);
+          out.any[static_cast<size_t>(row)] = 1;
         }
     }
   }
@@ -291,18 +389,14 @@ std::vector<std::uint8_t> within_radius_of(const std::vector<std::uint8_t>& set,
 }  // namespace
 
 void close_mask(LabelVolume& mask, double radius_mm) {
-  if (radius_mm <= 0) return;
-  std::vector<std::uint8_t> outside = within_radius_of(mask.labels, mask.geometry, radius_mm);
-  const long long n = static_cast<long long>(outside.size());
-  // The dilation's complement: what lies farther than r from the mask.
-#pragma omp parallel for schedule(static)
-  for (long long i = 0; i < n; ++i)
-    outside[static_cast<size_t>(i)] = !outside[static_cast<size_t>(i)];
-  const std::vector<std::uint8_t> near_outside =
-      within_radius_of(outside, mask.geometry, radius_mm);
-#pragma omp parallel for schedule(static)
-  for (long long i = 0; i < n; ++i)
-    mask.labels[static_cast<size_t>(i)] = !near_outside[static_cast<size_t>(i)];
+  if (radius_mm <= 0 || mask.labels.empty()) return;
+  // What lies farther than r from the mask (the dilation's complement), then what lies
+  // farther than r from that: all in bits, made bytes once.
+  BitRows outside = within_radius_of(BitRows(mask.labels, mask.geometry), mask.geometry, radius_mm);
+  outside.complement();
+  BitRows closed = within_radius_of(outside, mask.geometry, radius_mm);
+  closed.complement();
+  closed.to_bytes(mask.labels);
 }
 
 LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm,

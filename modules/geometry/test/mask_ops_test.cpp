@@ -219,14 +219,15 @@ TEST(MaskOps, ClosingEqualsItsDefinitionByDistanceTransforms) {
       changed += before[i] != mask.labels[i];
   }
   EXPECT_GT(changed, 100);  // the closings did fill gaps
-  // Rows longer than 64 voxels, and a ball reaching more than 64 voxels along x.
+  // Rows longer than 64 voxels, and a ball reaching more than 64 voxels along x; labels
+  // other than 1 (any nonzero is the body's, as the transform takes it).
   for (int trial = 0; trial < 3; ++trial) {
     ImageGeometry g;
     g.size = {trial == 2 ? 150 : 70 + 40 * trial, 9, 8};
     g.spacing_mm = trial == 2 ? Eigen::Vector3d(0.015, 0.4, 0.5) : Eigen::Vector3d(0.3, 0.5, 0.6);
     LabelVolume mask(g);
     for (auto& v : mask.labels)
-      v = rng() % 9 == 0;
+      v = rng() % 9 == 0 ? static_cast<std::uint8_t>(1 + rng() % 255) : 0;
     const double r = trial == 2 ? 1.0 : 0.9 + 0.3 * trial;
     const std::vector<std::uint8_t> expected = closing_by_distance_transforms(mask, r);
     close_mask(mask, r);
