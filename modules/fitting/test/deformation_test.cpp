@@ -65,6 +65,22 @@ TEST(Deformation, AtRestIsTheGlobalMapExactly) {
   EXPECT_NEAR(g.determinant(), 1.0, 1e-6);
 }
 
+TEST(Deformation, IsTheIdentityOnlyAtRestUnderNoMap) {
+  const particles::Positions x = ellipsoid();
+  EXPECT_TRUE(Deformation().identity());
+  EXPECT_TRUE(Deformation(GlobalMap{}, x, x, 2 * kSpacing).identity());
+  EXPECT_FALSE(Deformation(bend(), x, x, 2 * kSpacing).identity());  // at rest, a map
+  GlobalMap shift;
+  shift.affine.t.x() = 1e-9;
+  EXPECT_FALSE(Deformation(shift, x, x, 2 * kSpacing).identity());
+  GlobalMap shear;
+  shear.shears.c(14) = 1e-9;
+  EXPECT_FALSE(Deformation(shear, x, x, 2 * kSpacing).identity());
+  particles::Positions moved = x;
+  moved(1, 7) += 0.01;  // one particle moved: a local displacement
+  EXPECT_FALSE(Deformation(GlobalMap{}, x, moved, 2 * kSpacing).identity());
+}
+
 TEST(Deformation, CarriesAnAffineMotionAcrossATearExactly) {
   // A hole of 6 mm radius at the centre, no particle in it: u there is harmonic, and an
   // affine field is harmonic, so the hole is carried as the rest.

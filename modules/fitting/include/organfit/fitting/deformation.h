@@ -81,6 +81,9 @@ class Deformation {
   double min_volume_ratio() const;
   double max_volume_ratio() const;
   bool folds() const { return min_det_ <= 0; }
+  /// phi is the identity: no local displacement and the global map's every part the
+  /// identity (a model at rest carries its planning organ exactly).
+  bool identity() const { return values_.empty() && map_.identity(); }
   /// Where u may be nonzero (mm): the lattice's box; empty at rest.
   geometry::Aabb local_box() const;
   /// The box of the particles (placed and current) widened by the support and the

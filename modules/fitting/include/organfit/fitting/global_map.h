@@ -162,6 +162,11 @@ struct GlobalMap {
   Eigen::Vector3d apply(const Eigen::Vector3d& p) const {
     return flow.apply(fields.apply(shears.apply(affine.a * p + affine.t)));
   }
+  /// Every part the identity (a map never fitted, or fitted to no change at all).
+  bool identity() const {
+    return affine.a == Eigen::Matrix3d::Identity() && affine.t.isZero(0) && shears.c.isZero(0) &&
+           fields.empty() && flow.empty();
+  }
   Eigen::Vector3d inverse(const Eigen::Vector3d& q) const;
   /// The same with affine.a's inverse at hand (`a_inverse`), for callers that invert
   /// many points through one map.
