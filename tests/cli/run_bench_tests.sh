@@ -192,9 +192,9 @@ assert abs(s['update_s'] - sum(s['stages'][k]['wall_s'] for k in ('planning_mode
 assert s['points'] == 87 and s['truth_msd_mm'] < 1.0 and c['relax_particle_steps_per_s'] > 0 and s['fit_particle_steps_per_s'] >= s['fit_wall_particle_steps_per_s'] > 0
 assert s['fit_rate_runs'] == 1 and s['fit_rate_steps_s'] > 0, s  # timed once: not in the flatness
 assert 'fit_step_flatness' not in j and 'targets' not in c, j  # one case under 5,000 particles"
-"$bin" bench scale --cases prostate,liver --out "$tmp/noscale" > /dev/null 2> "$tmp/noscale.err"
+"$bin" bench scale --cases prostate,bladder --out "$tmp/noscale" > /dev/null 2> "$tmp/noscale.err"
 check bench.scale_unknown_case_refused test $? -eq 2 -a "$(grep -c . "$tmp/noscale.err")" -eq 1 -a ! -e "$tmp/noscale"
-check bench.scale_unknown_case_named grep -q -- "--cases: unknown case 'liver'" "$tmp/noscale.err"
+check bench.scale_unknown_case_named grep -q -- "--cases: unknown case 'bladder'" "$tmp/noscale.err"
 fi
 echo "$passed passed, $failed failed"
 [[ $failed -eq 0 ]]

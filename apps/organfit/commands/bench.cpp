@@ -131,8 +131,9 @@ std::vector<Command> add_bench(CLI::App& app) {
   bench_scale->add_option("-o,--out", o->scb.out, "Output folder (new): scenes, runs, scale.json")
       ->required();
   bench_scale
-      ->add_option("--cases", o->scb.cases,
-                   "Only these, comma-separated: prostate, gtv, lung, million (default: all)")
+      ->add_option(
+          "--cases", o->scb.cases,
+          "Only these, comma-separated: prostate, gtv, lung, liver, million (default: all)")
       ->delimiter(',');
   bench_scale->add_option("--threads", o->scb.threads, "OpenMP threads of each run (0: all)")
       ->check(CLI::Range(0, 256));

@@ -44,6 +44,15 @@ std::vector<ScaleCase> all_cases() {
                    data),
        {87}},
       {"lung", "a phantom lung of 2.23 L, radius 2 mm", lung + "model:\n  radius_mm: 2\n", {87}},
+      // A real organ near the lung's size: its surface is a mask's (scripts/real_organs.sh
+      // grows the same liver for the sweeps), larger and rougher than the phantom's.
+      {"liver",
+       "the liver grown on ct-crlm-1004 (1.49 L), radius 2 mm",
+       fmt::format("ct:\n  folder: '{}/ct-crlm-1004/ct'\norgan:\n  source: seed\n  roi: liver\n"
+                   "  seed_mm: [-86.6, -28.7, -275]\n  hu_low: 95\n  hu_high: 165\n"
+                   "  search_box_mm: 260\nmodel:\n  radius_mm: 2\n",
+                   data),
+       {87}},
       {"million",
        "the phantom lung at radius 0.75 mm (about 1M particles)",
        lung + "model:\n  radius_mm: 0.75\n",
@@ -130,9 +139,10 @@ double stage_s(const nlohmann::json& run, const std::string& name) {
 nlohmann::json run_cases(const std::vector<const ScaleCase*>& chosen, const ScaleBenchOptions& o) {
   nlohmann::json results = nlohmann::json::array();
   for (const ScaleCase* c : chosen) {
-    if (c->name == "gtv" && !fs::exists(fs::path(ORGANFIT_SHARED_DATA_DIR_STRING) / "ct-sts-004")) {
+    const char* scan = c->name == "gtv" ? "ct-sts-004" : c->name == "liver" ? "ct-crlm-1004" : "";
+    if (*scan && !fs::exists(fs::path(ORGANFIT_SHARED_DATA_DIR_STRING) / scan)) {
       spdlog::warn("bench scale: {} skipped: {} is not there", c->name,
-                   ORGANFIT_SHARED_DATA_DIR_STRING);
+                   (fs::path(ORGANFIT_SHARED_DATA_DIR_STRING) / scan).string());
       continue;
     }
     const fs::path dir = o.out / c->name;
@@ -220,8 +230,8 @@ nlohmann::json run_cases(const std::vector<const ScaleCase*>& chosen, const Scal
       return std::max(row["planning"]["peak_memory_mib"].get<double>(),
                       se["peak_memory_mib"].get<double>());
     };
-    if (c->name == "lung") {
-      // A 2.3 L lung at radius 2 mm on 2 cores.
+    if (c->name == "lung" || c->name == "liver") {
+      // A 2.3 L lung at radius 2 mm on 2 cores; the same limits for the real liver.
       const auto& se = sessions[0];
       row["targets"] = {{"planning_s", target(row["planning"]["wall_s"].get<double>(), 5.0)},
                         {"update_s", target(se["update_s"].get<double>(), 2.0)},
@@ -289,7 +299,7 @@ nlohmann::json run_scale_benchmark(const ScaleBenchOptions& o) {
     if (std::none_of(cases.begin(), cases.end(),
                      [&](const ScaleCase& c) { return c.name == name; }))
       throw InputError("--cases: unknown case '" + echo(name, 40) +
-                       "' (prostate, gtv, lung, million)");
+                       "' (prostate, gtv, lung, liver, million)");
   check_output_location(o.out, {}, "--out");
   if (fs::exists(o.out)) throw InputError(o.out.string() + ": exists (bench scale makes it new)");
   CreatedFolders folder(o.out, /*with_contents=*/true);  // a stopped or failed bench: gone

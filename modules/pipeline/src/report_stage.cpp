@@ -9,6 +9,7 @@
 #include "organfit/geometry/shape.h"
 #include "organfit/meshing/surface.h"
 #include "organfit/report/report.h"
+#include "organfit/support/parallel.h"
 #include "organfit/support/progress.h"
 
 namespace organfit::pipeline {
@@ -37,10 +38,17 @@ std::string build_report(const ReportContext& c) {
     meshing::SurfaceMesh mesh = meshing::surface_mesh(body);
     progress.update(1, "the 3D view");
     in.surface_vertex_mm = std::move(mesh.vertex_mm);
-    if (sigma)
-      for (size_t v = 0; v + 2 < in.surface_vertex_mm.size(); v += 3)
-        in.surface_sigma_mm.push_back(static_cast<float>(sigma(Eigen::Vector3d(
-            in.surface_vertex_mm[v], in.surface_vertex_mm[v + 1], in.surface_vertex_mm[v + 2]))));
+    if (sigma) {  // each vertex its own, on threads (55,000 on a 1.5 L liver: 0.1 s on one)
+      const auto& xyz = in.surface_vertex_mm;
+      const long long vertices = static_cast<long long>(xyz.size() / 3);
+      in.surface_sigma_mm.resize(static_cast<size_t>(vertices));
+#pragma omp parallel for schedule(dynamic, 256)
+      for (long long v = 0; v < vertices; ++v) {
+        const size_t at = 3 * static_cast<size_t>(v);
+        in.surface_sigma_mm[static_cast<size_t>(v)] =
+            static_cast<float>(sigma(Eigen::Vector3d(xyz[at], xyz[at + 1], xyz[at + 2])));
+      }
+    }
     in.surface_triangles = std::move(mesh.triangle_ids);
   }
   if (c.ct && c.fitted) {
@@ -73,10 +81,14 @@ std::string build_report(const ReportContext& c) {
       const geometry::LabelVolume* plan = c.planning ? &planning : nullptr;
       in.window = report::choose_window(g, c.ct->hu, c.planning ? planning : fitted);
       const double slab = 0.5 * g.spacing_mm.maxCoeff() + 1.0;
-      // Every axial slice through the organ (planning or fitted), browsable.
-      for (int k = organ_lo[2]; k <= organ_hi[2]; ++k)
-        in.axial.push_back(report::slice_view(g, c.ct->hu, report::Plane::kAxial, k, lo, hi, plan,
-                                              &fitted, c.points_mm, c.residuals_mm, slab, sigma));
+      // Every axial slice through the organ (planning or fitted), browsable; each its own,
+      // on threads.
+      in.axial.resize(static_cast<size_t>(organ_hi[2] - organ_lo[2] + 1));
+      parallel_for_each(static_cast<int>(in.axial.size()), [&](int s) {
+        in.axial[static_cast<size_t>(s)] =
+            report::slice_view(g, c.ct->hu, report::Plane::kAxial, organ_lo[2] + s, lo, hi, plan,
+                               &fitted, c.points_mm, c.residuals_mm, slab, sigma);
+      });
       in.axial_shown = static_cast<int>(std::lround(centroid[2])) - organ_lo[2];
       for (auto [plane, axis] :
            {std::pair{report::Plane::kCoronal, 1}, std::pair{report::Plane::kSagittal, 0}})

@@ -5,6 +5,10 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <string>
+#include <vector>
+
+#include "organfit/support/parallel.h"
 
 namespace organfit::report {
 namespace {
@@ -543,10 +547,16 @@ std::string report_html(const ReportInput& in) {
           "id=\"slice\" type=\"range\" min=\"0\" max=\"{}\" value=\"{}\"><button "
           "id=\"next\">superior &uarr;</button> axial slice <span id=\"slice-label\"></span></p>",
           in.axial.size() - 1, shown_first);
-      for (size_t i = 0; i < in.axial.size(); ++i)
-        html += view_svg(
-            in.axial[i], in.sigma_scale_mm,
-            fmt::format("class=\"axial{}\"", static_cast<int>(i) == shown_first ? " current" : ""));
+      // Each slice's images encoded on its own, on threads (129 PNGs of a 1.5 L liver's
+      // slices: 0.4 s on one), then set in order.
+      std::vector<std::string> slices(in.axial.size());
+      parallel_for_each(static_cast<int>(slices.size()), [&](int i) {
+        slices[static_cast<size_t>(i)] =
+            view_svg(in.axial[static_cast<size_t>(i)], in.sigma_scale_mm,
+                     fmt::format("class=\"axial{}\"", i == shown_first ? " current" : ""));
+      });
+      for (const auto& slice : slices)
+        html += slice;
       html += "</div>";
     }
     for (const auto& v : in.views)
