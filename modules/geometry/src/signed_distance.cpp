@@ -175,9 +175,13 @@ double interpolate_index(const ImageGeometry& g, const Eigen::Matrix3d& to_index
   const Eigen::Vector3d hi(g.size[0] - 1, g.size[1] - 1, g.size[2] - 1);
   const Eigen::Vector3d inside = idx.cwiseMax(Eigen::Vector3d::Zero()).cwiseMin(hi);
   // Beyond the grid: the distance to the grid's nearest point is added (a lower bound
-  // on the true distance, and continuous).
-  const Eigen::Vector3d beyond_mm = g.direction * g.spacing_mm.cwiseProduct(idx - inside);
-  const double beyond = beyond_mm.norm();
+  // on the true distance, and continuous); 0 within it, where it is not worked out.
+  Eigen::Vector3d beyond_mm = Eigen::Vector3d::Zero();
+  double beyond = 0;
+  if (!((idx.array() >= 0).all() && (idx.array() <= hi.array()).all())) {
+    beyond_mm = g.direction * g.spacing_mm.cwiseProduct(idx - inside);
+    beyond = beyond_mm.norm();
+  }
   Eigen::Vector3i base;
   Eigen::Vector3d f;
   for (int c = 0; c < 3; ++c) {
@@ -190,15 +194,17 @@ double interpolate_index(const ImageGeometry& g, const Eigen::Matrix3d& to_index
                              g.size[2] > 1 ? 1LL * g.size[0] * g.size[1] : 0};
   const long long corner0 = g.linear_index(base[0], base[1], base[2]);
   double sum = 0;
-  Eigen::Vector3d d_index = Eigen::Vector3d::Zero();  // d value / d index
+  Eigen::Vector3d d_index = Eigen::Vector3d::Zero();  // d value / d index, when asked
   for (int corner = 0; corner < 8; ++corner) {
     const int di = corner & 1, dj = (corner >> 1) & 1, dk = (corner >> 2) & 1;
     const double v = value(corner0 + di * step[0] + dj * step[1] + dk * step[2]);
     const double wx = di ? f[0] : 1 - f[0], wy = dj ? f[1] : 1 - f[1], wz = dk ? f[2] : 1 - f[2];
     sum += wx * wy * wz * v;
-    d_index[0] += (di ? 1 : -1) * wy * wz * v;
-    d_index[1] += (dj ? 1 : -1) * wx * wz * v;
-    d_index[2] += (dk ? 1 : -1) * wx * wy * v;
+    if (gradient) {
+      d_index[0] += (di ? 1 : -1) * wy * wz * v;
+      d_index[1] += (dj ? 1 : -1) * wx * wz * v;
+      d_index[2] += (dk ? 1 : -1) * wx * wy * v;
+    }
   }
   if (gradient) {
     *gradient = to_index.transpose() * d_index;
