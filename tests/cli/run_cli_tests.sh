@@ -239,7 +239,8 @@ assert t['msd_mm'] <= t['msd_undeformed_mm'] + 0.1 and abs(f['volume_change_pct'
   check real.kidney_session_meets_the_targets /usr/bin/python3 -c "
 import json; d = json.load(open('$tmp/kidney_session/run.json')); t, f = d['truth'], d['fit']
 assert t['msd_mm'] <= 1 and t['hd95_mm'] <= 2.5 and abs(f['volume_change_pct']) <= 1, (t, f['volume_change_pct'])
-assert t['msd_mm'] < t['msd_undeformed_mm'] - 0.5, t"
+assert t['msd_mm'] < t['msd_undeformed_mm'] - 0.5, t
+assert t['msd_floor_mm'] == 0, t  # a mask organ at rest is its shape exactly"
   # Its simulated ultrasound's points are measured against the true surface, which the same
   # generator samples (from the centroid, that measure said 19 mm; they lie 0.7 mm off).
   sed -e '/^export:/,$d' "$tmp/kidney.yaml" >"$tmp/kidney_us.yaml"
@@ -322,7 +323,7 @@ f, t = d['fit'], d['truth']
 for k in ['attractive_points', 'iterations', 'wall_s', 'converged', 'residual_mean_mm', 'residual_max_mm', 'volume_change_pct', 'method']: assert k in f, k
 for k in ['msd_mm', 'hd95_mm', 'msd_undeformed_mm', 'msd_floor_mm', 'recovery']: assert k in t, k
 assert f['converged'] and f['method'] == 'spread' and d['model']['skin_particles'] > 0
-assert t['msd_mm'] < t['msd_undeformed_mm']"
+assert t['msd_mm'] < t['msd_undeformed_mm'] and 0.05 < t['msd_floor_mm'] < t['msd_mm'], t  # an analytic body's floor"
 # fit.measure_truth: false leaves the truth out (the same fit), and is refused where the
 # points have no truth to measure against.
 expect fit.without_truth_runs 0 "" -- --quiet run "$src/pipelines/paper-prostate.yaml" --set fit.measure_truth=false --out "$tmp/fit1b"
