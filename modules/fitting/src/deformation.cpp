@@ -189,6 +189,7 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
     throw std::invalid_argument("deformation: support must be > 0 mm");
   map_inverse_a_ = map_.affine.a.inverse();
   map_fields_ = ShearFieldTable(map_.fields);
+  identity_ = map_.identity();  // until a local displacement is made below
   if (current.cols() == 0) return;
   const Eigen::Vector3d lo = current.rowwise().minCoeff().cwiseMin(placed.rowwise().minCoeff());
   const Eigen::Vector3d hi = current.rowwise().maxCoeff().cwiseMax(placed.rowwise().maxCoeff());
@@ -212,6 +213,7 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
         "deformation: the lattice of the displacement would exceed 6e7 nodes");
   const long long nodes = 1LL * n_[0] * n_[1] * n_[2];
   values_.assign(static_cast<size_t>(nodes), Eigen::Vector3f::Zero());
+  identity_ = false;
   std::vector<std::uint8_t> fitted(static_cast<size_t>(nodes), 0);  // the MLS's answer kept
   const long long step[3] = {1, n_[0], 1LL * n_[0] * n_[1]};
   {
@@ -372,7 +374,7 @@ void Deformation::cell_corners(long long v0, Eigen::Vector3d (&corner)[8]) const
 
 Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det, bool point) const {
   if (det) *det = 1;
-  if (!q.allFinite()) return q;
+  if (!q.allFinite() || identity_) return q;  // the identity's q exactly, not M^-1(q)'s rounding
   const Eigen::Vector3d t = (q - origin_) / spacing_;
   const Eigen::Vector3d base = t.array().floor();
   if (values_.empty() || (base.array() < 0).any() || base.x() >= n_[0] - 1 ||

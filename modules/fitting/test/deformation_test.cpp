@@ -68,7 +68,16 @@ TEST(Deformation, AtRestIsTheGlobalMapExactly) {
 TEST(Deformation, IsTheIdentityOnlyAtRestUnderNoMap) {
   const particles::Positions x = ellipsoid();
   EXPECT_TRUE(Deformation().identity());
-  EXPECT_TRUE(Deformation(GlobalMap{}, x, x, 2 * kSpacing).identity());
+  GlobalMap none;  // the identity, its shears' centre set (as a fit sets it)
+  none.shears.centre = Eigen::Vector3d(12.3, -45.6, 78.9);
+  const Deformation rest(none, x, x, 2 * kSpacing);
+  EXPECT_TRUE(rest.identity());
+  // The identity gives every point back exactly (the planning organ voxel for voxel).
+  for (const Eigen::Vector3d& q :
+       {Eigen::Vector3d(0.1, -7.3, 2.9), Eigen::Vector3d(-123.456, 1e-3, 98.7)}) {
+    EXPECT_EQ(rest.pull_back(q), q);
+    EXPECT_EQ(rest.volume_ratio(q), 1.0);
+  }
   EXPECT_FALSE(Deformation(bend(), x, x, 2 * kSpacing).identity());  // at rest, a map
   GlobalMap shift;
   shift.affine.t.x() = 1e-9;

@@ -83,7 +83,7 @@ class Deformation {
   bool folds() const { return min_det_ <= 0; }
   /// phi is the identity: no local displacement and the global map's every part the
   /// identity (a model at rest carries its planning organ exactly).
-  bool identity() const { return values_.empty() && map_.identity(); }
+  bool identity() const { return identity_; }
   /// Where u may be nonzero (mm): the lattice's box; empty at rest.
   geometry::Aabb local_box() const;
   /// The box of the particles (placed and current) widened by the support and the
@@ -99,6 +99,7 @@ class Deformation {
 
  private:
   GlobalMap map_;
+  bool identity_ = true;  // no local displacement and the map the identity: q itself
   Eigen::Matrix3d map_inverse_a_ = Eigen::Matrix3d::Identity();
   ShearFieldTable map_fields_;  // map_'s shear fields, tabulated (shear_field_table.h)
   double h_ = 1;
