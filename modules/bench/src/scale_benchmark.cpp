@@ -26,6 +26,7 @@ struct ScaleCase {
   std::string planning;             ///< YAML after the scene section
   std::vector<int> session_points;  ///< a session run for each count
   bool measure_truth = true;  ///< fit.measure_truth (the 1M body: its grids alone take minutes)
+  std::string scan = "";      ///< the folder of ../shared/data it reads ("": none); skipped without
 };
 
 std::vector<ScaleCase> all_cases() {
@@ -42,7 +43,9 @@ std::vector<ScaleCase> all_cases() {
        fmt::format("ct:\n  folder: '{0}/ct-sts-004/ct'\norgan:\n  rtstruct: "
                    "'{0}/ct-sts-004/rtstruct.dcm'\n  roi: GTV_Mass_CT\nmodel:\n  radius_mm: 2\n",
                    data),
-       {87}},
+       {87},
+       true,
+       "ct-sts-004"},
       {"lung", "a phantom lung of 2.23 L, radius 2 mm", lung + "model:\n  radius_mm: 2\n", {87}},
       // A real organ near the lung's size: its surface is a mask's (scripts/real_organs.sh
       // grows the same liver for the sweeps), larger and rougher than the phantom's.
@@ -52,7 +55,9 @@ std::vector<ScaleCase> all_cases() {
                    "  seed_mm: [-86.6, -28.7, -275]\n  hu_low: 95\n  hu_high: 165\n"
                    "  search_box_mm: 260\nmodel:\n  radius_mm: 2\n",
                    data),
-       {87}},
+       {87},
+       true,
+       "ct-crlm-1004"},
       {"million",
        "the phantom lung at radius 0.75 mm (about 1M particles)",
        lung + "model:\n  radius_mm: 0.75\n",
@@ -139,10 +144,9 @@ double stage_s(const nlohmann::json& run, const std::string& name) {
 nlohmann::json run_cases(const std::vector<const ScaleCase*>& chosen, const ScaleBenchOptions& o) {
   nlohmann::json results = nlohmann::json::array();
   for (const ScaleCase* c : chosen) {
-    const char* scan = c->name == "gtv" ? "ct-sts-004" : c->name == "liver" ? "ct-crlm-1004" : "";
-    if (*scan && !fs::exists(fs::path(ORGANFIT_SHARED_DATA_DIR_STRING) / scan)) {
-      spdlog::warn("bench scale: {} skipped: {} is not there", c->name,
-                   (fs::path(ORGANFIT_SHARED_DATA_DIR_STRING) / scan).string());
+    const fs::path scan = fs::path(ORGANFIT_SHARED_DATA_DIR_STRING) / c->scan;
+    if (!c->scan.empty() && !fs::exists(scan)) {
+      spdlog::warn("bench scale: {} skipped: {} is not there", c->name, scan.string());
       continue;
     }
     const fs::path dir = o.out / c->name;
