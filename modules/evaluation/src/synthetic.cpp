@@ -171,18 +171,28 @@ std::function<bool(const Eigen::Vector3d&)> deformed_inside(const geometry::Shap
   return [shape, d](const Eigen::Vector3d& p) { return shape.inside(d.inverse(p)); };
 }
 
+namespace {
+/// The body's labels over `range` of out's grid (the rest untouched), as sample_inside
+/// samples them.
+void sample_inside_range(const InsideTest& body, geometry::LabelVolume& out,
+                         const geometry::IndexRange& range) {
+  if (range.empty()) return;
+  if (body.ball) {
+    geometry::label_by_blocks(out, range, body.ball, body.inside);
+    return;
+  }
+  const geometry::ImageGeometry& grid = out.geometry;
+#pragma omp parallel for schedule(dynamic, 1) collapse(2)
+  for (int k = range.lo[2]; k <= range.hi[2]; ++k)
+    for (int j = range.lo[1]; j <= range.hi[1]; ++j)
+      for (int i = range.lo[0]; i <= range.hi[0]; ++i)
+        out.at(i, j, k) = body.inside(grid.index_to_physical(Eigen::Vector3d(i, j, k)));
+}
+}  // namespace
+
 geometry::LabelVolume sample_inside(const InsideTest& body, const geometry::ImageGeometry& grid) {
   geometry::LabelVolume out(grid);
-  if (body.ball) {
-    geometry::label_by_blocks(out, geometry::whole_range(grid), body.ball, body.inside);
-    return out;
-  }
-  const auto& n = grid.size;
-#pragma omp parallel for schedule(dynamic, 1) collapse(2)
-  for (int k = 0; k < n[2]; ++k)
-    for (int j = 0; j < n[1]; ++j)
-      for (int i = 0; i < n[0]; ++i)
-        out.at(i, j, k) = body.inside(grid.index_to_physical(Eigen::Vector3d(i, j, k)));
+  sample_inside_range(body, out, geometry::whole_range(grid));
   return out;
 }
 
@@ -333,12 +343,34 @@ std::array<std::array<bool, 2>, 3> KnownBody::faces_touched() const {
 }
 
 void KnownBody::cover(const geometry::ImageGeometry& g) {
-  geometry::ImageGeometry u = g;
-  if (!sampled_.labels.empty()) {  // the union of what is sampled and g, sampled anew
-    const geometry::Aabb s = sampled_.geometry.bounds_mm(), b = g.bounds_mm();
-    u = lattice_covering({s.min_mm.cwiseMin(b.min_mm), s.max_mm.cwiseMax(b.max_mm)}, 0);
+  if (sampled_.labels.empty()) {
+    sampled_ = sample_inside(body_, g);
+    return;
   }
-  sampled_ = sample_inside(body_, u);
+  // The union of what is sampled and g: the sampled part copied, the rest sampled (up to
+  // six slabs about it): a truth that outgrew its stated bounds is not sampled twice.
+  const geometry::Aabb s = sampled_.geometry.bounds_mm(), b = g.bounds_mm();
+  geometry::LabelVolume u(
+      lattice_covering({s.min_mm.cwiseMin(b.min_mm), s.max_mm.cwiseMax(b.max_mm)}, 0));
+  const geometry::ImageGeometry& ug = u.geometry;
+  const Eigen::Vector3i o = offset_in(sampled_.geometry, ug);
+  const auto& n = sampled_.geometry.size;
+#pragma omp parallel for collapse(2) schedule(static)
+  for (int k = 0; k < n[2]; ++k)
+    for (int j = 0; j < n[1]; ++j)
+      std::copy_n(&sampled_.at(0, j, k), n[0], &u.at(o.x(), j + o.y(), k + o.z()));
+  // The slabs: below and above the old part along z, then along y within its z, then
+  // along x within its y and z.
+  geometry::IndexRange rest = geometry::whole_range(ug);
+  for (int d = 2; d >= 0; --d) {
+    geometry::IndexRange below = rest, above = rest;
+    below.hi[static_cast<size_t>(d)] = o[d] - 1;
+    above.lo[static_cast<size_t>(d)] = o[d] + n[d];
+    sample_inside_range(body_, u, below);
+    sample_inside_range(body_, u, above);
+    rest.lo[static_cast<size_t>(d)] = o[d], rest.hi[static_cast<size_t>(d)] = o[d] + n[d] - 1;
+  }
+  sampled_ = std::move(u);
 }
 
 LatticeBody KnownBody::on_lattice(geometry::LabelVolume whole) const {
@@ -392,12 +424,22 @@ geometry::SurfaceComparison KnownBody::compare(const LatticeBody& body) const {
   const Eigen::Vector3i o = offset_in(g, sampled_.geometry);
   long long inter = 0;
   if (!in.empty()) {
+    // Row by row over the part of the body's inside range the sampled part covers.
+    const auto& n = sampled_.geometry.size;
+    const int i0 = std::max(in.lo[0], -o.x()), i1 = std::min(in.hi[0], n[0] - 1 - o.x());
 #pragma omp parallel for collapse(2) reduction(+ : inter)
     for (int k = in.lo[2]; k <= in.hi[2]; ++k)
-      for (int j = in.lo[1]; j <= in.hi[1]; ++j)
-        for (int i = in.lo[0]; i <= in.hi[0]; ++i)
-          inter += body.labels.at(i, j, k) != 0 &&
-                   label_at(sampled_, i + o.x(), j + o.y(), k + o.z()) != 0;
+      for (int j = in.lo[1]; j <= in.hi[1]; ++j) {
+        const int jj = j + o.y(), kk = k + o.z();
+        if (jj < 0 || kk < 0 || jj >= n[1] || kk >= n[2] || i0 > i1) continue;
+        const std::uint8_t* a = body.labels.labels.data() + g.linear_index(i0, j, k);
+        const std::uint8_t* b =
+            sampled_.labels.data() + sampled_.geometry.linear_index(i0 + o.x(), jj, kk);
+        long long row = 0;
+        for (int i = 0; i <= i1 - i0; ++i)
+          row += (a[i] != 0) & (b[i] != 0);
+        inter += row;
+      }
   }
   geometry::SurfaceComparison r;
   geometry::surface_distances(*body.surface, *surface_, r);
@@ -417,8 +459,8 @@ LatticeBody KnownBody::sample(const Eigen::Matrix3Xd& particles, double radius_m
   const geometry::Aabb box = particles.cols() > 0 ? geometry::Aabb{particles.rowwise().minCoeff(),
                                                                    particles.rowwise().maxCoeff()}
                                                   : bounds_;
-  return on_lattice(geometry::closed_body_on_grid(
-      particles, radius_mm, radius_mm, lattice_covering(box, 2 * radius_mm + 2 * voxel_mm_)));
+  return on_lattice(geometry::closed_body(particles, radius_mm, radius_mm,
+                                          lattice_covering(box, 2 * radius_mm + 2 * voxel_mm_)));
 }
 
 geometry::SurfaceComparison compare_with_body(

@@ -3,6 +3,7 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace organfit::geometry {
 
@@ -43,17 +44,24 @@ long long LabelVolume::count(std::uint8_t label) const {
 
 IndexRange LabelVolume::range(std::uint8_t label) const {
   const ImageGeometry& g = geometry;
+  const size_t nx = static_cast<size_t>(g.size[0]);
   int lo0 = g.size[0], lo1 = g.size[1], lo2 = g.size[2], hi0 = -1, hi1 = -1, hi2 = -1;
+  // A row's first and last voxel of the label by memchr and memrchr (many bytes a step):
+  // a lung's truth lattice at 0.5 mm has 60M voxels, most of them in rows without it.
 #pragma omp parallel for schedule(static) reduction(min                            \
                                                     : lo0, lo1, lo2) reduction(max \
                                                                                : hi0, hi1, hi2)
   for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        if (at(i, j, k) == label) {
-          lo0 = std::min(lo0, i), lo1 = std::min(lo1, j), lo2 = std::min(lo2, k);
-          hi0 = std::max(hi0, i), hi1 = std::max(hi1, j), hi2 = std::max(hi2, k);
-        }
+    for (int j = 0; j < g.size[1]; ++j) {
+      const std::uint8_t* row = labels.data() + g.linear_index(0, j, k);
+      const void* first = std::memchr(row, label, nx);
+      if (!first) continue;
+      const void* last = memrchr(row, label, nx);
+      const int i0 = static_cast<int>(static_cast<const std::uint8_t*>(first) - row);
+      const int i1 = static_cast<int>(static_cast<const std::uint8_t*>(last) - row);
+      lo0 = std::min(lo0, i0), lo1 = std::min(lo1, j), lo2 = std::min(lo2, k);
+      hi0 = std::max(hi0, i1), hi1 = std::max(hi1, j), hi2 = std::max(hi2, k);
+    }
   IndexRange r;
   r.lo = {lo0, lo1, lo2}, r.hi = {hi0, hi1, hi2};
   return r;

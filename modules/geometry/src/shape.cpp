@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <stdexcept>
 #include <vector>
 
@@ -139,6 +140,39 @@ Shape make_shape(const std::string& kind, const Eigen::Vector3d& size_mm,
   if (!(size_mm.array() > 0).all()) throw std::invalid_argument("shape size must be > 0 mm");
   shape.size_mm = size_mm, shape.centre_mm = centre_mm;
   return shape;
+}
+
+Aabb Shape::extent() const {
+  if (!mask) return bounds();
+  // In the distance grid's frame: beyond a face the organ reaches (the scan cut it), a
+  // point p is inside where (the value at its nearest grid point q, on that face) + |p - q|
+  // < level, so it lies within level - (the face's least value) of the face along its axis
+  // (beyond an edge, within each of its faces' reach along that face's axis). The grid's
+  // index box grown so, in patient coordinates, joins the box.
+  const ImageGeometry& g = distance->geometry();
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi(g.size[0] - 1, g.size[1] - 1, g.size[2] - 1);
+  bool reached = false;
+  for (int d = 0; d < 3; ++d) {
+    const int a = (d + 1) % 3, b = (d + 2) % 3;
+    for (int side = 0; side < 2; ++side) {
+      double least = std::numeric_limits<double>::infinity();
+      int idx[3];
+      idx[d] = side ? g.size[d] - 1 : 0;
+      for (int v = 0; v < g.size[b]; ++v)
+        for (int u = 0; u < g.size[a]; ++u) {
+          idx[a] = u, idx[b] = v;
+          least = std::min(least, distance->at_voxel(idx[0], idx[1], idx[2]));
+        }
+      if (!(level_mm - least > 0)) continue;
+      reached = true;
+      const double reach_voxels = (level_mm - least) / g.spacing_mm[d];
+      (side ? hi : lo)[d] += side ? reach_voxels : -reach_voxels;
+    }
+  }
+  if (!reached) return box;
+  const Aabb grown =
+      image_of_box({lo, hi}, [&g](const Eigen::Vector3d& i) { return g.index_to_physical(i); });
+  return {grown.min_mm.cwiseMin(box.min_mm), grown.max_mm.cwiseMax(box.max_mm)};
 }
 
 Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask, std::optional<double> level_mm) {

@@ -139,6 +139,72 @@ TEST(MaskOps, SurfaceDistancesAreTheDistanceTransformsValues) {
   EXPECT_TRUE(std::isinf(compare_masks(one, empty).msd_mm));
 }
 
+// Distances from any points (on the mask's lattice, on a part of it offset by whole
+// voxels, off it, near and far) are the least distance to a surface voxel's centre.
+TEST(MaskOps, MaskSurfaceDistancesAreTheNearestSurfaceVoxelsFromAnyPoint) {
+  ImageGeometry g;
+  g.size = {40, 30, 16};
+  g.spacing_mm = {0.6, 0.9, 1.7};
+  g.origin_mm = {-3.3, 2.1, 7.7};
+  LabelVolume mask(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        mask.at(i, j, k) =
+            Eigen::Vector3d((i - 20) / 9.0, (j - 14) / 7.0, (k - 8) / 4.0).norm() <= 1;
+  const MaskSurface surface(mask);
+  const Eigen::Matrix3Xd& centres = surface.points_mm();
+  ASSERT_GT(centres.cols(), 200);
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> voxel(-6, 46);
+  std::uniform_real_distribution<double> frac(0.0, 1.0);
+  Eigen::Matrix3Xd q(3, 1500);
+  for (int c = 0; c < q.cols(); ++c) {
+    Eigen::Vector3d idx(voxel(rng), voxel(rng) * 0.7, voxel(rng) * 0.4);
+    idx = idx.array().round();
+    if (c % 3 == 2) idx += Eigen::Vector3d(frac(rng), frac(rng), frac(rng));  // off the lattice
+    q.col(c) = g.index_to_physical(idx);
+  }
+  const std::vector<double> d = surface.distances_from(q);
+  int near = 0, far = 0;
+  for (int c = 0; c < q.cols(); ++c) {
+    const double truth = (centres.colwise() - q.col(c)).colwise().norm().minCoeff();
+    EXPECT_NEAR(d[static_cast<size_t>(c)], truth, 1e-9) << c;
+    (truth <= 4 * 1.7 ? near : far)++;
+  }
+  EXPECT_GT(near, 100);
+  EXPECT_GT(far, 100);
+}
+
+// The test a row's chord narrows to gives the voxels of testing every voxel of the box.
+TEST(MaskOps, BallsOnAnAlignedGridAreTheVoxelsWithinTheirRadius) {
+  ImageGeometry g;
+  g.size = {37, 29, 13};
+  g.spacing_mm = {0.5, 0.7, 2.5};
+  g.origin_mm = {1.1, -2.3, 0.45};
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  Eigen::Matrix3Xd c(3, 40);
+  for (int b = 0; b < c.cols(); ++b)
+    c.col(b) = g.index_to_physical(
+        Eigen::Vector3d(40 * uni(rng) - 2, 31 * uni(rng) - 1, 15 * uni(rng) - 1));
+  c.col(0) = g.index_to_physical(Eigen::Vector3d(10, 10, 5));  // radius 2.5: rims on centres
+  const double r = 2.5;
+  const LabelVolume m = rasterize_balls(c, r, g);
+  long long set = 0;
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
+        bool in = false;
+        for (int b = 0; b < c.cols(); ++b)
+          in = in || (p - c.col(b)).squaredNorm() <= r * r;
+        ASSERT_EQ(m.at(i, j, k), in ? 1 : 0) << i << " " << j << " " << k;
+        set += in;
+      }
+  EXPECT_GT(set, 500);
+}
+
 TEST(MaskOps, BallsOnARotatedGridLandWhereThePhysicalBallIs) {
   ImageGeometry g;
   g.size = {30, 30, 30};
@@ -172,6 +238,20 @@ TEST(MaskOps, ClosedBodyOnALargeGridEqualsClosingTheWholeGrid) {
   const LabelVolume cropped = closed_body_on_grid(c, 1.0, 1.0, g);
   EXPECT_GT(whole.count(1), 0);
   EXPECT_EQ(cropped.labels, whole.labels);
+  // The part alone: voxels of the grid (same spacing, origin on a voxel), the same labels.
+  const LabelVolume part = closed_body(c, 1.0, 1.0, g);
+  EXPECT_LT(part.geometry.voxel_count(), g.voxel_count() / 20);
+  const Eigen::Vector3d o = g.physical_to_index(part.geometry.origin_mm);
+  EXPECT_LT((o - o.array().round().matrix()).norm(), 1e-9);
+  EXPECT_EQ(part.count(1), whole.count(1));
+  for (int k = 0; k < part.geometry.size[2]; ++k)
+    for (int j = 0; j < part.geometry.size[1]; ++j)
+      for (int i = 0; i < part.geometry.size[0]; ++i)
+        ASSERT_EQ(part.at(i, j, k), whole.at(i + static_cast<int>(std::lround(o.x())),
+                                             j + static_cast<int>(std::lround(o.y())),
+                                             k + static_cast<int>(std::lround(o.z()))));
+  EXPECT_EQ(closed_body(Eigen::Matrix3Xd::Constant(3, 1, 1e4), 1.0, 1.0, g).geometry.voxel_count(),
+            0);
   EXPECT_EQ(closed_body_on_grid(Eigen::Matrix3Xd::Constant(3, 1, 1e4), 1.0, 1.0, g).count(1),
             0);  // off the grid
 }

@@ -207,6 +207,37 @@ TEST(Shapes, AMasksBallTestIsNeverWrong) {
   // organ on the CT's last plane may go on beyond it).
   EXPECT_TRUE(s.inside(edge - 1.0 * g.direction.col(0)));
   EXPECT_EQ(s.inside_ball(edge, 1.0), BallSide::unknown);
+  // Its extent holds that part too, and bounds() does not.
+  const Aabb e = s.extent(), b = s.bounds();
+  auto within = [](const Aabb& box, const Eigen::Vector3d& p) {
+    return (p.array() >= box.min_mm.array()).all() && (p.array() <= box.max_mm.array()).all();
+  };
+  int beyond_bounds = 0, reached = 0;
+  for (int n = 0; n < 20000; ++n) {
+    const Eigen::Vector3d p = g.index_to_physical(
+        Eigen::Vector3d(-12 + 14 * std::abs(uni(rng)), 18 + 20 * uni(rng), 6 + 5 * uni(rng)));
+    if (!s.inside(p)) continue;
+    ++reached;
+    EXPECT_TRUE(within(e, p)) << p.transpose();
+    beyond_bounds += !within(b, p);
+  }
+  EXPECT_GT(reached, 1000);
+  EXPECT_GT(beyond_bounds, 100);
+  EXPECT_LT(e.min_mm.x(), b.min_mm.x() - 1.0);
+}
+
+TEST(Shapes, AMasksExtentIsItsBoundsWhereItTouchesNoFace) {
+  ImageGeometry g;
+  g.size = {30, 30, 12};
+  g.spacing_mm = {0.8, 0.8, 2.5};
+  auto mask = std::make_shared<LabelVolume>(g);
+  for (int k = 2; k < 10; ++k)
+    for (int j = 5; j < 25; ++j)
+      for (int i = 4; i < 22; ++i)
+        mask->at(i, j, k) = 1;
+  const Shape s = make_mask_shape(mask);
+  EXPECT_EQ(s.extent().min_mm, s.bounds().min_mm);
+  EXPECT_EQ(s.extent().max_mm, s.bounds().max_mm);
 }
 
 }  // namespace

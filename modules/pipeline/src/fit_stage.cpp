@@ -286,7 +286,7 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
         shape_filled.mask && organ_before.shared_distance() == shape_filled.distance &&
         organ_before.level_mm() == shape_filled.level_mm && organ_before.deformation().identity();
     if (!rest_is_shape) {  // the shape's lattice let go before the truth's is made
-      const evaluation::KnownBody shape(evaluation::shape_body(shape_filled), shape_filled.bounds(),
+      const evaluation::KnownBody shape(evaluation::shape_body(shape_filled), shape_filled.extent(),
                                         truth_voxel);
       before = shape.sample(organ_before);
       floor = shape.compare(*before);

@@ -153,7 +153,7 @@ PointsStageResult run_points_stage(const PointsOptions& o, const ModelStageResul
 }
 
 geometry::Aabb deformed_bounds(const geometry::Shape& s, const evaluation::Deformation& d) {
-  const geometry::Aabb b = s.bounds();
+  const geometry::Aabb b = s.extent();
   geometry::Aabb out =
       geometry::image_of_box(b, [&d](const Eigen::Vector3d& p) { return d.apply(p); });
   // The non-affine parts move points off the corners' hull by at most their amplitudes.

@@ -39,10 +39,15 @@ LabelVolume rasterize_balls(const Eigen::Matrix3Xd& centres, double radius_mm,
 /// Morphological closing by a ball of `radius_mm` (dilate then erode), in place.
 void close_mask(LabelVolume& mask, double radius_mm);
 
-/// The closed body of a particle set on `grid`: balls of `radius_mm` closed by
-/// `closing_mm` (the definition above). Computed on the part of the grid the balls and
-/// the closing can reach, then placed on the whole grid: a large CT costs no more than
-/// the organ's box. Label 1 inside.
+/// The closed body of a particle set (balls of `radius_mm` closed by `closing_mm`, the
+/// definition above) on the part of `grid` the balls and the closing reach, a voxel more
+/// each side (clamped to the grid; no voxel when that part is empty): a grid of the same
+/// spacing and direction whose voxels are some of grid's. Label 1 inside.
+LabelVolume closed_body(const Eigen::Matrix3Xd& centres, double radius_mm, double closing_mm,
+                        const ImageGeometry& grid);
+
+/// The closed body of a particle set on `grid`: closed_body() placed on the whole grid (a
+/// large CT costs no more than the organ's box). Label 1 inside.
 LabelVolume closed_body_on_grid(const Eigen::Matrix3Xd& centres, double radius_mm,
                                 double closing_mm, const ImageGeometry& grid);
 
@@ -73,8 +78,9 @@ struct SurfaceComparison {
 
 /// A mask's surface voxels made ready for distance queries: their centres (mm, 3 x N,
 /// ascending linear index; origin + index * spacing, the grid's axes taken as the
-/// patient's as the distance transform takes them) and a grid and a k-d tree over them.
-/// Made once for a mask that is compared with several others.
+/// patient's as the distance transform takes them), as bits on the mask's lattice (a query
+/// on it searches the offsets about it) and in a k-d tree (a query off it, or far from
+/// the surface). Made once for a mask that is compared with several others.
 class MaskSurface {
  public:
   explicit MaskSurface(const LabelVolume& mask);
@@ -87,6 +93,13 @@ class MaskSurface {
   std::vector<double> distances_from(const Eigen::Matrix3Xd& q) const;
 
  private:
+  friend void surface_distances(const MaskSurface& a, const MaskSurface& b, SurfaceComparison& out);
+  // distances_from in its two passes: `d` set for the queries near the surface on its
+  // lattice, the others left at infinity and counted; then those, by the tree (built once,
+  // by build_tree or the first far pass).
+  long long near_distances(const Eigen::Matrix3Xd& q, std::vector<double>& d) const;
+  void build_tree() const;
+  void far_distances(const Eigen::Matrix3Xd& q, std::vector<double>& d) const;
   struct Search;  // the centres and their tree, where the tree's view of them stays put
   std::unique_ptr<Search> search_;
 };

@@ -1,6 +1,6 @@
 #pragma once
 // Exact nearest-point queries among a fixed set of points (mm): the global fits ask
-// them every iteration, the surface comparisons (mask_ops.h) once per surface voxel.
+// them every iteration.
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
@@ -14,9 +14,9 @@ namespace organfit::geometry {
 /// exact (ties go to the lower index, as a scan would), and O(points x a few cells)
 /// instead of O(points x samples): the fits ask it every iteration. By default about
 /// cbrt(S) cells a side (a query deep inside a surface searches few rings of them); a
-/// caller whose queries lie near dense samples (a surface's voxels against another's,
-/// points near the surface they are fitted to) asks for smaller cells, fewer samples a
-/// cell (surface_cell_mm).
+/// caller whose queries lie near dense samples (points near the surface they are fitted
+/// to, a distance's voxels near its surface) asks for smaller cells, fewer samples a cell
+/// (surface_cell_mm).
 class SampleGrid {
  public:
   /// `cell_mm` > 0: cells of that size (mm), or larger where that would make more than

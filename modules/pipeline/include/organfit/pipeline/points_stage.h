@@ -76,7 +76,8 @@ evaluation::Deformation deformation_about(evaluation::Deformation d, const geome
 /// placed about a shape (deformation_about).
 evaluation::Deformation true_deformation_from(const config::Scene& scene);
 
-/// A box holding the deformed shape: its corners mapped, widened by the non-affine parts.
+/// A box holding the deformed shape: its extent()'s corners mapped, widened by the
+/// non-affine parts.
 geometry::Aabb deformed_bounds(const geometry::Shape& shape,
                                const evaluation::Deformation& deformation);
 
