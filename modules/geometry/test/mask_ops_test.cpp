@@ -170,9 +170,9 @@ TEST(MaskOps, MaskSurfaceDistancesAreTheNearestSurfaceVoxelsFromAnyPoint) {
   for (int c = 0; c < q.cols(); ++c) {
     const double truth = (centres.colwise() - q.col(c)).colwise().norm().minCoeff();
     EXPECT_NEAR(d[static_cast<size_t>(c)], truth, 1e-9) << c;
-    (truth <= 4 * 1.7 ? near : far)++;
+    if (c % 3 != 2) (truth <= 4 * 0.6 ? near : far)++;  // on the lattice: within its reach?
   }
-  EXPECT_GT(near, 100);
+  EXPECT_GT(near, 50);
   EXPECT_GT(far, 100);
 }
 
