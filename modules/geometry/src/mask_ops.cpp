@@ -236,6 +236,13 @@ struct BitRows {
   std::vector<std::uint8_t> any;
 
   BitRows() = default;
+  /// No voxel set: `rows` rows of `nx` voxels.
+  BitRows(int nx_, int rows_)
+      : nx(nx_),
+        rows(rows_),
+        words((nx + 63) / 64),
+        bits(static_cast<size_t>(rows) * words, 0),
+        any(static_cast<size_t>(rows), 0) {}
   /// The nonzero voxels of `set` (a grid's labels, i fastest).
   BitRows(const std::vector<std::uint8_t>& set, const ImageGeometry& g)
       : nx(g.size[0]),
@@ -255,11 +262,15 @@ struct BitRows {
   }
   /// No voxel set, on `other`'s grid.
   static BitRows empty_like(const BitRows& other) {
-    BitRows out;
-    out.nx = other.nx, out.rows = other.rows, out.words = other.words;
-    out.bits.assign(other.bits.size(), 0);
-    out.any.assign(other.any.size(), 0);
-    return out;
+    return BitRows(other.nx, other.rows);
+  }
+  /// Voxel i of row `row`: set, and whether it is.
+  void set(long long row, int i) {
+    bits[static_cast<size_t>(row * words + (i >> 6))] |= Word{1} << (i & 63);
+    any[static_cast<size_t>(row)] = 1;
+  }
+  bool test(long long row, int i) const {
+    return (bits[static_cast<size_t>(row * words + (i >> 6))] >> (i & 63)) & 1;
   }
   /// Every voxel flipped (the bits past a row's end left zero).
   void complement() {
@@ -564,18 +575,14 @@ struct MaskSurface::Search {
   // on every side (a ball about any voxel of the grid stays within), rows along x.
   ImageGeometry grid;
   Eigen::Vector3i pad = Eigen::Vector3i::Zero();
-  int nx = 0, ny = 0, words = 0;  // the grown grid's row length, rows a slice, words a row
-  std::vector<Word> bits;
+  int ny = 0;  // the grown grid's rows a slice
+  BitRows surface;
   struct Offset {
     long long row;  // rows to step (dz * ny + dy of the grown grid)
     int dx;
     double d2_mm2;  // its squared length, summed as within_radius_of sums it
   };
   std::vector<Offset> ball;  // within the reach, ascending length
-
-  bool surface_at(long long row, int i) const {
-    return (bits[static_cast<size_t>(row * words + (i >> 6))] >> (i & 63)) & 1;
-  }
 };
 
 MaskSurface::MaskSurface(const LabelVolume& mask) : search_(std::make_unique<Search>()) {
@@ -593,15 +600,10 @@ MaskSurface::MaskSurface(const LabelVolume& mask) : search_(std::make_unique<Sea
   const double r2 = reach_mm * reach_mm;
   for (int d = 0; d < 3; ++d)
     s.pad[d] = static_cast<int>(std::floor(reach_mm / g.spacing_mm[d]));
-  s.nx = g.size[0] + 2 * s.pad[0], s.ny = g.size[1] + 2 * s.pad[1];
-  const int nz = g.size[2] + 2 * s.pad[2];
-  s.words = (s.nx + 63) / 64;
-  s.bits.assign(static_cast<size_t>(nz) * s.ny * s.words, 0);
-  for (const Eigen::Vector3i& v : voxels) {
-    const long long row = 1LL * (v.z() + s.pad[2]) * s.ny + (v.y() + s.pad[1]);
-    const int i = v.x() + s.pad[0];
-    s.bits[static_cast<size_t>(row * s.words + (i >> 6))] |= Word{1} << (i & 63);
-  }
+  s.ny = g.size[1] + 2 * s.pad[1];
+  s.surface = BitRows(g.size[0] + 2 * s.pad[0], (g.size[2] + 2 * s.pad[2]) * s.ny);
+  for (const Eigen::Vector3i& v : voxels)
+    s.surface.set(1LL * (v.z() + s.pad[2]) * s.ny + (v.y() + s.pad[1]), v.x() + s.pad[0]);
   for (int dz = -s.pad[2]; dz <= s.pad[2]; ++dz)
     for (int dy = -s.pad[1]; dy <= s.pad[1]; ++dy)
       for (int dx = -s.pad[0]; dx <= s.pad[0]; ++dx) {
@@ -642,7 +644,7 @@ long long MaskSurface::near_distances(const Eigen::Matrix3Xd& q, std::vector<dou
     const Eigen::Vector3i v = r.cast<int>() + s.pad;
     const long long row = 1LL * v.z() * s.ny + v.y();
     for (const Search::Offset& o : s.ball)
-      if (s.surface_at(row + o.row, v.x() + o.dx)) {
+      if (s.surface.test(row + o.row, v.x() + o.dx)) {
         d[static_cast<size_t>(k)] = std::sqrt(o.d2_mm2);
         break;
       }
