@@ -97,17 +97,34 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& s
     Eigen::Matrix<double, 4, 3> r = Eigen::Matrix<double, 4, 3>::Zero();
     int count = 0;
     const double h2 = h * h;
-    for (int dk = -reach; dk <= reach; ++dk)
-      for (int dj = -reach; dj <= reach; ++dj)
-        for (int di = -reach; di <= reach; ++di) {
-          const Eigen::Vector3i cc = cq + Eigen::Vector3i(di, dj, dk);
-          if ((cc.array() < 0).any() || (cc.array() >= b.dims.array()).any()) continue;
-          const size_t cell =
-              static_cast<size_t>(cc.x() + b.dims.x() * (cc.y() + b.dims.y() * cc.z()));
-          for (int k = b.start[cell]; k < b.start[cell + 1]; ++k) {
+    // A row of cells along x is one run of the sorted particles. Its candidates are
+    // screened in chunks by a loop without branches (most lie beyond h, at random: a
+    // branch on each would be mispredicted often), with a bound a little above h^2, then
+    // each one kept is tested and weighed as always, in the run's order.
+    constexpr int kChunk = 64;
+    const double screen2 = h2 * (1 + 1e-9);
+    const double* xs = sorted.current.data();
+    const int i_lo = std::max(0, cq.x() - reach), i_hi = std::min(b.dims.x() - 1, cq.x() + reach);
+    for (int dk = -reach; dk <= reach && i_lo <= i_hi; ++dk)
+      for (int dj = -reach; dj <= reach; ++dj) {
+        const int cy = cq.y() + dj, cz = cq.z() + dk;
+        if (cy < 0 || cz < 0 || cy >= b.dims.y() || cz >= b.dims.z()) continue;
+        const size_t row = static_cast<size_t>(b.dims.x()) * (cy + b.dims.y() * cz);
+        const int run_end = b.start[row + i_hi + 1];
+        for (int k0 = b.start[row + i_lo]; k0 < run_end; k0 += kChunk) {
+          const int len = std::min(kChunk, run_end - k0);
+          bool near[kChunk];
+          for (int u = 0; u < len; ++u) {
+            const double* p = xs + 3 * (k0 + u);
+            const double dx = p[0] - q.x(), dy = p[1] - q.y(), dz = p[2] - q.z();
+            near[u] = dx * dx + dy * dy + dz * dz < screen2;
+          }
+          for (int u = 0; u < len; ++u) {
+            if (!near[u]) continue;
+            const int k = k0 + u;
             const Eigen::Vector3d d = sorted.current.col(k) - q;
             const double d2 = d.squaredNorm();
-            if (d2 >= h2) continue;  // beyond h (without a division: most candidates are)
+            if (d2 >= h2) continue;  // beyond h (without a division)
             const double s = d2 / h2;
             if (s >= 1) continue;
             const double w = (1 - s) * (1 - s) * (1 - s);
@@ -117,6 +134,7 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& s
             ++count;
           }
         }
+      }
     if (count < 4) {
       if (widen == 0) return out;  // beyond the body: no particle within the support
       continue;

@@ -1,5 +1,6 @@
 #include "organfit/fitting/surface_samples.h"
 
+#include <algorithm>
 #include <cstdint>
 
 #include "organfit/geometry/counter_random.h"
@@ -51,18 +52,38 @@ SurfaceSamples reference_surface(const geometry::LabelVolume& reference,
                                  const geometry::SignedDistance& distance, int stride) {
   const geometry::ImageGeometry& g = reference.geometry;
   auto sd = [&](int i, int j, int k) { return distance.at_voxel(i, j, k); };
+  const std::vector<Eigen::Vector3i> voxels = geometry::surface_voxels(reference);
+  // Runs of the surface's voxels on threads, each into its own lists, joined in order: the
+  // samples in the voxels' order, as one pass gives them.
+  constexpr long long kRun = 4096;
+  const long long runs = (static_cast<long long>(voxels.size()) + kRun - 1) / kRun;
+  std::vector<std::vector<Eigen::Vector3d>> run_pts(static_cast<size_t>(runs)),
+      run_nrm(static_cast<size_t>(runs));
+#pragma omp parallel for schedule(dynamic, 1)
+  for (long long r = 0; r < runs; ++r) {
+    auto& pts = run_pts[static_cast<size_t>(r)];
+    auto& nrm = run_nrm[static_cast<size_t>(r)];
+    const size_t end = std::min(voxels.size(), static_cast<size_t>((r + 1) * kRun));
+    for (size_t at = static_cast<size_t>(r * kRun); at < end; ++at) {
+      const Eigen::Vector3i& voxel = voxels[at];
+      const int i = voxel.x(), j = voxel.y(), k = voxel.z();
+      if (!kept_one_in(stride, static_cast<std::uint64_t>(g.linear_index(i, j, k)))) continue;
+      Eigen::Vector3d grad((sd(i + 1, j, k) - sd(i - 1, j, k)) / (2 * g.spacing_mm.x()),
+                           (sd(i, j + 1, k) - sd(i, j - 1, k)) / (2 * g.spacing_mm.y()),
+                           (sd(i, j, k + 1) - sd(i, j, k - 1)) / (2 * g.spacing_mm.z()));
+      if (grad.norm() < 1e-9) continue;
+      grad = g.direction * grad;
+      const Eigen::Vector3d n = grad.normalized();
+      pts.push_back(g.index_to_physical(voxel.cast<double>()) - sd(i, j, k) * n);
+      nrm.push_back(n);
+    }
+  }
   std::vector<Eigen::Vector3d> pts, nrm;
-  for (const Eigen::Vector3i& voxel : geometry::surface_voxels(reference)) {
-    const int i = voxel.x(), j = voxel.y(), k = voxel.z();
-    if (!kept_one_in(stride, static_cast<std::uint64_t>(g.linear_index(i, j, k)))) continue;
-    Eigen::Vector3d grad((sd(i + 1, j, k) - sd(i - 1, j, k)) / (2 * g.spacing_mm.x()),
-                         (sd(i, j + 1, k) - sd(i, j - 1, k)) / (2 * g.spacing_mm.y()),
-                         (sd(i, j, k + 1) - sd(i, j, k - 1)) / (2 * g.spacing_mm.z()));
-    if (grad.norm() < 1e-9) continue;
-    grad = g.direction * grad;
-    const Eigen::Vector3d n = grad.normalized();
-    pts.push_back(g.index_to_physical(voxel.cast<double>()) - sd(i, j, k) * n);
-    nrm.push_back(n);
+  for (long long r = 0; r < runs; ++r) {
+    pts.insert(pts.end(), run_pts[static_cast<size_t>(r)].begin(),
+               run_pts[static_cast<size_t>(r)].end());
+    nrm.insert(nrm.end(), run_nrm[static_cast<size_t>(r)].begin(),
+               run_nrm[static_cast<size_t>(r)].end());
   }
   SurfaceSamples s;
   s.points.resize(3, static_cast<Eigen::Index>(pts.size()));

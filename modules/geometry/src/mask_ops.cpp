@@ -55,17 +55,51 @@ void edt_1d(const double* f, double* d, int n, double step, std::vector<int>& v,
 
 }  // namespace
 
+namespace {
+/// Per-thread room for one line's transforms (n voxels).
+struct LineScratch {
+  std::vector<double> values, f, out, z;
+  std::vector<int> v;
+  std::vector<std::uint8_t> inside;
+  explicit LineScratch(int n) : values(n), f(n), out(n), z(n + 1), v(n), inside(n) {}
+};
+
+/// fn(first voxel, stride, n, scratch) for every line of the grid along `axis` (1 or 2),
+/// on threads. The two other axes are walked the one of smaller stride inner, so that
+/// consecutive lines lie side by side in memory and share the cache lines a line's gather
+/// loads; a run of lines at a time, their costs differing.
+template <class Fn>
+void along_lines(const ImageGeometry& g, int axis, Fn&& fn) {
+  const int dims[3] = {g.size[0], g.size[1], g.size[2]};
+  const long long strides[3] = {1, g.size[0], 1LL * g.size[0] * g.size[1]};
+  const int n = dims[axis];
+  const long long stride = strides[axis];
+  const int a1 = axis == 2 ? 1 : 2, a2 = axis == 0 ? 1 : 0;
+#pragma omp parallel
+  {
+    LineScratch scratch(n);
+#pragma omp for schedule(dynamic, 256) collapse(2)
+    for (int p = 0; p < dims[a1]; ++p)
+      for (int q = 0; q < dims[a2]; ++q)
+        fn(p * strides[a1] + q * strides[a2], stride, n, scratch);
+  }
+}
+/// A transform's buffer for `mask` on `g` (its values left for the caller to set).
+GridBuffer<double> transform_buffer(const std::vector<std::uint8_t>& mask, const ImageGeometry& g) {
+  if (mask.size() != static_cast<size_t>(g.voxel_count()))
+    throw std::invalid_argument("distance transform: size mismatch");
+  return GridBuffer<double>(mask.size());
+}
+}  // namespace
+
 GridBuffer<double> squared_distance_transform(const std::vector<std::uint8_t>& feature,
                                               const ImageGeometry& g) {
   const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
-  const size_t total = static_cast<size_t>(g.voxel_count());
-  if (feature.size() != total) throw std::invalid_argument("distance transform: size mismatch");
-  GridBuffer<double> d(total);  // every voxel set below, on threads
+  GridBuffer<double> d = transform_buffer(feature, g);  // every voxel set below, on threads
+  const size_t total = d.size();
 #pragma omp parallel for schedule(static)
   for (long long i = 0; i < static_cast<long long>(total); ++i)
     d[static_cast<size_t>(i)] = feature[static_cast<size_t>(i)] ? 0.0 : kInf;
-  const int dims[3] = {nx, ny, nz};
-  const long long strides[3] = {1, nx, 1LL * nx * ny};
   // Along x the values are 0 (a feature) or infinite: the lower envelope's parabola at a
   // voxel is its nearest feature's, found by a sweep each way (dq^2 + 0, as edt_1d gives).
   const double sx = g.spacing_mm[0];
@@ -90,27 +124,81 @@ GridBuffer<double> squared_distance_transform(const std::vector<std::uint8_t>& f
     }
   }
   for (int axis = 1; axis < 3; ++axis) {
-    const int n = dims[axis];
-    const long long stride = strides[axis];
-    // The other two axes, the one of smaller stride inner: consecutive lines then lie side
-    // by side in memory and share the cache lines a line's gather loads.
-    const int a1 = axis == 2 ? 1 : 2, a2 = axis == 0 ? 1 : 0;
-    // The lines along an axis are independent: each thread takes whole lines.
-#pragma omp parallel
-    {
-      std::vector<double> line(n), out(n), z(n + 1);
-      std::vector<int> v(n);
-#pragma omp for schedule(static) collapse(2)
-      for (int p = 0; p < dims[a1]; ++p)
-        for (int q = 0; q < dims[a2]; ++q) {
-          const long long base = p * strides[a1] + q * strides[a2];
-          for (int t = 0; t < n; ++t)
-            line[t] = d[base + t * stride];
-          edt_1d(line.data(), out.data(), n, g.spacing_mm[axis], v, z);
-          for (int t = 0; t < n; ++t)
-            d[base + t * stride] = out[t];
-        }
+    const double step = g.spacing_mm[axis];
+    along_lines(g, axis, [&](long long base, long long stride, int n, LineScratch& s) {
+      bool zeros = true, infinite = true;  // the transform of either is itself
+      for (int t = 0; t < n; ++t) {
+        const double value = d[base + t * stride];
+        s.values[t] = value;
+        zeros = zeros && value == 0;
+        infinite = infinite && value == kInf;
+      }
+      if (zeros || infinite) return;
+      edt_1d(s.values.data(), s.out.data(), n, step, s.v, s.z);
+      for (int t = 0; t < n; ++t)
+        d[base + t * stride] = s.out[t];
+    });
+  }
+  return d;
+}
+
+GridBuffer<double> squared_distance_across(const std::vector<std::uint8_t>& inside,
+                                           const ImageGeometry& g) {
+  const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
+  // Two transforms in one buffer: the distance to the inside, which is 0 at the inside's
+  // voxels and asked at the outside's, and the distance to the outside, 0 at the outside's
+  // and asked at the inside's. Each voxel holds the one asked of it; the other is 0 there,
+  // so a line's input to either is its values with the other side's set to 0.
+  GridBuffer<double> d = transform_buffer(inside, g);  // every voxel set below, on threads
+  // Along x: the nearest voxel of the other side, by a sweep each way.
+  const double sx = g.spacing_mm[0];
+#pragma omp parallel for schedule(static)
+  for (long long row = 0; row < 1LL * ny * nz; ++row) {
+    double* line = d.data() + row * nx;
+    const std::uint8_t* side = inside.data() + row * nx;
+    int last[2] = {-1, -1};  // the nearest outside and inside voxel at or before i
+    for (int i = 0; i < nx; ++i) {
+      const int here = side[i] ? 1 : 0;
+      last[here] = i;
+      const int other = last[1 - here];
+      const double dq = (i - other) * sx;
+      line[i] = other >= 0 ? dq * dq : kInf;
     }
+    int next[2] = {-1, -1};  // at or after i
+    for (int i = nx - 1; i >= 0; --i) {
+      const int here = side[i] ? 1 : 0;
+      next[here] = i;
+      const int other = next[1 - here];
+      if (other >= 0) {
+        const double dq = (i - other) * sx;
+        line[i] = std::min(line[i], dq * dq);
+      }
+    }
+  }
+  for (int axis = 1; axis < 3; ++axis) {
+    const double step = g.spacing_mm[axis];
+    along_lines(g, axis, [&](long long base, long long stride, int n, LineScratch& s) {
+      int inside_count = 0;
+      for (int t = 0; t < n; ++t) {
+        s.values[t] = d[base + t * stride];
+        s.inside[t] = inside[static_cast<size_t>(base + t * stride)] ? 1 : 0;
+        inside_count += s.inside[t];
+      }
+      // The distance to the inside (asked outside), then to the outside (asked inside).
+      for (int asked_side = 0; asked_side < 2; ++asked_side) {
+        const int asked = asked_side ? inside_count : n - inside_count;
+        if (asked == 0) continue;  // nothing of this line asks it
+        bool finite = asked < n;   // a voxel of the other side: 0 there
+        for (int t = 0; t < n; ++t) {
+          s.f[t] = s.inside[t] == asked_side ? s.values[t] : 0.0;
+          finite = finite || s.f[t] != kInf;
+        }
+        if (!finite) continue;  // infinite throughout: the transform is itself
+        edt_1d(s.f.data(), s.out.data(), n, step, s.v, s.z);
+        for (int t = 0; t < n; ++t)
+          if (s.inside[t] == asked_side) d[base + t * stride] = s.out[t];
+      }
+    });
   }
   return d;
 }

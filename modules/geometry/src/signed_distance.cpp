@@ -23,63 +23,80 @@ Eigen::Matrix3d index_map(const ImageGeometry& g) {
 
 SignedDistance::SignedDistance(const LabelVolume& mask, bool smooth_it)
     : geometry_(mask.geometry), to_index_(index_map(mask.geometry)) {
-  // One feature buffer (the inside, then the outside) and one transform beside values_:
-  // two grids of doubles at a time, not three (a million-particle body's reference has
-  // 80M voxels, 640 MB a grid).
+  // One grid of doubles beside the mask (a million-particle body's reference has 80M
+  // voxels, 640 MB a grid).
   const long long total = static_cast<long long>(mask.labels.size());
-  std::vector<std::uint8_t> feature(mask.labels.size());
+  std::vector<std::uint8_t> inside(mask.labels.size());
 #pragma omp parallel for schedule(static)
   for (long long v = 0; v < total; ++v)
-    feature[v] = mask.labels[v] != 0;
-  values_ = squared_distance_transform(feature, geometry_);  // to the inside, squared
-#pragma omp parallel for schedule(static)
-  for (long long v = 0; v < total; ++v)
-    feature[v] = !feature[v];
-  const GridBuffer<double> to_out = squared_distance_transform(feature, geometry_);
+    inside[v] = mask.labels[v] != 0;
+  values_ = squared_distance_across(inside, geometry_);
   const double h = 0.5 * geometry_.spacing_mm.minCoeff();
   // An empty mask (or a full one) has no boundary: the transform's infinity stays.
 #pragma omp parallel for schedule(static)
   for (long long v = 0; v < total; ++v)
-    values_[v] = feature[v] ? std::sqrt(values_[v]) - h : -(std::sqrt(to_out[v]) - h);
+    values_[v] = inside[v] ? -(std::sqrt(values_[v]) - h) : std::sqrt(values_[v]) - h;
   if (smooth_it) smooth();
 }
 
 namespace {
-/// One pass of the binomial 1-4-6-4-1 along `axis`, ends clamped, from `in` into `out`
-/// (every voxel written).
-void binomial_pass(const ImageGeometry& g, int axis, const double* in, double* out) {
-  const double weight[5] = {1 / 16.0, 4 / 16.0, 6 / 16.0, 4 / 16.0, 1 / 16.0};
-  const long long stride[3] = {1, g.size[0], 1LL * g.size[0] * g.size[1]};
-  const int n = g.size[axis];
-  const long long s = stride[axis];
-#pragma omp parallel for schedule(static) collapse(2)
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j) {
-      const long long row = g.linear_index(0, j, k);
-      const int at_jk[3] = {0, j, k};
-      for (int i = 0; i < g.size[0]; ++i) {
-        const long long v = row + i;
-        const int t = axis == 0 ? i : at_jk[axis];  // the voxel's place along the axis
-        double sum = 0;
-        if (t >= 2 && t + 2 < n) {  // inside: no end to clamp at
-          for (int o = -2; o <= 2; ++o)
-            sum += weight[o + 2] * in[v + o * s];
-        } else {
-          for (int o = -2; o <= 2; ++o)
-            sum += weight[o + 2] * in[v + (std::clamp(t + o, 0, n - 1) - t) * s];
-        }
-        out[v] = sum;
-      }
-    }
+constexpr double kBinomial[5] = {1 / 16.0, 4 / 16.0, 6 / 16.0, 4 / 16.0, 1 / 16.0};
+
+/// The binomial 1-4-6-4-1 of a line of n values `stride` apart in `in`, ends clamped, at
+/// its place t.
+inline double binomial_at(const double* in, long long stride, int n, int t) {
+  double sum = 0;
+  if (t >= 2 && t + 2 < n) {  // inside: no end to clamp at
+    for (int o = -2; o <= 2; ++o)
+      sum += kBinomial[o + 2] * in[(t + o) * stride];
+  } else {
+    for (int o = -2; o <= 2; ++o)
+      sum += kBinomial[o + 2] * in[std::clamp(t + o, 0, n - 1) * stride];
+  }
+  return sum;
 }
 
-/// The three passes, x then y then z: from `in` into a, a into b, b into a (the smoothed
-/// values end in a). `b` may hold `in`: only the first pass reads it.
-void binomial_passes(const ImageGeometry& g, const double* in, GridBuffer<double>& a,
-                     GridBuffer<double>& b) {
-  binomial_pass(g, 0, in, a.data());
-  binomial_pass(g, 1, a.data(), b.data());
-  binomial_pass(g, 2, b.data(), a.data());
+/// The three passes, x then y then z, from `in` into `out` (every voxel written). The x
+/// pass reads `in`; the y and z passes work in place, a slice or a plane at a time
+/// copied aside: one grid besides `in`, not two.
+void binomial_passes(const ImageGeometry& g, const double* in, GridBuffer<double>& out) {
+  const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
+  const long long nxy = 1LL * nx * ny;
+#pragma omp parallel for schedule(static) collapse(2)
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j) {
+      const long long row = g.linear_index(0, j, k);
+      for (int i = 0; i < nx; ++i)
+        out[static_cast<size_t>(row + i)] = binomial_at(in + row, 1, nx, i);
+    }
+#pragma omp parallel
+  {
+    std::vector<double> slice(static_cast<size_t>(nxy));  // along y: a slice at a time
+#pragma omp for schedule(static)
+    for (int k = 0; k < nz; ++k) {
+      double* at = out.data() + nxy * k;
+      std::copy(at, at + nxy, slice.begin());
+      for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i)
+          at[i + 1LL * nx * j] = binomial_at(slice.data() + i, nx, ny, j);
+    }
+  }
+#pragma omp parallel
+  {
+    std::vector<double> plane(static_cast<size_t>(1LL * nx * nz));  // along z: an x-z plane
+#pragma omp for schedule(static)
+    for (int j = 0; j < ny; ++j) {
+      for (int k = 0; k < nz; ++k) {
+        const double* row = out.data() + 1LL * nx * j + nxy * k;
+        std::copy(row, row + nx, plane.begin() + 1LL * nx * k);
+      }
+      for (int k = 0; k < nz; ++k) {
+        double* row = out.data() + 1LL * nx * j + nxy * k;
+        for (int i = 0; i < nx; ++i)
+          row[i] = binomial_at(plane.data() + i, nx, nz, k);
+      }
+    }
+  }
 }
 }  // namespace
 
@@ -89,10 +106,9 @@ SignedDistance SignedDistance::smoothed() const {
     out.values_ = values_;
     return out;
   }
-  // From this distance's values into two new buffers.
+  // From this distance's values into one new buffer.
   out.values_ = GridBuffer<double>(values_.size());
-  GridBuffer<double> scratch(values_.size());
-  binomial_passes(geometry_, values_.data(), out.values_, scratch);
+  binomial_passes(geometry_, values_.data(), out.values_);
   return out;
 }
 
@@ -153,7 +169,7 @@ void SignedDistance::smooth() {
   // a linear field unchanged and takes the voxel steps out of a slanted boundary.
   if (!all_finite()) return;  // no boundary: nothing to smooth
   GridBuffer<double> out(values_.size());
-  binomial_passes(geometry_, values_.data(), out, values_);  // values_ the second buffer
+  binomial_passes(geometry_, values_.data(), out);
   values_.swap(out);
 }
 

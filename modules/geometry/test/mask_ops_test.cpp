@@ -35,6 +35,35 @@ TEST(DistanceTransform, MatchesBruteForceOnAnisotropicGrid) {
       }
 }
 
+TEST(DistanceTransform, AcrossIsBothTransformsEachWhereItIsAsked) {
+  // Random masks from sparse to dense on anisotropic grids, lines wholly inside, wholly
+  // outside and mixed, and the empty and full masks: to the inside at outside voxels, to
+  // the outside at inside voxels, value for value (the same arithmetic, one buffer).
+  std::mt19937 rng(5);
+  for (int trial = 0; trial < 10; ++trial) {
+    ImageGeometry g;
+    g.size = {11 + trial, 9 + trial % 3, 7 + 2 * (trial % 2)};
+    g.spacing_mm = {0.5 + 0.1 * trial, 0.8, 1.3};
+    std::vector<std::uint8_t> inside(g.voxel_count());
+    const unsigned one_in = 1 + trial;  // trial 0: full
+    for (auto& v : inside)
+      v = trial == 9 ? 0 : (rng() % one_in) == 0;  // trial 9: empty
+    if (trial == 4)  // a solid block: whole lines inside along every axis
+      for (int k = 1; k < 6; ++k)
+        for (int j = 2; j < 8; ++j)
+          for (int i = 0; i < g.size[0]; ++i)
+            inside[g.linear_index(i, j, k)] = 1;
+    std::vector<std::uint8_t> outside(inside.size());
+    for (size_t v = 0; v < inside.size(); ++v)
+      outside[v] = !inside[v];
+    const auto across = squared_distance_across(inside, g);
+    const auto to_inside = squared_distance_transform(inside, g);
+    const auto to_outside = squared_distance_transform(outside, g);
+    for (size_t v = 0; v < inside.size(); ++v)
+      ASSERT_EQ(across[v], inside[v] ? to_outside[v] : to_inside[v]) << "trial " << trial;
+  }
+}
+
 TEST(MaskOps, SurfaceVoxelsAreTheInsideVoxelsWithAFaceNeighbourOutsideOrOnTheEdge) {
   // Rows of several lengths (shorter than eight voxels, not a multiple of eight), solid
   // blocks with holes, and labels other than 1: the scan by eight voxels at a time must

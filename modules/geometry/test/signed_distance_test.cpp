@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -66,6 +67,49 @@ TEST(SignedDistance, AtPointsIsTheWholeGridsValue) {
   EXPECT_GT(inside, 10);  // both sides were tried
   const LabelVolume empty(g);
   EXPECT_TRUE(std::isinf(signed_distance_at(empty, points.leftCols(3))[1]));
+}
+
+// The smoothed distance is the binomial 1-4-6-4-1 along x, then y, then z, ends clamped,
+// of the unsmoothed one, value for value: each pass written out here as its definition,
+// voxel by voxel from a whole grid into another, on a grid of unequal sizes (rows shorter
+// than the filter included) and both ways of making it (smoothed() and the constructor).
+TEST(SignedDistance, SmoothedIsTheBinomialOfEachAxisInTurn) {
+  ImageGeometry g;
+  g.size = {14, 3, 9};
+  g.spacing_mm = {0.6, 0.9, 1.4};
+  LabelVolume mask(g);
+  std::mt19937 rng(7);
+  for (auto& v : mask.labels)
+    v = (rng() % 3) == 0;
+  const SignedDistance raw(mask, false);
+  std::vector<double> a(g.voxel_count()), b(g.voxel_count());
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        a[g.linear_index(i, j, k)] = raw.at_voxel(i, j, k);
+  const double w[5] = {1 / 16.0, 4 / 16.0, 6 / 16.0, 4 / 16.0, 1 / 16.0};
+  for (int axis = 0; axis < 3; ++axis) {
+    for (int k = 0; k < g.size[2]; ++k)
+      for (int j = 0; j < g.size[1]; ++j)
+        for (int i = 0; i < g.size[0]; ++i) {
+          double sum = 0;
+          for (int o = -2; o <= 2; ++o) {
+            int at[3] = {i, j, k};
+            at[axis] = std::clamp(at[axis] + o, 0, g.size[axis] - 1);
+            sum += w[o + 2] * a[g.linear_index(at[0], at[1], at[2])];
+          }
+          b[g.linear_index(i, j, k)] = sum;
+        }
+    a.swap(b);
+  }
+  const SignedDistance smoothed = raw.smoothed(), made(mask, true);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        ASSERT_EQ(smoothed.at_voxel(i, j, k), a[g.linear_index(i, j, k)])
+            << i << " " << j << " " << k;
+        ASSERT_EQ(made.at_voxel(i, j, k), a[g.linear_index(i, j, k)]);
+      }
 }
 
 TEST(SignedDistance, IsTheDistanceToABallsSurfaceWithinTheVoxelsStaircase) {

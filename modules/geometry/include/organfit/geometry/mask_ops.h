@@ -29,6 +29,13 @@ namespace organfit::geometry {
 GridBuffer<double> squared_distance_transform(const std::vector<std::uint8_t>& feature,
                                               const ImageGeometry& grid);
 
+/// Squared Euclidean distance (mm^2) from every voxel to the nearest voxel of the other
+/// side: from a voxel outside (`inside` zero) to the nearest inside, from one inside to
+/// the nearest outside (infinity when the other side has none). The two transforms of
+/// squared_distance_transform, each where it is asked, value for value, in one buffer.
+GridBuffer<double> squared_distance_across(const std::vector<std::uint8_t>& inside,
+                                           const ImageGeometry& grid);
+
 /// An axis-aligned grid of cubic voxels covering `box` grown by `margin_mm`.
 ImageGeometry grid_covering(const Aabb& box, double voxel_mm, double margin_mm);
 
