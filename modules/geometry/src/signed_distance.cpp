@@ -56,10 +56,11 @@ inline double binomial_at(const double* in, long long stride, int n, int t) {
   return sum;
 }
 
-/// The three passes, x then y then z, from `in` into `out` (every voxel written). The x
-/// pass reads `in`; the y and z passes work in place, a slice or a plane at a time
+/// The passes x, y and (`across_slices`) z, from `in` into `out` (every voxel written).
+/// The x pass reads `in`; the y and z passes work in place, a slice or a plane at a time
 /// copied aside: one grid besides `in`, not two.
-void binomial_passes(const ImageGeometry& g, const double* in, GridBuffer<double>& out) {
+void binomial_passes(const ImageGeometry& g, const double* in, GridBuffer<double>& out,
+                     bool across_slices) {
   const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
   const long long nxy = 1LL * nx * ny;
 #pragma omp parallel for schedule(static) collapse(2)
@@ -81,6 +82,7 @@ void binomial_passes(const ImageGeometry& g, const double* in, GridBuffer<double
           at[i + 1LL * nx * j] = binomial_at(slice.data() + i, nx, ny, j);
     }
   }
+  if (!across_slices) return;
 #pragma omp parallel
   {
     std::vector<double> plane(static_cast<size_t>(1LL * nx * nz));  // along z: an x-z plane
@@ -108,7 +110,21 @@ SignedDistance SignedDistance::smoothed() const {
   }
   // From this distance's values into one new buffer.
   out.values_ = GridBuffer<double>(values_.size());
-  binomial_passes(geometry_, values_.data(), out.values_);
+  binomial_passes(geometry_, values_.data(), out.values_, true);
+  return out;
+}
+
+SignedDistance SignedDistance::smoothed_within_slices(double level_mm) const {
+  SignedDistance out(geometry_, to_index_);  // its own gradient bound: other values
+  out.values_ = GridBuffer<double>(values_.size());
+  if (all_finite())
+    binomial_passes(geometry_, values_.data(), out.values_, false);
+  else  // no boundary: nothing to smooth
+    std::copy(values_.begin(), values_.end(), out.values_.begin());
+  const long long total = static_cast<long long>(out.values_.size());
+#pragma omp parallel for schedule(static)
+  for (long long v = 0; v < total; ++v)
+    out.values_[static_cast<size_t>(v)] -= level_mm;
   return out;
 }
 
@@ -169,7 +185,7 @@ void SignedDistance::smooth() {
   // a linear field unchanged and takes the voxel steps out of a slanted boundary.
   if (!all_finite()) return;  // no boundary: nothing to smooth
   GridBuffer<double> out(values_.size());
-  binomial_passes(geometry_, values_.data(), out);
+  binomial_passes(geometry_, values_.data(), out, true);
   values_.swap(out);
 }
 

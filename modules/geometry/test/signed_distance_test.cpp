@@ -70,9 +70,10 @@ TEST(SignedDistance, AtPointsIsTheWholeGridsValue) {
 }
 
 // The smoothed distance is the binomial 1-4-6-4-1 along x, then y, then z, ends clamped,
-// of the unsmoothed one, value for value: each pass written out here as its definition,
-// voxel by voxel from a whole grid into another, on a grid of unequal sizes (rows shorter
-// than the filter included) and both ways of making it (smoothed() and the constructor).
+// of the unsmoothed one (within slices: along x and y alone, less a level), value for value: each
+// pass written out here as its definition, voxel by voxel from a whole grid into another, on a grid
+// of unequal sizes (rows shorter than the filter included) and both ways of making it (smoothed()
+// and the constructor).
 TEST(SignedDistance, SmoothedIsTheBinomialOfEachAxisInTurn) {
   ImageGeometry g;
   g.size = {14, 3, 9};
@@ -88,7 +89,9 @@ TEST(SignedDistance, SmoothedIsTheBinomialOfEachAxisInTurn) {
       for (int i = 0; i < g.size[0]; ++i)
         a[g.linear_index(i, j, k)] = raw.at_voxel(i, j, k);
   const double w[5] = {1 / 16.0, 4 / 16.0, 6 / 16.0, 4 / 16.0, 1 / 16.0};
+  std::vector<double> within_slices;  // after the x and y passes
   for (int axis = 0; axis < 3; ++axis) {
+    if (axis == 2) within_slices = a;
     for (int k = 0; k < g.size[2]; ++k)
       for (int j = 0; j < g.size[1]; ++j)
         for (int i = 0; i < g.size[0]; ++i) {
@@ -102,6 +105,13 @@ TEST(SignedDistance, SmoothedIsTheBinomialOfEachAxisInTurn) {
         }
     a.swap(b);
   }
+  // Within slices, less a level: the x and y passes alone, then the level subtracted.
+  const double level = 0.037;
+  const SignedDistance in_slices = raw.smoothed_within_slices(level);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        ASSERT_EQ(in_slices.at_voxel(i, j, k), within_slices[g.linear_index(i, j, k)] - level);
   const SignedDistance smoothed = raw.smoothed(), made(mask, true);
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)

@@ -90,13 +90,13 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
 /// alternative). The shears are regularised towards none. Candidates: these fits, the
 /// annealed start's map at the end of each stiffness level, and the affine fits.
 ///
-/// With the reference's signed distance D at hand (`distance`), one more fit, free of
-/// closest-sample matches: robust Gauss-Newton from the identity on each point's distance
-/// to the mapped surface, D(M^-1 p) / |grad_p D(M^-1 p)|, the stiffness annealed as above
-/// and Geman-McClure weights whose scale falls with it (graduated non-convexity, from 8x
-/// `distance_scale_mm`). Why: when a third of the points lie far off the unmoved organ
-/// (a cube stretched 1.67x, its ends 10 mm out), a stiff fit by closest samples matches
-/// the rest and the outlier rule then drops those points for good; the fits above reach
+/// With the organ's signed distance D at hand (`distance`, its zero level the organ's
+/// surface), one more fit, free of closest-sample matches: robust Gauss-Newton from the
+/// identity on each point's distance to the mapped surface, D(M^-1 p) / |grad_p D(M^-1 p)|, the
+/// stiffness annealed as above and Geman-McClure weights whose scale falls with it (graduated
+/// non-convexity, from 8x `distance_scale_mm`). Why: when a third of the points lie far off the
+/// unmoved organ (a cube stretched 1.67x, its ends 10 mm out), a stiff fit by closest samples
+/// matches the rest and the outlier rule then drops those points for good; the fits above reach
 /// a 1.3x stretch at most and leave 3 to 4.5 mm of surface error. Its pulls are on the
 /// change of shape (a, the shears) and on the displacement of the body's centre, as hard
 /// per mm^2 as on a's entries: the organ stays where the reference has it unless the
