@@ -84,72 +84,19 @@ void along_lines(const ImageGeometry& g, int axis, Fn&& fn) {
         fn(p * strides[a1] + q * strides[a2], stride, n, scratch);
   }
 }
-/// A transform's buffer for `mask` on `g` (its values left for the caller to set).
-GridBuffer<double> transform_buffer(const std::vector<std::uint8_t>& mask, const ImageGeometry& g) {
-  if (mask.size() != static_cast<size_t>(g.voxel_count()))
+
+/// The squared distance (mm^2) from each voxel of an asked side to the nearest voxel of
+/// the other side (infinity when it has none), 0 at the voxels of a side not asked: the
+/// outside's voxels (`inside` zero) always asked, the inside's when `inside_too`. Each
+/// side's transform is 0 at the other side's voxels, so both live in one buffer: a line's
+/// input to either is its values with the other side's set to 0.
+GridBuffer<double> distance_to_other_side(const std::vector<std::uint8_t>& inside,
+                                          const ImageGeometry& g, bool inside_too) {
+  if (inside.size() != static_cast<size_t>(g.voxel_count()))
     throw std::invalid_argument("distance transform: size mismatch");
-  return GridBuffer<double>(mask.size());
-}
-}  // namespace
-
-GridBuffer<double> squared_distance_transform(const std::vector<std::uint8_t>& feature,
-                                              const ImageGeometry& g) {
   const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
-  GridBuffer<double> d = transform_buffer(feature, g);  // every voxel set below, on threads
-  const size_t total = d.size();
-#pragma omp parallel for schedule(static)
-  for (long long i = 0; i < static_cast<long long>(total); ++i)
-    d[static_cast<size_t>(i)] = feature[static_cast<size_t>(i)] ? 0.0 : kInf;
-  // Along x the values are 0 (a feature) or infinite: the lower envelope's parabola at a
-  // voxel is its nearest feature's, found by a sweep each way (dq^2 + 0, as edt_1d gives).
-  const double sx = g.spacing_mm[0];
-#pragma omp parallel for schedule(static)
-  for (long long row = 0; row < 1LL * ny * nz; ++row) {
-    double* line = d.data() + row * nx;
-    int last = -1;  // the nearest feature at or before i
-    for (int i = 0; i < nx; ++i) {
-      if (feature[static_cast<size_t>(row * nx + i)]) last = i;
-      if (last >= 0) {
-        const double dq = (i - last) * sx;
-        line[i] = dq * dq;
-      }
-    }
-    int next = -1;  // the nearest feature at or after i
-    for (int i = nx - 1; i >= 0; --i) {
-      if (feature[static_cast<size_t>(row * nx + i)]) next = i;
-      if (next >= 0) {
-        const double dq = (i - next) * sx;
-        line[i] = std::min(line[i], dq * dq);
-      }
-    }
-  }
-  for (int axis = 1; axis < 3; ++axis) {
-    const double step = g.spacing_mm[axis];
-    along_lines(g, axis, [&](long long base, long long stride, int n, LineScratch& s) {
-      bool zeros = true, infinite = true;  // the transform of either is itself
-      for (int t = 0; t < n; ++t) {
-        const double value = d[base + t * stride];
-        s.values[t] = value;
-        zeros = zeros && value == 0;
-        infinite = infinite && value == kInf;
-      }
-      if (zeros || infinite) return;
-      edt_1d(s.values.data(), s.out.data(), n, step, s.v, s.z);
-      for (int t = 0; t < n; ++t)
-        d[base + t * stride] = s.out[t];
-    });
-  }
-  return d;
-}
-
-GridBuffer<double> squared_distance_across(const std::vector<std::uint8_t>& inside,
-                                           const ImageGeometry& g) {
-  const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
-  // Two transforms in one buffer: the distance to the inside, which is 0 at the inside's
-  // voxels and asked at the outside's, and the distance to the outside, 0 at the outside's
-  // and asked at the inside's. Each voxel holds the one asked of it; the other is 0 there,
-  // so a line's input to either is its values with the other side's set to 0.
-  GridBuffer<double> d = transform_buffer(inside, g);  // every voxel set below, on threads
+  const bool asked_side[2] = {true, inside_too};  // outside, inside
+  GridBuffer<double> d(inside.size());            // every voxel set below, on threads
   // Along x: the nearest voxel of the other side, by a sweep each way.
   const double sx = g.spacing_mm[0];
 #pragma omp parallel for schedule(static)
@@ -162,14 +109,14 @@ GridBuffer<double> squared_distance_across(const std::vector<std::uint8_t>& insi
       last[here] = i;
       const int other = last[1 - here];
       const double dq = (i - other) * sx;
-      line[i] = other >= 0 ? dq * dq : kInf;
+      line[i] = !asked_side[here] ? 0.0 : other >= 0 ? dq * dq : kInf;
     }
     int next[2] = {-1, -1};  // at or after i
     for (int i = nx - 1; i >= 0; --i) {
       const int here = side[i] ? 1 : 0;
       next[here] = i;
       const int other = next[1 - here];
-      if (other >= 0) {
+      if (asked_side[here] && other >= 0) {
         const double dq = (i - other) * sx;
         line[i] = std::min(line[i], dq * dq);
       }
@@ -185,22 +132,33 @@ GridBuffer<double> squared_distance_across(const std::vector<std::uint8_t>& insi
         inside_count += s.inside[t];
       }
       // The distance to the inside (asked outside), then to the outside (asked inside).
-      for (int asked_side = 0; asked_side < 2; ++asked_side) {
-        const int asked = asked_side ? inside_count : n - inside_count;
+      for (int here = 0; here < 2; ++here) {
+        const int asked = !asked_side[here] ? 0 : here ? inside_count : n - inside_count;
         if (asked == 0) continue;  // nothing of this line asks it
         bool finite = asked < n;   // a voxel of the other side: 0 there
         for (int t = 0; t < n; ++t) {
-          s.f[t] = s.inside[t] == asked_side ? s.values[t] : 0.0;
+          s.f[t] = s.inside[t] == here ? s.values[t] : 0.0;
           finite = finite || s.f[t] != kInf;
         }
         if (!finite) continue;  // infinite throughout: the transform is itself
         edt_1d(s.f.data(), s.out.data(), n, step, s.v, s.z);
         for (int t = 0; t < n; ++t)
-          if (s.inside[t] == asked_side) d[base + t * stride] = s.out[t];
+          if (s.inside[t] == here) d[base + t * stride] = s.out[t];
       }
     });
   }
   return d;
+}
+}  // namespace
+
+GridBuffer<double> squared_distance_transform(const std::vector<std::uint8_t>& feature,
+                                              const ImageGeometry& g) {
+  return distance_to_other_side(feature, g, false);
+}
+
+GridBuffer<double> squared_distance_across(const std::vector<std::uint8_t>& inside,
+                                           const ImageGeometry& g) {
+  return distance_to_other_side(inside, g, true);
 }
 
 ImageGeometry grid_covering(const Aabb& box, double voxel_mm, double margin_mm) {
