@@ -17,16 +17,17 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
 /// 1D squared distance transform of f (sampled `step` apart) into d, in place of the
-/// lower envelope of parabolas. v, z are scratch of size n and n+1.
+/// lower envelope of parabolas. v, z and g are scratch of size n, n+1 and n: g[k] holds
+/// f + p^2 at the envelope's k-th parabola, computed once rather than at every comparison.
 void edt_1d(const double* f, double* d, int n, double step, std::vector<int>& v,
-            std::vector<double>& z) {
+            std::vector<double>& z, std::vector<double>& g) {
   int k = -1;
   for (int q = 0; q < n; ++q) {
     if (f[q] == kInf) continue;
     const double pq = q * step;
+    const double gq = f[q] + pq * pq;
     while (k >= 0) {
-      const double pv = v[k] * step;
-      const double s = ((f[q] + pq * pq) - (f[v[k]] + pv * pv)) / (2 * pq - 2 * pv);
+      const double s = (gq - g[k]) / (2 * pq - 2 * (v[k] * step));
       if (s <= z[k]) {
         --k;
       } else {
@@ -35,9 +36,8 @@ void edt_1d(const double* f, double* d, int n, double step, std::vector<int>& v,
     }
     ++k;
     v[k] = q;
-    z[k] = k == 0 ? -kInf
-                  : ((f[q] + pq * pq) - (f[v[k - 1]] + (v[k - 1] * step) * (v[k - 1] * step))) /
-                        (2 * pq - 2 * v[k - 1] * step);
+    g[k] = gq;
+    z[k] = k == 0 ? -kInf : (gq - g[k - 1]) / (2 * pq - 2 * (v[k - 1] * step));
     z[k + 1] = kInf;
   }
   if (k < 0) {
@@ -58,10 +58,10 @@ void edt_1d(const double* f, double* d, int n, double step, std::vector<int>& v,
 namespace {
 /// Per-thread room for one line's transforms (n voxels).
 struct LineScratch {
-  std::vector<double> values, f, out, z;
+  std::vector<double> values, f, out, z, g;
   std::vector<int> v;
   std::vector<std::uint8_t> inside;
-  explicit LineScratch(int n) : values(n), f(n), out(n), z(n + 1), v(n), inside(n) {}
+  explicit LineScratch(int n) : values(n), f(n), out(n), z(n + 1), g(n), v(n), inside(n) {}
 };
 
 /// fn(first voxel, stride, n, scratch) for every line of the grid along `axis` (1 or 2),
@@ -141,7 +141,7 @@ GridBuffer<double> distance_to_other_side(const std::vector<std::uint8_t>& insid
           finite = finite || s.f[t] != kInf;
         }
         if (!finite) continue;  // infinite throughout: the transform is itself
-        edt_1d(s.f.data(), s.out.data(), n, step, s.v, s.z);
+        edt_1d(s.f.data(), s.out.data(), n, step, s.v, s.z, s.g);
         for (int t = 0; t < n; ++t)
           if (s.inside[t] == here) d[base + t * stride] = s.out[t];
       }
