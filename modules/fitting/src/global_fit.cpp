@@ -251,18 +251,56 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   // fits[pick], and with `equally_good` it and then every other fit in the window.
   // Each with the points' RMS before any fit (the identity's, the same for every fit).
   const double rms_before_mm = affine_fits[0].affine.rms_before_mm;
+  // The chosen map moved towards the identity by the share of its change the points show
+  // beyond their noise: positive-part James-Stein shrinkage. A least-squares fit of k
+  // parameters to m points of noise variance s^2 lowers their sum of squares by about
+  // k s^2 by chance alone; what it lowers beyond that is the change:
+  //   kept = 1 - (k - 2) s^2 / (RSS_identity - RSS_fit), within [0, 1],
+  // s the stated noise (noise_mm), k the map's free parameters (the affine part's 11, the
+  // shears' 15 where it has them, the fields' or flow's effective count from their ridge
+  // system), at most m; the sums uncapped, over the points the fit keeps (the outlier rule
+  // on its residuals): a point far off weighs in neither, a large change is not taken for a
+  // small one. A 20-point fit to an unchanged organ keeps little of itself, an 87-point fit
+  // to a 5 mm stretch about 97%.
+  const Eigen::Vector3d centre = surface.points.rowwise().mean();
+  std::vector<double> fields_dof(candidates.size(), 0.0);  // the candidates' none
+  auto kept_share = [&](const GlobalMap& fit, double extra_dof) {
+    if (!distance || !(o.noise_mm > 0)) return 1.0;
+    const size_t count = points.size();
+    std::vector<double> before(count), after(count), w;
+    const Eigen::Matrix3d b = fit.affine.a.inverse();
+    for (size_t k = 0; k < count; ++k) {
+      before[k] = std::abs(
+          mapped_distance(GlobalMap{}, Eigen::Matrix3d::Identity(), *distance, points[k].p_mm).r);
+      after[k] = std::abs(mapped_distance(fit, b, *distance, points[k].p_mm).r);
+    }
+    robust_weights(after, points, o.outlier_mads, w);
+    double m = 0, gained = 0;
+    for (size_t k = 0; k < count; ++k)
+      m += w[k], gained += w[k] * (before[k] * before[k] - after[k] * after[k]);
+    const double k =
+        std::min(m, 11.0 + (fit.shears.c.isZero(0) ? 0.0 : QuadraticShears::kCount) + extra_dof);
+    if (!(gained > 0)) return 0.0;  // the organ as it was explains them as well
+    return std::clamp(1 - (k - 2) * noise2 / gained, 0.0, 1.0);
+  };
   auto taken = [&](const std::vector<const GlobalMap*>& fits_judged, size_t pick) {
-    GlobalMap out = *fits_judged[pick];
-    out.shears_dropped = shears_dropped;
-    out.affine.rms_before_mm = rms_before_mm;
+    const double share = kept_share(*fits_judged[pick], fields_dof[pick]);
+    auto shrunk = [&](const GlobalMap& fit) {
+      GlobalMap s = towards_identity(fit, share, centre);
+      s.kept_share = share;
+      s.shears_dropped = shears_dropped;
+      s.affine.rms_before_mm = rms_before_mm;
+      if (share < 1)
+        s.rms_after_mm = s.affine.rms_after_mm =
+            nearest_sample_rms(map_samples(s, surface), points, o.outlier_mads);
+      return s;
+    };
+    GlobalMap out = shrunk(*fits_judged[pick]);
     if (equally_good) {
       const std::vector<char> in = in_window();
       equally_good->push_back(out);
       for (size_t c = 0; c < fits_judged.size(); ++c)
-        if (c != pick && in[c]) {
-          equally_good->push_back(*fits_judged[c]);
-          equally_good->back().affine.rms_before_mm = rms_before_mm;
-        }
+        if (c != pick && in[c]) equally_good->push_back(shrunk(*fits_judged[c]));
     }
     return out;
   };
@@ -298,6 +336,7 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
       rms.push_back(truncated_rms(f, *distance, points, cap_mm) * std::sqrt(inflation));
       change.push_back(shape_change_of(m.full, surface.points));
       refined.push_back(std::move(f));
+      fields_dof.push_back(dof);
     }
   for (const GlobalMap& f : refined)
     all.push_back(&f);

@@ -1,7 +1,9 @@
 #include "organfit/fitting/global_map.h"
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <Eigen/LU>
+#include <Eigen/SVD>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -570,6 +572,31 @@ double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface) {
 
 LargestMoves largest_moves(const GlobalMap& map, const SurfaceSamples& surface) {
   return map_samples(map, surface).moves;
+}
+
+GlobalMap towards_identity(const GlobalMap& map, double c, const Eigen::Vector3d& centre) {
+  if (c >= 1) return map;
+  c = std::max(c, 0.0);
+  GlobalMap out = map;
+  // a = R S (polar decomposition: a = U s V^T, R = U V^T, S = V s V^T), det R = det S = 1.
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(map.affine.a,
+                                              Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Eigen::Matrix3d r = svd.matrixU() * svd.matrixV().transpose();
+  const Eigen::AngleAxisd turn(r);
+  const Eigen::Vector3d stretches = svd.singularValues().array().pow(c);
+  out.affine.a = Eigen::AngleAxisd(c * turn.angle(), turn.axis()).toRotationMatrix() *
+                 svd.matrixV() * stretches.asDiagonal() * svd.matrixV().transpose();
+  const Eigen::Vector3d move = map.affine.a * centre + map.affine.t - centre;
+  out.affine.t = centre + c * move - out.affine.a * centre;
+  // The other parts act where the affine part puts the organ: moved with its centre.
+  const Eigen::Vector3d moved_by = (c - 1) * move;
+  out.shears.centre += moved_by;
+  out.fields.origin_mm += moved_by;
+  out.flow.origin_mm += moved_by;
+  out.shears.c *= c;
+  out.fields.weights *= c;
+  out.flow.potentials *= c;
+  return out;
 }
 
 }  // namespace organfit::fitting

@@ -41,7 +41,8 @@ struct AffineFitOptions {
   /// that window. Fits within dof / m of the noise's mean square of the best are equally
   /// good, the noise's mean square taken as the best's own, but never above this squared:
   /// a best fit far worse than the noise does not make every fit equally good (two points
-  /// 8 mm off a cube: every candidate was). 0: the best's own, unbounded.
+  /// 8 mm off a cube: every candidate was). 0: the best's own, unbounded. Also the noise
+  /// by which the kept map's change is shrunk (fit_global_map; 0: not shrunk).
   double noise_mm = 0.0;
   /// robust scale of the fit on the signed distance (mm): point k weighs
   /// (c^2 / (c^2 + r_k^2))^2 (Geman-McClure), c from 8x this down to it
@@ -130,6 +131,11 @@ AffineFit fit_volume_preserving_affine(const SurfaceSamples& surface,
 ///    made again. Without the raise, fields fitted to the noise of 20 points put every
 ///    other fit out of the window. With `distance` and flow_sigma_mm > 0 (the fields on or
 ///    off), an IncompressibleFlow fitted likewise on the same two maps joins them too.
+///  * With `distance` and noise_mm > 0, the kept map is moved towards the identity
+///    (towards_identity) by the share of its change the points show beyond their noise
+///    (positive-part James-Stein: 1 - (k - 2) noise^2 / the sum of squares it gained over the
+///    identity, for its k free parameters; GlobalMap::kept_share): a fit that lowers the
+///    residual of an unchanged organ below the noise has fitted the noise.
 ///
 /// With `equally_good`, it is filled with the map returned and then every other fit in the
 /// last choice's window: the fits the points cannot tell from it (emptied when refused).

@@ -159,6 +159,9 @@ struct GlobalMap {
   /// "signed distance", "signed distance (shears)", "signed distance (stiffer shears)"
   /// ("none": not fitted); with shear fields on top of it when `fields` is not empty
   const char* found_by = "none";
+  /// The share of the fitted change kept (towards_identity): what the points show beyond
+  /// their noise (fit_global_map); 1 when nothing was shrunk.
+  double kept_share = 1;
   Eigen::Vector3d apply(const Eigen::Vector3d& p) const {
     return flow.apply(fields.apply(shears.apply(affine.a * p + affine.t)));
   }
@@ -196,6 +199,13 @@ SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface);
 /// (mm): the RMS displacement of the samples about their mean displacement (the
 /// translation).
 double shape_change_mm(const GlobalMap& map, const SurfaceSamples& surface);
+
+/// `map` moved a share `c` (0 to 1) of the way from the identity: the affine part about
+/// `centre` (mm) as a rotation by c of its angle and a stretch by its principal stretches to
+/// the power c (det 1 kept), its translation there times c; the shears' coefficients, the
+/// fields' heights and the flow's potentials times c. Each part keeps volume as before; c = 1
+/// is `map`, c = 0 the identity.
+GlobalMap towards_identity(const GlobalMap& map, double c, const Eigen::Vector3d& centre);
 
 /// How far (mm) the quadratic shears, the shear fields and the flow each move any of the
 /// surface samples at most: the shears from the affine image, the fields from the sheared
