@@ -134,17 +134,18 @@ assert json.load(open('$tmp/real/run.json'))['export']['checks']['cut_by_ct_edge
     [[ \$(grep -c '^organfit: error: ' '$tmp/far.err') -eq 1 ]] &&
     grep -q \"export: the fitted organ lies wholly outside the planning CT's field of view, 3[0-9][0-9] mm from where\" '$tmp/far.err'"
   check real.organ_off_the_ct_wrote_nothing test ! -e "$tmp/far"
-  # The GTV shrunk to 0.6 of its size about its centre (78% of its volume gone), points all
+  # The GTV shrunk to 0.7 of its size about its centre (66% of its volume gone), points all
   # round: the fit keeps the volume and does not converge; most of the points it cannot
   # reach lie inside the fitted organ, and the message says how many. (Points on one half
-  # alone can be explained by an organ of the same volume elongated.)
+  # alone can be explained by an organ of the same volume elongated; shrunk to 0.6, the
+  # best fit of these points stretches the organ 1.7x and is refused as implausible.)
   /usr/bin/python3 -c "
 import struct, random
 b = open('$tmp/real/gtv_fit.stl', 'rb').read(); n = struct.unpack_from('<I', b, 80)[0]
 v = sorted({struct.unpack_from('<3f', b, 84 + 50 * t + 12 + 12 * c) for t in range(n) for c in range(3)})
 c = [sum(p[a] for p in v) / len(v) for a in range(3)]
 random.seed(1)
-rows = ['%.3f,%.3f,%.3f' % tuple(c[a] + 0.6 * (p[a] - c[a]) for a in range(3)) for p in random.sample(v, 87)]
+rows = ['%.3f,%.3f,%.3f' % tuple(c[a] + 0.7 * (p[a] - c[a]) for a in range(3)) for p in random.sample(v, 87)]
 open('$tmp/shrunk.csv', 'w').write('\\n'.join(['x,y,z'] + rows) + '\\n')"
   sed "s|$tmp/beyond.csv|$tmp/shrunk.csv|" "$tmp/beyond.yaml" >"$tmp/shrunk.yaml"
   check real.shrunk_organ_points_inside_are_said bash -c "'$bin' --quiet run '$tmp/shrunk.yaml' --out '$tmp/shrunk' 2>'$tmp/shrunk.err'; [[ \$? -eq 3 ]] && /usr/bin/python3 -c \"
