@@ -576,8 +576,15 @@ LargestMoves largest_moves(const GlobalMap& map, const SurfaceSamples& surface) 
 
 GlobalMap towards_identity(const GlobalMap& map, double c, const Eigen::Vector3d& centre) {
   if (c >= 1) return map;
-  c = std::max(c, 0.0);
   GlobalMap out = map;
+  if (c <= 0) {  // the identity exactly (GlobalMap::identity() holds), its metadata kept
+    out.affine.a.setIdentity();
+    out.affine.t.setZero();
+    out.shears.c.setZero();
+    out.fields.weights.setZero();
+    out.flow.potentials.setZero();
+    return out;
+  }
   // a = R S (polar decomposition: a = U s V^T, R = U V^T, S = V s V^T), det R = det S = 1.
   const Eigen::JacobiSVD<Eigen::Matrix3d> svd(map.affine.a,
                                               Eigen::ComputeFullU | Eigen::ComputeFullV);

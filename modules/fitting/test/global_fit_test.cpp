@@ -656,6 +656,7 @@ TEST(GlobalMap, TowardsIdentityScalesEachPartsChange) {
     EXPECT_LT((towards_identity(map, 1, centre).apply(p) - map.apply(p)).norm(), 1e-12);
     EXPECT_LT((towards_identity(map, 0, centre).apply(p) - p).norm(), 1e-12);
   }
+  EXPECT_TRUE(towards_identity(map, 0, centre).identity());
   const GlobalMap half = towards_identity(map, 0.5, centre);
   EXPECT_NEAR(half.affine.a.determinant(), 1.0, 1e-12);
   const Eigen::JacobiSVD<Eigen::Matrix3d> svd(half.affine.a,
