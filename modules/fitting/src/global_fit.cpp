@@ -280,7 +280,8 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
       m += w[k], gained += w[k] * (before[k] * before[k] - after[k] * after[k]);
     const double k =
         std::min(m, 11.0 + (fit.shears.c.isZero(0) ? 0.0 : QuadraticShears::kCount) + extra_dof);
-    if (!(gained > 0)) return 0.0;  // the organ as it was explains them as well
+    if (!std::isfinite(gained)) return 1.0;  // no measure of it: the fit as chosen
+    if (!(gained > 0)) return 0.0;           // the organ as it was explains them as well
     return std::clamp(1 - (k - 2) * noise2 / gained, 0.0, 1.0);
   };
   auto taken = [&](const std::vector<const GlobalMap*>& fits_judged, size_t pick) {
