@@ -21,7 +21,9 @@ const config::Binding<fitting::OrganFitOptions>& fit() {
   static const auto b =
       config::Binding<O>("fit")
           .number("residual_tolerance_mm", &O::residual_tolerance_mm, "mm", 0.0, none,
-                  "converged when the mean data residual is at most this", true)
+                  "the points' noise: converged when the mean data residual is at most this; the "
+                  "global map keeps the share of its change the points show beyond it",
+                  true)
           .number("residual_max_tolerance_mm", &O::residual_max_tolerance_mm, "mm", 0.0, none,
                   "... and the 95th percentile at most this (0 = the particle radius, or 2.46 x "
                   "the mean's tolerance where larger: what points of that noise give)")
