@@ -363,8 +363,6 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
     for (Eigen::Index j = 0, k = 0; j < full.points.cols(); j += stride, ++k)
       surface.col(k) = full.points.col(j);
     const double voxel = evaluation::kTruthVoxelMm;
-    // The Jacobian's volume measure on the grid every fit measures its organ on.
-    const double volume_voxel = fitting::volume_voxel_mm(rho, model.reference.volume_mm3(1));
     const double v0 = geometry::particle_body_volume_mm3(model.state.x, rho, voxel, rho);
     const auto reference = std::make_shared<const geometry::LabelVolume>(model.reference);
     const double support = fitting::embedding_support_mm(model.lattice_spacing_mm);
@@ -383,6 +381,8 @@ nlohmann::json run_fit_benchmark(const FitBenchOptions& o) {
     // another grid a box's face moves a whole layer of voxels in or out with the grid's
     // origin (the 30 mm cube: -1.2% to +3.4% on voxels of 0.5 and 0.875 mm).
     const double v0_embedded = model.reference.volume_mm3(1);
+    // The Jacobian's volume measure on the grid every fit measures its organ on.
+    const double volume_voxel = fitting::volume_voxel_mm(rho, v0_embedded);
     std::map<std::string, FemCases> fem;  // per load, made when a case first needs it
     for (const auto& family : families)
       for (double magnitude : magnitudes)

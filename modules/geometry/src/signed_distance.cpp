@@ -102,7 +102,7 @@ void binomial_passes(const ImageGeometry& g, const double* in, GridBuffer<double
 }
 }  // namespace
 
-SignedDistance SignedDistance::smoothed() const {
+SignedDistance SignedDistance::smoothed_by_passes(bool across_slices) const {
   SignedDistance out(geometry_, to_index_);  // its own gradient bound: other values
   if (!all_finite()) {                       // no boundary: nothing to smooth
     out.values_ = values_;
@@ -110,17 +110,16 @@ SignedDistance SignedDistance::smoothed() const {
   }
   // From this distance's values into one new buffer.
   out.values_ = GridBuffer<double>(values_.size());
-  binomial_passes(geometry_, values_.data(), out.values_, true);
+  binomial_passes(geometry_, values_.data(), out.values_, across_slices);
   return out;
 }
 
+SignedDistance SignedDistance::smoothed() const {
+  return smoothed_by_passes(true);
+}
+
 SignedDistance SignedDistance::smoothed_within_slices(double level_mm) const {
-  SignedDistance out(geometry_, to_index_);  // its own gradient bound: other values
-  out.values_ = GridBuffer<double>(values_.size());
-  if (all_finite())
-    binomial_passes(geometry_, values_.data(), out.values_, false);
-  else  // no boundary: nothing to smooth
-    std::copy(values_.begin(), values_.end(), out.values_.begin());
+  SignedDistance out = smoothed_by_passes(false);
   const long long total = static_cast<long long>(out.values_.size());
 #pragma omp parallel for schedule(static)
   for (long long v = 0; v < total; ++v)

@@ -81,6 +81,9 @@ class SignedDistance {
   SignedDistance(const ImageGeometry& geometry, const Eigen::Matrix3d& to_index)
       : geometry_(geometry), to_index_(to_index) {}  // no values yet
   void smooth();
+  /// A new distance: this one's values through the binomial passes (x, y and, with
+  /// `across_slices`, z), or copied where there is no boundary to smooth.
+  SignedDistance smoothed_by_passes(bool across_slices) const;
   bool all_finite() const;
   ImageGeometry geometry_;
   Eigen::Matrix3d to_index_;  ///< physical offset -> index offset
