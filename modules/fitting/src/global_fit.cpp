@@ -76,17 +76,27 @@ double point_to_plane_rms(const GlobalMap& map, const MappedSamples& mapped,
   return robust_weights(r, points, mads, w);
 }
 
-/// RMS (mm) over all points of their mapped_distance, each capped at `cap_mm`: a fixed
-/// robust loss, so that fits which explain more of the points are not judged on fewer.
+/// RMS (mm) over all points of residuals r (mm, one a point, by their confidences), each
+/// capped at `cap_mm`: a fixed robust loss, so that fits which explain more of the points
+/// are not judged on fewer.
+template <class Residual>
+double truncated_rms_of(const std::vector<AttractivePoint>& points, double cap_mm,
+                        Residual&& r_of) {
+  double sum = 0, weight = 0;
+  for (size_t k = 0; k < points.size(); ++k) {
+    const double r = std::min(std::abs(r_of(k)), cap_mm);
+    sum += points[k].confidence * r * r, weight += points[k].confidence;
+  }
+  return std::sqrt(sum / std::max(weight, 1e-12));
+}
+
+/// truncated_rms_of the points' mapped_distance under `map`.
 double truncated_rms(const GlobalMap& map, const geometry::SignedDistance& distance,
                      const std::vector<AttractivePoint>& points, double cap_mm) {
   const Eigen::Matrix3d b = map.affine.a.inverse();
-  double sum = 0, weight = 0;
-  for (const AttractivePoint& p : points) {
-    const double r = std::min(std::abs(mapped_distance(map, b, distance, p.p_mm).r), cap_mm);
-    sum += p.confidence * r * r, weight += p.confidence;
-  }
-  return std::sqrt(sum / std::max(weight, 1e-12));
+  return truncated_rms_of(points, cap_mm, [&](size_t k) {
+    return mapped_distance(map, b, distance, points[k].p_mm).r;
+  });
 }
 
 }  // namespace
@@ -313,7 +323,13 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   // with the rest. A fit with k effective parameters lowers the mean square by about k/m of
   // the noise's by chance alone, so theirs is raised by m / (m - k) first: without that,
   // fields that fitted the noise of 20 points (a mean square a quarter of the noise's)
-  // put every fit without them out of the window.
+  // put every fit without them out of the window. And a part on top of a start is tried
+  // only where it foretells the points better than the start does: the points' residuals
+  // had each been left out of the part's fit (LinearisedFit), in the same capped RMS,
+  // below the start's. A change seen by one or two points is then left to the local stage:
+  // a 1.5 L liver probed 5 mm, 87 points half over it, took fields of 56 effective
+  // parameters which met those points at 0.33 mm, but foretold them left out at 0.82,
+  // against 0.69 for the start; kept, they spread the dent (MSD 0.18 mm, 0.034 unmoved).
   const size_t least_of_all =
       static_cast<size_t>(std::min_element(change.begin(), change.end()) - change.begin());
   std::vector<GlobalMap> refined;
@@ -325,12 +341,17 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   for (const size_t c : starts)
     for (const bool as_flow : {false, true}) {
       if (!((as_flow ? o.flow_sigma_mm : o.field_sigma_mm) > 0)) continue;
-      double dof = 0;
+      detail::LinearisedFit part;
       GlobalMap f =
-          as_flow ? fit_flow(*candidates[c], *distance, mapped[c].full, points, o, dof)
-                  : fit_shear_fields(*candidates[c], *distance, mapped[c].full, points, o, dof);
+          as_flow ? fit_flow(*candidates[c], *distance, mapped[c].full, points, o, part)
+                  : fit_shear_fields(*candidates[c], *distance, mapped[c].full, points, o, part);
+      if (as_flow ? f.flow.empty() : f.fields.empty()) continue;
+      const double left_out_rms =
+          truncated_rms_of(points, cap_mm, [&](size_t k) { return part.left_out_mm[k]; });
+      if (!(left_out_rms < rms[c])) continue;
       const MappedSamples m = map_samples(f, surface);
-      if ((as_flow ? f.flow.empty() : f.fields.empty()) || !plausible(f, m, surface, o)) continue;
+      if (!plausible(f, m, surface, o)) continue;
+      const double dof = part.effective_dof;
       f.rms_after_mm = f.affine.rms_after_mm = nearest_sample_rms(m, points, o.outlier_mads);
       const double inflation = static_cast<double>(points.size()) /
                                std::max(1.0, static_cast<double>(points.size()) - dof);

@@ -589,6 +589,34 @@ double RidgeSystem::effective_dof() const {
   return static_cast<double>(size) - lambda_ * trace;
 }
 
+Eigen::VectorXd RidgeSystem::leverages() const {
+  const Eigen::Index m = jac_.rows();
+  if (in_points_) {
+    // J S^-1 J^T W = K (K + lambda I)^-1 = I - lambda (K + lambda I)^-1, K = J J^T W.
+    const Eigen::MatrixXd inverse = lu_.solve(Eigen::MatrixXd::Identity(m, m));
+    Eigen::VectorXd h = (1.0 - lambda_ * inverse.diagonal().array()).cwiseMax(0.0).cwiseMin(1.0);
+    for (Eigen::Index k = 0; k < m; ++k)
+      if (w_(k) == 0) h(k) = 0;  // w_k times the rest: not left to rounding
+    return h;
+  }
+  // h_k = w_k |L^-1 J_k^T|^2 for S = L L^T: L solved against blocks of J^T's columns on
+  // threads.
+  constexpr Eigen::Index kBlock = 64;
+  const Eigen::Index blocks = (m + kBlock - 1) / kBlock;
+  Eigen::VectorXd h(m);
+  const auto l = llt_.matrixL();
+#pragma omp parallel for schedule(dynamic, 1)
+  for (Eigen::Index b = 0; b < blocks; ++b) {
+    const Eigen::Index k0 = b * kBlock, width = std::min(kBlock, m - k0);
+    Eigen::MatrixXd x = jac_.middleRows(k0, width).transpose();
+    l.solveInPlace(x);
+    h.segment(k0, width) =
+        (w_.segment(k0, width).array() * x.colwise().squaredNorm().transpose().array())
+            .cwiseMin(1.0);
+  }
+  return h;
+}
+
 Eigen::MatrixXd RidgeSystem::normal_matrix(const Eigen::MatrixXd& jac, const Eigen::VectorXd& w,
                                            double lambda, const std::vector<int>* row_order) {
   // Row by row, J^T W J is a rank-one update per point over its nonzeros (a fifth of a
@@ -734,8 +762,8 @@ template <class Parameters, class Row>
 GlobalMap fit_linearised_part(GlobalMap map, const geometry::SignedDistance& distance,
                               const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
                               double lambda, Parameters&& parameters, Row&& row,
-                              double& effective_dof) {
-  effective_dof = 0;
+                              LinearisedFit& judged) {
+  judged = LinearisedFit{};
   const int m = static_cast<int>(points.size());
   const int n = static_cast<int>(parameters(map).size());
   if (n == 0 || m == 0) return map;
@@ -771,7 +799,12 @@ GlobalMap fit_linearised_part(GlobalMap map, const geometry::SignedDistance& dis
       },
       residuals, objective);
   const VecX w = geman_mcclure_weights(points, r, c2);
-  effective_dof = RidgeSystem(jac, w, lambda, &order).effective_dof();
+  const RidgeSystem system(jac, w, lambda, &order);
+  judged.effective_dof = system.effective_dof();
+  const VecX h = system.leverages();
+  judged.left_out_mm.resize(static_cast<size_t>(m));
+  for (int k = 0; k < m; ++k)  // h = 1 only where no ridge holds it (lambda > 0 here)
+    judged.left_out_mm[static_cast<size_t>(k)] = r(k) / std::max(1 - h(k), 1e-12);
   return map;
 }
 }  // namespace
@@ -779,7 +812,7 @@ GlobalMap fit_linearised_part(GlobalMap map, const geometry::SignedDistance& dis
 GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distance,
                            const Eigen::Matrix3Xd& mapped_surface,
                            const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
-                           double& effective_dof) {
+                           LinearisedFit& judged) {
   map.fields = ShearFields::over(mapped_surface.rowwise().minCoeff(),
                                  mapped_surface.rowwise().maxCoeff(), o.field_sigma_mm);
   return fit_linearised_part(
@@ -793,20 +826,20 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
             jac_row(index) = -d.gp(a) * value / d.nu;
         }
       },
-      effective_dof);
+      judged);
 }
 
 GlobalMap fit_flow(GlobalMap map, const geometry::SignedDistance& distance,
                    const Eigen::Matrix3Xd& mapped_surface,
                    const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
-                   double& effective_dof) {
+                   LinearisedFit& judged) {
   map.flow = IncompressibleFlow::over(mapped_surface.rowwise().minCoeff(),
                                       mapped_surface.rowwise().maxCoeff(), o.flow_sigma_mm);
   // Its Jacobian is dense here: three potentials per node of a 3D grid (41k on a 2 L
   // lung) by the points; beyond 5e7 entries (400 MB) the flow is left out.
   if (static_cast<double>(points.size()) * static_cast<double>(map.flow.potentials.size()) > 5e7) {
     map.flow = IncompressibleFlow{};
-    effective_dof = 0;
+    judged = LinearisedFit{};
     return map;
   }
   // d r / d a_n = -(gp x g_n) / nu: the flow's inverse moves p by -v(p) to first order,
@@ -821,7 +854,7 @@ GlobalMap fit_flow(GlobalMap map, const geometry::SignedDistance& distance,
         for (const auto& [node, gradient] : near)
           jac_row.template segment<3>(3 * node) = -d.gp.cross(gradient).transpose() / d.nu;
       },
-      effective_dof);
+      judged);
 }
 
 }  // namespace detail

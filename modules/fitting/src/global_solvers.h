@@ -40,6 +40,10 @@ class RidgeSystem {
   /// The effective number of unknowns, tr(J (J^T W J + lambda I)^-1 J^T W): the size of
   /// the factored space less lambda tr(S^-1), S the matrix factored (either way).
   double effective_dof() const;
+  /// Each point's leverage h_k = w_k J_k (J^T W J + lambda I)^-1 J_k^T (0 to 1), the diagonal
+  /// of the matrix above: the share of its own residual a point's fit takes up. A point
+  /// left out of the fit would have had the residual r_k / (1 - h_k) (to first order).
+  Eigen::VectorXd leverages() const;
 
  private:
   /// J^T W J + lambda I from the rows' nonzeros, on threads; its lower triangle.
@@ -117,17 +121,26 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
                                        const AffineFitOptions& o, bool with_shears,
                                        bool on_constraint);
 
+/// What a part fitted on top of a map (fit_shear_fields, fit_flow) is judged by, at its fit's
+/// end: its effective number of parameters (RidgeSystem::effective_dof) and each point's
+/// residual had that point been left out of the part's fit, r_k / (1 - h_k) (mm; the
+/// leverages of RidgeSystem::leverages), the map under it held.
+struct LinearisedFit {
+  double effective_dof = 0;
+  std::vector<double> left_out_mm;
+};
+
 /// Smooth shear fields on top of `map` (its affine part and quadratic shears held): robust
 /// Gauss-Newton on the points' mapped_distance, Geman-McClure weights of scale
 /// distance_scale_mm, the bumps' heights pulled towards none by field_stiffness. The
 /// fields' Jacobian is taken to first order (each field's bumps at the point itself).
 /// The fields' grid covers `mapped_surface`, the surface samples as `map` moves them.
-/// `effective_dof` gets the fit's effective number of parameters at the end. The map's
+/// `judged` gets what the fit is judged by at its end (LinearisedFit). The map's
 /// rms_after_mm is left to the caller (it maps the samples anyway).
 GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distance,
                            const Eigen::Matrix3Xd& mapped_surface,
                            const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
-                           double& effective_dof);
+                           LinearisedFit& judged);
 
 /// An incompressible flow on top of `map` (all its other parts held), fitted as the shear
 /// fields are (the same weights, stiffness and first-order Jacobian, v at the point itself).
@@ -135,7 +148,7 @@ GlobalMap fit_shear_fields(GlobalMap map, const geometry::SignedDistance& distan
 GlobalMap fit_flow(GlobalMap map, const geometry::SignedDistance& distance,
                    const Eigen::Matrix3Xd& mapped_surface,
                    const std::vector<AttractivePoint>& points, const AffineFitOptions& o,
-                   double& effective_dof);
+                   LinearisedFit& judged);
 /// Distance (mm) of point p to the surface mapped by `map`, to first order:
 /// D(q) / |grad_p D(q)|, q = M^-1 p, with the shears' Jacobian left out of the
 /// normalisation (they are small). `b` is map.affine.a's inverse.
