@@ -125,7 +125,13 @@ FitResult run_fit(
       integ.refresh_forces(state);
     }
     const auto steps_start = Clock::now();
-    integ.run(state, std::min<long long>(o.record_every, o.max_steps - integ.stats().steps));
+    // Explained but still moving: the row comes as soon as the body is at rest, not at the
+    // end of a full row's steps.
+    const auto moving = [&](long long) {
+      return !explained || integ.kinetic_energy(state) / n > o.kinetic_tolerance;
+    };
+    integ.run(state, std::min<long long>(o.record_every, o.max_steps - integ.stats().steps),
+              moving);
     result.steps_wall_s += std::chrono::duration<double>(Clock::now() - steps_start).count();
   }
   result.steps = integ.stats().steps;

@@ -1,5 +1,6 @@
 // The fit loop's stopping rule: converged when the mean residual, its 95th percentile
-// and the kinetic energy are all within tolerance; one far point does not decide.
+// and the kinetic energy are all within tolerance; one far point does not decide; once the
+// points are explained, the fit stops at the step the body comes to rest.
 #include "organfit/fitting/fit.h"
 
 #include <gtest/gtest.h>
@@ -139,6 +140,37 @@ TEST(RunFit, AdjustsTheModelBetweenRowsOnlyUntilThePointsAreExplained) {
   ASSERT_EQ(r.history.size(), 9u);  // steps 0, 5, ..., 40
   EXPECT_NEAR(r.history[1].residual_mean_mm, 0.7, 1e-12);
   EXPECT_NEAR(r.history.back().residual_mean_mm, 0.4, 1e-12);
+}
+
+TEST(RunFit, OnceThePointsAreExplainedStopsAtTheStepTheBodyComesToRest) {
+  // Particles with no force on them, each with a point on its surface, all moving at 1
+  // mm/s along x and damped: each step multiplies v by c = exp(-K dt / m) = exp(-0.1), so
+  // the kinetic energy per particle is 0.5 exp(-0.2 s) after s steps, at most 1e-4 from
+  // step 43 (ln(5000) / 0.2 = 42.6). The points are explained at the row of step 20 (never
+  // at the first), with the body still moving; the rows still come every 20 steps, and the
+  // fit stops at step 43, not at step 60. They move 0.01 mm in all, across the points'
+  // normals.
+  const double rho = 2.0;
+  ParticleRow row(10, rho);
+  row.io.damping = 100;  // K (mass unit / s); m = 1, dt = 1e-3 s
+  std::vector<AttractivePoint> points;
+  for (int i = 0; i < 10; ++i)
+    points.push_back({row.x.col(i) + Eigen::Vector3d(0, 0, rho), 1.0});
+  FitOptions fo;
+  fo.record_every = 20;
+  fo.max_steps = 200;
+  fo.kinetic_tolerance = 1e-4;
+  particles::State state(row.x);
+  state.v.row(0).setOnes();
+  const FitResult r = row.fit(state, points, fo);
+  EXPECT_TRUE(r.converged) << r.stop_reason;
+  EXPECT_EQ(r.explained_at_step, 20);
+  EXPECT_EQ(r.steps, 43);
+  ASSERT_EQ(r.history.size(), 4u);  // steps 0, 20, 40 (rows as before), 43
+  EXPECT_EQ(r.history[2].step, 40);
+  EXPECT_EQ(r.history[3].step, 43);
+  EXPECT_LE(r.history[3].kinetic_energy_per_particle, 1e-4);
+  EXPECT_GT(r.history[2].kinetic_energy_per_particle, 1e-4);
 }
 
 }  // namespace

@@ -168,7 +168,7 @@ RelaxResult relax(Model& model, State& state, const IntegratorOptions& options, 
   const int n = std::max(1, state.size());
   integrator.run(state, max_steps, [&](long long step) {
     result.steps = step;
-    if (step < 20 || step % 10 != 0) return true;
+    if (step < 20) return true;
     result.kinetic_energy_per_particle = integrator.kinetic_energy(state) / n;
     result.settled = result.kinetic_energy_per_particle < ke_tolerance;
     return !result.settled;

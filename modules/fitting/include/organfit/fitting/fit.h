@@ -35,7 +35,9 @@ struct FitOptions {
   double kinetic_tolerance = 1e-4;          ///< ... and kinetic energy per particle below this
   long long max_steps = 20000;
   double max_wall_s = 60.0;
-  int record_every = 20;            ///< steps between history rows
+  int record_every = 20;            ///< steps between history rows; once the points are
+                                    ///< explained, a row also comes at the first step the
+                                    ///< kinetic energy is within tolerance
   int stall_rows = 25;              ///< stop when the mean residual has not improved by
   double stall_improvement = 0.01;  ///< this fraction over that many rows
   /// Volume of the model (mm^3) for the history; empty: not recorded.

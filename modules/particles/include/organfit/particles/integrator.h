@@ -92,7 +92,8 @@ struct RelaxResult {
 };
 
 /// Damped relaxation: runs until the kinetic energy per particle falls below
-/// `ke_tolerance` (checked every 10 steps, after at least 20) or `max_steps` pass.
+/// `ke_tolerance` (checked at every step after the first 20: a sum over the velocities,
+/// small beside a step's forces) or `max_steps` pass.
 RelaxResult relax(Model& model, State& state, const IntegratorOptions& options, long long max_steps,
                   double ke_tolerance);
 
