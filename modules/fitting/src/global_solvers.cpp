@@ -562,33 +562,6 @@ Eigen::VectorXd RidgeSystem::solve(const Eigen::VectorXd& g) const {
   return (g - jac_.transpose() * w_.cwiseProduct(lu_.solve(jac_ * g))) / lambda_;
 }
 
-double RidgeSystem::effective_dof() const {
-  if (in_points_) {
-    const Eigen::Index size = lu_.rows();
-    return static_cast<double>(size) -
-           lambda_ * lu_.solve(Eigen::MatrixXd::Identity(size, size)).trace();
-  }
-  // tr(S^-1) = |L^-1|_F^2 for S = L L^T. L^-1 is lower triangular: its columns j0..j1
-  // are zero above row j0, so each block of columns solves only L's trailing part (n^3/6
-  // multiply-adds in all, not n^3/2), the blocks on threads, their sums added in order.
-  const Eigen::Index size = llt_.rows();
-  const Eigen::MatrixXd& l = llt_.matrixLLT();  // L in its lower triangle
-  constexpr Eigen::Index kBlock = 64;
-  const Eigen::Index blocks = (size + kBlock - 1) / kBlock;
-  std::vector<double> block_sum(static_cast<size_t>(blocks), 0.0);
-#pragma omp parallel for schedule(dynamic, 1)
-  for (Eigen::Index b = 0; b < blocks; ++b) {
-    const Eigen::Index j0 = b * kBlock, width = std::min(kBlock, size - j0), rest = size - j0;
-    Eigen::MatrixXd x = Eigen::MatrixXd::Identity(rest, width);
-    l.bottomRightCorner(rest, rest).triangularView<Eigen::Lower>().solveInPlace(x);
-    block_sum[static_cast<size_t>(b)] = x.squaredNorm();
-  }
-  double trace = 0;
-  for (double v : block_sum)
-    trace += v;
-  return static_cast<double>(size) - lambda_ * trace;
-}
-
 Eigen::VectorXd RidgeSystem::leverages() const {
   const Eigen::Index m = jac_.rows();
   if (in_points_) {
@@ -799,9 +772,8 @@ GlobalMap fit_linearised_part(GlobalMap map, const geometry::SignedDistance& dis
       },
       residuals, objective);
   const VecX w = geman_mcclure_weights(points, r, c2);
-  const RidgeSystem system(jac, w, lambda, &order);
-  judged.effective_dof = system.effective_dof();
-  const VecX h = system.leverages();
+  const VecX h = RidgeSystem(jac, w, lambda, &order).leverages();
+  judged.effective_dof = h.sum();
   judged.left_out_mm.resize(static_cast<size_t>(m));
   for (int k = 0; k < m; ++k)  // h = 1 only where no ridge holds it (lambda > 0 here)
     judged.left_out_mm[static_cast<size_t>(k)] = r(k) / std::max(1 - h(k), 1e-12);

@@ -37,12 +37,10 @@ class RidgeSystem {
               const std::vector<int>* row_order = nullptr);
   /// (J^T W J + lambda I)^-1 g
   Eigen::VectorXd solve(const Eigen::VectorXd& g) const;
-  /// The effective number of unknowns, tr(J (J^T W J + lambda I)^-1 J^T W): the size of
-  /// the factored space less lambda tr(S^-1), S the matrix factored (either way).
-  double effective_dof() const;
   /// Each point's leverage h_k = w_k J_k (J^T W J + lambda I)^-1 J_k^T (0 to 1), the diagonal
-  /// of the matrix above: the share of its own residual a point's fit takes up. A point
-  /// left out of the fit would have had the residual r_k / (1 - h_k) (to first order).
+  /// of J (J^T W J + lambda I)^-1 J^T W: the share of its own residual a point's fit takes
+  /// up. A point left out of the fit would have had the residual r_k / (1 - h_k) (to first
+  /// order); their sum is the fit's effective number of unknowns.
   Eigen::VectorXd leverages() const;
 
  private:
@@ -122,7 +120,7 @@ std::vector<GlobalMap> fit_to_distance(GlobalMap map, const geometry::SignedDist
                                        bool on_constraint);
 
 /// What a part fitted on top of a map (fit_shear_fields, fit_flow) is judged by, at its fit's
-/// end: its effective number of parameters (RidgeSystem::effective_dof) and each point's
+/// end: its effective number of parameters (the leverages' sum) and each point's
 /// residual had that point been left out of the part's fit, r_k / (1 - h_k) (mm; the
 /// leverages of RidgeSystem::leverages), the map under it held.
 struct LinearisedFit {
