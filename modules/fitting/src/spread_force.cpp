@@ -1,5 +1,7 @@
 #include "organfit/fitting/spread_force.h"
 
+#include <Eigen/Geometry>
+#include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -172,6 +174,7 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
   const Eigen::Vector3d centroid = state.x.rowwise().mean();
   const long m = static_cast<long>(in_patches_.size());
   push_.assign(in_patches_.size(), 0.0);
+  pull_.assign(in_patches_.size(), Eigen::Vector3d::Zero());
 #pragma omp parallel for schedule(static) if (m >= particles::kParallelMinParticles)
   for (long j = 0; j < m; ++j) {
     Eigen::Vector3d num = Eigen::Vector3d::Zero();
@@ -188,13 +191,15 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
     const double mag = force.norm(), cap = 0.5 * std::max(1, w_[i]) * f_max_;  // W(i) F_max / 2
     if (mag > cap) force *= cap / mag;
     f.col(i) += force;
+    pull_[j] = force;
     push_[j] = force.dot((state.x.col(i) - centroid).normalized());
   }
   double inflation = 0;
   for (double push : push_)  // in particle order, for any thread count
     inflation += push;
-  if (!skin.empty() && params_.hold_volume) {
-    const double pressure = inflation / static_cast<double>(skin.size());
+  const double pressure =
+      !skin.empty() && params_.hold_volume ? inflation / static_cast<double>(skin.size()) : 0.0;
+  if (pressure != 0) {
     const long skin_count = static_cast<long>(skin.size());
 #pragma omp parallel for schedule(static) if (skin_count >= particles::kParallelMinParticles)
     for (long s = 0; s < skin_count; ++s) {
@@ -202,7 +207,54 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
       f.col(i) -= pressure * (state.x.col(i) - centroid).normalized();
     }
   }
+  if (params_.hold_pose) hold_pose(state, centroid, pressure, f);
   return 0.0;
+}
+
+void SpreadAttractiveForce::hold_pose(const particles::State& state,
+                                      const Eigen::Vector3d& centroid, double pressure,
+                                      particles::Forces& f) const {
+  // The term's net force and torque about the centroid, summed in particle order (the
+  // same for any thread count): the pulls, then the pressure's share on the skin.
+  Eigen::Vector3d net = Eigen::Vector3d::Zero(), torque = Eigen::Vector3d::Zero();
+  for (size_t j = 0; j < in_patches_.size(); ++j) {
+    net += pull_[j];
+    torque += (state.x.col(in_patches_[j]) - centroid).cross(pull_[j]);
+  }
+  if (pressure != 0)
+    for (const int i : skin_.skin()) {
+      const Eigen::Vector3d r = state.x.col(i) - centroid;
+      const Eigen::Vector3d push = -pressure * r.normalized();
+      net += push;
+      torque += r.cross(push);
+    }
+  if (net.isZero() && torque.isZero()) return;
+  // The body's second moment about its centroid (per unit mass: the particles weigh the
+  // same), in blocks of fixed size summed in order, then the rigid motion's forces taken
+  // back: the same net force and torque, spread as a rigid body's accelerations are.
+  const long n = state.size();
+  constexpr long kBlock = 4096;
+  const long blocks = (n + kBlock - 1) / kBlock;
+  std::vector<Eigen::Matrix3d> part(static_cast<size_t>(blocks), Eigen::Matrix3d::Zero());
+#pragma omp parallel for schedule(static) if (n >= particles::kParallelMinParticles)
+  for (long b = 0; b < blocks; ++b) {
+    Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+    for (long i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) {
+      const Eigen::Vector3d r = state.x.col(i) - centroid;
+      sum.noalias() += r.squaredNorm() * Eigen::Matrix3d::Identity() - r * r.transpose();
+    }
+    part[static_cast<size_t>(b)] = sum;
+  }
+  Eigen::Matrix3d inertia = Eigen::Matrix3d::Zero();
+  for (const auto& p : part)
+    inertia += p;
+  // A body of fewer than 3 particles, or all on a line, has no turn about that line: the
+  // pseudo-inverse leaves it.
+  const Eigen::Vector3d alpha = inertia.completeOrthogonalDecomposition().pseudoInverse() * torque;
+  const Eigen::Vector3d per_particle = net / static_cast<double>(n);
+#pragma omp parallel for schedule(static) if (n >= particles::kParallelMinParticles)
+  for (long i = 0; i < n; ++i)
+    f.col(i) -= per_particle + alpha.cross(state.x.col(i) - centroid);
 }
 
 }  // namespace organfit::fitting

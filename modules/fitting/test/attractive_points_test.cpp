@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <Eigen/Geometry>
+#include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
 
@@ -216,6 +218,25 @@ TEST_F(PaperForceTest, SpreadForceRejectsALoneJumpButNotACoherentDent) {
   }
 }
 
+/// The net force and torque about the centroid of forces `f` on `state`, and the sum of
+/// their sizes and of their moments' sizes (the scales to compare them with).
+struct NetLoad {
+  Eigen::Vector3d force = Eigen::Vector3d::Zero(), torque = Eigen::Vector3d::Zero();
+  double force_scale = 0, torque_scale = 0;
+};
+NetLoad net_load(const State& state, const Forces& f) {
+  NetLoad out;
+  const Eigen::Vector3d centroid = state.x.rowwise().mean();
+  for (int i = 0; i < state.size(); ++i) {
+    const Eigen::Vector3d r = state.x.col(i) - centroid;
+    out.force += f.col(i);
+    out.torque += r.cross(f.col(i));
+    out.force_scale += f.col(i).norm();
+    out.torque_scale += r.norm() * f.col(i).norm();
+  }
+  return out;
+}
+
 // The spread force on threads: each point's residual and each patch particle's sum run in
 // parallel once there are thousands of them; the forces must be those of one thread, bit
 // for bit, and the pressure must still take back the patches' whole outward push.
@@ -240,9 +261,12 @@ TEST(SpreadForce, ThreadsGiveOneThreadsForcesAndNoNetOutwardPush) {
   const int saved = omp_get_max_threads();
   std::vector<Forces> f;
   std::vector<int> skin;
-  for (int threads : {1, 2}) {
-    omp_set_num_threads(threads);
-    SpreadAttractiveForce term(pts, law, rho, SpreadForceParams{}, rho);
+  SpreadForceParams volume_alone;  // the pressure's outward sum, without the pose's hold
+  volume_alone.hold_pose = false;
+  for (const SpreadForceParams& settings :
+       {SpreadForceParams{}, SpreadForceParams{}, volume_alone}) {
+    omp_set_num_threads(f.size() == 1 ? 2 : 1);
+    SpreadAttractiveForce term(pts, law, rho, settings, rho);
     f.push_back(Forces::Zero(3, state.size()));
     term.add_forces(state, f.back(), false);
     skin = term.skin().skin();
@@ -253,11 +277,71 @@ TEST(SpreadForce, ThreadsGiveOneThreadsForcesAndNoNetOutwardPush) {
   const Eigen::Vector3d centroid = state.x.rowwise().mean();
   double outward = 0, magnitude = 0;
   for (int i : skin) {
-    outward += f[1].col(i).dot((state.x.col(i) - centroid).normalized());
-    magnitude += f[1].col(i).norm();
+    outward += f[2].col(i).dot((state.x.col(i) - centroid).normalized());
+    magnitude += f[2].col(i).norm();
   }
   EXPECT_GT(magnitude, 0.0);
   EXPECT_LT(std::abs(outward), 1e-9 * magnitude);
+  const NetLoad held = net_load(state, f[1]);
+  EXPECT_LT(held.force.norm(), 1e-9 * held.force_scale);
+  EXPECT_LT(held.torque.norm(), 1e-9 * held.torque_scale);
+}
+
+// The pose's hold: points 1.5 mm outside one end of the body and turned about its long
+// axis pull it one way and turn it; held, the term's forces sum to no force and no torque
+// about the centroid (so the body's centroid and turn are the global stage's), while the
+// pulls themselves are kept: each patch particle's force is the unheld one less the same
+// rigid motion's share as every other particle's.
+TEST(SpreadForce, HoldingThePoseTakesBackTheNetForceAndTorqueAsARigidMotion) {
+  particles::CohesionParams params;
+  params.r0_mm = 2.0;
+  const particles::LennardJones law(params);
+  const double rho = 0.5 * params.r0_mm;
+  const State state(
+      particles::fill_ellipsoid({40, 24, 24}, {0, 0, 0}, particles::fcc_equilibrium_spacing(law)));
+  const Eigen::Vector3d semi(20, 12, 12);
+  std::vector<AttractivePoint> pts;
+  for (int k = 0; k < 200; ++k) {  // the +x third of the surface, pushed out and turned
+    const double z = 1 - 2 * (k + 0.5) / 200, ring = std::sqrt(1 - z * z);
+    const double phi = k * M_PI * (3 - std::sqrt(5.0));
+    const Eigen::Vector3d on =
+        semi.cwiseProduct(Eigen::Vector3d(ring * std::cos(phi), ring * std::sin(phi), z));
+    if (on.x() < 8) continue;
+    const Eigen::Vector3d n = on.cwiseQuotient(semi.cwiseProduct(semi)).normalized();
+    pts.push_back({on + 1.5 * n + Eigen::Vector3d(0, -0.1 * on.z(), 0.1 * on.y()), 1.0});
+  }
+  ASSERT_GE(pts.size(), 30u);
+  SpreadForceParams free;
+  free.hold_pose = false;
+  Forces held_f = Forces::Zero(3, state.size()), free_f = Forces::Zero(3, state.size());
+  SpreadAttractiveForce held(pts, law, rho, SpreadForceParams{}, rho);
+  SpreadAttractiveForce unheld(pts, law, rho, free, rho);
+  held.add_forces(state, held_f, false);
+  unheld.add_forces(state, free_f, false);
+  const NetLoad a = net_load(state, free_f), b = net_load(state, held_f);
+  // Unheld, the pulls move the body (+x) and turn it (+x, as the points are turned).
+  EXPECT_GT(a.force.x(), 0.1 * a.force_scale);
+  EXPECT_GT(a.torque.x(), 0.01 * a.torque_scale);
+  EXPECT_LT(b.force.norm(), 1e-9 * b.force_scale);
+  EXPECT_LT(b.torque.norm(), 1e-9 * b.torque_scale);
+  // The difference is a rigid motion's forces: f_i = a + alpha x r_i, the same a and alpha
+  // for every particle (fitted over all of them, and met at each).
+  const Forces d = free_f - held_f;
+  const Eigen::Vector3d centroid = state.x.rowwise().mean();
+  Eigen::MatrixXd system(3 * state.size(), 6);
+  Eigen::VectorXd rhs(3 * state.size());
+  for (int i = 0; i < state.size(); ++i) {
+    const Eigen::Vector3d r = state.x.col(i) - centroid;
+    Eigen::Matrix3d cross;  // alpha x r = -[r]x alpha
+    cross << 0, r.z(), -r.y(), -r.z(), 0, r.x(), r.y(), -r.x(), 0;
+    system.block<3, 3>(3 * i, 0).setIdentity();
+    system.block<3, 3>(3 * i, 3) = cross;
+    rhs.segment<3>(3 * i) = d.col(i);
+  }
+  const Eigen::VectorXd motion = system.colPivHouseholderQr().solve(rhs);
+  EXPECT_LT((system * motion - rhs).cwiseAbs().maxCoeff(), 1e-9 * d.cwiseAbs().maxCoeff());
+  EXPECT_GT(motion.head<3>().norm(), 0.0);
+  EXPECT_GT(motion.tail<3>().norm(), 0.0);
 }
 
 TEST(PaperForce, BadPointsAndParametersAreRefused) {

@@ -335,6 +335,7 @@ TEST(SpreadAttractiveForce, PullsTheEpicentreAlongItsNormalByItsGapToThePoint) {
   x.col(1) = Eigen::Vector3d(0, 0, -3);
   SpreadForceParams params;
   params.hold_volume = false;
+  params.hold_pose = false;  // the pull alone (two particles: held, it would be shared)
   params.outlier_distance_mm = 20;
   params.stiffness_fraction = 1e-3;  // below the cohesion cap
   SurfaceFeet feet;

@@ -129,6 +129,9 @@ const config::Binding<fitting::SpreadForceParams>& fit_spread_local() {
                   "bound of a point's patch", true)
           .flag("local_hold_volume", &O::hold_volume,
                 "take the patches' net outward push back over the skin (keeps the volume)")
+          .flag("local_hold_pose", &O::hold_pose,
+                "take the local stage's net force and torque back over the whole body (the "
+                "organ's position and turn stay the global stage's)")
           .number("outlier_distance_mm", &O::outlier_distance_mm, "mm", 0.0, none,
                   "reject points farther than this from the model (0 = half its diameter)")
           .number("consistency_threshold", &O::consistency_threshold, "", 0.0, 100.0,

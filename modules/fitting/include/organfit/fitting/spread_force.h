@@ -18,6 +18,14 @@
 // Holding the volume: the patches' net outward push sum_i F_i . n_i is subtracted evenly
 // over all skin particles (a uniform pressure), so the local stage reshapes the surface
 // without inflating it (pulled skin otherwise opens gaps: +0.6 to +1.3% measured).
+// Holding the pose: the term's net force F and torque T about the body's centroid c (the
+// pulls and the pressure together) are taken back over every particle as a rigid motion's
+// forces, F_i -= F / N + alpha x (x_i - c), alpha = J^-1 T, J = sum_i (|r_i|^2 I - r_i r_i^T):
+// the term moves neither the body's centroid nor its turn. The organ's position and turn
+// are the global stage's, chosen from every point by the stated noise; summed, the patches
+// would re-decide them by patch weights (a small organ's patches cover much of its
+// surface: a 55 cm3 GTV under an FEM bladder load moved 1.0 mm as a whole, away from the
+// truth, where the global map had left it; docs/decisions.md).
 #include <vector>
 
 #include "organfit/fitting/attractive_points.h"
@@ -38,6 +46,7 @@ struct SpreadForceParams {
   int consistency_neighbours = 8;     ///< neighbours of a point for that test
   double consistency_noise_mm = 0.0;  ///< its epsilon, the residual noise (0: rho / 2)
   bool hold_volume = true;            ///< take the patches' net outward push back over the skin
+  bool hold_pose = true;  ///< take the term's net force and torque back over the whole body
 };
 
 class SpreadAttractiveForce : public AttractivePointTerm {
@@ -59,6 +68,10 @@ class SpreadAttractiveForce : public AttractivePointTerm {
 
  private:
   void assign(const particles::Positions& x);
+  /// Takes the term's net force and torque (its pulls, pull_, and the volume's `pressure`
+  /// on the skin) back over every particle of `state` as a rigid motion's forces.
+  void hold_pose(const particles::State& state, const Eigen::Vector3d& centroid, double pressure,
+                 particles::Forces& f) const;
   double kappa_;
   SpreadForceParams params_;
   std::vector<std::vector<std::pair<int, double>>> patch_;  // (particle, weight) per point
@@ -76,6 +89,7 @@ class SpreadAttractiveForce : public AttractivePointTerm {
   std::vector<Eigen::Vector3d> residual_;
   std::vector<char> pulls_now_;
   std::vector<double> push_;
+  std::vector<Eigen::Vector3d> pull_;  // in_patches_[j]'s force (N), for the pose's hold
 };
 
 }  // namespace organfit::fitting
