@@ -4,6 +4,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <deque>
 #include <limits>
 #include <optional>
 
@@ -21,6 +22,19 @@ using detail::mapped_distance;
 using detail::nearest_sample_rms;
 using detail::refine_global_map;
 using detail::robust_weights;
+
+/// A global map as the window judges it: its surface samples mapped (kept for the plain
+/// fits, the starts of the fitted parts; empty for a fitted part's), the points' capped RMS
+/// against it (mm; a fitted part's raised by m / (m - k)), how much it changes the organ's
+/// shape (mm, shape_change_of), and the effective parameters its fitted part (shear fields
+/// or flow) adds to the affine part's and the shears' (0: none).
+struct Candidate {
+  const GlobalMap* map = nullptr;
+  MappedSamples mapped;
+  double rms_mm = 0;
+  double change_mm = 0;
+  double fitted_dof = 0;
+};
 
 /// The largest of a's principal stretches and their inverses (1: none).
 double largest_stretch(const Eigen::Matrix3d& a) {
@@ -204,11 +218,10 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     return refused_with_best();
   // The plausible fits. Shears can swing out of range (a bulge seen from one side can do
   // that); when every fit of the whole map does, the affine part alone is what is left.
-  std::vector<const GlobalMap*> candidates;
-  std::vector<MappedSamples> mapped;
+  std::vector<Candidate> candidates;
   auto keep_if_plausible = [&](const GlobalMap& fit) {
     MappedSamples m = &fit == &best_fit ? std::move(best_mapped) : map_samples(fit, surface);
-    if (plausible(fit, m, surface, o)) candidates.push_back(&fit), mapped.push_back(std::move(m));
+    if (plausible(fit, m, surface, o)) candidates.push_back({&fit, std::move(m)});
   };
   for (const GlobalMap& fit : fits)
     keep_if_plausible(fit);
@@ -221,44 +234,47 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   // Of those within `equally_good_dof` / m of the noise's mean square of the best (the best's
   // own, at most noise_mm^2), the one changing the shape least is kept (the closest to
   // rest, as the pull towards the identity would choose).
-  std::vector<double> rms;
-  for (size_t c = 0; c < candidates.size(); ++c)
-    rms.push_back(
-        distance ? truncated_rms(*candidates[c], *distance, points, o.distance_scale_mm)
-                 : point_to_plane_rms(*candidates[c], mapped[c], surface, points, o.outlier_mads));
+  for (Candidate& c : candidates)
+    c.rms_mm = distance ? truncated_rms(*c.map, *distance, points, o.distance_scale_mm)
+                        : point_to_plane_rms(*c.map, c.mapped, surface, points, o.outlier_mads);
+  auto least_rms = [&candidates] {
+    return std::min_element(
+               candidates.begin(), candidates.end(),
+               [](const Candidate& l, const Candidate& r) { return l.rms_mm < r.rms_mm; })
+        ->rms_mm;
+  };
   // Every candidate with every point beyond the cap: the capped measure cannot rank them,
   // the uncapped one does.
-  const bool saturated =
-      distance && *std::min_element(rms.begin(), rms.end()) >= o.distance_scale_mm * (1 - 1e-9);
+  const bool saturated = distance && least_rms() >= o.distance_scale_mm * (1 - 1e-9);
   const double cap_mm = saturated ? std::numeric_limits<double>::infinity() : o.distance_scale_mm;
   if (saturated)
-    for (size_t c = 0; c < candidates.size(); ++c)
-      rms[c] = truncated_rms(*candidates[c], *distance, points, cap_mm);
-  std::vector<double> change;
-  for (size_t c = 0; c < candidates.size(); ++c)
-    change.push_back(shape_change_of(mapped[c].full, surface.points));
+    for (Candidate& c : candidates)
+      c.rms_mm = truncated_rms(*c.map, *distance, points, cap_mm);
+  for (Candidate& c : candidates)
+    c.change_mm = shape_change_of(c.mapped.full, surface.points);
   // Equally good: within `window` of the best mean square (of the noise's, at most noise2).
   const double window = o.equally_good_dof / static_cast<double>(points.size());
   const double noise2 =
       o.noise_mm > 0 ? o.noise_mm * o.noise_mm : std::numeric_limits<double>::infinity();
   // Which fits are within `window` of the best (by their mean squares rms^2).
-  auto in_window = [window, noise2, &rms] {
-    const double best = *std::min_element(rms.begin(), rms.end());
-    std::vector<char> in(rms.size());
-    for (size_t c = 0; c < rms.size(); ++c)
-      in[c] = rms[c] * rms[c] <= best * best + window * std::min(best * best, noise2);
+  auto in_window = [&] {
+    const double best = least_rms();
+    std::vector<char> in(candidates.size());
+    for (size_t c = 0; c < candidates.size(); ++c)
+      in[c] = candidates[c].rms_mm * candidates[c].rms_mm <=
+              best * best + window * std::min(best * best, noise2);
     return in;
   };
   // Of those, the one changing the shape least.
-  auto least_change_in_window = [&in_window, &change] {
+  auto least_change_in_window = [&] {
     const std::vector<char> in = in_window();
     size_t chosen = 0;
     double least = std::numeric_limits<double>::infinity();
     for (size_t c = 0; c < in.size(); ++c)
-      if (in[c] && change[c] < least) least = change[c], chosen = c;
+      if (in[c] && candidates[c].change_mm < least) least = candidates[c].change_mm, chosen = c;
     return chosen;
   };
-  // fits[pick], and with `equally_good` it and then every other fit in the window.
+  // candidates[pick], and with `equally_good` it and then every other fit in the window.
   // Each with the points' RMS before any fit (the identity's, the same for every fit).
   const double rms_before_mm = affine_fits[0].affine.rms_before_mm;
   // The chosen map moved towards the identity by the share of its change the points show
@@ -273,7 +289,6 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   // small one. A 20-point fit to an unchanged organ keeps little of itself, an 87-point fit
   // to a 5 mm stretch about 97%.
   const Eigen::Vector3d centre = surface.points.rowwise().mean();
-  std::vector<double> fields_dof(candidates.size(), 0.0);  // the candidates' none
   auto kept_share = [&](const GlobalMap& fit, double extra_dof) {
     if (!distance || !(o.noise_mm > 0)) return 1.0;
     const size_t count = points.size();
@@ -294,8 +309,8 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
     if (!(gained > 0)) return 0.0;           // the organ as it was explains them as well
     return std::clamp(1 - (k - 2) * noise2 / gained, 0.0, 1.0);
   };
-  auto taken = [&](const std::vector<const GlobalMap*>& fits_judged, size_t pick) {
-    const double share = kept_share(*fits_judged[pick], fields_dof[pick]);
+  auto taken = [&](size_t pick) {
+    const double share = kept_share(*candidates[pick].map, candidates[pick].fitted_dof);
     auto shrunk = [&](const GlobalMap& fit) {
       GlobalMap s = towards_identity(fit, share, centre);
       s.kept_share = share;
@@ -306,18 +321,17 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
             nearest_sample_rms(map_samples(s, surface), points, o.outlier_mads);
       return s;
     };
-    GlobalMap out = shrunk(*fits_judged[pick]);
+    GlobalMap out = shrunk(*candidates[pick].map);
     if (equally_good) {
       const std::vector<char> in = in_window();
       equally_good->push_back(out);
-      for (size_t c = 0; c < fits_judged.size(); ++c)
-        if (c != pick && in[c]) equally_good->push_back(shrunk(*fits_judged[c]));
+      for (size_t c = 0; c < candidates.size(); ++c)
+        if (c != pick && in[c]) equally_good->push_back(shrunk(*candidates[c].map));
     }
     return out;
   };
   const size_t chosen = least_change_in_window();
-  if (!distance || (!(o.field_sigma_mm > 0) && !(o.flow_sigma_mm > 0)))
-    return taken(candidates, chosen);
+  if (!distance || (!(o.field_sigma_mm > 0) && !(o.flow_sigma_mm > 0))) return taken(chosen);
   // Shear fields on top of the chosen map and of the one changing the shape least of all
   // (often near the identity: a dent is a local change, not a global one), each judged
   // with the rest. A fit with k effective parameters lowers the mean square by about k/m of
@@ -331,38 +345,42 @@ GlobalMap fit_global_map(const SurfaceSamples& surface, const std::vector<Attrac
   // parameters which met those points at 0.33 mm, but foretold them left out at 0.82,
   // against 0.69 for the start; kept, they spread the dent (MSD 0.18 mm, 0.034 unmoved).
   const size_t least_of_all =
-      static_cast<size_t>(std::min_element(change.begin(), change.end()) - change.begin());
-  std::vector<GlobalMap> refined;
-  std::vector<const GlobalMap*> all = candidates;
+      static_cast<size_t>(std::min_element(candidates.begin(), candidates.end(),
+                                           [](const Candidate& l, const Candidate& r) {
+                                             return l.change_mm < r.change_mm;
+                                           }) -
+                          candidates.begin());
+  std::deque<GlobalMap> refined;  // the candidates point into it: kept in place as it grows
   std::vector<size_t> starts = {chosen};
   if (least_of_all != chosen) starts.push_back(least_of_all);
   // With flow_sigma_mm, an incompressible flow on the same starts too, a candidate beside
   // the fields (not on by default: docs/decisions.md).
+  candidates.reserve(candidates.size() + 2 * starts.size());  // a start stays in place
   for (const size_t c : starts)
     for (const bool as_flow : {false, true}) {
       if (!((as_flow ? o.flow_sigma_mm : o.field_sigma_mm) > 0)) continue;
+      const Candidate& start = candidates[c];
       detail::LinearisedFit part;
       GlobalMap f =
-          as_flow ? fit_flow(*candidates[c], *distance, mapped[c].full, points, o, part)
-                  : fit_shear_fields(*candidates[c], *distance, mapped[c].full, points, o, part);
+          as_flow ? fit_flow(*start.map, *distance, start.mapped.full, points, o, part)
+                  : fit_shear_fields(*start.map, *distance, start.mapped.full, points, o, part);
       if (as_flow ? f.flow.empty() : f.fields.empty()) continue;
       const double left_out_rms =
           truncated_rms_of(points, cap_mm, [&](size_t k) { return part.left_out_mm[k]; });
-      if (!(left_out_rms < rms[c])) continue;
+      if (!(left_out_rms < start.rms_mm)) continue;
       const MappedSamples m = map_samples(f, surface);
       if (!plausible(f, m, surface, o)) continue;
       const double dof = part.effective_dof;
       f.rms_after_mm = f.affine.rms_after_mm = nearest_sample_rms(m, points, o.outlier_mads);
       const double inflation = static_cast<double>(points.size()) /
                                std::max(1.0, static_cast<double>(points.size()) - dof);
-      rms.push_back(truncated_rms(f, *distance, points, cap_mm) * std::sqrt(inflation));
-      change.push_back(shape_change_of(m.full, surface.points));
-      refined.push_back(std::move(f));
-      fields_dof.push_back(dof);
+      Candidate refit{&refined.emplace_back(std::move(f)), {}};  // its samples not kept
+      refit.rms_mm = truncated_rms(*refit.map, *distance, points, cap_mm) * std::sqrt(inflation);
+      refit.change_mm = shape_change_of(m.full, surface.points);
+      refit.fitted_dof = dof;
+      candidates.push_back(std::move(refit));
     }
-  for (const GlobalMap& f : refined)
-    all.push_back(&f);
-  return taken(all, least_change_in_window());
+  return taken(least_change_in_window());
 }
 
 }  // namespace organfit::fitting
