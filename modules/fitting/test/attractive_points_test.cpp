@@ -218,6 +218,36 @@ TEST_F(PaperForceTest, SpreadForceRejectsALoneJumpButNotACoherentDent) {
   }
 }
 
+/// A body of r0 = 2 mm particles filling the ellipsoid of semi-axes `semi_mm` on its fcc
+/// lattice, and `count` points spread evenly over that ellipsoid (a Fibonacci sphere
+/// scaled), each with its outward normal.
+struct EllipsoidCase {
+  particles::CohesionParams params;
+  particles::LennardJones law;
+  double rho;
+  State state;
+  std::vector<Eigen::Vector3d> on, normal;
+  EllipsoidCase(const Eigen::Vector3d& semi_mm, int count)
+      : params(with_r0(2.0)),
+        law(params),
+        rho(0.5 * params.r0_mm),
+        state(particles::fill_ellipsoid(2 * semi_mm, {0, 0, 0},
+                                        particles::fcc_equilibrium_spacing(law))) {
+    for (int k = 0; k < count; ++k) {
+      const double z = 1 - 2 * (k + 0.5) / count, ring = std::sqrt(1 - z * z);
+      const double phi = k * M_PI * (3 - std::sqrt(5.0));
+      on.push_back(
+          semi_mm.cwiseProduct(Eigen::Vector3d(ring * std::cos(phi), ring * std::sin(phi), z)));
+      normal.push_back(on.back().cwiseQuotient(semi_mm.cwiseProduct(semi_mm)).normalized());
+    }
+  }
+  static particles::CohesionParams with_r0(double r0_mm) {
+    particles::CohesionParams p;
+    p.r0_mm = r0_mm;
+    return p;
+  }
+};
+
 /// The net force and torque about the centroid of forces `f` on `state`, and the sum of
 /// their sizes and of their moments' sizes (the scales to compare them with).
 struct NetLoad {
@@ -241,23 +271,11 @@ NetLoad net_load(const State& state, const Forces& f) {
 // parallel once there are thousands of them; the forces must be those of one thread, bit
 // for bit, and the pressure must still take back the patches' whole outward push.
 TEST(SpreadForce, ThreadsGiveOneThreadsForcesAndNoNetOutwardPush) {
-  particles::CohesionParams params;
-  params.r0_mm = 2.0;
-  const particles::LennardJones law(params);
-  const double rho = 0.5 * params.r0_mm;
-  const State state(
-      particles::fill_ellipsoid({120, 80, 80}, {0, 0, 0}, particles::fcc_equilibrium_spacing(law)));
-  // 6,000 points 1.5 mm outside the body's surface, spread evenly (a Fibonacci sphere).
-  const Eigen::Vector3d semi(60, 40, 40);
+  // 6,000 points 1.5 mm outside the body's surface, spread evenly.
+  const EllipsoidCase body(Eigen::Vector3d(60, 40, 40), 6000);
   std::vector<AttractivePoint> pts;
-  const int count = 6000;
-  for (int k = 0; k < count; ++k) {
-    const double z = 1 - 2 * (k + 0.5) / count, ring = std::sqrt(1 - z * z);
-    const double phi = k * M_PI * (3 - std::sqrt(5.0));
-    const Eigen::Vector3d on =
-        semi.cwiseProduct(Eigen::Vector3d(ring * std::cos(phi), ring * std::sin(phi), z));
-    pts.push_back({on + 1.5 * on.cwiseQuotient(semi.cwiseProduct(semi)).normalized(), 1.0});
-  }
+  for (size_t k = 0; k < body.on.size(); ++k)
+    pts.push_back({body.on[k] + 1.5 * body.normal[k], 1.0});
   const int saved = omp_get_max_threads();
   std::vector<Forces> f;
   std::vector<int> skin;
@@ -266,23 +284,23 @@ TEST(SpreadForce, ThreadsGiveOneThreadsForcesAndNoNetOutwardPush) {
   for (const SpreadForceParams& settings :
        {SpreadForceParams{}, SpreadForceParams{}, volume_alone}) {
     omp_set_num_threads(f.size() == 1 ? 2 : 1);
-    SpreadAttractiveForce term(pts, law, rho, settings, rho);
-    f.push_back(Forces::Zero(3, state.size()));
-    term.add_forces(state, f.back(), false);
+    SpreadAttractiveForce term(pts, body.law, body.rho, settings, body.rho);
+    f.push_back(Forces::Zero(3, body.state.size()));
+    term.add_forces(body.state, f.back(), false);
     skin = term.skin().skin();
   }
   omp_set_num_threads(saved);
   ASSERT_GE(skin.size(), 4096u);  // the threaded paths ran
   EXPECT_EQ((f[0] - f[1]).cwiseAbs().maxCoeff(), 0.0);
-  const Eigen::Vector3d centroid = state.x.rowwise().mean();
+  const Eigen::Vector3d centroid = body.state.x.rowwise().mean();
   double outward = 0, magnitude = 0;
   for (int i : skin) {
-    outward += f[2].col(i).dot((state.x.col(i) - centroid).normalized());
+    outward += f[2].col(i).dot((body.state.x.col(i) - centroid).normalized());
     magnitude += f[2].col(i).norm();
   }
   EXPECT_GT(magnitude, 0.0);
   EXPECT_LT(std::abs(outward), 1e-9 * magnitude);
-  const NetLoad held = net_load(state, f[1]);
+  const NetLoad held = net_load(body.state, f[1]);
   EXPECT_LT(held.force.norm(), 1e-9 * held.force_scale);
   EXPECT_LT(held.torque.norm(), 1e-9 * held.torque_scale);
 }
@@ -293,32 +311,24 @@ TEST(SpreadForce, ThreadsGiveOneThreadsForcesAndNoNetOutwardPush) {
 // pulls themselves are kept: each patch particle's force is the unheld one less the same
 // rigid motion's share as every other particle's.
 TEST(SpreadForce, HoldingThePoseTakesBackTheNetForceAndTorqueAsARigidMotion) {
-  particles::CohesionParams params;
-  params.r0_mm = 2.0;
-  const particles::LennardJones law(params);
-  const double rho = 0.5 * params.r0_mm;
-  const State state(
-      particles::fill_ellipsoid({40, 24, 24}, {0, 0, 0}, particles::fcc_equilibrium_spacing(law)));
-  const Eigen::Vector3d semi(20, 12, 12);
+  // The +x third of the surface's points, pushed out and turned.
+  const EllipsoidCase body(Eigen::Vector3d(20, 12, 12), 200);
   std::vector<AttractivePoint> pts;
-  for (int k = 0; k < 200; ++k) {  // the +x third of the surface, pushed out and turned
-    const double z = 1 - 2 * (k + 0.5) / 200, ring = std::sqrt(1 - z * z);
-    const double phi = k * M_PI * (3 - std::sqrt(5.0));
-    const Eigen::Vector3d on =
-        semi.cwiseProduct(Eigen::Vector3d(ring * std::cos(phi), ring * std::sin(phi), z));
-    if (on.x() < 8) continue;
-    const Eigen::Vector3d n = on.cwiseQuotient(semi.cwiseProduct(semi)).normalized();
-    pts.push_back({on + 1.5 * n + Eigen::Vector3d(0, -0.1 * on.z(), 0.1 * on.y()), 1.0});
+  for (size_t k = 0; k < body.on.size(); ++k) {
+    const Eigen::Vector3d& on = body.on[k];
+    if (on.x() >= 8)
+      pts.push_back(
+          {on + 1.5 * body.normal[k] + Eigen::Vector3d(0, -0.1 * on.z(), 0.1 * on.y()), 1.0});
   }
   ASSERT_GE(pts.size(), 30u);
   SpreadForceParams free;
   free.hold_pose = false;
-  Forces held_f = Forces::Zero(3, state.size()), free_f = Forces::Zero(3, state.size());
-  SpreadAttractiveForce held(pts, law, rho, SpreadForceParams{}, rho);
-  SpreadAttractiveForce unheld(pts, law, rho, free, rho);
-  held.add_forces(state, held_f, false);
-  unheld.add_forces(state, free_f, false);
-  const NetLoad a = net_load(state, free_f), b = net_load(state, held_f);
+  Forces held_f = Forces::Zero(3, body.state.size()), free_f = Forces::Zero(3, body.state.size());
+  SpreadAttractiveForce held(pts, body.law, body.rho, SpreadForceParams{}, body.rho);
+  SpreadAttractiveForce unheld(pts, body.law, body.rho, free, body.rho);
+  held.add_forces(body.state, held_f, false);
+  unheld.add_forces(body.state, free_f, false);
+  const NetLoad a = net_load(body.state, free_f), b = net_load(body.state, held_f);
   // Unheld, the pulls move the body (+x) and turn it (+x, as the points are turned).
   EXPECT_GT(a.force.x(), 0.1 * a.force_scale);
   EXPECT_GT(a.torque.x(), 0.01 * a.torque_scale);
@@ -327,11 +337,11 @@ TEST(SpreadForce, HoldingThePoseTakesBackTheNetForceAndTorqueAsARigidMotion) {
   // The difference is a rigid motion's forces: f_i = a + alpha x r_i, the same a and alpha
   // for every particle (fitted over all of them, and met at each).
   const Forces d = free_f - held_f;
-  const Eigen::Vector3d centroid = state.x.rowwise().mean();
-  Eigen::MatrixXd system(3 * state.size(), 6);
-  Eigen::VectorXd rhs(3 * state.size());
-  for (int i = 0; i < state.size(); ++i) {
-    const Eigen::Vector3d r = state.x.col(i) - centroid;
+  const Eigen::Vector3d centroid = body.state.x.rowwise().mean();
+  Eigen::MatrixXd system(3 * body.state.size(), 6);
+  Eigen::VectorXd rhs(3 * body.state.size());
+  for (int i = 0; i < body.state.size(); ++i) {
+    const Eigen::Vector3d r = body.state.x.col(i) - centroid;
     Eigen::Matrix3d cross;  // alpha x r = -[r]x alpha
     cross << 0, r.z(), -r.y(), -r.z(), 0, r.x(), r.y(), -r.x(), 0;
     system.block<3, 3>(3 * i, 0).setIdentity();
