@@ -89,7 +89,7 @@ class SpreadAttractiveForce : public AttractivePointTerm {
   std::vector<Eigen::Vector3d> residual_;
   std::vector<char> pulls_now_;
   std::vector<double> push_;
-  std::vector<Eigen::Vector3d> pull_;  // in_patches_[j]'s force (N), for the pose's hold
+  std::vector<Eigen::Vector3d> pull_;  // in_patches_[j]'s pull (energy / mm), for the pose's hold
 };
 
 }  // namespace organfit::fitting
