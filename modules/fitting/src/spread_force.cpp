@@ -173,7 +173,6 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
   const auto& skin = skin_.skin();
   const Eigen::Vector3d centroid = state.x.rowwise().mean();
   const long m = static_cast<long>(in_patches_.size());
-  push_.assign(in_patches_.size(), 0.0);
   pull_.assign(in_patches_.size(), Eigen::Vector3d::Zero());
 #pragma omp parallel for schedule(static) if (m >= particles::kParallelMinParticles)
   for (long j = 0; j < m; ++j) {
@@ -192,11 +191,10 @@ double SpreadAttractiveForce::add_forces(const particles::State& state, particle
     if (mag > cap) force *= cap / mag;
     f.col(i) += force;
     pull_[j] = force;
-    push_[j] = force.dot((state.x.col(i) - centroid).normalized());
   }
-  double inflation = 0;
-  for (double push : push_)  // in particle order, for any thread count
-    inflation += push;
+  double inflation = 0;  // the pulls' outward parts, in particle order for any thread count
+  for (size_t j = 0; j < pull_.size(); ++j)
+    inflation += pull_[j].dot((state.x.col(in_patches_[j]) - centroid).normalized());
   const double pressure =
       !skin.empty() && params_.hold_volume ? inflation / static_cast<double>(skin.size()) : 0.0;
   if (pressure != 0) {

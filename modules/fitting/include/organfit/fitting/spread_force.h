@@ -85,11 +85,11 @@ class SpreadAttractiveForce : public AttractivePointTerm {
   std::vector<int> pull_first_;
   std::vector<std::pair<int, double>> pulls_;
   // Per step: each point's residual r_k (mm) and whether it pulls; each in_patches_[j]'s
-  // outward push F . n (0 where no point pulls it).
+  // pull F (energy / mm; 0 where no point pulls it), whose outward parts the volume's
+  // pressure and whose sum and moment the pose's hold take back.
   std::vector<Eigen::Vector3d> residual_;
   std::vector<char> pulls_now_;
-  std::vector<double> push_;
-  std::vector<Eigen::Vector3d> pull_;  // in_patches_[j]'s pull (energy / mm), for the pose's hold
+  std::vector<Eigen::Vector3d> pull_;
 };
 
 }  // namespace organfit::fitting
