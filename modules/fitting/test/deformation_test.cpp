@@ -133,6 +133,34 @@ TEST(Deformation, FallsToTheGlobalMapFarAwayWithoutFolding) {
   }
 }
 
+TEST(Deformation, HoldsUAtZeroBeyondDOfItsAnswersInsideAConcaveBody) {
+  // A U of particles (arms at 30 <= |y| <= 45 mm, joined at x <= -15 mm) moved 5 mm along
+  // x: D = max(2h, 2 * 5 mm) = 12 mm. Inside the U, 30 mm from every particle and over
+  // 20 mm from every node their moving least squares answer, u is zero (phi the global
+  // map, here the identity), though the lattice's box covers the gap; within D of an
+  // arm it is the harmonic part's, falling from the arm's move.
+  std::vector<Eigen::Vector3d> pts;
+  for (double z = -6; z <= 6; z += kSpacing)
+    for (double y = -45; y <= 45; y += kSpacing)
+      for (double x = -30; x <= 30; x += kSpacing)
+        if (x <= -15 || std::abs(y) >= 30) pts.emplace_back(x, y, z);
+  particles::Positions x0(3, static_cast<Eigen::Index>(pts.size()));
+  for (size_t i = 0; i < pts.size(); ++i)
+    x0.col(static_cast<Eigen::Index>(i)) = pts[i];
+  const particles::Positions x1 = x0.colwise() + Eigen::Vector3d(5, 0, 0);
+  const Deformation phi(GlobalMap{}, x0, x1, 2 * kSpacing);
+  const Eigen::Vector3d centre(25, 0, 0);  // 30 mm from the arms' and the base's particles
+  const geometry::Aabb box = phi.local_box();
+  EXPECT_TRUE((centre.array() > box.min_mm.array()).all() &&
+              (centre.array() < box.max_mm.array()).all());
+  EXPECT_LT((phi.pull_back(centre) - centre).norm(), 1e-12);
+  const Eigen::Vector3d near_arm(20, 21, 0);  // 9 mm from the moved arm's inner face (y = 30)
+  const double u = (phi.pull_back(near_arm) - near_arm).norm();
+  EXPECT_GT(u, 0.1);
+  EXPECT_LT(u, 5.0);  // no interior extremum: within the particles' moves
+  EXPECT_FALSE(phi.folds());
+}
+
 TEST(Deformation, ExtrapolatesNoFoldFromTheParticlesJitter) {
   // No change of shape, the particles jittered about their places (sd 0.2 of their
   // spacing on each axis). Past the outermost particles the field is extrapolated from

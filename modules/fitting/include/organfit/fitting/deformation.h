@@ -18,8 +18,9 @@
 //    support of 1.5 h or 2 h;
 //  - everywhere else (beyond the particles, or where the model tore apart inside), u is
 //    harmonic (the Laplace equation), matching the kept values and zero at
-//    D = max(2 h, 2 max|u|) beyond the particles. A harmonic field has no interior
-//    extremum: |u| stays within the particles' moves.
+//    D = max(2 h, 2 max|u|) beyond them: at the nodes farther than D from every node
+//    answered above, and on the lattice's faces, D beyond the particles' box. A harmonic
+//    field has no interior extremum: |u| stays within the particles' moves.
 // So far from the organ phi is the global map alone. Not the identity: the global map's
 // bend is volume-preserving only as an exact shear, and decaying it to the identity folds
 // the CT far from the organ (docs/decisions.md).
@@ -113,9 +114,11 @@ class Deformation {
   double largest_u_mm_ = 0;              // |u| over the nodes
   double largest_grad_u_ = 0;            // a bound on |grad u| (Frobenius) over the lattice
   long long fitted_nodes_ = 0, harmonic_nodes_ = 0;
-  /// Solves the Laplace equation for u at the nodes not `fitted` (values_ there), matching
-  /// the fitted ones and zero on the lattice's faces; returns how many nodes it solved.
-  long long solve_harmonic_part(const std::vector<std::uint8_t>& fitted);
+  /// Solves the Laplace equation for u at the nodes neither `fitted` (values_ there) nor
+  /// `zero` (u = 0 held there: beyond D) nor on the lattice's faces (u = 0), matching the
+  /// held values; returns how many nodes it solved.
+  long long solve_harmonic_part(const std::vector<std::uint8_t>& fitted,
+                                const std::vector<std::uint8_t>& zero);
 
   Eigen::Vector3d node(long long v) const;  ///< node v's position (mm)
   /// u (mm) at the 8 nodes of the cell whose lowest node is v0: corner c at offsets
