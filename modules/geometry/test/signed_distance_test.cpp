@@ -198,6 +198,54 @@ TEST(SignedDistance, GradientBoundHoldsBetweenAnyTwoPointsOfTheBall) {
   EXPECT_FALSE(std::isfinite(SignedDistance(empty, false).gradient_bound({0, 0, 0}, 1.0)));
 }
 
+// The bound over a ball is the largest over the blocks about the cells it touches, not
+// over the grid: a slab (|x| <= 8 mm) beside a cube (the cube's corners the steep places),
+// on a 1 mm grid. Where the slab's distance is the nearest (it varies along x alone, by
+// 1 mm a voxel) the bound is 1; the ball's bound holds between its points wherever it
+// lies, the cube's corners within it or not.
+TEST(SignedDistance, GradientBoundIsTheLargestWhereTheBallLies) {
+  const ImageGeometry g =
+      grid_covering({Eigen::Vector3d::Constant(-30), Eigen::Vector3d::Constant(30)}, 1.0, 0.0);
+  LabelVolume mask(g);
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        const Eigen::Vector3d p = g.index_to_physical(Eigen::Vector3d(i, j, k));
+        const bool cube =
+            p.x() >= 20 && p.x() <= 26 && std::abs(p.y()) <= 3 && std::abs(p.z()) <= 3;
+        mask.at(i, j, k) = std::abs(p.x()) <= 8 || cube;
+      }
+  const SignedDistance d(mask, false);
+  const double global = d.gradient_bound();
+  EXPECT_NEAR(global, std::sqrt(3.0), 1e-9);  // at the cube's corners
+  EXPECT_NEAR(d.gradient_bound(Eigen::Vector3d(-20, 20, 20), 3.0), 1.0, 1e-12);
+  EXPECT_NEAR(d.gradient_bound(Eigen::Vector3d(-15, 0, 0), 5.0), 1.0, 1e-12);
+  // A larger ball is bounded over larger blocks: this one's (32 voxels a side) reach the
+  // cube, 20 mm from its edge.
+  EXPECT_NEAR(d.gradient_bound(Eigen::Vector3d(0, -15, 10), 12.0), global, 1e-12);
+  EXPECT_NEAR(d.gradient_bound(Eigen::Vector3d(23, 3, 3), 1.0), global, 1e-12);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int ball = 0; ball < 200; ++ball) {
+    const Eigen::Vector3d centre = 24.0 * Eigen::Vector3d(u(rng), u(rng), u(rng));
+    const double radius = 0.5 + 2.5 * (1 + u(rng));
+    const double bound = d.gradient_bound(centre, radius);
+    ASSERT_LE(bound, global + 1e-12);
+    for (int trial = 0; trial < 50; ++trial) {
+      Eigen::Vector3d a, b;
+      do
+        a = radius * Eigen::Vector3d(u(rng), u(rng), u(rng));
+      while (a.norm() > radius);
+      do
+        b = radius * Eigen::Vector3d(u(rng), u(rng), u(rng));
+      while (b.norm() > radius);
+      a += centre, b += centre;
+      EXPECT_LE(std::abs(d.at(a) - d.at(b)), bound * (a - b).norm() * (1 + 1e-9) + 1e-12)
+          << centre.transpose() << " r " << radius;
+    }
+  }
+}
+
 // The volume level: the region {at() < level} has the voxels' volume, measured here by
 // uniform random points (4M over the ellipsoid's box: 0.1% standard error), on 1 x 1 x 3
 // mm voxels where the zero level rounds the staircase's edges off by about 2%; every voxel

@@ -50,9 +50,12 @@ class SignedDistance {
   /// that call outside a parallel region), then kept; copies of this distance share it.
   double gradient_bound() const;
   /// A bound on |grad at()| over the ball of `radius_mm` about `p_mm`: at() changes by at
-  /// most this times the distance between two points of the ball. gradient_bound() for a
-  /// ball within the grid; one reaching beyond it adds the distance term's unit slope in
-  /// quadrature.
+  /// most this times the distance between two points of the ball. Within the grid, the
+  /// largest corner bound (as gradient_bound()'s) over the voxels of the cells the ball's
+  /// box touches, read from their maxima by blocks of 4, 8, 16... voxels a side (at most 8
+  /// blocks: a block at least the box's size): a thick-sliced mask's distance is steep
+  /// only where its slices step, and the bound where a ball lies is near 1. One reaching
+  /// beyond the grid: gradient_bound() with the distance term's unit slope in quadrature.
   double gradient_bound(const Eigen::Vector3d& p_mm, double radius_mm) const;
 
   /// The level c (mm) whose region {p : at(p) < c} has the volume of the voxels whose
@@ -94,7 +97,13 @@ class SignedDistance {
     std::once_flag found;
     double value = 0;
   };
-  std::shared_ptr<FoundOnce> gradient_bound_ = std::make_shared<FoundOnce>();
+  /// gradient_bound()'s squared corner bounds, their maxima over blocks of 4 * 2^level
+  /// voxels a side (level 0 first; block (a, b, c) of a level at a + dims.x (b + dims.y c)).
+  struct GradientBlocks : FoundOnce {
+    std::vector<std::vector<double>> largest_sq;
+    std::vector<Eigen::Vector3i> dims;
+  };
+  std::shared_ptr<GradientBlocks> gradient_bound_ = std::make_shared<GradientBlocks>();
   std::shared_ptr<FoundOnce> volume_level_ = std::make_shared<FoundOnce>();
 };
 
