@@ -4,6 +4,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -336,37 +337,66 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
         }
       }
   min_det_ = lo_det, max_det_ = hi_det;
-  // u's largest size and gradient (for pull_back_stretch): at a node, the largest edge
-  // difference either side along each axis, over the spacing.
-  double largest_u = 0, largest_grad_sq = 0;
-#pragma omp parallel for collapse(2) reduction(max : largest_u, largest_grad_sq)
-  for (int k = 0; k < n_[2]; ++k)
-    for (int j = 0; j < n_[1]; ++j)
-      for (int i = 0; i < n_[0]; ++i) {
-        const int at[3] = {i, j, k};
-        const long long v = i + step[1] * j + step[2] * k;
-        const Eigen::Vector3d u = values_[static_cast<size_t>(v)].cast<double>();
-        largest_u = std::max(largest_u, u.norm());
-        double sq = 0;
-        for (int d = 0; d < 3; ++d) {
-          double edge = 0;
-          if (at[d] > 0)
-            edge = (values_[static_cast<size_t>(v - step[d])].cast<double>() - u).squaredNorm();
-          if (at[d] + 1 < n_[d])
-            edge = std::max(
-                edge, (values_[static_cast<size_t>(v + step[d])].cast<double>() - u).squaredNorm());
-          sq += edge;
+  // u's largest size, and its gradient's bound at each node (for pull_back_stretch): the
+  // largest edge difference either side along each axis, over the spacing, kept by blocks.
+  double largest_u = 0;
+  const Eigen::Vector3i dims = geometry::BlockMaxima::finest_dims({n_[0], n_[1], n_[2]});
+  constexpr int kBlock = geometry::BlockMaxima::kFinest;
+  std::vector<double> finest(static_cast<size_t>(dims.prod()), 0.0);
+  // A layer of blocks per thread at a time: each block is written by one thread.
+#pragma omp parallel for schedule(dynamic, 1) reduction(max : largest_u)
+  for (int kb = 0; kb < dims.z(); ++kb)
+    for (int k = kb * kBlock; k < std::min(n_[2], (kb + 1) * kBlock); ++k)
+      for (int j = 0; j < n_[1]; ++j) {
+        double* block_row =
+            finest.data() + static_cast<size_t>(dims.x()) * (j / kBlock + dims.y() * kb);
+        for (int i = 0; i < n_[0]; ++i) {
+          const int at[3] = {i, j, k};
+          const long long v = i + step[1] * j + step[2] * k;
+          const Eigen::Vector3d u = values_[static_cast<size_t>(v)].cast<double>();
+          largest_u = std::max(largest_u, u.norm());
+          double sq = 0;
+          for (int d = 0; d < 3; ++d) {
+            double edge = 0;
+            if (at[d] > 0)
+              edge = (values_[static_cast<size_t>(v - step[d])].cast<double>() - u).squaredNorm();
+            if (at[d] + 1 < n_[d])
+              edge = std::max(
+                  edge,
+                  (values_[static_cast<size_t>(v + step[d])].cast<double>() - u).squaredNorm());
+            sq += edge;
+          }
+          double& largest = block_row[i / kBlock];
+          largest = std::max(largest, sq / (spacing_ * spacing_));
         }
-        largest_grad_sq = std::max(largest_grad_sq, sq / (spacing_ * spacing_));
       }
-  largest_u_mm_ = largest_u, largest_grad_u_ = std::sqrt(largest_grad_sq);
+  grad_u_sq_ = geometry::BlockMaxima({n_[0], n_[1], n_[2]}, std::move(finest));
+  largest_u_mm_ = largest_u, largest_grad_u_ = std::sqrt(grad_u_sq_.largest());
+}
+
+StretchBound Deformation::map_inverse_stretch(const geometry::Aabb& box) const {
+  const geometry::Aabb grown{box.min_mm.array() - largest_u_mm_,
+                             box.max_mm.array() + largest_u_mm_};
+  return map_.inverse_stretch(grown, map_fields_.error());
+}
+
+double Deformation::u_gradient_bound(const geometry::Aabb& box) const {
+  if (grad_u_sq_.empty()) return 0;  // no lattice: u is zero everywhere
+  // The nodes at the corners of the cells the box touches (clamped to the lattice).
+  std::array<int, 3> lo, hi;
+  for (int d = 0; d < 3; ++d) {
+    const double a = std::floor((box.min_mm[d] - origin_[d]) / spacing_);
+    const double b = std::floor((box.max_mm[d] - origin_[d]) / spacing_) + 1;
+    if (!std::isfinite(a) || !std::isfinite(b)) return largest_grad_u_;
+    lo[d] = static_cast<int>(std::clamp(a, 0.0, n_[d] - 1.0));
+    hi[d] = static_cast<int>(std::clamp(b, 0.0, n_[d] - 1.0));
+  }
+  return std::sqrt(grad_u_sq_.over(lo, hi));
 }
 
 StretchBound Deformation::pull_back_stretch(const geometry::Aabb& box) const {
-  const geometry::Aabb grown{box.min_mm.array() - largest_u_mm_,
-                             box.max_mm.array() + largest_u_mm_};
-  StretchBound b = map_.inverse_stretch(grown, map_fields_.error());
-  b.stretch *= 1 + largest_grad_u_;
+  StretchBound b = map_inverse_stretch(box);
+  b.stretch *= 1 + u_gradient_bound(box);
   return b;
 }
 

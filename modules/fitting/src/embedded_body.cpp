@@ -57,15 +57,16 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   if (r.empty()) return out;
   // A voxel q is inside when D(q) = d(phi^-1(q)) - level < 0, d the reference's signed
   // distance. Over a ball of radius h about c, |D(q) - D(c)| <= G (S h + slack), S and
-  // slack phi^-1's stretch bound over the grid's part (pull_back_stretch) and G d's gradient
-  // bound about phi^-1(c): where |D(c)| exceeds that, the whole ball has D(c)'s sign
-  // (geometry/label_by_blocks.h). The labels are those of evaluating every voxel; the
-  // pull-backs are those of a band about the surface.
+  // slack phi^-1's stretch bound (the global map's over the grid's part, u's gradient's over
+  // the ball: Deformation::pull_back_stretch) and G d's gradient bound about phi^-1(c):
+  // where |D(c)| exceeds that, the whole ball has D(c)'s sign (geometry/label_by_blocks.h).
+  // The labels are those of evaluating every voxel; the pull-backs are those of a band
+  // about the surface.
   const geometry::Aabb part{grid.index_to_physical(Eigen::Vector3d(r.lo[0], r.lo[1], r.lo[2])),
                             grid.index_to_physical(Eigen::Vector3d(r.hi[0], r.hi[1], r.hi[2]))};
   const geometry::Aabb box =
       geometry::image_of_box(part, [](const Eigen::Vector3d& p) { return p; });
-  const StretchBound bound = deformation_->pull_back_stretch(box);
+  const StretchBound bound = deformation_->map_inverse_stretch(box);
   // d's gradient bound, found here on threads rather than by the first block that asks.
   const bool bounded = std::isfinite(bound.stretch) && std::isfinite(bound.slack_mm) &&
                        std::isfinite(distance_->gradient_bound());
@@ -75,7 +76,10 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
     const Eigen::Vector3d y = pull_back(centre);
     const double d = y.allFinite() ? distance_->at(y) - level : HUGE_VAL;
     if (!std::isfinite(d)) return geometry::BallSide::unknown;
-    const double reach = bound.stretch * h + bound.slack_mm;
+    const Eigen::Vector3d half = Eigen::Vector3d::Constant(h);
+    const double stretch =
+        bound.stretch * (1 + deformation_->u_gradient_bound({centre - half, centre + half}));
+    const double reach = stretch * h + bound.slack_mm;
     if (std::abs(d) > distance_->gradient_bound(y, reach) * reach)
       return d < 0 ? geometry::BallSide::inside : geometry::BallSide::outside;
     return geometry::BallSide::unknown;

@@ -124,6 +124,13 @@ TEST(Deformation, FallsToTheGlobalMapFarAwayWithoutFolding) {
   EXPECT_GT(phi.min_volume_ratio(), 0.25);
   EXPECT_LT(phi.max_volume_ratio(), 4.0);
   const geometry::Aabb box = phi.local_box();
+  // u's gradient: about nothing within the body (u the same everywhere there), steep where
+  // it falls beyond it; a box's bound is where the box lies.
+  const double falling = phi.u_gradient_bound(box);
+  EXPECT_GT(falling, 0.2);
+  EXPECT_LT(phi.u_gradient_bound({Eigen::Vector3d(3, -2, -2), Eigen::Vector3d(7, 2, 2)}), 1e-3);
+  EXPECT_NEAR(phi.pull_back_stretch(box).stretch,
+              phi.map_inverse_stretch(box).stretch * (1 + falling), 1e-12);
   double previous = phi.pull_back(Eigen::Vector3d(25, 0, 0)).x();
   for (double x = 25.25; x <= box.max_mm.x() + 2; x += 0.25) {
     const double now = phi.pull_back(Eigen::Vector3d(x, 0, 0)).x();

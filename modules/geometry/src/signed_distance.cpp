@@ -2,6 +2,7 @@
 
 #include <Eigen/LU>
 #include <algorithm>
+#include <array>
 #include <climits>
 #include <cmath>
 #include <cstdint>
@@ -136,10 +137,6 @@ bool SignedDistance::all_finite() const {
   return finite;
 }
 
-namespace {
-constexpr int kGradientBlock = 4;  // voxels a side of the finest blocks of corner bounds
-}  // namespace
-
 double SignedDistance::gradient_bound() const {
   std::call_once(gradient_bound_->found, [this] {
     // At a cell's corner the partials are the differences along the cell's three edges;
@@ -148,20 +145,18 @@ double SignedDistance::gradient_bound() const {
     // Beyond the grid a voxel's neighbour is itself (at_voxel clamps): no difference.
     const ImageGeometry& g = geometry_;
     const long long stride[3] = {1, g.size[0], 1LL * g.size[0] * g.size[1]};
-    GradientBlocks& blocks = *gradient_bound_;
-    Eigen::Vector3i dims;
-    for (int a = 0; a < 3; ++a)
-      dims[a] = (g.size[a] + kGradientBlock - 1) / kGradientBlock;
+    constexpr int kBlock = BlockMaxima::kFinest;
+    const Eigen::Vector3i dims = BlockMaxima::finest_dims(g.size);
     std::vector<double> finest(static_cast<size_t>(dims.prod()), 0.0);
     // A layer of blocks per thread at a time: each block is written by one thread.
 #pragma omp parallel for schedule(dynamic, 1)
     for (int kb = 0; kb < dims.z(); ++kb)
-      for (int k = kb * kGradientBlock; k < std::min(g.size[2], (kb + 1) * kGradientBlock); ++k)
+      for (int k = kb * kBlock; k < std::min(g.size[2], (kb + 1) * kBlock); ++k)
         for (int j = 0; j < g.size[1]; ++j) {
           const double* row = values_.data() + g.linear_index(0, j, k);
           const int at_jk[3] = {0, j, k};
           double* block_row =
-              finest.data() + static_cast<size_t>(dims.x()) * (j / kGradientBlock + dims.y() * kb);
+              finest.data() + static_cast<size_t>(dims.x()) * (j / kBlock + dims.y() * kb);
           for (int i = 0; i < g.size[0]; ++i) {
             const double* v = row + i;
             double sq = 0;
@@ -172,28 +167,12 @@ double SignedDistance::gradient_bound() const {
               const double d = std::max(below, above) / g.spacing_mm[a];
               sq += d * d;
             }
-            double& largest = block_row[i / kGradientBlock];
+            double& largest = block_row[i / kBlock];
             largest = std::max(largest, std::isfinite(sq) && std::isfinite(*v) ? sq : HUGE_VAL);
           }
         }
-    blocks.largest_sq.push_back(std::move(finest));
-    blocks.dims.push_back(dims);
-    while (dims.maxCoeff() > 1) {  // each coarser level the maxima of 2 x 2 x 2 blocks
-      const std::vector<double>& fine = blocks.largest_sq.back();
-      const Eigen::Vector3i fd = dims;
-      dims = (fd.array() + 1) / 2;
-      std::vector<double> coarse(static_cast<size_t>(dims.prod()), 0.0);
-      for (int c = 0; c < fd.z(); ++c)
-        for (int b = 0; b < fd.y(); ++b)
-          for (int a = 0; a < fd.x(); ++a) {
-            double& largest =
-                coarse[static_cast<size_t>(a / 2 + dims.x() * (b / 2 + dims.y() * (c / 2)))];
-            largest = std::max(largest, fine[static_cast<size_t>(a + fd.x() * (b + fd.y() * c))]);
-          }
-      blocks.largest_sq.push_back(std::move(coarse));
-      blocks.dims.push_back(dims);
-    }
-    blocks.value = std::sqrt(blocks.largest_sq.back().front());
+    gradient_bound_->largest_sq = BlockMaxima(g.size, std::move(finest));
+    gradient_bound_->value = std::sqrt(gradient_bound_->largest_sq.largest());
   });
   return gradient_bound_->value;
 }
@@ -201,32 +180,18 @@ double SignedDistance::gradient_bound() const {
 double SignedDistance::gradient_bound(const Eigen::Vector3d& p_mm, double radius_mm) const {
   const ImageGeometry& g = geometry_;
   const Eigen::Vector3d idx = to_index_ * (p_mm - g.origin_mm);
-  int lo[3], hi[3];
+  std::array<int, 3> lo, hi;
   for (int c = 0; c < 3; ++c) {
     const double reach = radius_mm / g.spacing_mm[c];
     if (!(idx[c] - reach >= 0) || !(idx[c] + reach <= g.size[c] - 1))
       return std::hypot(gradient_bound(), 1.0);
     // The voxels at the corners of the cells the box [idx - reach, idx + reach] touches.
     lo[c] = static_cast<int>(std::floor(idx[c] - reach));
-    hi[c] = std::min(g.size[c] - 1, static_cast<int>(std::floor(idx[c] + reach)) + 1);
+    hi[c] = static_cast<int>(std::floor(idx[c] + reach)) + 1;
   }
   const double global = gradient_bound();  // the blocks found with it
   if (!std::isfinite(global)) return global;
-  const GradientBlocks& blocks = *gradient_bound_;
-  // The finest level whose blocks are at least the box's size: at most 2 a side.
-  const int extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]}) + 1;
-  size_t level = 0;
-  while (level + 1 < blocks.largest_sq.size() && (kGradientBlock << level) < extent)
-    ++level;
-  const int size = kGradientBlock << level;
-  const Eigen::Vector3i& dims = blocks.dims[level];
-  const std::vector<double>& largest_sq = blocks.largest_sq[level];
-  double sq = 0;
-  for (int c = lo[2] / size; c <= hi[2] / size; ++c)
-    for (int b = lo[1] / size; b <= hi[1] / size; ++b)
-      for (int a = lo[0] / size; a <= hi[0] / size; ++a)
-        sq = std::max(sq, largest_sq[static_cast<size_t>(a + dims.x() * (b + dims.y() * c))]);
-  return std::sqrt(sq);
+  return std::sqrt(gradient_bound_->largest_sq.over(lo, hi));
 }
 
 void SignedDistance::smooth() {

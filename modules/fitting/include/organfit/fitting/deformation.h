@@ -45,6 +45,7 @@
 
 #include "organfit/fitting/global_fit.h"
 #include "organfit/fitting/shear_field_table.h"
+#include "organfit/geometry/block_maxima.h"
 #include "organfit/geometry/image_geometry.h"
 #include "organfit/particles/state.h"
 
@@ -71,10 +72,16 @@ class Deformation {
   double volume_ratio(const Eigen::Vector3d& q_mm) const;
 
   /// How phi^-1 stretches distances over today's points in `box` (mm): |phi^-1(p) -
-  /// phi^-1(q)| <= stretch |p - q| + slack_mm. The global map's inverse bound over the box
-  /// grown by u's largest size, times 1 + u's largest gradient (trilinear: its Frobenius
-  /// norm is largest at a cell's corner, from the cell's edge differences).
+  /// phi^-1(q)| <= stretch |p - q| + slack_mm. map_inverse_stretch(box) times
+  /// 1 + u_gradient_bound(box).
   StretchBound pull_back_stretch(const geometry::Aabb& box) const;
+  /// The global map's part of it: M^-1's bound over the box grown by u's largest size.
+  StretchBound map_inverse_stretch(const geometry::Aabb& box) const;
+  /// A bound on |grad u| (Frobenius, unit-free) over `box` (mm): trilinear, its norm is
+  /// largest at a cell's corner, from the cell's edge differences; the largest over the
+  /// nodes of the cells the box touches, by blocks (geometry/block_maxima.h). u is steep
+  /// where it falls away from the organ, gentle within it.
+  double u_gradient_bound(const geometry::Aabb& box) const;
 
   /// Over the lattice's cells (trilinear gradient at the centres of each cell's eight
   /// octants): the smallest and largest det(grad phi); a value <= 0 means phi folds (not
@@ -113,6 +120,7 @@ class Deformation {
   double min_det_ = 1, max_det_ = 1;     // of det(grad phi^-1) over the lattice's cells
   double largest_u_mm_ = 0;              // |u| over the nodes
   double largest_grad_u_ = 0;            // a bound on |grad u| (Frobenius) over the lattice
+  geometry::BlockMaxima grad_u_sq_;      // its square's bounds at the nodes, by blocks
   long long fitted_nodes_ = 0, harmonic_nodes_ = 0;
   /// Solves the Laplace equation for u at the nodes neither `fitted` (values_ there) nor
   /// `zero` (u = 0 held there: beyond D) nor on the lattice's faces (u = 0), matching the

@@ -6,6 +6,7 @@
 #include <mutex>
 #include <vector>
 
+#include "organfit/geometry/block_maxima.h"
 #include "organfit/geometry/grid_buffer.h"
 #include "organfit/geometry/image_geometry.h"
 
@@ -97,11 +98,9 @@ class SignedDistance {
     std::once_flag found;
     double value = 0;
   };
-  /// gradient_bound()'s squared corner bounds, their maxima over blocks of 4 * 2^level
-  /// voxels a side (level 0 first; block (a, b, c) of a level at a + dims.x (b + dims.y c)).
+  /// gradient_bound() and its voxels' squared corner bounds, by blocks.
   struct GradientBlocks : FoundOnce {
-    std::vector<std::vector<double>> largest_sq;
-    std::vector<Eigen::Vector3i> dims;
+    BlockMaxima largest_sq;
   };
   std::shared_ptr<GradientBlocks> gradient_bound_ = std::make_shared<GradientBlocks>();
   std::shared_ptr<FoundOnce> volume_level_ = std::make_shared<FoundOnce>();
