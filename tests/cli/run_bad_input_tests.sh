@@ -17,19 +17,28 @@ if ! /usr/bin/python3 -c 'import pydicom' 2> /dev/null || [[ ! -d "$data/us-plus
   exit 0
 fi
 /usr/bin/python3 "$src/tests/bad_inputs/make_corpus.py" "$tmp/corpus" "$bin" "$data" > /dev/null || { echo "FAIL corpus generation"; exit 1; }
+# The shared data as it was: each case must leave it so.
+data_before=$(find "$data/us-plus" "$data/us-dicom" -type f -print0 | sort -z | xargs -0 md5sum | md5sum)
 for dir in "$tmp"/corpus/*/; do
   name=$(basename "$dir")
   [[ "$name" == _* ]] && continue  # shared inputs of several cases
   dir=${dir%/}
-  mapfile -t args < <(/usr/bin/python3 -c "
-import json, sys
-c = json.load(open('$dir/case.json'))
-for a in c['args']: print(a.replace('{case}', '$dir').replace('{data}', '$data'))")
-  code=$(/usr/bin/python3 -c "import json; print(json.load(open('$dir/case.json'))['code'])")
-  expect=$(/usr/bin/python3 -c "import json; print(json.load(open('$dir/case.json'))['expect'])")
+  # The case's fields, read by one interpreter (its start-up was most of a case's time):
+  # args, code, expect, secrets and class as shell-quoted assignments.
+  eval "$(/usr/bin/python3 - "$dir" "$data" << 'PY'
+import json, shlex, sys
+case, data = sys.argv[1], sys.argv[2]
+c = json.load(open(case + "/case.json"))
+quote = lambda values: " ".join(shlex.quote(v) for v in values)
+print("args=(" + quote(a.replace("{case}", case).replace("{data}", data) for a in c["args"]) + ")")
+print("code=" + shlex.quote(str(c["code"])))
+print("expect=" + shlex.quote(c["expect"]))
+print("secrets=(" + quote(c.get("secrets", [])) + ")")
+print("class=" + shlex.quote(c.get("class", "other")))
+PY
+)"
   before=$(cd "$dir" && find . -path ./out -prune -o -type f -print0 | sort -z | xargs -0 md5sum | md5sum)
   out_before=$(cd "$dir" && [[ -d out ]] && find out -print0 | sort -z | xargs -0 md5sum 2>&1 | md5sum)
-  data_before=$(find "$data/us-plus" "$data/us-dicom" -type f -print0 | sort -z | xargs -0 md5sum | md5sum)
   timeout 120 "$bin" "${args[@]}" > "$tmp/out.txt" 2> "$tmp/err.txt"
   got=$?
   after=$(cd "$dir" && find . -path ./out -prune -o -type f -print0 | sort -z | xargs -0 md5sum | md5sum)
@@ -37,9 +46,9 @@ for a in c['args']: print(a.replace('{case}', '$dir').replace('{data}', '$data')
   lines=$(grep -c . "$tmp/err.txt")
   why=""
   # No patient name or ID in any output line, and every line bounded.
-  while IFS= read -r secret; do
+  for secret in "${secrets[@]}"; do
     [[ -n "$secret" ]] && grep -qF -- "$secret" "$tmp/out.txt" "$tmp/err.txt" && why="prints the patient's '$secret'"
-  done < <(/usr/bin/python3 -c "import json; print('\n'.join(json.load(open('$dir/case.json')).get('secrets', [])))")
+  done
   longest=$(awk '{ if (length($0) > m) m = length($0) } END { print m + 0 }' "$tmp/err.txt")
   [[ -z "$why" && $longest -gt 600 ]] && why="a stderr line of $longest characters"
   [[ -z "$why" && $got -ne $code ]] && why="exit $got, expected $code"
@@ -55,7 +64,7 @@ for a in c['args']: print(a.replace('{case}', '$dir').replace('{data}', '$data')
   if [[ -z "$why" ]]; then
     echo "ok   bad_input.$name"
     passed=$((passed + 1))
-    classes+=("$(/usr/bin/python3 -c "import json; print(json.load(open('$dir/case.json')).get('class', 'other'))")")
+    classes+=("$class")
   else
     echo "FAIL bad_input.$name: $why: $(head -c 300 "$tmp/err.txt")"
     failed=$((failed + 1))
