@@ -300,20 +300,19 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
   }
   for (const auto f : fitted)
     fitted_nodes_ += f;
-  // u = 0 held at the nodes farther than D from every answered node: the harmonic part
-  // falls over D from where the particles' answers end, as it does towards the lattice's
+  // u where the moving least squares did not answer: harmonic, held at its answers, and
+  // at zero on the lattice's faces and at the nodes farther than D from every answered
+  // node: it falls over D from where the particles' answers end, as it does towards the
   // faces, but also in a concave organ's hollows, which its box encloses (on a liver, a
   // quarter of its box, 7 in 10 of the free nodes the faces alone left).
-  std::vector<std::uint8_t> beyond(static_cast<size_t>(nodes), 0);
   {
     const geometry::GridBuffer<double> d2 = geometry::squared_distance_transform(fitted, lattice);
+    std::vector<std::uint8_t>& held = fitted;  // from here: u given (answered, or zero)
 #pragma omp parallel for schedule(static)
     for (long long v = 0; v < nodes; ++v)
-      beyond[static_cast<size_t>(v)] = d2[static_cast<size_t>(v)] > fall_mm * fall_mm;
+      held[static_cast<size_t>(v)] |= d2[static_cast<size_t>(v)] > fall_mm * fall_mm;
+    harmonic_nodes_ = solve_harmonic_part(held);
   }
-  // u where the moving least squares did not answer: harmonic, zero beyond D and at the
-  // lattice's faces.
-  harmonic_nodes_ = solve_harmonic_part(fitted, beyond);
   // det(grad phi^-1) over the cells, at the centres of their eight octants (within a cell
   // the trilinear gradient varies, and a fold need not reach the centre).
   double lo_det = 1, hi_det = 1;
@@ -337,40 +336,28 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
         }
       }
   min_det_ = lo_det, max_det_ = hi_det;
-  // u's largest size, and its gradient's bound at each node (for pull_back_stretch): the
+  // u's largest size, and its gradient's bound at each node (for on_grid's stretch): the
   // largest edge difference either side along each axis, over the spacing, kept by blocks.
   double largest_u = 0;
-  const Eigen::Vector3i dims = geometry::BlockMaxima::finest_dims({n_[0], n_[1], n_[2]});
-  constexpr int kBlock = geometry::BlockMaxima::kFinest;
-  std::vector<double> finest(static_cast<size_t>(dims.prod()), 0.0);
-  // A layer of blocks per thread at a time: each block is written by one thread.
-#pragma omp parallel for schedule(dynamic, 1) reduction(max : largest_u)
-  for (int kb = 0; kb < dims.z(); ++kb)
-    for (int k = kb * kBlock; k < std::min(n_[2], (kb + 1) * kBlock); ++k)
-      for (int j = 0; j < n_[1]; ++j) {
-        double* block_row =
-            finest.data() + static_cast<size_t>(dims.x()) * (j / kBlock + dims.y() * kb);
-        for (int i = 0; i < n_[0]; ++i) {
-          const int at[3] = {i, j, k};
-          const long long v = i + step[1] * j + step[2] * k;
-          const Eigen::Vector3d u = values_[static_cast<size_t>(v)].cast<double>();
-          largest_u = std::max(largest_u, u.norm());
-          double sq = 0;
-          for (int d = 0; d < 3; ++d) {
-            double edge = 0;
-            if (at[d] > 0)
-              edge = (values_[static_cast<size_t>(v - step[d])].cast<double>() - u).squaredNorm();
-            if (at[d] + 1 < n_[d])
-              edge = std::max(
-                  edge,
-                  (values_[static_cast<size_t>(v + step[d])].cast<double>() - u).squaredNorm());
-            sq += edge;
-          }
-          double& largest = block_row[i / kBlock];
-          largest = std::max(largest, sq / (spacing_ * spacing_));
-        }
-      }
-  grad_u_sq_ = geometry::BlockMaxima({n_[0], n_[1], n_[2]}, std::move(finest));
+#pragma omp parallel for schedule(static) reduction(max : largest_u)
+  for (long long v = 0; v < nodes; ++v)
+    largest_u = std::max(largest_u, values_[static_cast<size_t>(v)].cast<double>().norm());
+  grad_u_sq_ = geometry::BlockMaxima::of({n_[0], n_[1], n_[2]}, [&](int i, int j, int k) {
+    const int at[3] = {i, j, k};
+    const long long v = i + step[1] * j + step[2] * k;
+    const Eigen::Vector3d u = values_[static_cast<size_t>(v)].cast<double>();
+    double sq = 0;
+    for (int d = 0; d < 3; ++d) {
+      double edge = 0;
+      if (at[d] > 0)
+        edge = (values_[static_cast<size_t>(v - step[d])].cast<double>() - u).squaredNorm();
+      if (at[d] + 1 < n_[d])
+        edge = std::max(
+            edge, (values_[static_cast<size_t>(v + step[d])].cast<double>() - u).squaredNorm());
+      sq += edge;
+    }
+    return sq / (spacing_ * spacing_);
+  });
   largest_u_mm_ = largest_u, largest_grad_u_ = std::sqrt(grad_u_sq_.largest());
 }
 
@@ -394,12 +381,6 @@ double Deformation::u_gradient_bound(const geometry::Aabb& box) const {
   return std::sqrt(grad_u_sq_.over(lo, hi));
 }
 
-StretchBound Deformation::pull_back_stretch(const geometry::Aabb& box) const {
-  StretchBound b = map_inverse_stretch(box);
-  b.stretch *= 1 + u_gradient_bound(box);
-  return b;
-}
-
 double Deformation::min_volume_ratio() const {
   return max_det_ > 0 ? 1.0 / max_det_ : -std::numeric_limits<double>::infinity();
 }
@@ -408,13 +389,8 @@ double Deformation::max_volume_ratio() const {
   return min_det_ > 0 ? 1.0 / min_det_ : std::numeric_limits<double>::infinity();
 }
 
-long long Deformation::solve_harmonic_part(const std::vector<std::uint8_t>& fitted,
-                                           const std::vector<std::uint8_t>& zero) {
-  std::vector<std::uint8_t> given(fitted.size());  // u known: fitted, or zero
-#pragma omp parallel for schedule(static)
-  for (long long v = 0; v < static_cast<long long>(given.size()); ++v)
-    given[static_cast<size_t>(v)] = fitted[static_cast<size_t>(v)] | zero[static_cast<size_t>(v)];
-  const detail::LatticeFreeNodes lattice = detail::lattice_free_nodes(n_, given);
+long long Deformation::solve_harmonic_part(const std::vector<std::uint8_t>& held) {
+  const detail::LatticeFreeNodes lattice = detail::lattice_free_nodes(n_, held);
   const size_t nf = lattice.free_nodes.size();
   if (nf == 0) return 0;
   const auto count = static_cast<Eigen::Index>(nf);
@@ -425,13 +401,13 @@ long long Deformation::solve_harmonic_part(const std::vector<std::uint8_t>& fitt
 #pragma omp parallel for schedule(static)
   for (Eigen::Index f = 0; f < count; ++f) {
     const auto at = static_cast<size_t>(f);
-    Eigen::Vector3d held = Eigen::Vector3d::Zero();
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();  // of the held neighbours' values
     for (int d = 0; d < 3; ++d)
       for (int side = 0; side < 2; ++side)
         if (lattice.neighbours[at][static_cast<size_t>(2 * d + side)] < 0)  // 0 on a face
-          held += values_[static_cast<size_t>(lattice.free_nodes[at] + (side ? step[d] : -step[d]))]
-                      .cast<double>();
-    rhs.col(f) = held;
+          sum += values_[static_cast<size_t>(lattice.free_nodes[at] + (side ? step[d] : -step[d]))]
+                     .cast<double>();
+    rhs.col(f) = sum;
     x.col(f).setZero();
   }
   detail::solve_lattice_laplace(lattice, rhs, x);

@@ -58,7 +58,7 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   // A voxel q is inside when D(q) = d(phi^-1(q)) - level < 0, d the reference's signed
   // distance. Over a ball of radius h about c, |D(q) - D(c)| <= G (S h + slack), S and
   // slack phi^-1's stretch bound (the global map's over the grid's part, u's gradient's over
-  // the ball: Deformation::pull_back_stretch) and G d's gradient bound about phi^-1(c):
+  // the ball: Deformation::map_inverse_stretch) and G d's gradient bound about phi^-1(c):
   // where |D(c)| exceeds that, the whole ball has D(c)'s sign (geometry/label_by_blocks.h).
   // The labels are those of evaluating every voxel; the pull-backs are those of a band
   // about the surface.

@@ -129,8 +129,6 @@ TEST(Deformation, FallsToTheGlobalMapFarAwayWithoutFolding) {
   const double falling = phi.u_gradient_bound(box);
   EXPECT_GT(falling, 0.2);
   EXPECT_LT(phi.u_gradient_bound({Eigen::Vector3d(3, -2, -2), Eigen::Vector3d(7, 2, 2)}), 1e-3);
-  EXPECT_NEAR(phi.pull_back_stretch(box).stretch,
-              phi.map_inverse_stretch(box).stretch * (1 + falling), 1e-12);
   double previous = phi.pull_back(Eigen::Vector3d(25, 0, 0)).x();
   for (double x = 25.25; x <= box.max_mm.x() + 2; x += 0.25) {
     const double now = phi.pull_back(Eigen::Vector3d(x, 0, 0)).x();

@@ -145,33 +145,18 @@ double SignedDistance::gradient_bound() const {
     // Beyond the grid a voxel's neighbour is itself (at_voxel clamps): no difference.
     const ImageGeometry& g = geometry_;
     const long long stride[3] = {1, g.size[0], 1LL * g.size[0] * g.size[1]};
-    constexpr int kBlock = BlockMaxima::kFinest;
-    const Eigen::Vector3i dims = BlockMaxima::finest_dims(g.size);
-    std::vector<double> finest(static_cast<size_t>(dims.prod()), 0.0);
-    // A layer of blocks per thread at a time: each block is written by one thread.
-#pragma omp parallel for schedule(dynamic, 1)
-    for (int kb = 0; kb < dims.z(); ++kb)
-      for (int k = kb * kBlock; k < std::min(g.size[2], (kb + 1) * kBlock); ++k)
-        for (int j = 0; j < g.size[1]; ++j) {
-          const double* row = values_.data() + g.linear_index(0, j, k);
-          const int at_jk[3] = {0, j, k};
-          double* block_row =
-              finest.data() + static_cast<size_t>(dims.x()) * (j / kBlock + dims.y() * kb);
-          for (int i = 0; i < g.size[0]; ++i) {
-            const double* v = row + i;
-            double sq = 0;
-            for (int a = 0; a < 3; ++a) {
-              const int t = a == 0 ? i : at_jk[a];
-              const double below = t > 0 ? std::abs(v[-stride[a]] - *v) : 0.0;
-              const double above = t + 1 < g.size[a] ? std::abs(v[stride[a]] - *v) : 0.0;
-              const double d = std::max(below, above) / g.spacing_mm[a];
-              sq += d * d;
-            }
-            double& largest = block_row[i / kBlock];
-            largest = std::max(largest, std::isfinite(sq) && std::isfinite(*v) ? sq : HUGE_VAL);
-          }
-        }
-    gradient_bound_->largest_sq = BlockMaxima(g.size, std::move(finest));
+    gradient_bound_->largest_sq = BlockMaxima::of(g.size, [&](int i, int j, int k) {
+      const double* v = values_.data() + g.linear_index(i, j, k);
+      const int at[3] = {i, j, k};
+      double sq = 0;
+      for (int a = 0; a < 3; ++a) {
+        const double below = at[a] > 0 ? std::abs(v[-stride[a]] - *v) : 0.0;
+        const double above = at[a] + 1 < g.size[a] ? std::abs(v[stride[a]] - *v) : 0.0;
+        const double d = std::max(below, above) / g.spacing_mm[a];
+        sq += d * d;
+      }
+      return std::isfinite(sq) && std::isfinite(*v) ? sq : HUGE_VAL;
+    });
     gradient_bound_->value = std::sqrt(gradient_bound_->largest_sq.largest());
   });
   return gradient_bound_->value;

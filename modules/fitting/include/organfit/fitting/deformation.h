@@ -71,11 +71,10 @@ class Deformation {
   /// volume (1 where phi keeps volume).
   double volume_ratio(const Eigen::Vector3d& q_mm) const;
 
-  /// How phi^-1 stretches distances over today's points in `box` (mm): |phi^-1(p) -
-  /// phi^-1(q)| <= stretch |p - q| + slack_mm. map_inverse_stretch(box) times
-  /// 1 + u_gradient_bound(box).
-  StretchBound pull_back_stretch(const geometry::Aabb& box) const;
-  /// The global map's part of it: M^-1's bound over the box grown by u's largest size.
+  /// How phi^-1 = M^-1(q + u(q)) stretches distances over today's points in `box` (mm) is
+  /// bounded by two parts: |phi^-1(p) - phi^-1(q)| <= stretch (1 + G) |p - q| + slack_mm,
+  /// with stretch and slack M^-1's bound over the box grown by u's largest size (this),
+  /// and G u_gradient_bound over the segment's box (a part as small as a ball about it).
   StretchBound map_inverse_stretch(const geometry::Aabb& box) const;
   /// A bound on |grad u| (Frobenius, unit-free) over `box` (mm): trilinear, its norm is
   /// largest at a cell's corner, from the cell's edge differences; the largest over the
@@ -122,11 +121,10 @@ class Deformation {
   double largest_grad_u_ = 0;            // a bound on |grad u| (Frobenius) over the lattice
   geometry::BlockMaxima grad_u_sq_;      // its square's bounds at the nodes, by blocks
   long long fitted_nodes_ = 0, harmonic_nodes_ = 0;
-  /// Solves the Laplace equation for u at the nodes neither `fitted` (values_ there) nor
-  /// `zero` (u = 0 held there: beyond D) nor on the lattice's faces (u = 0), matching the
-  /// held values; returns how many nodes it solved.
-  long long solve_harmonic_part(const std::vector<std::uint8_t>& fitted,
-                                const std::vector<std::uint8_t>& zero);
+  /// Solves the Laplace equation for u at the nodes neither `held` (values_ there: the
+  /// answers, or zero beyond D) nor on the lattice's faces (u = 0), matching the held
+  /// values; returns how many nodes it solved.
+  long long solve_harmonic_part(const std::vector<std::uint8_t>& held);
 
   Eigen::Vector3d node(long long v) const;  ///< node v's position (mm)
   /// u (mm) at the 8 nodes of the cell whose lowest node is v0: corner c at offsets
