@@ -91,13 +91,15 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   const particles::LennardJones law(model.cohesion);
   const double skin_voxel = common.skin_voxel_r0 * law.r0();
 
-  // The organ before the fit, kept for measures against a truth after it.
-  const double volume_voxel = volume_voxel_mm(rho, model.reference.volume_mm3(1));
+  // The organ before the fit, kept for measures against a truth after it; its volumes are
+  // the model's own (measured at planning).
+  const PlanningVolumes planned = planning_volumes(model);
+  const double volume_voxel = planned.voxel_mm;
   report.volume_voxel_mm = volume_voxel;
   const particles::Positions start = state.x;
   out.before.emplace(organ_body(model));
-  const double v0 = body_volume(start, rho, volume_voxel);
-  report.volume_before_mm3 = out.before->volume_mm3(volume_voxel);
+  const double v0 = planned.particle_body_mm3;
+  report.volume_before_mm3 = planned.organ_mm3;
   preparing(1, "the organ's volume before the fit");
   particles::IntegratorOptions opt = integrator_options_from(model.settings, m);
   opt.damping = common.damping_ratio * 2.0 * std::sqrt(law.stiffness() * m.mass());

@@ -1,9 +1,11 @@
 #include "organfit/fitting/organ_model.h"
 
 #include <cmath>
+#include <cstring>
 #include <optional>
 #include <stdexcept>
 
+#include "organfit/geometry/counter_random.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/particles/cohesion_force.h"
 #include "organfit/particles/lattice_fill.h"
@@ -112,6 +114,46 @@ double planning_volume_level_mm(const OrganModel& m) {
   return m.planning_distance->volume_level();
 }
 
+namespace {
+/// Folds `bytes` bytes at `data` into `h`, 8 at a time (the last word zero-padded).
+std::uint64_t fold_bytes(std::uint64_t h, const void* data, size_t bytes) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (size_t at = 0; at < bytes; at += 8) {
+    std::uint64_t word = 0;
+    std::memcpy(&word, p + at, std::min<size_t>(8, bytes - at));
+    h = geometry::splitmix64(h ^ word);
+  }
+  return geometry::splitmix64(h ^ bytes);
+}
+}  // namespace
+
+std::uint64_t planning_fingerprint(const OrganModel& m) {
+  const geometry::ImageGeometry& g = m.reference.geometry;
+  const double radius = m.model->radius_mm();
+  std::uint64_t h = 0;
+  h = fold_bytes(h, m.state.x.data(), sizeof(double) * static_cast<size_t>(m.state.x.size()));
+  h = fold_bytes(h, &radius, sizeof radius);
+  h = fold_bytes(h, g.size.data(), sizeof(g.size[0]) * 3);
+  h = fold_bytes(h, g.spacing_mm.data(), sizeof(double) * 3);
+  h = fold_bytes(h, g.origin_mm.data(), sizeof(double) * 3);
+  h = fold_bytes(h, g.direction.data(), sizeof(double) * 9);
+  return fold_bytes(h, m.reference.labels.data(), m.reference.labels.size());
+}
+
+PlanningVolumes planning_volumes(const OrganModel& m) {
+  const bool fitted = m.placed.cols() > 0;
+  const std::uint64_t fingerprint = planning_fingerprint(m);
+  if (!fitted && m.saved_planning_volumes && m.saved_planning_volumes->fingerprint == fingerprint)
+    return *m.saved_planning_volumes;
+  PlanningVolumes v;
+  const double rho = m.model->radius_mm();
+  v.voxel_mm = volume_voxel_mm(rho, m.reference.volume_mm3(1));
+  v.organ_mm3 = organ_body(m).volume_mm3(v.voxel_mm);
+  v.particle_body_mm3 = geometry::particle_body_volume_mm3(m.state.x, rho, v.voxel_mm, rho);
+  v.fingerprint = fingerprint;
+  return v;
+}
+
 std::vector<double> planning_surface_distance_mm(const OrganModel& m,
                                                  const Eigen::Matrix3Xd& points_mm) {
   make_planning_organ(m);
@@ -153,6 +195,7 @@ OrganModel copy_model(const OrganModel& m) {
   c.planning_mask = m.planning_mask;  // the same shape and reference: the same cache
   c.planning_distance = m.planning_distance;
   c.saved_planning_level_mm = m.saved_planning_level_mm;
+  c.saved_planning_volumes = m.saved_planning_volumes;
   std::optional<particles::Skeleton> skeleton;
   if (m.skeleton) skeleton = m.skeleton->skeleton();
   build_model_terms(c, skeleton ? &*skeleton : nullptr);

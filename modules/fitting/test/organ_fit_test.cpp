@@ -12,6 +12,7 @@
 #include <random>
 #include <vector>
 
+#include "organfit/geometry/mask_ops.h"
 #include "organfit/particles/lattice_fill.h"
 
 namespace organfit::fitting {
@@ -259,6 +260,43 @@ TEST(FitSpread, UndoesALocalStageThatTearsFoldsOrSwellsTheOrgan) {
     EXPECT_EQ(r.components, 1);
     EXPECT_NEAR(r.volume_ratio, 1.0, 0.005) << "seed " << seed;
   }
+}
+
+// The volumes a fit starts from are the model's own: measured as the fit measured them,
+// taken as kept while their fingerprint is the model's, measured again once a particle or
+// a voxel of the reference moved.
+TEST(PlanningVolumes, AreTheModelsOwnWhileTheyDescribeItAndMeasuredAgainOnceItChanged) {
+  OrganModel m = ellipsoid_model();
+  const PlanningVolumes v = planning_volumes(m);
+  const double rho = m.model->radius_mm();
+  EXPECT_EQ(v.voxel_mm, volume_voxel_mm(rho, m.reference.volume_mm3(1)));
+  EXPECT_EQ(v.organ_mm3, organ_body(m).volume_mm3(v.voxel_mm));
+  EXPECT_EQ(v.particle_body_mm3,
+            geometry::particle_body_volume_mm3(m.state.x, rho, v.voxel_mm, rho));
+  EXPECT_NEAR(v.organ_mm3, 4.0 / 3.0 * M_PI * 18 * 14 * 12, 0.01 * 4.0 / 3.0 * M_PI * 18 * 14 * 12);
+  EXPECT_EQ(v.fingerprint, planning_fingerprint(m));
+  // Kept volumes (made up here, to tell them from a measure) are taken, by the fit too.
+  PlanningVolumes kept = v;
+  kept.organ_mm3 = 1.25 * v.organ_mm3, kept.particle_body_mm3 = 1.5 * v.particle_body_mm3;
+  m.saved_planning_volumes = kept;
+  EXPECT_EQ(planning_volumes(m).organ_mm3, kept.organ_mm3);
+  EXPECT_EQ(planning_volumes(copy_model(m)).particle_body_mm3, kept.particle_body_mm3);
+  EXPECT_EQ(fit_spread(copy_model(m), stretched_surface(1.0, 40), default_spread_options())
+                .report.volume_before_mm3,
+            kept.organ_mm3);
+  // One particle moved by 1 nm, or one voxel of the reference flipped: measured again.
+  OrganModel moved = copy_model(m);
+  moved.state.x(0, 7) += 1e-6;
+  EXPECT_NE(planning_fingerprint(moved), v.fingerprint);
+  EXPECT_EQ(planning_volumes(moved).organ_mm3, v.organ_mm3);
+  OrganModel flipped = copy_model(m);
+  flipped.reference.labels[flipped.reference.labels.size() / 2] ^= 1;
+  EXPECT_NE(planning_fingerprint(flipped), v.fingerprint);
+  EXPECT_EQ(planning_volumes(flipped).particle_body_mm3, v.particle_body_mm3);
+  // A fitted model's are its fit's to measure: never the kept ones.
+  OrganModel fitted = copy_model(m);
+  fitted.placed = fitted.state.x;
+  EXPECT_EQ(planning_volumes(fitted).organ_mm3, v.organ_mm3);
 }
 
 TEST(FitPaper, AFitThatRejectedEveryPointHasNotConverged) {

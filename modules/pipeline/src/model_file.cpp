@@ -4,6 +4,7 @@
 
 #include <Eigen/LU>
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <stdexcept>
@@ -129,6 +130,15 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
   if (m.shape.mask) shape["mask"] = mask_to_json(geometry::cropped_organ(*m.shape.mask));
   j["organ"]["volume_level_mm"] =
       m.shape.mask ? m.shape.level_mm : fitting::planning_volume_level_mm(m);
+  // The organ's and its particles' volumes before a fit (fitting::PlanningVolumes), measured
+  // once at planning rather than at every session; a fitted model's are measured by its fit.
+  if (m.placed.cols() == 0) {
+    const fitting::PlanningVolumes v = fitting::planning_volumes(m);
+    j["organ"]["planning_volumes"] = {{"voxel_mm", v.voxel_mm},
+                                      {"organ_mm3", v.organ_mm3},
+                                      {"particle_body_mm3", v.particle_body_mm3},
+                                      {"fingerprint", fmt::format("{:016x}", v.fingerprint)}};
+  }
   j["shape"] = shape;
   j["ct"] = ct ? nlohmann::json{{"folder", ct->folder},
                                 {"series_instance_uid", ct->series_instance_uid},
@@ -256,6 +266,23 @@ SavedModel load_model(const fs::path& file) {
     m.reference = fitting::reference_body(m.shape, cp.r0_mm);
     if (!m.shape.mask) check_level(m.reference.geometry);
     m.saved_planning_level_mm = level;
+    // Absent in models written before they were kept: measured by the fit then.
+    if (j.at("organ").contains("planning_volumes")) {
+      const auto& v = j.at("organ").at("planning_volumes");
+      fitting::PlanningVolumes p;
+      p.voxel_mm = v.at("voxel_mm").get<double>();
+      p.organ_mm3 = v.at("organ_mm3").get<double>();
+      p.particle_body_mm3 = v.at("particle_body_mm3").get<double>();
+      const std::string print = v.at("fingerprint").get<std::string>();
+      if (print.size() != 16 ||
+          !std::all_of(print.begin(), print.end(), [](char c) { return std::isxdigit(c); }))
+        fail("organ.planning_volumes.fingerprint needs 16 hexadecimal digits");
+      p.fingerprint = std::stoull(print, nullptr, 16);
+      for (const double value : {p.voxel_mm, p.organ_mm3, p.particle_body_mm3})
+        if (!(std::isfinite(value) && value > 0))
+          fail("organ.planning_volumes: voxel_mm, organ_mm3 and particle_body_mm3 must be > 0");
+      m.saved_planning_volumes = p;
+    }
     std::optional<particles::Skeleton> skeleton;
     if (!j.at("skeleton").is_null()) {
       const auto nodes = j.at("skeleton").at("nodes_mm").get<std::vector<double>>();

@@ -73,6 +73,23 @@ TEST_F(ModelFile, SavedAndLoadedModelsAreTheSame) {
   const double eb = back.model.model->compute_forces(back.model.state, fb, true);
   EXPECT_NEAR(ea, eb, 1e-9 * std::abs(ea));
   EXPECT_LT((fa - fb).cwiseAbs().maxCoeff(), 1e-9);
+  // The volumes a fit starts from, measured at planning, kept to the bit and taken by a
+  // session (the loaded model's fingerprint is the saved one's: its positions the same).
+  const fitting::PlanningVolumes planned = fitting::planning_volumes(m);
+  ASSERT_TRUE(back.model.saved_planning_volumes.has_value());
+  const fitting::PlanningVolumes& kept = *back.model.saved_planning_volumes;
+  EXPECT_EQ(kept.voxel_mm, planned.voxel_mm);
+  EXPECT_EQ(kept.organ_mm3, planned.organ_mm3);
+  EXPECT_EQ(kept.particle_body_mm3, planned.particle_body_mm3);
+  EXPECT_EQ(kept.fingerprint, planned.fingerprint);
+  EXPECT_EQ(fitting::planning_fingerprint(back.model), planned.fingerprint);
+  // A file written before they were kept loads; its session measures them.
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["organ"].erase("planning_volumes");
+  std::ofstream(dir_ / "old.json") << j.dump();
+  const SavedModel old = load_model(dir_ / "old.json");
+  EXPECT_FALSE(old.model.saved_planning_volumes.has_value());
+  EXPECT_EQ(fitting::planning_volumes(old.model).organ_mm3, planned.organ_mm3);
 }
 
 TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
@@ -95,6 +112,8 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
   m.state.x.row(1).array() += 0.4;
   save_model(dir_ / "fitted.json", m, "Prostate", OrganLook{}, std::nullopt, {});
   SavedModel back = load_model(dir_ / "fitted.json");
+  // A fitted organ's volumes are not a planning model's: its file keeps none.
+  EXPECT_FALSE(back.model.saved_planning_volumes.has_value());
   EXPECT_EQ(back.model.global_map.fields.weights, m.global_map.fields.weights);
   EXPECT_EQ(back.model.global_map.flow.potentials, m.global_map.flow.potentials);
   EXPECT_EQ(back.model.global_map.flow.count, m.global_map.flow.count);
@@ -261,6 +280,14 @@ TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
   j["organ"]["volume_level_mm"] = 40.0;  // farther than a voxel: not this organ's level
   EXPECT_EQ(error_of(j.dump()),
             f + ": organ.volume_level_mm: not finite, or farther from 0 than a voxel");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["organ"]["planning_volumes"]["organ_mm3"] = -5.0;
+  EXPECT_EQ(error_of(j.dump()), f + ": organ.planning_volumes: voxel_mm, organ_mm3 and "
+                                    "particle_body_mm3 must be > 0");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["organ"]["planning_volumes"]["fingerprint"] = "-00000000000001f";
+  EXPECT_EQ(error_of(j.dump()),
+            f + ": organ.planning_volumes.fingerprint needs 16 hexadecimal digits");
   EXPECT_NE(error_of("").find(f + ": not an organfit model"), std::string::npos);
 }
 
