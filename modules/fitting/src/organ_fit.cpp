@@ -111,19 +111,28 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   double residual_floor = 0;
   // The reference's signed distance, unsmoothed (the re-fill's depth; for an analytic
   // body it is the planning organ's, made by organ_body above) and smoothed (its surface
-  // samples and the global fit's distance).
-  // Both are let go before the fit loop (8 bytes a reference voxel each: 640 MB apiece
-  // for a million-particle body's reference); the organ bodies keep the planning organ's.
+  // samples, and an analytic body's distance in the global fit).
+  // Both are let go before the fit loop at the latest (8 bytes a reference voxel each: 640
+  // MB apiece for a million-particle body's reference); the organ bodies keep the planning
+  // organ's.
   std::shared_ptr<const geometry::SignedDistance> reference_exact =
       model.shape.mask || !model.planning_distance
           ? std::make_shared<const geometry::SignedDistance>(model.reference, false)
           : model.planning_distance;
   std::optional<const geometry::SignedDistance> smoothed_distance(reference_exact->smoothed());
-  const geometry::SignedDistance& reference_distance = *smoothed_distance;
+  // Its surface samples, made once: every boundary voxel's for the spread fit (the surface
+  // feet; one in 2 for the global map), one in 4 for the residual floor. The global fit
+  // measures the points against a mask organ's own distance (below), so a mask organ's
+  // smoothed reference distance is let go here, before the global stage's grids are made:
+  // every byte of it is memory first touched at every session (75 MB on a 1.5 L liver).
+  const SurfaceSamples reference_samples =
+      reference_surface(model.reference, *smoothed_distance, spread ? 1 : 4);
+  const bool organ_has_own_distance = model.shape.mask && model.shape.distance;
+  if (organ_has_own_distance) smoothed_distance.reset();
   {
     SkinDetector skin0(skin_voxel, rho);
     skin0.update(start);
-    const SurfaceSamples ref = reference_surface(model.reference, reference_distance, 4);
+    const SurfaceSamples ref = spread ? reference_samples.one_in(4) : reference_samples;
     std::vector<AttractivePoint> probes;
     for (Eigen::Index j = 0; j < ref.points.cols(); ++j)
       probes.push_back({ref.points.col(j), 1.0});
@@ -168,7 +177,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     // quadratic shears and shear fields) fitted to the points; the body re-made in its
     // mapped shape.
     const auto started = std::chrono::steady_clock::now();
-    const SurfaceSamples samples = reference_surface(model.reference, reference_distance, 2);
+    const SurfaceSamples samples = reference_samples.one_in(2);
     AffineFitOptions global_options = spread->global;
     // The points' noise is what the fit accepts: the scale of fits equally good.
     global_options.noise_mm = spread->fit.residual_tolerance_mm;
@@ -179,12 +188,12 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     // left as it was above the stated noise and let flexible maps fit the difference
     // (docs/decisions.md). An analytic body's reference is its organ.
     std::optional<const geometry::SignedDistance> organ_distance;
-    if (model.shape.mask && model.shape.distance)
+    if (organ_has_own_distance)
       organ_distance.emplace(model.shape.distance->smoothed_within_slices(model.shape.level_mm));
     std::vector<GlobalMap> equally_good;
     const GlobalMap map =
         fit_global_map(samples, points, global_options,
-                       organ_distance ? &*organ_distance : &reference_distance, &equally_good);
+                       organ_distance ? &*organ_distance : &*smoothed_distance, &equally_good);
     if (map.refused) {
       report.refused = true;
       report.refused_move_mm = map.refused_move_mm;
@@ -253,9 +262,8 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     // The surface the local stage fits is the organ's embedded surface (the reference
     // moved with the particles, embedded_body.h): each particle's foot on the mapped
     // reference surface and the tangent plane there replace the balls.
-    fo.surface_feet = surface_feet(
-        state.x, map_surface(map, reference_surface(model.reference, reference_distance, 1)),
-        3.0 * model.lattice_spacing_mm);
+    fo.surface_feet =
+        surface_feet(state.x, map_surface(map, reference_samples), 3.0 * model.lattice_spacing_mm);
     term.set_surface_feet(fo.surface_feet);
     skin_of = [&term](const particles::Positions&) -> const std::vector<int>& {
       return term.skin().skin();

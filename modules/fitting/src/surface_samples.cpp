@@ -59,15 +59,18 @@ SurfaceSamples reference_surface(const geometry::LabelVolume& reference,
   const long long runs = (static_cast<long long>(voxels.size()) + kRun - 1) / kRun;
   std::vector<std::vector<Eigen::Vector3d>> run_pts(static_cast<size_t>(runs)),
       run_nrm(static_cast<size_t>(runs));
+  std::vector<std::vector<std::uint64_t>> run_keys(static_cast<size_t>(runs));
 #pragma omp parallel for schedule(dynamic, 1)
   for (long long r = 0; r < runs; ++r) {
     auto& pts = run_pts[static_cast<size_t>(r)];
     auto& nrm = run_nrm[static_cast<size_t>(r)];
+    auto& keys = run_keys[static_cast<size_t>(r)];
     const size_t end = std::min(voxels.size(), static_cast<size_t>((r + 1) * kRun));
     for (size_t at = static_cast<size_t>(r * kRun); at < end; ++at) {
       const Eigen::Vector3i& voxel = voxels[at];
       const int i = voxel.x(), j = voxel.y(), k = voxel.z();
-      if (!kept_one_in(stride, static_cast<std::uint64_t>(g.linear_index(i, j, k)))) continue;
+      const auto key = static_cast<std::uint64_t>(g.linear_index(i, j, k));
+      if (!kept_one_in(stride, key)) continue;
       Eigen::Vector3d grad((sd(i + 1, j, k) - sd(i - 1, j, k)) / (2 * g.spacing_mm.x()),
                            (sd(i, j + 1, k) - sd(i, j - 1, k)) / (2 * g.spacing_mm.y()),
                            (sd(i, j, k + 1) - sd(i, j, k - 1)) / (2 * g.spacing_mm.z()));
@@ -76,21 +79,46 @@ SurfaceSamples reference_surface(const geometry::LabelVolume& reference,
       const Eigen::Vector3d n = grad.normalized();
       pts.push_back(g.index_to_physical(voxel.cast<double>()) - sd(i, j, k) * n);
       nrm.push_back(n);
+      keys.push_back(key);
     }
   }
-  std::vector<Eigen::Vector3d> pts, nrm;
-  for (long long r = 0; r < runs; ++r) {
-    pts.insert(pts.end(), run_pts[static_cast<size_t>(r)].begin(),
-               run_pts[static_cast<size_t>(r)].end());
-    nrm.insert(nrm.end(), run_nrm[static_cast<size_t>(r)].begin(),
-               run_nrm[static_cast<size_t>(r)].end());
-  }
+  // The runs joined in order, each straight into its columns (and let go).
+  std::vector<Eigen::Index> first(static_cast<size_t>(runs) + 1, 0);
+  for (long long r = 0; r < runs; ++r)
+    first[static_cast<size_t>(r) + 1] =
+        first[static_cast<size_t>(r)] +
+        static_cast<Eigen::Index>(run_pts[static_cast<size_t>(r)].size());
   SurfaceSamples s;
-  s.points.resize(3, static_cast<Eigen::Index>(pts.size()));
-  s.normals.resize(3, static_cast<Eigen::Index>(pts.size()));
-  for (size_t q = 0; q < pts.size(); ++q)
-    s.points.col(q) = pts[q], s.normals.col(q) = nrm[q];
+  s.points.resize(3, first.back());
+  s.normals.resize(3, first.back());
+  s.keys.resize(static_cast<size_t>(first.back()));
+  for (long long r = 0; r < runs; ++r) {
+    const auto at = static_cast<size_t>(r);
+    for (size_t q = 0; q < run_pts[at].size(); ++q) {
+      const Eigen::Index c = first[at] + static_cast<Eigen::Index>(q);
+      s.points.col(c) = run_pts[at][q];
+      s.normals.col(c) = run_nrm[at][q];
+      s.keys[static_cast<size_t>(c)] = run_keys[at][q];
+    }
+    std::vector<Eigen::Vector3d>().swap(run_pts[at]);
+    std::vector<Eigen::Vector3d>().swap(run_nrm[at]);
+  }
   return s;
+}
+
+SurfaceSamples SurfaceSamples::one_in(int stride) const {
+  SurfaceSamples out;
+  std::vector<Eigen::Index> kept;
+  for (size_t q = 0; q < keys.size(); ++q)
+    if (kept_one_in(stride, keys[q])) kept.push_back(static_cast<Eigen::Index>(q));
+  out.points.resize(3, static_cast<Eigen::Index>(kept.size()));
+  out.normals.resize(3, static_cast<Eigen::Index>(kept.size()));
+  for (size_t q = 0; q < kept.size(); ++q) {
+    out.points.col(static_cast<Eigen::Index>(q)) = points.col(kept[q]);
+    out.normals.col(static_cast<Eigen::Index>(q)) = normals.col(kept[q]);
+    out.keys.push_back(keys[static_cast<size_t>(kept[q])]);
+  }
+  return out;
 }
 
 }  // namespace organfit::fitting

@@ -288,13 +288,20 @@ TEST(GlobalFit, IsTheSameWhereverTheOriginLies) {
 
 // One in `stride` boundary voxels, spread over the whole surface: every face of the cube
 // keeps its share and the samples' centre stays at the cube's (counting in raster order,
-// 1 in 2 kept the -x face and none of the +x face).
+// 1 in 2 kept the -x face and none of the +x face); the same as one in `stride` of every
+// voxel's samples (SurfaceSamples::one_in).
 TEST(ReferenceSurface, OneInStrideSamplesCoverEveryFaceEvenly) {
   const geometry::LabelVolume mask = cube_mask();
   const geometry::SignedDistance distance(mask);
   const SurfaceSamples all = reference_surface(mask, distance, 1);
   for (int stride : {2, 4}) {
     const SurfaceSamples some = reference_surface(mask, distance, stride);
+    // The same samples as one in `stride` of all of them, to the bit and in order.
+    const SurfaceSamples thinned = all.one_in(stride);
+    EXPECT_EQ(thinned.points, some.points);
+    EXPECT_EQ(thinned.normals, some.normals);
+    EXPECT_EQ(thinned.keys, some.keys);
+    EXPECT_EQ(some.keys.size(), static_cast<size_t>(some.points.cols()));
     EXPECT_NEAR(static_cast<double>(some.points.cols()),
                 static_cast<double>(all.points.cols()) / stride, 0.05 * all.points.cols() / stride);
     EXPECT_LT(some.points.rowwise().mean().norm(), 0.5) << some.points.rowwise().mean().transpose();

@@ -25,18 +25,15 @@ Eigen::Matrix3d index_map(const ImageGeometry& g) {
 SignedDistance::SignedDistance(const LabelVolume& mask, bool smooth_it)
     : geometry_(mask.geometry), to_index_(index_map(mask.geometry)) {
   // One grid of doubles beside the mask (a million-particle body's reference has 80M
-  // voxels, 640 MB a grid).
+  // voxels, 640 MB a grid); the transform takes any nonzero label as inside.
   const long long total = static_cast<long long>(mask.labels.size());
-  std::vector<std::uint8_t> inside(mask.labels.size());
-#pragma omp parallel for schedule(static)
-  for (long long v = 0; v < total; ++v)
-    inside[v] = mask.labels[v] != 0;
+  const std::vector<std::uint8_t>& inside = mask.labels;
   values_ = squared_distance_across(inside, geometry_);
   const double h = 0.5 * geometry_.spacing_mm.minCoeff();
   // An empty mask (or a full one) has no boundary: the transform's infinity stays.
 #pragma omp parallel for schedule(static)
   for (long long v = 0; v < total; ++v)
-    values_[v] = inside[v] ? -(std::sqrt(values_[v]) - h) : std::sqrt(values_[v]) - h;
+    values_[v] = inside[v] != 0 ? -(std::sqrt(values_[v]) - h) : std::sqrt(values_[v]) - h;
   if (smooth_it) smooth();
 }
 

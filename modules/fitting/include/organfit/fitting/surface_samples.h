@@ -3,6 +3,7 @@
 // body's skin, or from its reference body's mask through the signed distance (denser and
 // smoother). What the global map is fitted and judged on.
 #include <Eigen/Core>
+#include <cstdint>
 #include <vector>
 
 #include "organfit/geometry/image_geometry.h"
@@ -16,6 +17,12 @@ namespace organfit::fitting {
 struct SurfaceSamples {
   Eigen::Matrix3Xd points;   ///< mm
   Eigen::Matrix3Xd normals;  ///< unit, outward
+  /// What one_in chooses by: a reference surface's sample's voxel (its linear index); empty
+  /// for a particle body's.
+  std::vector<std::uint64_t> keys;
+  /// One in `stride` of these samples, in their order, chosen by key as reference_surface
+  /// chooses its voxels: reference_surface(r, d, 1).one_in(s) is reference_surface(r, d, s).
+  SurfaceSamples one_in(int stride) const;
 };
 SurfaceSamples surface_samples(const particles::Positions& x, const std::vector<int>& skin,
                                double radius_mm);
