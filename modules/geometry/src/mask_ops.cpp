@@ -26,8 +26,11 @@ void edt_1d(const double* f, double* d, int n, double step, std::vector<int>& v,
     if (f[q] == kInf) continue;
     const double pq = q * step;
     const double gq = f[q] + pq * pq;
+    // The intersection s with the envelope's last parabola, popped while s <= z[k]. The
+    // last one computed is the new parabola's z (the same quotient: not divided again).
+    double s = -kInf;
     while (k >= 0) {
-      const double s = (gq - g[k]) / (2 * pq - 2 * (v[k] * step));
+      s = (gq - g[k]) / (2 * pq - 2 * (v[k] * step));
       if (s <= z[k]) {
         --k;
       } else {
@@ -37,7 +40,7 @@ void edt_1d(const double* f, double* d, int n, double step, std::vector<int>& v,
     ++k;
     v[k] = q;
     g[k] = gq;
-    z[k] = k == 0 ? -kInf : (gq - g[k - 1]) / (2 * pq - 2 * (v[k - 1] * step));
+    z[k] = k == 0 ? -kInf : s;
     z[k + 1] = kInf;
   }
   if (k < 0) {
@@ -126,9 +129,17 @@ GridBuffer<double> distance_to_other_side(const std::vector<std::uint8_t>& insid
     const double step = g.spacing_mm[axis];
     along_lines(g, axis, [&](long long base, long long stride, int n, LineScratch& s) {
       int inside_count = 0;
+      double* const line = d.data() + base;
+      const std::uint8_t* const side = inside.data() + base;
+      // The lines are walked in the order of the smaller stride: the next lines' values
+      // share these cache lines, or lie in the next ones, fetched ahead here (8 doubles on,
+      // within the grid).
+      const long long ahead =
+          base + (n - 1) * stride + 8 < static_cast<long long>(d.size()) ? 8 : 0;
       for (int t = 0; t < n; ++t) {
-        s.values[t] = d[base + t * stride];
-        s.inside[t] = inside[static_cast<size_t>(base + t * stride)] ? 1 : 0;
+        __builtin_prefetch(line + t * stride + ahead);
+        s.values[t] = line[t * stride];
+        s.inside[t] = side[t * stride] ? 1 : 0;
         inside_count += s.inside[t];
       }
       // The distance to the inside (asked outside), then to the outside (asked inside).
@@ -143,7 +154,7 @@ GridBuffer<double> distance_to_other_side(const std::vector<std::uint8_t>& insid
         if (!finite) continue;  // infinite throughout: the transform is itself
         edt_1d(s.f.data(), s.out.data(), n, step, s.v, s.z, s.g);
         for (int t = 0; t < n; ++t)
-          if (s.inside[t] == here) d[base + t * stride] = s.out[t];
+          if (s.inside[t] == here) line[t * stride] = s.out[t];
       }
     });
   }
