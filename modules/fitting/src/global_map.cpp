@@ -553,6 +553,7 @@ SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface) 
   SurfaceSamples out;
   out.points.resize(3, surface.points.cols());
   out.normals.resize(3, surface.points.cols());
+  out.keys = surface.keys;                   // the same samples, moved
   const double h = 1e-3;                     // mm: the shears' second derivatives are ~1/100 mm^-1
   const ShearFieldTable fields(map.fields);  // 7 maps a sample: a lung's 630,000
 #pragma omp parallel for schedule(static)

@@ -1,5 +1,6 @@
 #include "organfit/fitting/organ_model.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <optional>

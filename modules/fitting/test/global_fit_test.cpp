@@ -478,7 +478,7 @@ TEST(SampleGrid, NearestEachGivesEveryQueryItsOwnSearchsAnswer) {
 
 TEST(MapSurface, TurnsNormalsToStayNormalToTheMappedSurface) {
   // A stretch and all the shears: a mapped tangent stays orthogonal to the mapped normal,
-  // and for the affine part alone the normal is a^-T n.
+  // and for the affine part alone the normal is a^-T n; the samples keep their keys.
   const SurfaceSamples samples = ellipsoid_mask_surface();
   GlobalMap map;
   map.affine.a = Eigen::DiagonalMatrix<double, 3>(1.3, 1 / std::sqrt(1.3), 1 / std::sqrt(1.3));
@@ -488,6 +488,11 @@ TEST(MapSurface, TurnsNormalsToStayNormalToTheMappedSurface) {
     map.shears.c(c) = 0.004 * (c % 2 ? 1 : -1) * (1 + c / 3);
   const SurfaceSamples mapped = map_surface(map, samples);
   ASSERT_EQ(mapped.points.cols(), samples.points.cols());
+  // The same samples, moved: their keys kept, so that one in 2 of them mapped is one in 2
+  // mapped.
+  ASSERT_FALSE(samples.keys.empty());
+  EXPECT_EQ(mapped.keys, samples.keys);
+  EXPECT_EQ(mapped.one_in(2).points, map_surface(map, samples.one_in(2)).points);
   double worst = 0;
   for (Eigen::Index j = 0; j < samples.points.cols(); j += 7) {
     const Eigen::Vector3d n = samples.normals.col(j);

@@ -192,7 +192,7 @@ struct GlobalMap {
 
 /// The surface samples moved by `map` (its fields from their table, shear_field_table.h):
 /// points mapped, normals turned by the inverse transpose of its Jacobian (by central
-/// differences) and made unit again.
+/// differences) and made unit again; their keys kept.
 SurfaceSamples map_surface(const GlobalMap& map, const SurfaceSamples& surface);
 
 /// How much `map` changes the shape and orientation of the body whose surface is sampled
