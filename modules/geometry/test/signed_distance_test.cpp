@@ -138,6 +138,24 @@ TEST(SignedDistance, IsTheDistanceToABallsSurfaceWithinTheVoxelsStaircase) {
   }
 }
 
+// Any nonzero label is inside: a mask of label 2 has label 1's distance, voxel for voxel.
+TEST(SignedDistance, TakesAnyNonzeroLabelAsInside) {
+  const LabelVolume ones = rotated_ball();
+  LabelVolume twos = ones;
+  for (auto& v : twos.labels)
+    v = static_cast<std::uint8_t>(2 * v);
+  const SignedDistance a(ones, false), b(twos, false);
+  const ImageGeometry& g = ones.geometry;
+  long long inside = 0;
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i) {
+        ASSERT_EQ(a.at_voxel(i, j, k), b.at_voxel(i, j, k)) << i << " " << j << " " << k;
+        inside += a.at_voxel(i, j, k) < 0;
+      }
+  EXPECT_EQ(inside, ones.count(1));
+}
+
 TEST(SignedDistance, GradientIsTheInterpolantsDerivative) {
   const SignedDistance d(rotated_ball());
   const Eigen::Vector3d p(3.1, -6.27, 4.43);  // inside a cell, off its faces
