@@ -358,7 +358,7 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
     }
     return sq / (spacing_ * spacing_);
   });
-  largest_u_mm_ = largest_u, largest_grad_u_ = std::sqrt(grad_u_sq_.largest());
+  largest_u_mm_ = largest_u;
 }
 
 StretchBound Deformation::map_inverse_stretch(const geometry::Aabb& box) const {
@@ -374,7 +374,7 @@ double Deformation::u_gradient_bound(const geometry::Aabb& box) const {
   for (int d = 0; d < 3; ++d) {
     const double a = std::floor((box.min_mm[d] - origin_[d]) / spacing_);
     const double b = std::floor((box.max_mm[d] - origin_[d]) / spacing_) + 1;
-    if (!std::isfinite(a) || !std::isfinite(b)) return largest_grad_u_;
+    if (!std::isfinite(a) || !std::isfinite(b)) return std::sqrt(grad_u_sq_.largest());
     lo[d] = static_cast<int>(std::clamp(a, 0.0, n_[d] - 1.0));
     hi[d] = static_cast<int>(std::clamp(b, 0.0, n_[d] - 1.0));
   }

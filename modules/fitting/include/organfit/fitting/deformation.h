@@ -118,8 +118,7 @@ class Deformation {
   std::vector<Eigen::Vector3f> values_;  // u (mm)
   double min_det_ = 1, max_det_ = 1;     // of det(grad phi^-1) over the lattice's cells
   double largest_u_mm_ = 0;              // |u| over the nodes
-  double largest_grad_u_ = 0;            // a bound on |grad u| (Frobenius) over the lattice
-  geometry::BlockMaxima grad_u_sq_;      // its square's bounds at the nodes, by blocks
+  geometry::BlockMaxima grad_u_sq_;      // |grad u|^2 bounds (Frobenius) at the nodes, by blocks
   long long fitted_nodes_ = 0, harmonic_nodes_ = 0;
   /// Solves the Laplace equation for u at the nodes neither `held` (values_ there: the
   /// answers, or zero beyond D) nor on the lattice's faces (u = 0), matching the held
