@@ -95,13 +95,16 @@ void make_planning_organ(const OrganModel& m) {
 }
 }  // namespace
 
+bool carries_fit(const OrganModel& m) {
+  return m.placed.cols() == m.state.x.cols() && m.placed.cols() > 0;
+}
+
 EmbeddedBody organ_body(const OrganModel& m) {
-  const bool fitted = m.placed.cols() == m.state.x.cols() && m.placed.cols() > 0;
   make_planning_organ(m);
   return EmbeddedBody(
       m.planning_mask, m.planning_distance,
-      std::make_shared<const Deformation>(m.global_map, fitted ? m.placed : m.state.x, m.state.x,
-                                          embedding_support_mm(m.lattice_spacing_mm)));
+      std::make_shared<const Deformation>(m.global_map, carries_fit(m) ? m.placed : m.state.x,
+                                          m.state.x, embedding_support_mm(m.lattice_spacing_mm)));
 }
 
 EmbeddedBody organ_body(const OrganModel& m, std::shared_ptr<const Deformation> deformation) {
@@ -142,9 +145,9 @@ std::uint64_t planning_fingerprint(const OrganModel& m) {
 }
 
 PlanningVolumes planning_volumes(const OrganModel& m) {
-  const bool fitted = m.placed.cols() > 0;
   const std::uint64_t fingerprint = planning_fingerprint(m);
-  if (!fitted && m.saved_planning_volumes && m.saved_planning_volumes->fingerprint == fingerprint)
+  if (!carries_fit(m) && m.saved_planning_volumes &&
+      m.saved_planning_volumes->fingerprint == fingerprint)
     return *m.saved_planning_volumes;
   PlanningVolumes v;
   const double rho = m.model->radius_mm();

@@ -132,7 +132,7 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
       m.shape.mask ? m.shape.level_mm : fitting::planning_volume_level_mm(m);
   // The organ's and its particles' volumes before a fit (fitting::PlanningVolumes), measured
   // once at planning rather than at every session; a fitted model's are measured by its fit.
-  if (m.placed.cols() == 0) {
+  if (!fitting::carries_fit(m)) {
     const fitting::PlanningVolumes v = fitting::planning_volumes(m);
     j["organ"]["planning_volumes"] = {{"voxel_mm", v.voxel_mm},
                                       {"organ_mm3", v.organ_mm3},
@@ -154,7 +154,7 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
     j["skeleton"] = nullptr;
   }
   // A fitted model: how its reference follows the particles (fitting/embedded_body.h).
-  if (m.placed.cols() == m.state.x.cols() && m.placed.cols() > 0) {
+  if (fitting::carries_fit(m)) {
     const auto& map = m.global_map;
     j["embedding"] = {
         {"placed_positions_mm", flat(m.placed)},

@@ -110,6 +110,10 @@ void add_skeleton_term(OrganModel& model, const particles::Skeleton& skeleton);
 /// rebuilt; the planning organ's cache shared): what a fit may move without moving this.
 OrganModel copy_model(const OrganModel& model);
 
+/// Whether the model carries a fit: its particles were placed by a global map (`placed`,
+/// one per particle) and its reference follows them (embedded_body.h).
+bool carries_fit(const OrganModel& model);
+
 /// The organ as the model carries it now: the reference body moved with the particles
 /// (at rest, the reference itself). What is exported, reported and measured.
 EmbeddedBody organ_body(const OrganModel& model);
