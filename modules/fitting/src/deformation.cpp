@@ -130,9 +130,18 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& s
             const double s = d2 / h2;
             if (s >= 1) continue;
             const double w = (1 - s) * (1 - s) * (1 - s);
-            const Eigen::Vector4d phi(1, d.x() / h, d.y() / h, d.z() / h);
-            m.noalias() += w * phi * phi.transpose();
-            r.noalias() += w * phi * sorted.back.col(k).transpose();
+            // m += w phi phi^T and r += w phi back^T, phi = (1, d / h), entry by entry in
+            // registers (as Eigen's outer product rounds them: (w phi_i) phi_j), not
+            // through a vector built on the stack and read back whole.
+            const double phi[4] = {1, d.x() / h, d.y() / h, d.z() / h};
+            const double* back = sorted.back.data() + 3 * k;
+            for (int i = 0; i < 4; ++i) {
+              const double wi = w * phi[i];
+              for (int j = 0; j < 4; ++j)
+                m(i, j) += wi * phi[j];
+              for (int j = 0; j < 3; ++j)
+                r(i, j) += wi * back[j];
+            }
             ++count;
           }
         }

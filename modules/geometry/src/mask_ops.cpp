@@ -17,20 +17,23 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
 /// 1D squared distance transform of f (sampled `step` apart) into d, in place of the
-/// lower envelope of parabolas. v, z and g are scratch of size n, n+1 and n: g[k] holds
-/// f + p^2 at the envelope's k-th parabola, computed once rather than at every comparison.
-void edt_1d(const double* f, double* d, int n, double step, std::vector<int>& v,
+/// lower envelope of parabolas. f[0] is the line's sample `first`: positions are the
+/// line's, (first + q) step, so that a piece of a line gives the same numbers as the
+/// whole line where the piece decides them. v, z and g are scratch of size n, n+1 and n:
+/// g[k] holds f + p^2 at the envelope's k-th parabola, computed once rather than at every
+/// comparison.
+void edt_1d(const double* f, double* d, int first, int n, double step, std::vector<int>& v,
             std::vector<double>& z, std::vector<double>& g) {
   int k = -1;
   for (int q = 0; q < n; ++q) {
     if (f[q] == kInf) continue;
-    const double pq = q * step;
+    const double pq = (first + q) * step;
     const double gq = f[q] + pq * pq;
     // The intersection s with the envelope's last parabola, popped while s <= z[k]. The
     // last one computed is the new parabola's z (the same quotient: not divided again).
     double s = -kInf;
     while (k >= 0) {
-      s = (gq - g[k]) / (2 * pq - 2 * (v[k] * step));
+      s = (gq - g[k]) / (2 * pq - 2 * ((first + v[k]) * step));
       if (s <= z[k]) {
         --k;
       } else {
@@ -49,7 +52,7 @@ void edt_1d(const double* f, double* d, int n, double step, std::vector<int>& v,
   }
   int j = 0;
   for (int q = 0; q < n; ++q) {
-    while (z[j + 1] < q * step)
+    while (z[j + 1] < (first + q) * step)
       ++j;
     const double dq = (q - v[j]) * step;
     d[q] = dq * dq + f[v[j]];
@@ -128,7 +131,6 @@ GridBuffer<double> distance_to_other_side(const std::vector<std::uint8_t>& insid
   for (int axis = 1; axis < 3; ++axis) {
     const double step = g.spacing_mm[axis];
     along_lines(g, axis, [&](long long base, long long stride, int n, LineScratch& s) {
-      int inside_count = 0;
       double* const line = d.data() + base;
       const std::uint8_t* const side = inside.data() + base;
       // The lines are walked in the order of the smaller stride: the next lines' values
@@ -140,21 +142,30 @@ GridBuffer<double> distance_to_other_side(const std::vector<std::uint8_t>& insid
         __builtin_prefetch(line + t * stride + ahead);
         s.values[t] = line[t * stride];
         s.inside[t] = side[t * stride] ? 1 : 0;
-        inside_count += s.inside[t];
       }
-      // The distance to the inside (asked outside), then to the outside (asked inside).
-      for (int here = 0; here < 2; ++here) {
-        const int asked = !asked_side[here] ? 0 : here ? inside_count : n - inside_count;
-        if (asked == 0) continue;  // nothing of this line asks it
-        bool finite = asked < n;   // a voxel of the other side: 0 there
-        for (int t = 0; t < n; ++t) {
-          s.f[t] = s.inside[t] == here ? s.values[t] : 0.0;
-          finite = finite || s.f[t] != kInf;
+      // Each run of one side's voxels, where that side is asked, on its own: its voxels'
+      // nearest of the other side lie within it or at the other side's voxels bounding it
+      // (0 there; any beyond is farther than they are), and those bounding voxels are never
+      // taken off the envelope, so the run with them gives the whole line's numbers.
+      for (int a = 0; a < n;) {
+        const int here = s.inside[a];
+        int b = a;
+        while (b + 1 < n && s.inside[b + 1] == here)
+          ++b;
+        if (asked_side[here]) {
+          const int lo = a > 0 ? a - 1 : a, hi = b + 1 < n ? b + 1 : b;
+          bool finite = lo < a || hi > b;  // a voxel of the other side: 0 there
+          for (int t = lo; t <= hi; ++t) {
+            s.f[t] = t < a || t > b ? 0.0 : s.values[t];
+            finite = finite || s.f[t] != kInf;
+          }
+          if (finite) {  // else infinite throughout: the transform is itself
+            edt_1d(s.f.data() + lo, s.out.data() + lo, lo, hi - lo + 1, step, s.v, s.z, s.g);
+            for (int t = a; t <= b; ++t)
+              line[t * stride] = s.out[t];
+          }
         }
-        if (!finite) continue;  // infinite throughout: the transform is itself
-        edt_1d(s.f.data(), s.out.data(), n, step, s.v, s.z, s.g);
-        for (int t = 0; t < n; ++t)
-          if (s.inside[t] == here) line[t * stride] = s.out[t];
+        a = b + 1;
       }
     });
   }

@@ -54,20 +54,25 @@ inline double binomial_at(const double* in, long long stride, int n, int t) {
   return sum;
 }
 
-/// The passes x, y and (`across_slices`) z, from `in` into `out` (every voxel written).
-/// The x pass reads `in`; the y and z passes work in place, a slice or a plane at a time
-/// copied aside: one grid besides `in`, not two.
+/// The passes x, y and (`across_slices`) z, from `in` into `out` (every voxel written;
+/// `in` may be `out`'s own values). Each pass works a row, a slice or a plane at a time
+/// copied aside: no grid besides `in` and `out`, and none at all in place.
 void binomial_passes(const ImageGeometry& g, const double* in, GridBuffer<double>& out,
                      bool across_slices) {
   const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
   const long long nxy = 1LL * nx * ny;
-#pragma omp parallel for schedule(static) collapse(2)
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < ny; ++j) {
-      const long long row = g.linear_index(0, j, k);
-      for (int i = 0; i < nx; ++i)
-        out[static_cast<size_t>(row + i)] = binomial_at(in + row, 1, nx, i);
-    }
+#pragma omp parallel
+  {
+    std::vector<double> line(static_cast<size_t>(nx));  // along x: a row at a time
+#pragma omp for schedule(static) collapse(2)
+    for (int k = 0; k < nz; ++k)
+      for (int j = 0; j < ny; ++j) {
+        const long long row = g.linear_index(0, j, k);
+        std::copy(in + row, in + row + nx, line.begin());
+        for (int i = 0; i < nx; ++i)
+          out[static_cast<size_t>(row + i)] = binomial_at(line.data(), 1, nx, i);
+      }
+  }
 #pragma omp parallel
   {
     std::vector<double> slice(static_cast<size_t>(nxy));  // along y: a slice at a time
@@ -179,10 +184,8 @@ double SignedDistance::gradient_bound(const Eigen::Vector3d& p_mm, double radius
 void SignedDistance::smooth() {
   // Binomial 1-4-6-4-1 along each axis (a Gaussian of one voxel), ends clamped: it leaves
   // a linear field unchanged and takes the voxel steps out of a slanted boundary.
-  if (!all_finite()) return;  // no boundary: nothing to smooth
-  GridBuffer<double> out(values_.size());
-  binomial_passes(geometry_, values_.data(), out, true);
-  values_.swap(out);
+  if (!all_finite()) return;                                  // no boundary: nothing to smooth
+  binomial_passes(geometry_, values_.data(), values_, true);  // in place: no new grid
 }
 
 double SignedDistance::at_voxel(int i, int j, int k) const {
