@@ -171,9 +171,11 @@ const config::Binding<fitting::ModelSettings>& model() {
           .number("time_step_fraction", &O::time_step_fraction, "", 0.0, 0.9,
                   "time step as a fraction of the stability limit 2 sqrt(M/k)", true)
           .integer("relax_steps", &O::relax_steps, 0, 10000000,
-                   "most steps of the damped relaxation after filling")
+                   "most steps of the relaxation (FIRE) after filling")
           .number("relax_tolerance", &O::relax_tolerance, "E", 0.0, none,
-                  "relaxation ends when kinetic energy per particle falls below this", true)
+                  "relaxation ends when the rms force per particle is K_a sqrt(2 this / M) or less "
+                  "(the damping's force on a particle of this kinetic energy)",
+                  true)
           .flag("skeleton", &O::skeleton,
                 "tie the particles to a medial skeleton that keeps the global shape")
           .number("skeleton_stiffness", &O::skeleton_stiffness, "k", 0.0, none,
