@@ -1,5 +1,7 @@
 #pragma once
 // Small systems shared by the physics-core tests.
+#include <omp.h>
+
 #include <random>
 
 #include "organfit/particles/cohesion_force.h"
@@ -57,6 +59,20 @@ inline Model cohesion_model(int n, const CohesionParams& p, double mass = 1.0,
   Model model(n, mass, 0.5 * p.r0_mm);
   model.add(std::make_unique<CohesionForce>(LennardJones(p), skin_r0 * p.r0_mm));
   return model;
+}
+
+/// The largest difference between the positions `run(threads)` ends with on one thread and
+/// on two (0: bitwise the same, as the thread count must not change a result).
+template <class Run>
+double one_and_two_threads_differ_by(Run&& run) {
+  const int saved = omp_get_max_threads();
+  Positions result[2];
+  for (int t : {1, 2}) {
+    omp_set_num_threads(t);
+    result[t - 1] = run();
+  }
+  omp_set_num_threads(saved);
+  return (result[0] - result[1]).cwiseAbs().maxCoeff();
 }
 
 }  // namespace organfit::particles::testing
