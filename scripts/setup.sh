@@ -23,9 +23,11 @@ packages=(
 # own: iproute2 brings its loopback up); dcmtk: storescu loads it independently of us.
 # python3-getfem, tetgen, python3-scipy: the FEM ground truth (testdata/fem/fem_cases.py),
 # with OpenBLAS under its MUMPS solver (3x faster than the reference BLAS). time: GNU
-# time's peak memory of a run (the fuzz regressions' bound).
+# time's peak memory of a run (the fuzz regressions' bound). strace: how many times a
+# command starts (the huge-page request restarts the heavy ones).
 test_tools=(lammps python3 plastimatch dicom3tools python3-pydicom chromium clang-format
-  orthanc dcmtk iproute2 curl python3-getfem python3-scipy tetgen libopenblas0-pthread time)
+  orthanc dcmtk iproute2 curl python3-getfem python3-scipy tetgen libopenblas0-pthread time
+  strace)
 
 missing=()
 for p in "${packages[@]}" "${test_tools[@]}"; do

@@ -296,6 +296,16 @@ check schema.json_parses python3 -c "import json,sys; d=json.load(open('$tmp/out
 expect version 0 "" -- version
 check version.prints grep -qE "^organfit [0-9]+\.[0-9]+\.[0-9]+$" "$tmp/out"
 
+# Huge pages are asked for (the program starts itself again, where the kernel gives them on
+# request) by the subcommands that handle organs and scans, not by version, validate,
+# schema or dicom: the program started once or twice (strace's execve count).
+starts() { strace -f -e trace=execve -o "$tmp/strace" "$bin" "$@" >/dev/null 2>&1; grep -c 'execve(' "$tmp/strace"; }
+heavy=1
+grep -q '\[madvise\]' /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null && heavy=2
+check startup.version_once test "$(starts version)" -eq 1
+check startup.validate_once test "$(starts validate "$scenes/small-model.yaml")" -eq 1
+check startup.run_asks_huge_pages test "$(starts run --help)" -eq "$heavy"
+
 # run: outputs, refusals
 expect run.small 0 "" -- --quiet run "$scenes/small-model.yaml" --out "$tmp/run1"
 check run.writes_run_json_and_resolved_yaml test -s "$tmp/run1/run.json" -a -s "$tmp/run1/resolved.yaml"
