@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "capped_move.h"
 #include "organfit/particles/integrator.h"
 #include "organfit/particles/neighbour_list.h"
 
@@ -97,13 +98,7 @@ FireResult minimise_fire(Model& model, State& state, const FireOptions& options,
     for (int i = 0; i < n; ++i) {
       auto v = state.v.col(i);
       v = keep * v + turn * f.col(i) + kick * f.col(i);
-      if (options.max_step_mm > 0) {
-        const double move = v.norm() * dt;
-        if (move > options.max_step_mm) {  // safety net, as the integrator's
-          v *= options.max_step_mm / move;
-          ++capped;
-        }
-      }
+      if (detail::cap_move(v, dt, options.max_step_mm)) ++capped;
       state.x.col(i) += dt * v;
       finite = finite && state.x.col(i).allFinite();
     }

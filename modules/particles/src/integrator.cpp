@@ -3,6 +3,7 @@
 #include <cmath>
 #include <string>
 
+#include "capped_move.h"
 #include "organfit/geometry/counter_random.h"
 #include "organfit/particles/neighbour_list.h"
 
@@ -85,13 +86,7 @@ void Integrator::drift_half(State& state, double dt, long long& capped) {
 #pragma omp parallel for schedule(static) reduction(+ : c) if (n >= kParallelMinParticles)
   for (long i = 0; i < n; ++i) {
     auto v = state.v.col(i);
-    if (cap > 0) {
-      const double step = v.norm() * dt;
-      if (step > cap) {  // safety net: shorten the move (removes kinetic energy)
-        v *= cap / step;
-        ++c;
-      }
-    }
+    if (detail::cap_move(v, dt, cap)) ++c;
     state.x.col(i) += dt * v;
   }
   capped += c;

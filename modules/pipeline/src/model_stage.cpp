@@ -160,21 +160,19 @@ ModelStageResult run_model_stage(const ModelStageOptions& options, const geometr
   fire.time_step_s = integ.time_step_s();
   fire.max_step_mm = opt.max_step_r0 * opt.length_scale_mm;
   Progress progress("relax", max_steps);
-  particles::FireResult relaxed;
-  relaxed.settled = max_steps == 0;
-  if (max_steps > 0) {
-    relaxed = particles::minimise_fire(
-        *result.model, result.state, fire, max_steps, force_tolerance,
-        [&](long long step, double rms_force) {
-          throw_if_interrupted();
-          if (step % 10 == 0)
-            progress.update(step, fmt::format("rms force {:.2e} (settled at {:.2e})", rms_force,
-                                              force_tolerance));
-          return true;
-        });
-  }
+  // With relax_steps 0 nothing moves, its rms force is still measured, and it is settled
+  // as asked.
+  const particles::FireResult relaxed = particles::minimise_fire(
+      *result.model, result.state, fire, max_steps, force_tolerance,
+      [&](long long step, double rms_force) {
+        throw_if_interrupted();
+        if (step % 10 == 0)
+          progress.update(step, fmt::format("rms force {:.2e} (settled at {:.2e})", rms_force,
+                                            force_tolerance));
+        return true;
+      });
   const long long steps = relaxed.steps;
-  const bool settled = relaxed.settled;
+  const bool settled = max_steps == 0 || relaxed.settled;
   progress.finish();
   const double relax_wall_s = clock.elapsed_s();
   if (result.skeleton) result.skeleton->set_rest_shape(result.state.x);

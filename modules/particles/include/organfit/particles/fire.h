@@ -8,10 +8,10 @@
 // while the power P = f . v stays positive, the time step growing and alpha shrinking
 // after `delay_steps` such steps; when P < 0 (it has gone past a minimum along its way)
 // the velocities are zeroed, the time step halved and alpha reset (P = 0, at rest as at
-// the start: a plain step). Damped dynamics, with
-// its damping set for one pair, relaxes a body's slow collective modes (a surface layer
-// settling over tens of particles) overdamped, hundreds of steps; FIRE takes the largest
-// stable step along them. Its constants are the paper's recommended ones, not tuned here.
+// the start: a plain step). Damped dynamics, with its damping set for one pair, relaxes a
+// body's slow collective modes (a surface layer settling over tens of particles)
+// overdamped, over hundreds of steps; FIRE takes the largest stable step along them. Its
+// constants are the paper's recommended ones, not tuned here.
 #include <functional>
 
 #include "organfit/particles/model.h"
