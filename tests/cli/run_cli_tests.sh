@@ -409,7 +409,13 @@ assert d['fit']['converged'] and abs(d['fit']['volume_change_pct']) < 1.0 and d[
 p = d['points']  # simulated transrectal ultrasound, speckle 1.0 (fully developed)
 assert p['source'] == 'simulate' and p['speckle'] == 1.0 and p['count'] == 87, p
 assert p['median_distance_to_true_surface_mm'] <= 1.0 and p['fraction_within_1_5_mm'] >= 0.8, p
-assert p['fraction_on_visible_surface'] >= 0.8, p"
+assert p['fraction_on_visible_surface'] >= 0.8, p
+assert d['warnings'] == [], d['warnings']
+# Its export is 1.7% over the expected volume on the CT's 2.5 mm slices, the grid's phase:
+# the mean over shifted copies of the grid is within 0.5% of it.
+c = d['export']['checks']; e = c['expected_volume_on_ct_grid_cm3']; g = c['volume_on_shifted_grids']
+assert c['volume_difference_cm3'] > 0.01 * e and c['volume_kept'], c
+assert g['grids'] == 17 and abs(g['mean_cm3'] - e) < 0.005 * e and g['sd_cm3'] > 0.1, c"
 check default.saved_the_ultrasound_volume test -s "$tmp/default/ultrasound.mha"
 check default.report_written_without_patient_identifiers /usr/bin/python3 -c "
 html = open('$tmp/default/report.html').read()

@@ -32,6 +32,18 @@ check prostate.session_bend_10mm "$bin" --quiet run "$src/pipelines/prostate-ses
   --set export.labels=fit.nrrd --set export.displacement_field=vf.mha --set export.jacobian=jacobian.nrrd \
   --set export.registration=reg.dcm
 check prostate.checks_hold checks_hold "$tmp/session/run.json"
+# The volume check has teeth: a model file whose organ level is 0.6 mm off (the organ
+# a layer of 0.6 mm larger, about 8%) exports an organ the fit's volume change does not
+# explain, on the CT's own grid and on average over its shifted copies: warned.
+$py -c "
+import json; d = json.load(open('$tmp/plan/prostate_model.json'))
+d['organ']['volume_level_mm'] += 0.6; json.dump(d, open('$tmp/level_off.json', 'w'))"
+check prostate.volume_off_by_a_layer_warned bash -c "'$bin' --quiet run '$src/pipelines/prostate-session.yaml' --out '$tmp/level_off' \
+  --set 'planning.model=$tmp/level_off.json' 2>'$tmp/level_off.err' &&
+  grep -q 'warning: export: the exported organ is 3[6-9]\.[0-9]* cm3 on the CT grid and 3[6-9]\.[0-9]* cm3 on average over it and 16 copies' '$tmp/level_off.err' &&
+  $py -c \"
+import json; c = json.load(open('$tmp/level_off/run.json'))['export']['checks']
+assert not c['volume_kept'] and c['volume_on_shifted_grids']['mean_cm3'] > 1.05 * c['expected_volume_on_ct_grid_cm3'], c\""
 # plastimatch warps the planning label map by our field (output(q) = input(q + v(q))),
 # linearly, kept where >= 0.5: Dice against our exported label map.
 warp_dice() {  # warp_dice PLANNING_LABELS FIELD OURS MIN_DICE

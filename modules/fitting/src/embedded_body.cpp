@@ -94,6 +94,32 @@ double EmbeddedBody::volume_mm3(double voxel_mm) const {
   return on_grid(geometry::grid_covering(b, voxel_mm, voxel_mm)).volume_mm3(1);
 }
 
+namespace {
+/// The radical inverse of i in `base`: the i-th Halton coordinate, in [0, 1).
+double radical_inverse(int i, int base) {
+  double scale = 1, value = 0;
+  for (; i > 0; i /= base) {
+    scale /= base;
+    value += scale * (i % base);
+  }
+  return value;
+}
+}  // namespace
+
+std::vector<double> EmbeddedBody::volumes_on_shifted_grids(const geometry::ImageGeometry& grid,
+                                                           int count) const {
+  if (count < 0) throw std::invalid_argument("shifted grids: the count must be >= 0");
+  std::vector<double> volumes;
+  for (int s = 1; s <= count; ++s) {
+    const Eigen::Vector3d move_voxels(radical_inverse(s, 2) - 0.5, radical_inverse(s, 3) - 0.5,
+                                      radical_inverse(s, 5) - 0.5);
+    geometry::ImageGeometry shifted = grid;
+    shifted.origin_mm += grid.direction * move_voxels.cwiseProduct(grid.spacing_mm);
+    volumes.push_back(on_grid(shifted).volume_mm3(1));
+  }
+  return volumes;
+}
+
 double EmbeddedBody::volume_ratio(const geometry::LabelVolume& organ) const {
   const geometry::ImageGeometry& g = organ.geometry;
   double planning = 0;

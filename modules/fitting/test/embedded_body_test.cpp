@@ -201,6 +201,47 @@ TEST(EmbeddedBody, KeepsItsVoxelCountOnItsGridMovedByPartOfAVoxel) {
   EXPECT_NEAR(sum / static_cast<double>(shifts.size()), 1.0, 0.005);
 }
 
+// Counted on copies of a thick-slice grid (1 x 1 x 3 mm) moved by parts of a voxel, an
+// organ stretched 1.15x with its volume kept averages to its volume; the counts spread by
+// more than independent half-voxel errors at the boundary voxels would (the export's volume
+// check, pipeline/export_stage.cpp, compares their mean for that reason).
+TEST(EmbeddedBody, VolumesOnShiftedGridsAverageToItsVolume) {
+  const Eigen::Vector3d c(0.4, -0.3, 1.1);
+  geometry::ImageGeometry g = geometry::grid_covering({c - kSemiAxes, c + kSemiAxes}, 1.0, 8.0);
+  g.spacing_mm.z() = 3.0;
+  g.size[2] = (g.size[2] + 2) / 3;
+  const auto mask = ellipsoid_on(g, c);
+  const double planned = mask->volume_mm3(1);
+  const particles::Positions x0 = fill(*mask);
+  GlobalMap map;
+  const double s = 1.15;
+  map.affine.a = Eigen::Vector3d(1 / std::sqrt(s), 1 / std::sqrt(s), s).asDiagonal();
+  map.affine.t = map.affine.a * -c + c;  // about the organ's centre: it stays on the grid
+  particles::Positions placed(3, x0.cols());
+  for (Eigen::Index i = 0; i < x0.cols(); ++i)
+    placed.col(i) = map.apply(x0.col(i));
+  const EmbeddedBody body(mask, map, placed, placed, embedding_support_mm(kSpacing));
+  const std::vector<double> v = body.volumes_on_shifted_grids(g, 16);
+  ASSERT_EQ(v.size(), 16u);
+  double mean = 0, square = 0;
+  for (const double x : v)
+    mean += x / 16;
+  for (const double x : v)
+    square += (x - mean) * (x - mean);
+  const double sd = std::sqrt(square / 15);
+  EXPECT_NEAR(mean / planned, 1.0, 3 * sd / 4 / planned);
+  long long boundary = 0;
+  for (const auto b : geometry::surface_of(body.on_grid(g)))
+    boundary += b;
+  EXPECT_GT(sd, 0.5 * g.spacing_mm.prod() * std::sqrt(static_cast<double>(boundary)));
+  // The first copy: moved by (1/2, 1/3, 1/5) of a voxel less half a voxel along each axis.
+  geometry::ImageGeometry first = g;
+  first.origin_mm += g.spacing_mm.cwiseProduct(Eigen::Vector3d(0, 1.0 / 3 - 0.5, 0.2 - 0.5));
+  EXPECT_EQ(v[0], body.on_grid(first).volume_mm3(1));
+  EXPECT_TRUE(body.volumes_on_shifted_grids(g, 0).empty());
+  EXPECT_THROW(body.volumes_on_shifted_grids(g, -1), std::invalid_argument);
+}
+
 TEST(EmbeddedBody, IsEmptyFarFromTheParticlesAndRefusesBadInput) {
   const auto mask = ellipsoid_mask(Eigen::Vector3d::Zero());
   const particles::Positions x = fill(*mask);

@@ -76,6 +76,12 @@ struct PlanningOnGrid {
   }
 };
 
+/// Copies of the export's grid, moved by parts of a voxel, that the exported organ's volume
+/// is counted on where it differs from the expected by more than 0.5%: 16, whose mean's
+/// standard error is a quarter of the grid's spread (0.03 s on a prostate, 1.1 s on a
+/// 1.5 L liver, which needs them rarely: its spread is 0.1% of its volume).
+constexpr int kGridShifts = 16;
+
 /// The checks of the exported organ (after `repair`) against the planning organ on the
 /// same grid.
 void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume& exported,
@@ -101,28 +107,50 @@ void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume
         after.components, after.single_voxel_components, after.cavities,
         after.single_voxel_cavities, before.components, before.cavities));
   // Volume: the planning organ's voxels times the deformation's volume change, against
-  // the exported voxels. Sampling a surface on a grid errs by about half a voxel at each
-  // boundary voxel, independently: sigma = voxel volume x sqrt(boundary voxels) / 2.
-  const double voxel_cm3 = exported.geometry.spacing_mm.prod() / 1000.0;
+  // the exported voxels, within 0.5%. Where they differ by more, the difference may be the
+  // grid's: the same organ counted on copies of the grid moved by parts of a voxel varies
+  // by a slice's worth at each end between thick slices (the default scene's prostate from
+  // -1.2% to +2.2% over 64 copies; 2.5 mm slices), and the CT's own grid
+  // is one of those phases. Their mean, the exported count among them, is the organ's
+  // volume without the grid's phase; it is what must then be within 0.5%, and 3 standard
+  // errors of the mean (docs/decisions.md, "The exported volume against the grid's phase").
   const double planning_cm3 = planning.volume_mm3(1) / 1000.0;
   const double exported_cm3 = exported.volume_mm3(1) / 1000.0;
   const double ratio = organ.volume_ratio(exported);
-  long long boundary = 0;
-  for (const auto b : geometry::surface_of(exported))
-    boundary += b;
   const double expected_cm3 = planning_cm3 * ratio;
-  const double sampling_cm3 = 3 * 0.5 * voxel_cm3 * std::sqrt(static_cast<double>(boundary));
-  const double tolerance_cm3 = 0.005 * expected_cm3 + sampling_cm3;
+  double tolerance_cm3 = 0.005 * expected_cm3;
+  double compared_cm3 = exported_cm3;
   checks["planning_volume_on_ct_grid_cm3"] = planning_cm3;
   checks["deformation_volume_change_pct"] = 100 * (ratio - 1);
   checks["expected_volume_on_ct_grid_cm3"] = expected_cm3;
   checks["volume_difference_cm3"] = exported_cm3 - expected_cm3;
-  checks["volume_tolerance_cm3"] = tolerance_cm3;
-  checks["volume_kept"] = std::abs(exported_cm3 - expected_cm3) <= tolerance_cm3;
-  // The organ on a face of the CT's grid, more than the planning organ was: it goes on
-  // beyond the CT's field of view, which cannot hold it, and what is written is cut there.
+  checks["volume_on_shifted_grids"] = nullptr;
   const std::array<long long, 6> on_faces = geometry::voxels_on_faces(exported),
                                  planning_on_faces = geometry::voxels_on_faces(planning);
+  bool cut_by_edge = false;
+  for (size_t f = 0; f < on_faces.size(); ++f)
+    cut_by_edge = cut_by_edge || on_faces[f] > planning_on_faces[f];
+  if (std::abs(exported_cm3 - expected_cm3) > tolerance_cm3 && !cut_by_edge) {
+    std::vector<double> volumes = organ.volumes_on_shifted_grids(exported.geometry, kGridShifts);
+    for (double& v : volumes)
+      v /= 1000.0;
+    volumes.push_back(exported_cm3);
+    const auto n = static_cast<double>(volumes.size());
+    double mean = 0, square = 0;
+    for (const double v : volumes)
+      mean += v / n;
+    for (const double v : volumes)
+      square += (v - mean) * (v - mean);
+    const double sd = std::sqrt(square / (n - 1));
+    compared_cm3 = mean;
+    tolerance_cm3 += 3 * sd / std::sqrt(n);
+    checks["volume_on_shifted_grids"] = {
+        {"grids", volumes.size()}, {"mean_cm3", mean}, {"sd_cm3", sd}};
+  }
+  checks["volume_tolerance_cm3"] = tolerance_cm3;
+  checks["volume_kept"] = std::abs(compared_cm3 - expected_cm3) <= tolerance_cm3;
+  // The organ on a face of the CT's grid, more than the planning organ was: it goes on
+  // beyond the CT's field of view, which cannot hold it, and what is written is cut there.
   nlohmann::json cut = nlohmann::json::array();
   std::string sides;
   for (int face = 0; face < 6; ++face) {
@@ -143,9 +171,10 @@ void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume
         sides, exported_cm3, expected_cm3));
   else if (!checks["volume_kept"].get<bool>())
     out.warnings.push_back(fmt::format(
-        "export: the exported organ is {:.3f} cm3 on the CT grid; the planning organ moved by "
-        "the fit would be {:.3f} cm3 (tolerance {:.3f} cm3)",
-        exported_cm3, expected_cm3, tolerance_cm3));
+        "export: the exported organ is {:.3f} cm3 on the CT grid and {:.3f} cm3 on average over "
+        "it and {} copies of it moved by parts of a voxel; the planning organ moved by the fit "
+        "would be {:.3f} cm3 (tolerance {:.3f} cm3)",
+        exported_cm3, compared_cm3, kGridShifts, expected_cm3, tolerance_cm3));
   // Slices both organs cut whose contour count differs (a slice split in two, merged, or
   // with a hole or an island in it).
   const std::vector<geometry::ContourCountChange> changes =

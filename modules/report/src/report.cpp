@@ -427,6 +427,8 @@ std::string report_html(const ReportInput& in) {
                            {"Expected from the deformation",
                             "export.checks.expected_volume_on_ct_grid_cm3", "cm3", 2},
                            {"Difference", "export.checks.volume_difference_cm3", "cm3", 2},
+                           {"Mean over the grid moved by parts of a voxel",
+                            "export.checks.volume_on_shifted_grids.mean_cm3", "cm3", 2},
                            {"Tolerance", "export.checks.volume_tolerance_cm3", "cm3", 2},
                            {"Sent to", "export.sent.node"},
                            {"Send failed", "export.send_failed"}}) +
