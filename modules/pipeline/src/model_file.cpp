@@ -219,9 +219,22 @@ SavedModel load_model(const fs::path& file) {
     if (!(m.lattice_spacing_mm > 0)) fail("lattice_spacing_mm must be > 0");
 
     const auto& shape = j.at("shape");
-    auto read_vec = [](const nlohmann::json& v) {
-      return Eigen::Vector3d(v.at(0), v.at(1), v.at(2));
+    // Three finite numbers (mm) at `key` of `parent`, or the file is refused naming the key.
+    auto three = [&](const nlohmann::json& parent, const char* key, const std::string& name) {
+      const nlohmann::json& v = parent.at(key);
+      if (!v.is_array() || v.size() != 3 ||
+          !std::all_of(v.begin(), v.end(),
+                       [](const nlohmann::json& number) { return number.is_number(); }))
+        fail(name + " needs 3 numbers");
+      const Eigen::Vector3d out(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
+      if (!out.allFinite()) fail(name + " needs 3 finite numbers");
+      return out;
     };
+    // The organ's box as planned (a mask organ's is written for the reader, the mask itself
+    // is what is read): sizes > 0 either way.
+    const Eigen::Vector3d shape_size = three(shape, "size_mm", "shape.size_mm"),
+                          shape_centre = three(shape, "centre_mm", "shape.centre_mm");
+    if (!(shape_size.array() > 0).all()) fail("shape.size_mm must be > 0 along each axis");
     // The organ's level as planned (files written before it was kept have none), checked on
     // the grid it lies on: the mask's, else the reference body's.
     std::optional<double> level;
@@ -236,8 +249,8 @@ SavedModel load_model(const fs::path& file) {
       geometry::ImageGeometry g;
       for (int d = 0; d < 3; ++d)
         g.size[d] = mj.at("size").at(d).get<int>();
-      g.spacing_mm = read_vec(mj.at("spacing_mm"));
-      g.origin_mm = read_vec(mj.at("origin_mm"));
+      g.spacing_mm = three(mj, "spacing_mm", "shape.mask.spacing_mm");
+      g.origin_mm = three(mj, "origin_mm", "shape.mask.origin_mm");
       const std::vector<double> r = mj.at("direction").get<std::vector<double>>();
       if (r.size() != 9) fail("shape.mask.direction needs 9 numbers");
       g.direction = Eigen::Map<const Eigen::Matrix3d>(r.data());
@@ -258,12 +271,20 @@ SavedModel load_model(const fs::path& file) {
       check_level(mask->geometry);
       m.shape = geometry::make_mask_shape(std::move(mask), level);
     } else {
-      m.shape =
-          geometry::make_shape(shape.at("kind").get<std::string>(), read_vec(shape.at("size_mm")),
-                               read_vec(shape.at("centre_mm")));
+      m.shape = geometry::make_shape(shape.at("kind").get<std::string>(), shape_size, shape_centre);
     }
     const particles::CohesionParams cp = cohesion_params_from(m.settings);
     m.reference = fitting::reference_body(m.shape, cp.r0_mm);
+    // The reference body is made again from the shape as it was at planning: the same
+    // voxels, so the volume the file states (absent in no file written) is its volume.
+    const nlohmann::json& stated = j.at("organ").at("reference_volume_mm3");
+    const double rebuilt = m.reference.volume_mm3(1);
+    if (!stated.is_number() || std::abs(stated.get<double>() - rebuilt) > 1e-9 * rebuilt)
+      fail(
+          fmt::format("organ.reference_volume_mm3: {} in the file, but its shape gives {} mm3 "
+                      "here (the file was changed, or made by an organfit that built the "
+                      "reference otherwise: plan again)",
+                      stated.dump(), rebuilt));
     if (!m.shape.mask) check_level(m.reference.geometry);
     m.saved_planning_level_mm = level;
     // Absent in models written before they were kept: measured by the fit then.
@@ -306,8 +327,9 @@ SavedModel load_model(const fs::path& file) {
         fail("embedding.global_shears needs 15 numbers (9 in models written before 2026-11)");
       m.placed = Eigen::Map<const Eigen::Matrix3Xd>(placed.data(), 3, static_cast<Eigen::Index>(n));
       m.global_map.affine.a = Eigen::Map<const Eigen::Matrix3d>(a.data());
-      m.global_map.affine.t = read_vec(e.at("global_translation_mm"));
-      m.global_map.shears.centre = read_vec(e.at("global_shear_centre_mm"));
+      m.global_map.affine.t = three(e, "global_translation_mm", "embedding.global_translation_mm");
+      m.global_map.shears.centre =
+          three(e, "global_shear_centre_mm", "embedding.global_shear_centre_mm");
       m.global_map.shears.c.setZero();
       m.global_map.shears.c.head(static_cast<Eigen::Index>(c.size())) =
           Eigen::Map<const Eigen::VectorXd>(c.data(), static_cast<Eigen::Index>(c.size()));
@@ -319,7 +341,7 @@ SavedModel load_model(const fs::path& file) {
         const std::string name = std::string("embedding.") + key;
         const auto& f = e.at(key);
         const double sigma = f.at("sigma_mm").get<double>();
-        const Eigen::Vector3d origin = read_vec(f.at("origin_mm"));
+        const Eigen::Vector3d origin = three(f, "origin_mm", name + ".origin_mm");
         const auto given = f.at("count").get<std::vector<int>>();
         const auto numbers = f.at(values).get<std::vector<double>>();
         if (given.size() != 3 || !(sigma > 0) || !origin.allFinite())

@@ -288,6 +288,28 @@ TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
   j["organ"]["planning_volumes"]["fingerprint"] = "-00000000000001f";
   EXPECT_EQ(error_of(j.dump()),
             f + ": organ.planning_volumes.fingerprint needs 16 hexadecimal digits");
+  // The organ's box and the reference's volume, written for the reader, are read too: a
+  // file with them broken or not matching its shape is refused.
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["shape"]["size_mm"] = {1.0, 2.0};
+  EXPECT_EQ(error_of(j.dump()), f + ": shape.size_mm needs 3 numbers");
+  j["shape"]["size_mm"] = {1.0, 2.0, -1e308};
+  EXPECT_EQ(error_of(j.dump()), f + ": shape.size_mm must be > 0 along each axis");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["shape"]["centre_mm"] = {0.0, "x", 1.0};
+  EXPECT_EQ(error_of(j.dump()), f + ": shape.centre_mm needs 3 numbers");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  const double volume = j["organ"]["reference_volume_mm3"].get<double>();
+  j["organ"]["reference_volume_mm3"] = nlohmann::json::object();
+  EXPECT_NE(error_of(j.dump()).find(f + ": organ.reference_volume_mm3: {} in the file, but its "
+                                        "shape gives "),
+            std::string::npos);
+  j["organ"]["reference_volume_mm3"] = volume * 1.001;
+  EXPECT_NE(error_of(j.dump()).find("(the file was changed, or made by an organfit that built "
+                                    "the reference otherwise: plan again)"),
+            std::string::npos);
+  j["organ"]["reference_volume_mm3"] = volume;
+  EXPECT_EQ(error_of(j.dump()), "no error");
   EXPECT_NE(error_of("").find(f + ": not an organfit model"), std::string::npos);
 }
 
