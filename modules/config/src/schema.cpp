@@ -146,13 +146,11 @@ Schema& Schema::subsection(const std::string& name, const std::string& doc,
   return *this;
 }
 
-namespace {
 bool number_in_range(const ParamSpec& s, double v) {
   if (s.min && (s.min_exclusive ? !(v > *s.min) : !(v >= *s.min))) return false;
   if (s.max && !(v <= *s.max)) return false;
   return true;
 }
-}  // namespace
 
 Schema& Schema::add(ParamSpec spec) {
   if (sections_.empty()) throw std::logic_error("schema: key declared before any section");

@@ -196,11 +196,13 @@ SavedModel load_model(const fs::path& file) {
   } catch (const nlohmann::json::exception&) {
     fail("not an organfit model (not JSON)");
   }
-  if (!j.is_object() || j.value("format", "") != kFormat)
+  if (!j.is_object() || !j.contains("format") || j.at("format") != kFormat)
     fail("not an organfit model (no 'format: organfit-model')");
-  if (j.value("format_version", 0) != kFormatVersion)
+  const auto version = j.find("format_version");
+  if (version == j.end() || !version->is_number_integer() ||
+      version->get<long long>() != kFormatVersion)
     fail(fmt::format("model format version {} is not {} (made by another organfit version)",
-                     j.value("format_version", 0), kFormatVersion));
+                     version == j.end() ? "0" : version->dump(), kFormatVersion));
   SavedModel saved;
   try {
     ModelStageResult& m = saved.model;
@@ -244,6 +246,9 @@ SavedModel load_model(const fs::path& file) {
       if (level && !geometry::could_be_volume_level(*level, grid))
         fail("organ.volume_level_mm: not finite, or farther from 0 than a voxel");
     };
+    if (!shape.at("kind").is_string()) fail("shape.kind: the organ's kind of shape, a text");
+    if (shape.contains("mask") != (shape.at("kind") == "mask"))
+      fail("shape: a mask is given exactly when shape.kind is 'mask'");
     if (shape.contains("mask")) {
       const auto& mj = shape.at("mask");
       geometry::ImageGeometry g;
@@ -389,9 +394,13 @@ SavedModel load_model(const fs::path& file) {
     saved.organ_name = j.at("organ").at("name").get<std::string>();
     const auto& organ = j.at("organ");
     if (organ.contains("colour")) {  // files written before the look was kept have none
-      const auto c = organ.at("colour").get<std::vector<int>>();
-      if (c.size() != 3 || std::any_of(c.begin(), c.end(), [](int v) { return v < 0 || v > 255; }))
+      const nlohmann::json& given = organ.at("colour");
+      if (!given.is_array() || given.size() != 3 ||
+          !std::all_of(given.begin(), given.end(), [](const nlohmann::json& v) {
+            return v.is_number_integer() && v.get<long long>() >= 0 && v.get<long long>() <= 255;
+          }))
         fail("organ.colour: three integers from 0 to 255");
+      const auto c = given.get<std::vector<int>>();
       saved.organ_look.colour = {c[0], c[1], c[2]};
     }
     if (organ.contains("interpreted_type"))
@@ -403,7 +412,14 @@ SavedModel load_model(const fs::path& file) {
           c.at("frame_of_reference_uid").get<std::string>(),
           c.contains("structure_set") ? c.at("structure_set").get<std::string>() : std::string()};
     }
+    // Where the model came from, for the session's log and run.json.
     saved.provenance = j.value("provenance", nlohmann::json::object());
+    if (saved.provenance.is_null()) saved.provenance = nlohmann::json::object();
+    const nlohmann::json& from = saved.provenance;
+    if (!from.is_object() ||
+        (from.contains("modelling_wall_s") && !from["modelling_wall_s"].is_number()) ||
+        (from.contains("scene") && !from["scene"].is_string()))
+      fail("provenance: an object whose modelling_wall_s is a number and scene a text");
     if (j.contains("uncertainty") && !j.at("uncertainty").is_null())  // absent in older models
       saved.uncertainty = uncertainty_from_json(j.at("uncertainty"));
   } catch (const nlohmann::json::exception& e) {

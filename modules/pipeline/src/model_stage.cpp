@@ -67,6 +67,13 @@ ModelSettings model_settings_from_json(const nlohmann::json& j, const std::strin
       throw InputError(fmt::format("{}: model setting '{}' is missing or not a {}", where, key,
                                    std::is_same_v<T, bool> ? "true/false" : "number"));
     value = it->template get<T>();
+    // Within the range the scene key of the same name declares (scene_schema.cpp).
+    if constexpr (!std::is_same_v<T, bool>) {
+      const config::ParamSpec* spec = keys::model().find(key);
+      if (spec && !config::number_in_range(*spec, static_cast<double>(value)))
+        throw InputError(fmt::format("{}: model setting '{}' is {}, out of range {}", where, key,
+                                     it->dump(), spec->range_text()));
+    }
   });
   return s;
 }

@@ -274,8 +274,36 @@ TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
   j["settings"].erase("mass");
   EXPECT_EQ(error_of(j.dump()), f + ": model setting 'mass' is missing or not a number");
   j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
-  j["settings"]["radius_mm"] = -1;
-  EXPECT_NE(error_of(j.dump()).find(f + ": invalid model:"), std::string::npos);
+  j["settings"]["radius_mm"] = -1;  // within the range the scene key declares
+  EXPECT_EQ(error_of(j.dump()), f + ": model setting 'radius_mm' is -1, out of range [0, 100]");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["settings"]["time_step_fraction"] = 1e-300;
+  EXPECT_EQ(error_of(j.dump()), "no error");
+  j["settings"]["time_step_fraction"] = 0.95;
+  EXPECT_EQ(error_of(j.dump()),
+            f + ": model setting 'time_step_fraction' is 0.95, out of range (0, 0.9]");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["format"] = 1e-300;
+  EXPECT_EQ(error_of(j.dump()), f + ": not an organfit model (no 'format: organfit-model')");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["organ"]["colour"] = {255, 0, 3.5};
+  EXPECT_EQ(error_of(j.dump()), f + ": organ.colour: three integers from 0 to 255");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["shape"]["kind"] = "mask";  // this model's shape is an analytic body: no mask in the file
+  EXPECT_EQ(error_of(j.dump()), f + ": shape: a mask is given exactly when shape.kind is 'mask'");
+  j["shape"]["kind"] = 1e308;
+  EXPECT_EQ(error_of(j.dump()), f + ": shape.kind: the organ's kind of shape, a text");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["format_version"] = nullptr;
+  EXPECT_EQ(error_of(j.dump()),
+            f + ": model format version null is not 1 (made by another organfit version)");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["provenance"] = 3.5;
+  EXPECT_EQ(error_of(j.dump()),
+            f + ": provenance: an object whose modelling_wall_s is a number and scene a text");
+  j["provenance"] = {{"modelling_wall_s", "1 s"}};
+  EXPECT_EQ(error_of(j.dump()),
+            f + ": provenance: an object whose modelling_wall_s is a number and scene a text");
   j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
   j["organ"]["volume_level_mm"] = 40.0;  // farther than a voxel: not this organ's level
   EXPECT_EQ(error_of(j.dump()),

@@ -108,6 +108,12 @@ class Binding {
   }
 
   const std::string& section() const { return section_; }
+  /// The declaration of the bound key `name` (its range, unit and doc), or nullptr.
+  const ParamSpec* find(const std::string& name) const {
+    for (const auto& key : keys_)
+      if (key.spec.name == name) return &key.spec;
+    return nullptr;
+  }
 
  private:
   struct Key {

@@ -62,6 +62,9 @@ struct ParamSpec {
   std::string range_text() const;
 };
 
+/// `v` within the key's declared range (a number or an integer key; a vec3's component).
+bool number_in_range(const ParamSpec& s, double v);
+
 struct SectionSpec {
   std::string name;  ///< "fit", or "fit.paper" for a sub-section of "fit"
   std::string doc;
