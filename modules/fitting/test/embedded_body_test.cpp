@@ -61,6 +61,24 @@ particles::Positions fill(const geometry::LabelVolume& mask) {
   return x;
 }
 
+/// The ellipsoid on a grid of 1 x 1 x 3 mm voxels (thick slices, as a CT's) with
+/// `margin_mm` about it, its volume there and the particles filling it.
+struct ThickSliceOrgan {
+  const Eigen::Vector3d c{0.4, -0.3, 1.1};
+  geometry::ImageGeometry grid;
+  std::shared_ptr<const geometry::LabelVolume> mask;
+  double planned_mm3 = 0;
+  particles::Positions x0;
+  explicit ThickSliceOrgan(double margin_mm)
+      : grid(geometry::grid_covering({c - kSemiAxes, c + kSemiAxes}, 1.0, margin_mm)) {
+    grid.spacing_mm.z() = 3.0;
+    grid.size[2] = (grid.size[2] + 2) / 3;
+    mask = ellipsoid_on(grid, c);
+    planned_mm3 = mask->volume_mm3(1);
+    x0 = fill(*mask);
+  }
+};
+
 TEST(EmbeddedBody, AtRestIsTheReference) {
   const Eigen::Vector3d c(10, -5, 30);
   const auto mask = ellipsoid_mask(c);
@@ -176,13 +194,7 @@ TEST(EmbeddedBody, OnGridIsEveryVoxelsInsideTest) {
 // and no shift loses a layer of voxels (exactly half a slice along z tied at every
 // boundary at the zero level: -10%).
 TEST(EmbeddedBody, KeepsItsVoxelCountOnItsGridMovedByPartOfAVoxel) {
-  const Eigen::Vector3d c(0.4, -0.3, 1.1);
-  geometry::ImageGeometry g = geometry::grid_covering({c - kSemiAxes, c + kSemiAxes}, 1.0, 4.0);
-  g.spacing_mm.z() = 3.0;
-  g.size[2] = (g.size[2] + 2) / 3;
-  const auto mask = ellipsoid_on(g, c);
-  const double planned = mask->volume_mm3(1);
-  const particles::Positions x0 = fill(*mask);
+  const ThickSliceOrgan organ(4.0);
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   std::vector<Eigen::Vector3d> shifts = {{0.5, 0, 0}, {0, 0, 0.5}, {0.3, 0.7, 0.4}};
@@ -191,10 +203,10 @@ TEST(EmbeddedBody, KeepsItsVoxelCountOnItsGridMovedByPartOfAVoxel) {
   double sum = 0;
   for (const Eigen::Vector3d& s : shifts) {
     GlobalMap map;
-    map.affine.t = s.cwiseProduct(g.spacing_mm);
-    const particles::Positions placed = x0.colwise() + map.affine.t;
-    const EmbeddedBody body(mask, map, placed, placed, embedding_support_mm(kSpacing));
-    const double ratio = body.on_grid(g).volume_mm3(1) / planned;
+    map.affine.t = s.cwiseProduct(organ.grid.spacing_mm);
+    const particles::Positions placed = organ.x0.colwise() + map.affine.t;
+    const EmbeddedBody body(organ.mask, map, placed, placed, embedding_support_mm(kSpacing));
+    const double ratio = body.on_grid(organ.grid).volume_mm3(1) / organ.planned_mm3;
     EXPECT_GT(ratio, 0.95) << s.transpose();
     sum += ratio;
   }
@@ -206,22 +218,17 @@ TEST(EmbeddedBody, KeepsItsVoxelCountOnItsGridMovedByPartOfAVoxel) {
 // more than independent half-voxel errors at the boundary voxels would (the export's volume
 // check, pipeline/export_stage.cpp, compares their mean for that reason).
 TEST(EmbeddedBody, VolumesOnShiftedGridsAverageToItsVolume) {
-  const Eigen::Vector3d c(0.4, -0.3, 1.1);
-  geometry::ImageGeometry g = geometry::grid_covering({c - kSemiAxes, c + kSemiAxes}, 1.0, 8.0);
-  g.spacing_mm.z() = 3.0;
-  g.size[2] = (g.size[2] + 2) / 3;
-  const auto mask = ellipsoid_on(g, c);
-  const double planned = mask->volume_mm3(1);
-  const particles::Positions x0 = fill(*mask);
+  const ThickSliceOrgan organ(8.0);
   GlobalMap map;
   const double s = 1.15;
   map.affine.a = Eigen::Vector3d(1 / std::sqrt(s), 1 / std::sqrt(s), s).asDiagonal();
-  map.affine.t = map.affine.a * -c + c;  // about the organ's centre: it stays on the grid
-  particles::Positions placed(3, x0.cols());
-  for (Eigen::Index i = 0; i < x0.cols(); ++i)
-    placed.col(i) = map.apply(x0.col(i));
-  const EmbeddedBody body(mask, map, placed, placed, embedding_support_mm(kSpacing));
-  const std::vector<double> v = body.volumes_on_shifted_grids(g, 16);
+  // About the organ's centre: it stays on the grid.
+  map.affine.t = organ.c - map.affine.a * organ.c;
+  particles::Positions placed(3, organ.x0.cols());
+  for (Eigen::Index i = 0; i < organ.x0.cols(); ++i)
+    placed.col(i) = map.apply(organ.x0.col(i));
+  const EmbeddedBody body(organ.mask, map, placed, placed, embedding_support_mm(kSpacing));
+  const std::vector<double> v = body.volumes_on_shifted_grids(organ.grid, 16);
   ASSERT_EQ(v.size(), 16u);
   double mean = 0, square = 0;
   for (const double x : v)
@@ -229,17 +236,18 @@ TEST(EmbeddedBody, VolumesOnShiftedGridsAverageToItsVolume) {
   for (const double x : v)
     square += (x - mean) * (x - mean);
   const double sd = std::sqrt(square / 15);
-  EXPECT_NEAR(mean / planned, 1.0, 3 * sd / 4 / planned);
+  EXPECT_NEAR(mean / organ.planned_mm3, 1.0, 3 * sd / 4 / organ.planned_mm3);
   long long boundary = 0;
-  for (const auto b : geometry::surface_of(body.on_grid(g)))
+  for (const auto b : geometry::surface_of(body.on_grid(organ.grid)))
     boundary += b;
-  EXPECT_GT(sd, 0.5 * g.spacing_mm.prod() * std::sqrt(static_cast<double>(boundary)));
+  EXPECT_GT(sd, 0.5 * organ.grid.spacing_mm.prod() * std::sqrt(static_cast<double>(boundary)));
   // The first copy: moved by (1/2, 1/3, 1/5) of a voxel less half a voxel along each axis.
-  geometry::ImageGeometry first = g;
-  first.origin_mm += g.spacing_mm.cwiseProduct(Eigen::Vector3d(0, 1.0 / 3 - 0.5, 0.2 - 0.5));
+  geometry::ImageGeometry first = organ.grid;
+  first.origin_mm +=
+      organ.grid.spacing_mm.cwiseProduct(Eigen::Vector3d(0, 1.0 / 3 - 0.5, 0.2 - 0.5));
   EXPECT_EQ(v[0], body.on_grid(first).volume_mm3(1));
-  EXPECT_TRUE(body.volumes_on_shifted_grids(g, 0).empty());
-  EXPECT_THROW(body.volumes_on_shifted_grids(g, -1), std::invalid_argument);
+  EXPECT_TRUE(body.volumes_on_shifted_grids(organ.grid, 0).empty());
+  EXPECT_THROW(body.volumes_on_shifted_grids(organ.grid, -1), std::invalid_argument);
 }
 
 TEST(EmbeddedBody, IsEmptyFarFromTheParticlesAndRefusesBadInput) {
