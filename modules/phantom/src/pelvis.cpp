@@ -41,6 +41,7 @@ double sq(double v) {
 /// ellipse's own equation, 2% from 1, has the same answer (radial_excess errs by parts in
 /// 1e15).
 bool inside_ellipse(double x, double y, double cx, double cy, double a, double b) {
+  if (!(a > 0 && b > 0)) return radial_excess(x, y, cx, cy, a, b) < 0;  // far along z
   const double q = sq((x - cx) / a) + sq((y - cy) / b);
   if (q < 0.98) return true;
   if (q > 1.02) return false;
