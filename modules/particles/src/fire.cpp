@@ -68,9 +68,13 @@ FireResult minimise_fire(Model& model, State& state, const FireOptions& options,
   double dt = options.time_step_s, alpha = options.alpha_start;
   int since_negative = 0;
   Forces f;
-  model.compute_forces(state, f, false);
-  double f_sq = sums_by_blocks<1>(n, [&](int i) { return std::array{f.col(i).squaredNorm()}; })[0];
-  result.rms_force = std::sqrt(f_sq / n);
+  double f_sq = 0;
+  auto measure_forces = [&] {  // f, |f|^2 summed and the rms force per particle
+    model.compute_forces(state, f, false);
+    f_sq = sums_by_blocks<1>(n, [&](int i) { return std::array{f.col(i).squaredNorm()}; })[0];
+    result.rms_force = std::sqrt(f_sq / n);
+  };
+  measure_forces();
   for (long long step = 1; step <= max_steps && result.rms_force > rms_force_tolerance; ++step) {
     const auto [power, v_sq] = sums_by_blocks<2>(n, [&](int i) {
       return std::array{f.col(i).dot(state.v.col(i)), state.v.col(i).squaredNorm()};
@@ -106,9 +110,7 @@ FireResult minimise_fire(Model& model, State& state, const FireOptions& options,
     if (!finite)
       throw StabilityError("fire: the state became non-finite at step " + std::to_string(step) +
                            " (time step " + std::to_string(dt) + " s)");
-    model.compute_forces(state, f, false);
-    f_sq = sums_by_blocks<1>(n, [&](int i) { return std::array{f.col(i).squaredNorm()}; })[0];
-    result.rms_force = std::sqrt(f_sq / n);
+    measure_forces();
     result.steps = step;
     if (!std::isfinite(result.rms_force))
       throw StabilityError("fire: the forces became non-finite at step " + std::to_string(step));

@@ -77,7 +77,7 @@ double Integrator::refresh_forces(State& state, bool want_energy) {
 
 void Integrator::drift_half(State& state, double dt, long long& capped) {
   const long n = state.size();
-  double cap = options_.max_step_r0 * options_.length_scale_mm * 0.5;
+  double cap = max_step_mm() * 0.5;
   if (options_.max_speed_mm_s > 0) {
     const double speed_cap = options_.max_speed_mm_s * dt;
     cap = cap > 0 ? std::min(cap, speed_cap) : speed_cap;

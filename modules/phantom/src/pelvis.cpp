@@ -80,14 +80,13 @@ double pelvic_bone_hu(const Eigen::Vector3d& p) {
 
 /// A femur (head and neck), side = +1 left, -1 right. HU or NaN.
 double femur_hu(const Eigen::Vector3d& p, double side) {
-  // Beyond the box that holds the head's ball and the neck's capsule, by 1 mm (far more
-  // than the tests below can round by): not in the femur, without them (most of the body).
-  const double x = side * p.x();
-  if (x < 74 - 1 || x > 164 + 1 || p.y() < -16 - 1 || p.y() > 32 + 1 || p.z() < -69 - 1 ||
-      p.z() > 19 + 1)
-    return std::nan("");
   const Eigen::Vector3d head(side * 98, 8, -5), neck_end(side * 150, 10, -55);
   const double head_r = 24, neck_r = 14;
+  // Beyond the box that holds the head's ball and the neck's capsule, by 1 mm (far more
+  // than the tests below can round by): not in the femur, without them (most of the body).
+  const Eigen::Vector3d lo = (head.array() - head_r).min(head.cwiseMin(neck_end).array() - neck_r),
+                        hi = (head.array() + head_r).max(head.cwiseMax(neck_end).array() + neck_r);
+  if (((p.array() < lo.array() - 1) || (p.array() > hi.array() + 1)).any()) return std::nan("");
   const double dh = (p - head).norm();
   const Eigen::Vector3d axis = (neck_end - head).normalized();
   const double t = std::clamp((p - head).dot(axis), 0.0, (neck_end - head).norm());
@@ -114,11 +113,11 @@ bool in_bladder(const Eigen::Vector3d& p) {
 /// Rectum: a tube along z, curving backwards above the prostate; outer radius 15 mm,
 /// wall 4 mm. Returns the HU (wall, gas in the anterior lumen, faeces) or NaN.
 double rectum_hu(const Eigen::Vector3d& p) {
-  const double cy = 38 + 0.12 * std::max(0.0, p.z());
-  // r >= 15 wherever either side is (hypot is never below the larger): no hypot needed.
-  if (std::abs(p.x()) >= 15 || std::abs(p.y() - cy) >= 15) return std::nan("");
+  const double cy = 38 + 0.12 * std::max(0.0, p.z()), outer_r = 15;
+  // r >= outer_r wherever either side is (hypot is never below the larger): no hypot needed.
+  if (std::abs(p.x()) >= outer_r || std::abs(p.y() - cy) >= outer_r) return std::nan("");
   const double r = std::hypot(p.x(), p.y() - cy);
-  if (r >= 15 || p.z() < -75) return std::nan("");
+  if (r >= outer_r || p.z() < -75) return std::nan("");
   if (r >= 11) return kHuRectalWall;
   const bool gas = p.z() > -30 && p.z() < 40 && p.y() < cy + 2;  // gas rises anteriorly (supine)
   return gas ? kHuGas : kHuFaeces;

@@ -165,7 +165,7 @@ ModelStageResult run_model_stage(const ModelStageOptions& options, const geometr
   const particles::Integrator integ(*result.model, opt);  // validates; its time step
   particles::FireOptions fire;
   fire.time_step_s = integ.time_step_s();
-  fire.max_step_mm = opt.max_step_r0 * opt.length_scale_mm;
+  fire.max_step_mm = integ.max_step_mm();
   Progress progress("relax", max_steps);
   // With relax_steps 0 nothing moves, its rms force is still measured, and it is settled
   // as asked.

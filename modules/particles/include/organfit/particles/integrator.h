@@ -73,6 +73,9 @@ class Integrator {
   const Forces& forces() const { return f_; }
   double kinetic_energy(const State& state) const;
   double time_step_s() const { return stats_.time_step_s; }
+  /// The cap on one particle's move in one step (mm; 0: none): max_step_r0 r0, each
+  /// half-drift taking half of it.
+  double max_step_mm() const { return options_.max_step_r0 * options_.length_scale_mm; }
   const IntegratorStats& stats() const { return stats_; }
   const IntegratorOptions& options() const { return options_; }
 
