@@ -127,10 +127,22 @@ void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume
   checks["volume_on_shifted_grids"] = nullptr;
   const std::array<long long, 6> on_faces = geometry::voxels_on_faces(exported),
                                  planning_on_faces = geometry::voxels_on_faces(planning);
-  bool cut_by_edge = false;
-  for (size_t f = 0; f < on_faces.size(); ++f)
-    cut_by_edge = cut_by_edge || on_faces[f] > planning_on_faces[f];
-  if (std::abs(exported_cm3 - expected_cm3) > tolerance_cm3 && !cut_by_edge) {
+  // The organ on a face of the CT's grid, more than the planning organ was: it goes on
+  // beyond the CT's field of view, which cannot hold it, and what is written is cut there.
+  nlohmann::json cut = nlohmann::json::array();
+  std::string sides;
+  for (int face = 0; face < 6; ++face) {
+    const auto f = static_cast<size_t>(face);
+    if (on_faces[f] <= planning_on_faces[f]) continue;
+    const char* side = geometry::side_of_face(exported.geometry, face);
+    cut.push_back(
+        {{"side", side}, {"voxels", on_faces[f]}, {"planning_voxels", planning_on_faces[f]}});
+    sides += fmt::format("{}{} ({} voxels on the CT's last plane there, the planning organ {})",
+                         sides.empty() ? "" : "; ", side, on_faces[f], planning_on_faces[f]);
+  }
+  checks["cut_by_ct_edge"] = cut;
+  // A cut organ is warned about as such below: no copies counted for it.
+  if (std::abs(exported_cm3 - expected_cm3) > tolerance_cm3 && cut.empty()) {
     std::vector<double> volumes = organ.volumes_on_shifted_grids(exported.geometry, kGridShifts);
     for (double& v : volumes)
       v /= 1000.0;
@@ -149,20 +161,6 @@ void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume
   }
   checks["volume_tolerance_cm3"] = tolerance_cm3;
   checks["volume_kept"] = std::abs(compared_cm3 - expected_cm3) <= tolerance_cm3;
-  // The organ on a face of the CT's grid, more than the planning organ was: it goes on
-  // beyond the CT's field of view, which cannot hold it, and what is written is cut there.
-  nlohmann::json cut = nlohmann::json::array();
-  std::string sides;
-  for (int face = 0; face < 6; ++face) {
-    const auto f = static_cast<size_t>(face);
-    if (on_faces[f] <= planning_on_faces[f]) continue;
-    const char* side = geometry::side_of_face(exported.geometry, face);
-    cut.push_back(
-        {{"side", side}, {"voxels", on_faces[f]}, {"planning_voxels", planning_on_faces[f]}});
-    sides += fmt::format("{}{} ({} voxels on the CT's last plane there, the planning organ {})",
-                         sides.empty() ? "" : "; ", side, on_faces[f], planning_on_faces[f]);
-  }
-  checks["cut_by_ct_edge"] = cut;
   if (!cut.empty())
     out.warnings.push_back(fmt::format(
         "export: the fitted organ reaches the planning CT's edge: {}. It goes on beyond the "
