@@ -349,7 +349,7 @@ SavedModel load_model(const fs::path& file) {
         const Eigen::Vector3d origin = three(f, "origin_mm", name + ".origin_mm");
         const auto given = f.at("count").get<std::vector<int>>();
         const auto numbers = f.at(values).get<std::vector<double>>();
-        if (given.size() != 3 || !(sigma > 0) || !origin.allFinite())
+        if (given.size() != 3 || !(sigma > 0))
           fail(name + " needs sigma_mm > 0, origin_mm and 3 counts");
         Eigen::Vector3i counts;
         for (int axis = 0; axis < 3; ++axis) {
