@@ -32,14 +32,16 @@ check prostate.session_bend_10mm "$bin" --quiet run "$src/pipelines/prostate-ses
   --set export.labels=fit.nrrd --set export.displacement_field=vf.mha --set export.jacobian=jacobian.nrrd \
   --set export.registration=reg.dcm
 check prostate.checks_hold checks_hold "$tmp/session/run.json"
-# A model file whose organ level is 0.6 mm off (the organ a 0.6 mm layer larger, about
+# A model file whose organ levels are 0.6 mm off (the organ a 0.6 mm layer larger, about
 # 8%): refused as it is read, its reference body no longer the volume the file states.
 # With that volume made to agree, the export's volume check catches it: the organ the fit's
 # volume change does not explain, on the CT's own grid and on average over its shifted
 # copies: warned.
 $py -c "
 import json; d = json.load(open('$tmp/plan/prostate_model.json'))
-d['organ']['volume_level_mm'] += 0.6; json.dump(d, open('$tmp/level_off.json', 'w'))"
+d['organ']['volume_level_mm'] += 0.6
+d['organ']['volume_level_by_slice_phase_mm'] = [c + 0.6 for c in d['organ']['volume_level_by_slice_phase_mm']]
+json.dump(d, open('$tmp/level_off.json', 'w'))"
 check prostate.level_off_refused_as_read bash -c "! '$bin' --quiet run '$src/pipelines/prostate-session.yaml' --out '$tmp/level_off' \
   --set 'planning.model=$tmp/level_off.json' 2>'$tmp/level_off.err' &&
   grep -q 'level_off.json: organ.reference_volume_mm3: [0-9.]* in the file, but its shape gives [0-9.]* mm3 here' '$tmp/level_off.err' &&

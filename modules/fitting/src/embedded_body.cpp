@@ -38,7 +38,7 @@ EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> referenc
 
 bool EmbeddedBody::inside(const Eigen::Vector3d& q) const {
   const Eigen::Vector3d r = pull_back(q);
-  return r.allFinite() && distance_->at(r) < level_mm();
+  return r.allFinite() && distance_->beyond_level(r) < 0;
 }
 
 geometry::Aabb EmbeddedBody::bounds() const {
@@ -55,10 +55,11 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   geometry::LabelVolume out(grid);
   const geometry::IndexRange r = geometry::index_range(grid, bounds());
   if (r.empty()) return out;
-  // A voxel q is inside when D(q) = d(phi^-1(q)) - level < 0, d the reference's signed
-  // distance. Over a ball of radius h about c, |D(q) - D(c)| <= G (S h + slack), S and
+  // A voxel q is inside when D(q) = d(phi^-1(q)) - level(phi^-1(q)) < 0, d the reference's
+  // signed distance. Over a ball of radius h about c, |D(q) - D(c)| <= G (S h + slack), S and
   // slack phi^-1's stretch bound (the global map's over the grid's part, u's gradient's over
-  // the ball: Deformation::map_inverse_stretch) and G d's gradient bound about phi^-1(c):
+  // the ball: Deformation::map_inverse_stretch) and G d's gradient bound about phi^-1(c)
+  // plus the level's slope across slices (SignedDistance::volume_level_slope):
   // where |D(c)| exceeds that, the whole ball has D(c)'s sign (geometry/label_by_blocks.h).
   // The labels are those of evaluating every voxel; the pull-backs are those of a band
   // about the surface.
@@ -70,17 +71,17 @@ geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid)
   // d's gradient bound, found here on threads rather than by the first block that asks.
   const bool bounded = std::isfinite(bound.stretch) && std::isfinite(bound.slack_mm) &&
                        std::isfinite(distance_->gradient_bound());
-  const double level = level_mm();
+  const double level_slope = distance_->volume_level_slope();
   auto ball = [&](const Eigen::Vector3d& centre, double h) {
     if (!bounded) return geometry::BallSide::unknown;
     const Eigen::Vector3d y = pull_back(centre);
-    const double d = y.allFinite() ? distance_->at(y) - level : HUGE_VAL;
+    const double d = y.allFinite() ? distance_->beyond_level(y) : HUGE_VAL;
     if (!std::isfinite(d)) return geometry::BallSide::unknown;
     const Eigen::Vector3d half = Eigen::Vector3d::Constant(h);
     const double stretch =
         bound.stretch * (1 + deformation_->u_gradient_bound({centre - half, centre + half}));
     const double reach = stretch * h + bound.slack_mm;
-    if (std::abs(d) > distance_->gradient_bound(y, reach) * reach)
+    if (std::abs(d) > (distance_->gradient_bound(y, reach) + level_slope) * reach)
       return d < 0 ? geometry::BallSide::inside : geometry::BallSide::outside;
     return geometry::BallSide::unknown;
   };

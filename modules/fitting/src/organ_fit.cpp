@@ -391,7 +391,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     point_positions.push_back(p);
     local_sq += (phi.global_map().apply(x) - p).squaredNorm();
     Eigen::Vector3d gradient;
-    const double d = organ_distance.at(x, &gradient) - out.after->level_mm();
+    const double d = organ_distance.beyond_level(x, &gradient);
     const double stretch =
         gradient.norm() > 1e-9 ? (normal_map * gradient.normalized()).norm() : 1.0;
     point_residuals.push_back(d / stretch);

@@ -90,8 +90,7 @@ void make_planning_organ(const OrganModel& m) {
   }
   m.planning_mask = std::make_shared<const geometry::LabelVolume>(m.reference);
   m.planning_distance = std::make_shared<const geometry::SignedDistance>(*m.planning_mask, false);
-  if (m.saved_planning_level_mm)
-    m.planning_distance->adopt_volume_level(*m.saved_planning_level_mm);
+  if (m.saved_planning_levels) m.planning_distance->adopt_volume_levels(*m.saved_planning_levels);
 }
 }  // namespace
 
@@ -112,10 +111,10 @@ EmbeddedBody organ_body(const OrganModel& m, std::shared_ptr<const Deformation> 
   return EmbeddedBody(m.planning_mask, m.planning_distance, std::move(deformation));
 }
 
-double planning_volume_level_mm(const OrganModel& m) {
-  if (m.saved_planning_level_mm) return *m.saved_planning_level_mm;
+geometry::SignedDistance::VolumeLevels planning_volume_levels(const OrganModel& m) {
+  if (m.saved_planning_levels) return *m.saved_planning_levels;
   make_planning_organ(m);
-  return m.planning_distance->volume_level();
+  return m.planning_distance->volume_levels();
 }
 
 namespace {
@@ -161,10 +160,9 @@ PlanningVolumes planning_volumes(const OrganModel& m) {
 std::vector<double> planning_surface_distance_mm(const OrganModel& m,
                                                  const Eigen::Matrix3Xd& points_mm) {
   make_planning_organ(m);
-  const double level = planning_volume_level_mm(m);
   std::vector<double> d(static_cast<size_t>(points_mm.cols()));
   for (Eigen::Index k = 0; k < points_mm.cols(); ++k)
-    d[static_cast<size_t>(k)] = std::abs(m.planning_distance->at(points_mm.col(k)) - level);
+    d[static_cast<size_t>(k)] = std::abs(m.planning_distance->beyond_level(points_mm.col(k)));
   return d;
 }
 
@@ -198,7 +196,7 @@ OrganModel copy_model(const OrganModel& m) {
   c.placed = m.placed;
   c.planning_mask = m.planning_mask;  // the same shape and reference: the same cache
   c.planning_distance = m.planning_distance;
-  c.saved_planning_level_mm = m.saved_planning_level_mm;
+  c.saved_planning_levels = m.saved_planning_levels;
   c.saved_planning_volumes = m.saved_planning_volumes;
   std::optional<particles::Skeleton> skeleton;
   if (m.skeleton) skeleton = m.skeleton->skeleton();

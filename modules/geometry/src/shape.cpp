@@ -29,7 +29,7 @@ Notch lung_notch(const Eigen::Vector3d& semi) {
 }  // namespace
 
 bool Shape::inside(const Eigen::Vector3d& p) const {
-  if (mask) return distance->at(p) < level_mm;
+  if (mask) return distance->beyond_level(p) < 0;
   const Eigen::Vector3d semi = 0.5 * size_mm;
   const Eigen::Vector3d q = p - centre_mm;
   if (kind == Kind::box) return (q.cwiseAbs().array() <= semi.array()).all();
@@ -62,8 +62,10 @@ BallSide Shape::inside_ball(const Eigen::Vector3d& p, double radius_mm) const {
   if (!(radius_mm >= 0) || !p.allFinite()) return BallSide::unknown;
   if (mask) {
     constexpr double kRounding = 1e-9;  // mm
-    const double v = distance->at(p) - level_mm;
-    const double reach = distance->gradient_bound(p, radius_mm) * radius_mm + kRounding;
+    const double v = distance->beyond_level(p);
+    const double reach =
+        (distance->gradient_bound(p, radius_mm) + distance->volume_level_slope()) * radius_mm +
+        kRounding;
     return v < -reach ? BallSide::inside : v > reach ? BallSide::outside : BallSide::unknown;
   }
   const Eigen::Vector3d semi = 0.5 * size_mm;
@@ -152,6 +154,7 @@ Aabb Shape::extent() const {
   const ImageGeometry& g = distance->geometry();
   Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi(g.size[0] - 1, g.size[1] - 1, g.size[2] - 1);
   bool reached = false;
+  const double highest = distance->highest_volume_level();
   for (int d = 0; d < 3; ++d) {
     const int a = (d + 1) % 3, b = (d + 2) % 3;
     for (int side = 0; side < 2; ++side) {
@@ -163,9 +166,9 @@ Aabb Shape::extent() const {
           idx[a] = u, idx[b] = v;
           least = std::min(least, distance->at_voxel(idx[0], idx[1], idx[2]));
         }
-      if (!(level_mm - least > 0)) continue;
+      if (!(highest - least > 0)) continue;
       reached = true;
-      const double reach_voxels = (level_mm - least) / g.spacing_mm[d];
+      const double reach_voxels = (highest - least) / g.spacing_mm[d];
       (side ? hi : lo)[d] += side ? reach_voxels : -reach_voxels;
     }
   }
@@ -175,7 +178,8 @@ Aabb Shape::extent() const {
   return {grown.min_mm.cwiseMin(box.min_mm), grown.max_mm.cwiseMax(box.max_mm)};
 }
 
-Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask, std::optional<double> level_mm) {
+Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask,
+                      std::optional<SignedDistance::VolumeLevels> levels) {
   const auto& g = mask->geometry;
   Shape s;
   s.kind = Shape::Kind::mask;
@@ -197,7 +201,7 @@ Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask, std::optional<dou
   // The distance on the organ's voxels and one about them (cropped_organ): a CT's whole grid
   // would take 8 bytes a voxel.
   auto distance = std::make_shared<SignedDistance>(cropped_organ(*mask), false);
-  if (level_mm) distance->adopt_volume_level(*level_mm);
+  if (levels) distance->adopt_volume_levels(*levels);
   s.level_mm = distance->volume_level();
   (void)distance->gradient_bound();  // found here, not by the first of many threads asking
   s.distance = std::move(distance);

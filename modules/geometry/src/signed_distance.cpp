@@ -303,6 +303,18 @@ std::vector<std::uint8_t> sides_about(const ImageGeometry& g, const GridBuffer<d
 }  // namespace
 
 double SignedDistance::volume_level() const {
+  return found_levels().level_mm;
+}
+
+namespace {
+/// The quarter of the half slice a sample lies in (volume_levels_by_slice_phase): from its
+/// offset u in [-1/2, 1/2) (slices) from its voxel's centre.
+int slice_phase_quarter(double u) {
+  return std::min(3, static_cast<int>(std::abs(u) * 8));
+}
+}  // namespace
+
+const SignedDistance::VolumeLevels& SignedDistance::found_levels() const {
   std::call_once(volume_level_->found, [this] {
     const ImageGeometry& g = geometry_;
     const long long total = static_cast<long long>(values_.size());
@@ -359,14 +371,19 @@ double SignedDistance::volume_level() const {
     while (sub < kMostSub && sub * sub * sub < wanted_samples)
       ++sub;
     const int per_voxel = sub * sub * sub;
-    constexpr int kBins = 4096;
+    // The samples counted apart by the quarter of the half slice they lie in (in each:
+    // those within the gap by bins, those below it, those of an inside voxel); the whole's
+    // are their sums.
+    constexpr int kBins = 4096, kQuarters = 4;
     const double width = (above - below) / kBins;
-    std::vector<long long> bins(kBins, 0);
-    long long fixed = 0;  // samples inside at any level in the gap
+    std::vector<long long> bins(kQuarters * kBins, 0);
+    std::array<long long, kQuarters> below_gap{}, of_inside{};
+    long long fixed = 0;  // samples of voxels all of whose 27 neighbours are inside
     const double* values = values_.data();
 #pragma omp parallel reduction(+ : fixed)
     {
-      std::vector<long long> mine(kBins, 0);
+      std::vector<long long> mine(kQuarters * kBins, 0);
+      std::array<long long, kQuarters> my_below{}, my_inside{};
 #pragma omp for schedule(dynamic, 1) collapse(2)
       for (int k = 0; k < g.size[2]; ++k)
         for (int j = 0; j < g.size[1]; ++j)
@@ -376,48 +393,128 @@ double SignedDistance::volume_level() const {
               fixed += sides[static_cast<size_t>(v)] == 1 ? per_voxel : 0;
               continue;
             }
+            const bool voxel_inside = values[v] < 0;
             for (int sample = 0; sample < per_voxel; ++sample) {
               const std::uint64_t key =
                   3 * (key_of(i, j, k) * kMostSub * kMostSub * kMostSub + sample);
               const Eigen::Vector3d place(sample % sub + uniform01(key),
                                           (sample / sub) % sub + uniform01(key + 1),
                                           sample / (sub * sub) + uniform01(key + 2));
+              const Eigen::Vector3d offset = place / sub - Eigen::Vector3d::Constant(0.5);
               const double d = interpolate_index(
-                  g, to_index_,
-                  Eigen::Vector3d(i, j, k) + place / sub - Eigen::Vector3d::Constant(0.5),
+                  g, to_index_, Eigen::Vector3d(i, j, k) + offset,
                   [values](long long at) { return values[at]; }, nullptr);
+              const int quarter = slice_phase_quarter(offset.z());
+              my_inside[quarter] += voxel_inside;
               if (d <= below)
-                ++fixed;
+                ++my_below[quarter];
               else if (d < above)
-                ++mine[std::min(kBins - 1, static_cast<int>((d - below) / width))];
+                ++mine[quarter * kBins +
+                       std::min(kBins - 1, static_cast<int>((d - below) / width))];
             }
           }
 #pragma omp critical
-      for (int b = 0; b < kBins; ++b)
-        bins[b] += mine[b];
-    }
-    // The level below which as many samples lie as the inside voxels have: within its bin,
-    // by the bin's count spread evenly.
-    const long long wanted = per_voxel * inside - fixed;
-    double level = above;
-    long long counted = 0;
-    for (int b = 0; b < kBins; ++b) {
-      if (counted + bins[b] >= wanted && bins[b] > 0) {
-        level = below + width * (b + static_cast<double>(wanted - counted) / bins[b]);
-        break;
+      {
+        for (int b = 0; b < kQuarters * kBins; ++b)
+          bins[b] += mine[b];
+        for (int q = 0; q < kQuarters; ++q)
+          below_gap[q] += my_below[q], of_inside[q] += my_inside[q];
       }
-      counted += bins[b];
     }
-    volume_level_->value = std::clamp(level, std::nextafter(below, above), above);
+    // The level below which `wanted` of the samples in `counts` (a histogram across the
+    // gap) lie: within its bin, by the bin's count spread evenly; the gap's top if none.
+    auto level_for = [&](const long long* counts, long long wanted) {
+      double level = above;
+      long long counted = 0;
+      for (int b = 0; b < kBins; ++b) {
+        if (counted + counts[b] >= wanted && counts[b] > 0) {
+          level = below + width * (b + static_cast<double>(wanted - counted) / counts[b]);
+          break;
+        }
+        counted += counts[b];
+      }
+      return std::clamp(level, std::nextafter(below, above), above);
+    };
+    // As many samples below the level as the inside voxels have (those of voxels inside
+    // all about are below it at any level in the gap, and counted on both sides).
+    std::vector<long long> all(kBins, 0);
+    long long wanted = per_voxel * inside - fixed;
+    for (int q = 0; q < kQuarters; ++q) {
+      wanted -= below_gap[q];
+      for (int b = 0; b < kBins; ++b)
+        all[b] += bins[q * kBins + b];
+      volume_level_->levels.by_slice_phase_mm[q] =
+          level_for(bins.data() + q * kBins, of_inside[q] - below_gap[q]);
+    }
+    volume_level_->levels.level_mm = level_for(all.data(), wanted);
   });
-  return volume_level_->value;
+  return volume_level_->levels;
 }
 
-void SignedDistance::adopt_volume_level(double level_mm) const {
-  if (!could_be_volume_level(level_mm, geometry_))
-    throw std::invalid_argument("signed distance: a volume level of " + std::to_string(level_mm) +
-                                " mm is not one of this grid's");
-  std::call_once(volume_level_->found, [this, level_mm] { volume_level_->value = level_mm; });
+SignedDistance::LevelsBySlicePhase SignedDistance::volume_levels_by_slice_phase() const {
+  return found_levels().by_slice_phase_mm;
+}
+
+namespace {
+constexpr double kQuarter = 0.125;  // slices: the width of a quarter of the half slice
+
+/// The level's pieces: linear on [t_q, t_q+1] between the quarters' centres t_q, the
+/// first's and last's lines extended to 0 and 1/2.
+double level_by_phase(const SignedDistance::LevelsBySlicePhase& c, double t, double half_spacing) {
+  const int piece = std::clamp(static_cast<int>(std::floor((t - kQuarter / 2) / kQuarter)), 0, 2);
+  const double f = (t - (piece + 0.5) * kQuarter) / kQuarter;
+  const double level = c[piece] + f * (c[piece + 1] - c[piece]);
+  return std::clamp(level, std::nextafter(-half_spacing, 0.0), half_spacing);
+}
+}  // namespace
+
+double SignedDistance::volume_level_at(const Eigen::Vector3d& p_mm) const {
+  const double z = to_index_.row(2).dot(p_mm - geometry_.origin_mm);
+  const double t = std::abs(z - std::round(z));
+  return level_by_phase(found_levels().by_slice_phase_mm, t, 0.5 * geometry_.spacing_mm.minCoeff());
+}
+
+double SignedDistance::beyond_level(const Eigen::Vector3d& p_mm, Eigen::Vector3d* gradient) const {
+  const double d = at(p_mm, gradient);
+  const double z = to_index_.row(2).dot(p_mm - geometry_.origin_mm);
+  const double u = z - std::round(z), t = std::abs(u);
+  const LevelsBySlicePhase& c = found_levels().by_slice_phase_mm;
+  const double half_spacing = 0.5 * geometry_.spacing_mm.minCoeff();
+  const double level = level_by_phase(c, t, half_spacing);
+  if (gradient) {  // the level's slope along the slices' normal, where it is not clamped
+    const int piece = std::clamp(static_cast<int>(std::floor((t - kQuarter / 2) / kQuarter)), 0, 2);
+    const bool clamped = level <= std::nextafter(-half_spacing, 0.0) || level >= half_spacing;
+    const double dlevel_dt = clamped ? 0 : (c[piece + 1] - c[piece]) / kQuarter;
+    *gradient -= dlevel_dt * (u < 0 ? -1.0 : 1.0) * to_index_.row(2).transpose();
+  }
+  return d - level;
+}
+
+double SignedDistance::volume_level_slope() const {
+  const LevelsBySlicePhase& c = found_levels().by_slice_phase_mm;
+  double steepest = 0;
+  for (int q = 0; q + 1 < 4; ++q)
+    steepest = std::max(steepest, std::abs(c[q + 1] - c[q]) / kQuarter);
+  return steepest * to_index_.row(2).norm();
+}
+
+double SignedDistance::highest_volume_level() const {
+  const LevelsBySlicePhase& c = found_levels().by_slice_phase_mm;
+  const double half_spacing = 0.5 * geometry_.spacing_mm.minCoeff();
+  double highest = -HUGE_VAL;  // at a piece's end: 0, the quarters' centres, or 1/2
+  for (double t : {0.0, 0.0625, 0.1875, 0.3125, 0.4375, 0.5})
+    highest = std::max(highest, level_by_phase(c, t, half_spacing));
+  return highest;
+}
+
+void SignedDistance::adopt_volume_levels(const VolumeLevels& levels) const {
+  bool fits = could_be_volume_level(levels.level_mm, geometry_);
+  for (double c : levels.by_slice_phase_mm)
+    fits = fits && could_be_volume_level(c, geometry_);
+  if (!fits)
+    throw std::invalid_argument("signed distance: a volume level of " +
+                                std::to_string(levels.level_mm) + " mm is not one of this grid's");
+  std::call_once(volume_level_->found, [this, &levels] { volume_level_->levels = levels; });
 }
 
 bool could_be_volume_level(double level_mm, const ImageGeometry& grid) {

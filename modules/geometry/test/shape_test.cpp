@@ -119,9 +119,11 @@ TEST(Shapes, AMasksOrganBetweenThickSlicesIsInterpolatedByShape) {
   EXPECT_TRUE(s.inside({6, 0, 1.5}));
   EXPECT_TRUE(s.inside({8.9, 0, 0}));  // on a slice, its contour
   EXPECT_FALSE(s.inside({9.6, 0, 0}));
-  // A saved level is taken as it is.
-  const double level = 0.5 * s.level_mm;
-  EXPECT_EQ(make_mask_shape(mask, level).level_mm, level);
+  // Saved levels are taken as they are.
+  SignedDistance::VolumeLevels levels{0.5 * s.level_mm, {0.01, 0.02, 0.03, 0.04}};
+  const Shape saved = make_mask_shape(mask, levels);
+  EXPECT_EQ(saved.level_mm, levels.level_mm);
+  EXPECT_EQ(saved.distance->volume_levels_by_slice_phase(), levels.by_slice_phase_mm);
 }
 
 // inside_ball is never wrong: for balls about each analytic shape, every point sampled in

@@ -303,7 +303,11 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
   out.summary = nlohmann::json::object();
   const bool on_ct = r.on_ct_grid(), fields = r.deformation_files();
   // The organ's level where the organ itself is written (not for its deformation alone).
-  if (on_ct || !r.mesh.empty()) out.summary["organ_level_mm"] = organ.level_mm();
+  if (on_ct || !r.mesh.empty()) {
+    const geometry::SignedDistance::VolumeLevels levels = organ.levels();
+    out.summary["organ_level_mm"] = levels.level_mm;
+    out.summary["organ_level_by_slice_phase_mm"] = levels.by_slice_phase_mm;
+  }
   const bool vectors = !r.displacement_field.empty() || !r.registration.empty();
   Progress progress("export", (on_ct ? 3 : 0) + (fields ? 1 : 0) + (r.mesh.empty() ? 0 : 1));
   int done = 0;

@@ -278,14 +278,14 @@ FitStageResult run_fit_stage(const FitStageOptions& options, ModelStageResult mo
     // (the undeformed error); the truth is sampled once for the three bodies compared with it.
     std::optional<evaluation::LatticeBody> before;
     geometry::SurfaceComparison floor;
-    // A mask organ's model at rest is its shape: the same signed distance at the same level
+    // A mask organ's model at rest is its shape: the same signed distance at the same levels
     // moved by the identity (fitting/embedded_body.h), voxel for voxel on any lattice, so
     // its floor is zero by construction and its shape is not sampled (on a 1.5 L liver,
     // 0.5 s of its truth's 3.2 s); the organ as it was is sampled on the truth's lattice.
     const geometry::Shape& shape_filled = out.model.shape;
-    const bool rest_is_shape =
-        shape_filled.mask && organ_before.shared_distance() == shape_filled.distance &&
-        organ_before.level_mm() == shape_filled.level_mm && organ_before.deformation().identity();
+    const bool rest_is_shape = shape_filled.mask &&
+                               organ_before.shared_distance() == shape_filled.distance &&
+                               organ_before.deformation().identity();
     if (!rest_is_shape) {  // the shape's lattice let go before the truth's is made
       const evaluation::KnownBody shape(evaluation::shape_body(shape_filled), shape_filled.extent(),
                                         truth_voxel);

@@ -124,12 +124,14 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
   nlohmann::json shape = {{"kind", m.shape.kind_name()},
                           {"size_mm", vec(m.shape.size_mm)},
                           {"centre_mm", vec(m.shape.centre_mm)}};
-  // The planning organ's volume level, found once at planning rather than at every session
+  // The planning organ's volume levels, found once at planning rather than at every session
   // (0.28 s on a 1.5 L liver): a mask shape's own (found when the shape was made), else the
   // reference body's.
   if (m.shape.mask) shape["mask"] = mask_to_json(geometry::cropped_organ(*m.shape.mask));
-  j["organ"]["volume_level_mm"] =
-      m.shape.mask ? m.shape.level_mm : fitting::planning_volume_level_mm(m);
+  const geometry::SignedDistance::VolumeLevels levels =
+      m.shape.mask ? m.shape.distance->volume_levels() : fitting::planning_volume_levels(m);
+  j["organ"]["volume_level_mm"] = levels.level_mm;
+  j["organ"]["volume_level_by_slice_phase_mm"] = levels.by_slice_phase_mm;
   // The organ's and its particles' volumes before a fit (fitting::PlanningVolumes), measured
   // once at planning rather than at every session; a fitted model's are measured by its fit.
   if (!fitting::carries_fit(m)) {
@@ -237,14 +239,33 @@ SavedModel load_model(const fs::path& file) {
     const Eigen::Vector3d shape_size = three(shape, "size_mm", "shape.size_mm"),
                           shape_centre = three(shape, "centre_mm", "shape.centre_mm");
     if (!(shape_size.array() > 0).all()) fail("shape.size_mm must be > 0 along each axis");
-    // The organ's level as planned (files written before it was kept have none), checked on
-    // the grid it lies on: the mask's, else the reference body's.
-    std::optional<double> level;
-    if (j.at("organ").contains("volume_level_mm"))
-      level = j.at("organ").at("volume_level_mm").get<double>();
+    // The organ's levels as planned, checked on the grid they lie on: the mask's, else the
+    // reference body's. Files written before the levels by slice phase were kept have the
+    // single level alone (older ones none): their levels are found again, and their planning
+    // volumes, measured on the organ at its single level, measured again.
+    const nlohmann::json& organ = j.at("organ");
+    const bool by_phase = organ.contains("volume_level_by_slice_phase_mm");
+    if (by_phase && !organ.contains("volume_level_mm"))
+      fail("organ.volume_level_by_slice_phase_mm is given without organ.volume_level_mm");
+    std::optional<geometry::SignedDistance::VolumeLevels> levels;
+    if (by_phase) {
+      levels.emplace();
+      levels->level_mm = organ.at("volume_level_mm").get<double>();
+      const nlohmann::json& phases = organ.at("volume_level_by_slice_phase_mm");
+      if (!phases.is_array() || phases.size() != levels->by_slice_phase_mm.size() ||
+          !std::all_of(phases.begin(), phases.end(),
+                       [](const auto& value) { return value.is_number(); }))
+        fail("organ.volume_level_by_slice_phase_mm needs 4 numbers");
+      for (size_t q = 0; q < phases.size(); ++q)
+        levels->by_slice_phase_mm[q] = phases[q].get<double>();
+    }
     auto check_level = [&](const geometry::ImageGeometry& grid) {
-      if (level && !geometry::could_be_volume_level(*level, grid))
+      if (!levels) return;
+      if (!geometry::could_be_volume_level(levels->level_mm, grid))
         fail("organ.volume_level_mm: not finite, or farther from 0 than a voxel");
+      for (double c : levels->by_slice_phase_mm)
+        if (!geometry::could_be_volume_level(c, grid))
+          fail("organ.volume_level_by_slice_phase_mm: not finite, or farther from 0 than a voxel");
     };
     if (!shape.at("kind").is_string()) fail("shape.kind: the organ's kind of shape, a text");
     if (shape.contains("mask") != (shape.at("kind") == "mask"))
@@ -274,7 +295,7 @@ SavedModel load_model(const fs::path& file) {
       }
       if (v != mask->labels.size()) fail("shape.mask runs do not cover the grid");
       check_level(mask->geometry);
-      m.shape = geometry::make_mask_shape(std::move(mask), level);
+      m.shape = geometry::make_mask_shape(std::move(mask), levels);
     } else {
       m.shape = geometry::make_shape(shape.at("kind").get<std::string>(), shape_size, shape_centre);
     }
@@ -291,9 +312,9 @@ SavedModel load_model(const fs::path& file) {
                       "reference otherwise: plan again)",
                       stated.dump(), rebuilt));
     if (!m.shape.mask) check_level(m.reference.geometry);
-    m.saved_planning_level_mm = level;
+    m.saved_planning_levels = levels;
     // Absent in models written before they were kept: measured by the fit then.
-    if (j.at("organ").contains("planning_volumes")) {
+    if (by_phase && organ.contains("planning_volumes")) {
       const auto& v = j.at("organ").at("planning_volumes");
       fitting::PlanningVolumes p;
       p.voxel_mm = v.at("voxel_mm").get<double>();
@@ -392,7 +413,6 @@ SavedModel load_model(const fs::path& file) {
         fail("embedding: not finite, or the global map does not keep volume (det != 1)");
     }
     saved.organ_name = j.at("organ").at("name").get<std::string>();
-    const auto& organ = j.at("organ");
     if (organ.contains("colour")) {  // files written before the look was kept have none
       const nlohmann::json& given = organ.at("colour");
       if (!given.is_array() || given.size() != 3 ||

@@ -224,18 +224,24 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
   EXPECT_FALSE(back.ct.has_value());
   EXPECT_EQ(back.model.shape.mask->count(1), mask->count(1));
   EXPECT_EQ(back.model.reference.labels, m.reference.labels);
-  // The organ's volume level is saved as a session would find it on the organ it loads,
-  // and as the planning run finds it on the uncropped mask, to the bit; adopted, not found.
-  ASSERT_TRUE(back.model.saved_planning_level_mm.has_value());
-  const double found = geometry::SignedDistance(*back.model.shape.mask, false).volume_level();
-  EXPECT_EQ(*back.model.saved_planning_level_mm, found);
-  EXPECT_EQ(fitting::planning_volume_level_mm(m), found);
-  EXPECT_GT(std::abs(found), 0.01);  // this organ's is not 0: the check above means something
-  EXPECT_EQ(fitting::planning_volume_level_mm(back.model), found);
-  // The organ a session loads is the organ planned: the same level, the same inside test
+  // The organ's volume levels are saved as a session would find them on the organ it
+  // loads, and as the planning run finds them on the uncropped mask, to the bit; adopted,
+  // not found.
+  ASSERT_TRUE(back.model.saved_planning_levels.has_value());
+  const geometry::SignedDistance::VolumeLevels found =
+      geometry::SignedDistance(*back.model.shape.mask, false).volume_levels();
+  auto same = [](const geometry::SignedDistance::VolumeLevels& a,
+                 const geometry::SignedDistance::VolumeLevels& b) {
+    return a.level_mm == b.level_mm && a.by_slice_phase_mm == b.by_slice_phase_mm;
+  };
+  EXPECT_TRUE(same(*back.model.saved_planning_levels, found));
+  EXPECT_TRUE(same(fitting::planning_volume_levels(m), found));
+  EXPECT_GT(std::abs(found.level_mm), 0.01);  // this organ's is not 0: the check means something
+  EXPECT_TRUE(same(fitting::planning_volume_levels(back.model), found));
+  // The organ a session loads is the organ planned: the same levels, the same inside test
   // (its distance made on the saved crop, the planning one's on the whole grid).
-  EXPECT_EQ(organ.level_mm, found);
-  EXPECT_EQ(back.model.shape.level_mm, found);
+  EXPECT_EQ(organ.level_mm, found.level_mm);
+  EXPECT_EQ(back.model.shape.level_mm, found.level_mm);
   int inside = 0, tried = 0;
   for (double x = -10; x <= 10; x += 0.37)
     for (const double z : {-10.2, -9.0, -7.4, -3.3, 0.0, 2.9, 4.6}) {
@@ -244,17 +250,25 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
     }
   EXPECT_GT(inside, tried / 2);  // both sides of the surface asked
   EXPECT_LT(inside, tried);
-  // Saved again (a fitted model is), the level is kept, not found again.
+  // Saved again (a fitted model is), the levels are kept, not found again.
   save_model(dir_ / "m2.json", back.model, "X", OrganLook{}, std::nullopt,
              nlohmann::json::object());
-  EXPECT_EQ(load_model(dir_ / "m2.json").model.saved_planning_level_mm, found);
-  // A file written before the level was kept: the session finds the same level itself.
+  EXPECT_TRUE(same(*load_model(dir_ / "m2.json").model.saved_planning_levels, found));
+  // Files written before the levels by slice phase were kept (the single level alone) or
+  // before any level was: the session finds the same levels itself, and measures the
+  // planning volumes again (they were measured on the organ at its single level).
   nlohmann::json j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  ASSERT_TRUE(j["organ"].contains("planning_volumes"));
+  j["organ"].erase("volume_level_by_slice_phase_mm");
+  std::ofstream(dir_ / "single.json") << j.dump();
   j["organ"].erase("volume_level_mm");
   std::ofstream(dir_ / "old.json") << j.dump();
-  const SavedModel old = load_model(dir_ / "old.json");
-  EXPECT_FALSE(old.model.saved_planning_level_mm.has_value());
-  EXPECT_EQ(fitting::planning_volume_level_mm(old.model), found);
+  for (const char* file : {"single.json", "old.json"}) {
+    const SavedModel old = load_model(dir_ / file);
+    EXPECT_FALSE(old.model.saved_planning_levels.has_value()) << file;
+    EXPECT_FALSE(old.model.saved_planning_volumes.has_value()) << file;
+    EXPECT_TRUE(same(fitting::planning_volume_levels(old.model), found)) << file;
+  }
 }
 
 TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
@@ -308,6 +322,18 @@ TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
   j["organ"]["volume_level_mm"] = 40.0;  // farther than a voxel: not this organ's level
   EXPECT_EQ(error_of(j.dump()),
             f + ": organ.volume_level_mm: not finite, or farther from 0 than a voxel");
+  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j["organ"]["volume_level_by_slice_phase_mm"][2] = -40.0;
+  EXPECT_EQ(error_of(j.dump()), f + ": organ.volume_level_by_slice_phase_mm: not finite, or "
+                                    "farther from 0 than a voxel");
+  j["organ"]["volume_level_by_slice_phase_mm"] = {0.01, 0.02, 0.03};
+  EXPECT_EQ(error_of(j.dump()), f + ": organ.volume_level_by_slice_phase_mm needs 4 numbers");
+  j["organ"]["volume_level_by_slice_phase_mm"] = {0.01, 0.02, 0.03, "0.04"};
+  EXPECT_EQ(error_of(j.dump()), f + ": organ.volume_level_by_slice_phase_mm needs 4 numbers");
+  j["organ"]["volume_level_by_slice_phase_mm"] = {0.01, 0.02, 0.03, 0.04};
+  j["organ"].erase("volume_level_mm");
+  EXPECT_EQ(error_of(j.dump()), f + ": organ.volume_level_by_slice_phase_mm is given without "
+                                    "organ.volume_level_mm");
   j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
   j["organ"]["planning_volumes"]["organ_mm3"] = -5.0;
   EXPECT_EQ(error_of(j.dump()), f + ": organ.planning_volumes: voxel_mm, organ_mm3 and "

@@ -48,11 +48,13 @@ class EmbeddedBody {
     return deformation_->pull_back(q_mm);
   }
   bool inside(const Eigen::Vector3d& q_mm) const;
-  /// The level of the reference's signed distance that bounds the body (mm; inside where
-  /// d(phi^-1(q)) < level): SignedDistance::volume_level, so that the body keeps its voxel
-  /// count on a grid it moves across by parts of a voxel. Found on first use (0.05 to 0.3 s
-  /// on a real organ), so a body asked only for its deformation does not pay for it.
-  double level_mm() const { return distance_->volume_level(); }
+  /// The levels of the reference's signed distance that bound the body (mm; inside where
+  /// d(phi^-1(q)) < the level at phi^-1(q)'s place between the reference's slices):
+  /// SignedDistance::volume_levels, so that the body keeps its voxel count on a grid it
+  /// moves across by parts of a voxel, whatever the part along the slices. Found on first
+  /// use (0.05 to 0.3 s on a real organ), so a body asked only for its deformation does not
+  /// pay for it.
+  geometry::SignedDistance::VolumeLevels levels() const { return distance_->volume_levels(); }
   /// A box holding the body (Deformation::particle_box; the reference's box for a
   /// deformation without particles).
   geometry::Aabb bounds() const;

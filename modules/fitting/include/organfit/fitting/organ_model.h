@@ -68,9 +68,9 @@ struct OrganModel {
   /// every organ_body of this model (a cache, hence mutable; copies share it).
   mutable std::shared_ptr<const geometry::LabelVolume> planning_mask;
   mutable std::shared_ptr<const geometry::SignedDistance> planning_distance;
-  /// The planning organ's volume level (mm, geometry::SignedDistance::volume_level) as a
-  /// saved model recorded it: its distance takes it rather than finding it again.
-  std::optional<double> saved_planning_level_mm;
+  /// The planning organ's volume levels (mm, geometry::SignedDistance::volume_levels) as a
+  /// saved model recorded them: its distance takes them rather than finding them again.
+  std::optional<geometry::SignedDistance::VolumeLevels> saved_planning_levels;
   /// The planning volumes as a saved model recorded them: planning_volumes takes them while
   /// they still describe the model.
   std::optional<PlanningVolumes> saved_planning_volumes;
@@ -120,10 +120,10 @@ EmbeddedBody organ_body(const OrganModel& model);
 /// The same through a deformation already made (the fit's), not made again.
 EmbeddedBody organ_body(const OrganModel& model, std::shared_ptr<const Deformation> deformation);
 
-/// The planning organ's volume level (mm): where its exported organ is cut
-/// (geometry::SignedDistance::volume_level); the saved one when a model file gave it, else
-/// found once per planning organ.
-double planning_volume_level_mm(const OrganModel& model);
+/// The planning organ's volume levels (mm): where its exported organ is cut
+/// (geometry::SignedDistance::volume_levels); the saved ones when a model file gave them,
+/// else found once per planning organ.
+geometry::SignedDistance::VolumeLevels planning_volume_levels(const OrganModel& model);
 
 /// A 64-bit hash of what the planning volumes are measured on: the particles' positions,
 /// their radius and the reference body (its grid and voxels). About 5 ms on a 9M-voxel
@@ -136,7 +136,7 @@ std::uint64_t planning_fingerprint(const OrganModel& model);
 PlanningVolumes planning_volumes(const OrganModel& model);
 
 /// The unsigned distance (mm) of each column of `points_mm` (3 x n, patient mm) to the
-/// planning organ's surface: |d(p) - level| of its signed distance at its volume level (the
+/// planning organ's surface: |beyond_level(p)| of its signed distance at its volume level (the
 /// surface organ_body exports at phi = identity). Beyond the distance's grid, its value at
 /// the grid's nearest point plus the way there.
 std::vector<double> planning_surface_distance_mm(const OrganModel& model,

@@ -19,13 +19,17 @@ struct Shape {
   Eigen::Vector3d size_mm = Eigen::Vector3d::Ones();    ///< full extents (before the notch)
   Eigen::Vector3d centre_mm = Eigen::Vector3d::Zero();  ///< centre (a mask: its centroid)
   std::shared_ptr<const LabelVolume> mask;              ///< kind "mask": label 1 is inside
-  /// kind "mask": the organ is {distance < level_mm}: the mask's signed distance
-  /// (unsmoothed, on geometry::cropped_organ of it) at its volume level, the surface the
+  /// kind "mask": the organ is {distance->beyond_level(p) < 0}: the mask's signed distance
+  /// (unsmoothed, on geometry::cropped_organ of it) at its volume level by the place
+  /// between slices (SignedDistance::volume_level_at), the surface the
   /// fit's organ and every export have (fitting::organ_body), so that the reference the fit
   /// measures points against, generated points and a benchmark's truth are that organ too.
   /// Not the 0.5 level of the mask's trilinear interpolation, which holds a contour to the
   /// midplane between thick slices (docs/decisions.md, "A mask organ is one surface").
   std::shared_ptr<const SignedDistance> distance;
+  /// kind "mask": the volume level of all slice phases together (SignedDistance::
+  /// volume_level): the level of the distance smoothed within slices that the fit measures
+  /// points against (that smoothing evens out the slices' phases too).
   double level_mm = 0;
   Aabb box;  ///< kind "mask": bounds of its voxels, half a voxel more (where the level lies)
   bool inside(const Eigen::Vector3d& p) const;
@@ -46,12 +50,13 @@ struct Shape {
   Aabb extent() const;
 };
 
-/// A shape from a mask (label 1), its distance made and its level found (`level_mm`, when
-/// given, adopted instead: a saved model's, as SignedDistance::adopt_volume_level takes it).
+/// A shape from a mask (label 1), its distance made and its levels found (`levels`, when
+/// given, adopted instead: a saved model's, as SignedDistance::adopt_volume_levels takes
+/// them).
 /// Call outside a parallel region (the distance's passes are on threads). Throws
 /// std::invalid_argument when the mask is empty.
 Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask,
-                      std::optional<double> level_mm = std::nullopt);
+                      std::optional<SignedDistance::VolumeLevels> levels = std::nullopt);
 
 /// Makes a shape: "ellipsoid" and "box" as named; "egg" is an ellipsoid whose cross-
 /// section narrows linearly towards -x (a prostate's apex, 30% narrower at the tip);
