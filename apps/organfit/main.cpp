@@ -66,11 +66,12 @@ int run_main(int argc, char** argv) {
   return 0;
 }
 
-/// Whether the subcommand may touch hundreds of MB (organs, scans, benchmarks), for which
-/// huge pages are worth their cost: the program started again, 0.12 s of loading and linking
-/// its 103 shared libraries a second time. Checking a scene, the schema, the version, a
-/// DICOM node by hand and help do not ask for them.
-bool wants_huge_pages(int argc, char** argv) {
+/// Whether the subcommand may touch hundreds of MB or compute for seconds on threads
+/// (organs, scans, benchmarks), for which huge pages and a short busy wait are worth their
+/// cost: the program started again, 0.12 s of loading and linking its 103 shared libraries
+/// a second time. Checking a scene, the schema, the version, a DICOM node by hand and help
+/// do not ask for them.
+bool wants_runtime_settings(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg.empty() || arg[0] == '-') continue;  // the global flags take no values
@@ -91,7 +92,7 @@ std::string one_line(const char* what) {
 }
 
 int main(int argc, char** argv) {
-  if (wants_huge_pages(argc, argv)) organfit::request_huge_pages(argv);
+  if (wants_runtime_settings(argc, argv)) organfit::start_with_runtime_settings(argv);
   organfit::keep_freed_memory();
   int code = 0;
   try {

@@ -296,16 +296,24 @@ check schema.json_parses python3 -c "import json,sys; d=json.load(open('$tmp/out
 expect version 0 "" -- version
 check version.prints grep -qE "^organfit [0-9]+\.[0-9]+\.[0-9]+$" "$tmp/out"
 
-# Huge pages are asked for (the program starts itself again, where the kernel gives them on
-# request) by the subcommands that handle organs and scans, not by version, validate,
-# schema or dicom: the program started once or twice (strace's execve count).
+# Huge pages and a short OpenMP busy wait are asked for (the program starts itself again
+# with GLIBC_TUNABLES and GOMP_SPINCOUNT, read only at a start) by the subcommands that
+# handle organs and scans, not by version, validate, schema or dicom: the program started
+# once or twice (strace's execve count). A user's own setting of either is left as it is.
 starts() { strace -f -e trace=execve -o "$tmp/strace" "$bin" "$@" >/dev/null 2>&1; grep -c 'execve(' "$tmp/strace"; }
 heavy=1
-grep -q '\[madvise\]' /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null && heavy=2
-[[ ${GLIBC_TUNABLES:-} == *glibc.malloc.hugetlb* ]] && heavy=1  # asked (or declined) already
+grep -q '\[madvise\]' /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null &&
+  [[ ${GLIBC_TUNABLES:-} != *glibc.malloc.hugetlb* ]] && heavy=2
+[[ -z ${OMP_WAIT_POLICY+set} && -z ${GOMP_SPINCOUNT+set} ]] && heavy=2
 check startup.version_once test "$(starts version)" -eq 1
 check startup.validate_once test "$(starts validate "$scenes/small-model.yaml")" -eq 1
-check startup.run_asks_huge_pages test "$(starts run --help)" -eq "$heavy"
+check startup.run_asks_huge_pages_and_a_short_busy_wait test "$(starts run --help)" -eq "$heavy"
+check startup.run_starts_again_with_a_short_busy_wait bash -c "env -u OMP_WAIT_POLICY -u GOMP_SPINCOUNT \
+  strace -f -v -s 256 -e trace=execve -o '$tmp/strace_env' '$bin' run --help >/dev/null 2>&1 &&
+  test \$(grep -c 'execve(' '$tmp/strace_env') -eq 2 && grep 'execve(' '$tmp/strace_env' | tail -1 | grep -q 'GOMP_SPINCOUNT=10000'"
+check startup.users_wait_policy_kept bash -c "GLIBC_TUNABLES=glibc.malloc.hugetlb=0 OMP_WAIT_POLICY=passive \
+  strace -f -e trace=execve -o '$tmp/strace_user' '$bin' run --help >/dev/null 2>&1 &&
+  test \$(grep -c 'execve(' '$tmp/strace_user') -eq 1"
 
 # run: outputs, refusals
 expect run.small 0 "" -- --quiet run "$scenes/small-model.yaml" --out "$tmp/run1"

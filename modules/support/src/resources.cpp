@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #if defined(__GLIBC__)
 #include <malloc.h>
@@ -31,24 +32,45 @@ std::optional<std::string> huge_page_tunables(const char* present, const std::st
   return tunables + (tunables.empty() ? "" : ":") + "glibc.malloc.hugetlb=1";
 }
 
-void request_huge_pages(char** argv) {
+std::optional<std::string> openmp_spin_count(const char* wait_policy, const char* spin_count) {
+  if (wait_policy || spin_count) return std::nullopt;
+  return "10000";
+}
+
+void start_with_runtime_settings(char** argv) {
 #if defined(__GLIBC__) && defined(__linux__)
   if (getauxval(AT_SECURE) != 0) return;
-  const char* present = std::getenv("GLIBC_TUNABLES");
   std::ifstream mode_file("/sys/kernel/mm/transparent_hugepage/enabled");
   std::string mode;
   std::getline(mode_file, mode);
-  const std::optional<std::string> tunables = huge_page_tunables(present, mode);
-  if (!tunables) return;
-  const std::string kept = present ? present : "";
-  if (setenv("GLIBC_TUNABLES", tunables->c_str(), 1) != 0) return;
+  // Each variable to set, with its present value (nullopt: unset) to put back if the exec fails.
+  struct Change {
+    const char* name;
+    std::string value;
+    std::optional<std::string> before;
+  };
+  std::vector<Change> changes;
+  auto present = [](const char* name) -> std::optional<std::string> {
+    const char* value = std::getenv(name);
+    return value ? std::optional<std::string>(value) : std::nullopt;
+  };
+  if (const auto tunables = huge_page_tunables(std::getenv("GLIBC_TUNABLES"), mode))
+    changes.push_back({"GLIBC_TUNABLES", *tunables, present("GLIBC_TUNABLES")});
+  if (const auto spins =
+          openmp_spin_count(std::getenv("OMP_WAIT_POLICY"), std::getenv("GOMP_SPINCOUNT")))
+    changes.push_back({"GOMP_SPINCOUNT", *spins, std::nullopt});
+  if (changes.empty()) return;
+  for (const Change& c : changes)
+    if (setenv(c.name, c.value.c_str(), 1) != 0) return;
   execv("/proc/self/exe", argv);
-  // The exec failed (no /proc): run on with the pages as they are, and no request left set
-  // for programs this one starts.
-  if (present) {
-    setenv("GLIBC_TUNABLES", kept.c_str(), 1);
-  } else {
-    unsetenv("GLIBC_TUNABLES");
+  // The exec failed (no /proc): run on as things are, and nothing left set for programs
+  // this one starts.
+  for (const Change& c : changes) {
+    if (c.before) {
+      setenv(c.name, c.before->c_str(), 1);
+    } else {
+      unsetenv(c.name);
+    }
   }
 #else
   (void)argv;

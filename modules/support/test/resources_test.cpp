@@ -61,5 +61,13 @@ TEST(RequestHugePages, AskedOnlyWhereTheKernelGivesThemOnRequestAndNobodyAnswere
   EXPECT_EQ(huge_page_tunables(nullptr, ""), std::nullopt);
 }
 
+TEST(OpenMpSpinCount, ShortenedUnlessTheUserOrAnEarlierStartSetIt) {
+  EXPECT_EQ(openmp_spin_count(nullptr, nullptr), "10000");
+  EXPECT_EQ(openmp_spin_count("ACTIVE", nullptr), std::nullopt);
+  EXPECT_EQ(openmp_spin_count("passive", nullptr), std::nullopt);
+  EXPECT_EQ(openmp_spin_count(nullptr, "300000"), std::nullopt);
+  EXPECT_EQ(openmp_spin_count(nullptr, ""), std::nullopt);  // set, if empty: as it is
+}
+
 }  // namespace
 }  // namespace organfit
