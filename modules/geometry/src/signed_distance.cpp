@@ -458,42 +458,49 @@ SignedDistance::LevelsBySlicePhase SignedDistance::volume_levels_by_slice_phase(
 namespace {
 constexpr double kQuarter = 0.125;  // slices: the width of a quarter of the half slice
 
-/// The level's pieces: linear on [t_q, t_q+1] between the quarters' centres t_q, the
-/// first's and last's lines extended to 0 and 1/2.
-double level_by_phase(const SignedDistance::LevelsBySlicePhase& c, double t, double half_spacing) {
+/// The level at t slices from the nearest plane of voxel centres (mm), and its slope along
+/// t (mm per slice; 0 where it is clamped): linear on [t_q, t_q+1] between the quarters'
+/// centres t_q, the first's and last's lines extended to 0 and 1/2, kept within half the
+/// smallest spacing of 0.
+struct LevelAtPhase {
+  double level_mm, slope_mm;
+};
+LevelAtPhase level_by_phase(const SignedDistance::LevelsBySlicePhase& c, double t,
+                            double half_spacing) {
   const int piece = std::clamp(static_cast<int>(std::floor((t - kQuarter / 2) / kQuarter)), 0, 2);
   const double f = (t - (piece + 0.5) * kQuarter) / kQuarter;
   const double level = c[piece] + f * (c[piece + 1] - c[piece]);
-  return std::clamp(level, std::nextafter(-half_spacing, 0.0), half_spacing);
+  const double lowest = std::nextafter(-half_spacing, 0.0);
+  if (level <= lowest) return {lowest, 0.0};
+  if (level >= half_spacing) return {half_spacing, 0.0};
+  return {level, (c[piece + 1] - c[piece]) / kQuarter};
 }
 }  // namespace
 
-double SignedDistance::volume_level_at(const Eigen::Vector3d& p_mm) const {
+double SignedDistance::slice_offset(const Eigen::Vector3d& p_mm) const {
   const double z = to_index_.row(2).dot(p_mm - geometry_.origin_mm);
-  const double t = std::abs(z - std::round(z));
-  return level_by_phase(found_levels().by_slice_phase_mm, t, 0.5 * geometry_.spacing_mm.minCoeff());
+  return z - std::round(z);
+}
+
+double SignedDistance::volume_level_at(const Eigen::Vector3d& p_mm) const {
+  return level_by_phase(found_levels().by_slice_phase_mm, std::abs(slice_offset(p_mm)),
+                        0.5 * geometry_.spacing_mm.minCoeff())
+      .level_mm;
 }
 
 double SignedDistance::beyond_level(const Eigen::Vector3d& p_mm, Eigen::Vector3d* gradient) const {
   const double d = at(p_mm, gradient);
-  const double z = to_index_.row(2).dot(p_mm - geometry_.origin_mm);
-  const double u = z - std::round(z), t = std::abs(u);
-  const LevelsBySlicePhase& c = found_levels().by_slice_phase_mm;
-  const double half_spacing = 0.5 * geometry_.spacing_mm.minCoeff();
-  const double level = level_by_phase(c, t, half_spacing);
-  if (gradient) {  // the level's slope along the slices' normal, where it is not clamped
-    const int piece = std::clamp(static_cast<int>(std::floor((t - kQuarter / 2) / kQuarter)), 0, 2);
-    const bool clamped = level <= std::nextafter(-half_spacing, 0.0) || level >= half_spacing;
-    const double dlevel_dt = clamped ? 0 : (c[piece + 1] - c[piece]) / kQuarter;
-    *gradient -= dlevel_dt * (u < 0 ? -1.0 : 1.0) * to_index_.row(2).transpose();
-  }
-  return d - level;
+  const double u = slice_offset(p_mm);
+  const LevelAtPhase level = level_by_phase(found_levels().by_slice_phase_mm, std::abs(u),
+                                            0.5 * geometry_.spacing_mm.minCoeff());
+  if (gradient) *gradient -= level.slope_mm * (u < 0 ? -1.0 : 1.0) * to_index_.row(2).transpose();
+  return d - level.level_mm;
 }
 
 double SignedDistance::volume_level_slope() const {
   const LevelsBySlicePhase& c = found_levels().by_slice_phase_mm;
   double steepest = 0;
-  for (int q = 0; q + 1 < 4; ++q)
+  for (size_t q = 0; q + 1 < c.size(); ++q)
     steepest = std::max(steepest, std::abs(c[q + 1] - c[q]) / kQuarter);
   return steepest * to_index_.row(2).norm();
 }
@@ -501,9 +508,11 @@ double SignedDistance::volume_level_slope() const {
 double SignedDistance::highest_volume_level() const {
   const LevelsBySlicePhase& c = found_levels().by_slice_phase_mm;
   const double half_spacing = 0.5 * geometry_.spacing_mm.minCoeff();
-  double highest = -HUGE_VAL;  // at a piece's end: 0, the quarters' centres, or 1/2
-  for (double t : {0.0, 0.0625, 0.1875, 0.3125, 0.4375, 0.5})
-    highest = std::max(highest, level_by_phase(c, t, half_spacing));
+  // The largest of a piecewise linear function: at a piece's end (0, a quarter's centre, 1/2).
+  double highest = std::max(level_by_phase(c, 0.0, half_spacing).level_mm,
+                            level_by_phase(c, 0.5, half_spacing).level_mm);
+  for (size_t q = 0; q < c.size(); ++q)
+    highest = std::max(highest, level_by_phase(c, (q + 0.5) * kQuarter, half_spacing).level_mm);
   return highest;
 }
 

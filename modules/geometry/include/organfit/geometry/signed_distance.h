@@ -122,6 +122,9 @@ class SignedDistance {
   /// `across_slices`, z), or copied where there is no boundary to smooth.
   SignedDistance smoothed_by_passes(bool across_slices) const;
   bool all_finite() const;
+  /// p_mm's offset from the nearest plane of voxel centres along the third axis (slices,
+  /// in [-1/2, 1/2]).
+  double slice_offset(const Eigen::Vector3d& p_mm) const;
   ImageGeometry geometry_;
   Eigen::Matrix3d to_index_;  ///< physical offset -> index offset
   GridBuffer<double> values_;
