@@ -307,10 +307,13 @@ double SignedDistance::volume_level() const {
 }
 
 namespace {
-/// The quarter of the half slice a sample lies in (volume_levels_by_slice_phase): from its
-/// offset u in [-1/2, 1/2) (slices) from its voxel's centre.
+constexpr double kQuarter = 0.125;  // slices: the width of a quarter of the half slice
+constexpr int kQuarters = std::tuple_size_v<SignedDistance::LevelsBySlicePhase>;
+
+/// The quarter of the half slice a sample lies in (VolumeLevels::by_slice_phase_mm): from
+/// its offset u in [-1/2, 1/2) (slices) from its voxel's centre.
 int slice_phase_quarter(double u) {
-  return std::min(3, static_cast<int>(std::abs(u) * 8));
+  return std::min(kQuarters - 1, static_cast<int>(std::abs(u) / kQuarter));
 }
 }  // namespace
 
@@ -374,7 +377,7 @@ const SignedDistance::VolumeLevels& SignedDistance::found_levels() const {
     // The samples counted apart by the quarter of the half slice they lie in (in each:
     // those within the gap by bins, those below it, those of an inside voxel); the whole's
     // are their sums.
-    constexpr int kBins = 4096, kQuarters = 4;
+    constexpr int kBins = 4096;
     const double width = (above - below) / kBins;
     std::vector<long long> bins(kQuarters * kBins, 0);
     std::array<long long, kQuarters> below_gap{}, of_inside{};
@@ -451,13 +454,7 @@ const SignedDistance::VolumeLevels& SignedDistance::found_levels() const {
   return volume_level_->levels;
 }
 
-SignedDistance::LevelsBySlicePhase SignedDistance::volume_levels_by_slice_phase() const {
-  return found_levels().by_slice_phase_mm;
-}
-
 namespace {
-constexpr double kQuarter = 0.125;  // slices: the width of a quarter of the half slice
-
 /// The level at t slices from the nearest plane of voxel centres (mm), and its slope along
 /// t (mm per slice; 0 where it is clamped): linear on [t_q, t_q+1] between the quarters'
 /// centres t_q, the first's and last's lines extended to 0 and 1/2, kept within half the
@@ -467,7 +464,8 @@ struct LevelAtPhase {
 };
 LevelAtPhase level_by_phase(const SignedDistance::LevelsBySlicePhase& c, double t,
                             double half_spacing) {
-  const int piece = std::clamp(static_cast<int>(std::floor((t - kQuarter / 2) / kQuarter)), 0, 2);
+  const int piece =
+      std::clamp(static_cast<int>(std::floor((t - kQuarter / 2) / kQuarter)), 0, kQuarters - 2);
   const double f = (t - (piece + 0.5) * kQuarter) / kQuarter;
   const double level = c[piece] + f * (c[piece + 1] - c[piece]);
   const double lowest = std::nextafter(-half_spacing, 0.0);

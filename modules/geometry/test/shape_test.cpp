@@ -123,7 +123,7 @@ TEST(Shapes, AMasksOrganBetweenThickSlicesIsInterpolatedByShape) {
   SignedDistance::VolumeLevels levels{0.5 * s.level_mm, {0.01, 0.02, 0.03, 0.04}};
   const Shape saved = make_mask_shape(mask, levels);
   EXPECT_EQ(saved.level_mm, levels.level_mm);
-  EXPECT_EQ(saved.distance->volume_levels_by_slice_phase(), levels.by_slice_phase_mm);
+  EXPECT_EQ(saved.distance->volume_levels().by_slice_phase_mm, levels.by_slice_phase_mm);
 }
 
 // inside_ball is never wrong: for balls about each analytic shape, every point sampled in

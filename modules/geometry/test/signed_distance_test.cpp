@@ -356,7 +356,7 @@ TEST(SignedDistance, LevelsBySlicePhaseKeepTheVolumeAtEveryPhase) {
   const LabelVolume egg = egg_on_thick_slices();
   const ImageGeometry& g = egg.geometry;
   const SignedDistance d(egg, false);
-  const SignedDistance::LevelsBySlicePhase c = d.volume_levels_by_slice_phase();
+  const SignedDistance::LevelsBySlicePhase c = d.volume_levels().by_slice_phase_mm;
   EXPECT_LT(c[0], c[3]);  // the corners cut between the slices, not at them
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)

@@ -126,10 +126,9 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
                           {"centre_mm", vec(m.shape.centre_mm)}};
   // The planning organ's volume levels, found once at planning rather than at every session
   // (0.28 s on a 1.5 L liver): a mask shape's own (found when the shape was made), else the
-  // reference body's.
+  // reference body's (fitting::planning_volume_levels takes the one the organ is).
   if (m.shape.mask) shape["mask"] = mask_to_json(geometry::cropped_organ(*m.shape.mask));
-  const geometry::SignedDistance::VolumeLevels levels =
-      m.shape.mask ? m.shape.distance->volume_levels() : fitting::planning_volume_levels(m);
+  const geometry::SignedDistance::VolumeLevels levels = fitting::planning_volume_levels(m);
   j["organ"]["volume_level_mm"] = levels.level_mm;
   j["organ"]["volume_level_by_slice_phase_mm"] = levels.by_slice_phase_mm;
   // The organ's and its particles' volumes before a fit (fitting::PlanningVolumes), measured

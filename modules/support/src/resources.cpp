@@ -60,11 +60,12 @@ void start_with_runtime_settings(char** argv) {
           openmp_spin_count(std::getenv("OMP_WAIT_POLICY"), std::getenv("GOMP_SPINCOUNT")))
     changes.push_back({"GOMP_SPINCOUNT", *spins, std::nullopt});
   if (changes.empty()) return;
+  bool all_set = true;
   for (const Change& c : changes)
-    if (setenv(c.name, c.value.c_str(), 1) != 0) return;
-  execv("/proc/self/exe", argv);
-  // The exec failed (no /proc): run on as things are, and nothing left set for programs
-  // this one starts.
+    all_set = all_set && setenv(c.name, c.value.c_str(), 1) == 0;
+  if (all_set) execv("/proc/self/exe", argv);
+  // A variable not set, or the exec failed (no /proc): run on as things are, and nothing
+  // left set for programs this one starts.
   for (const Change& c : changes) {
     if (c.before) {
       setenv(c.name, c.before->c_str(), 1);

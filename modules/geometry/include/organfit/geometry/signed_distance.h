@@ -76,22 +76,33 @@ class SignedDistance {
   /// region), then kept; copies of this distance share it. 0 for a mask without boundary.
   double volume_level() const;
 
-  /// The level found as volume_level() is, apart for the samples in each quarter of the
-  /// half slice between a voxel centre's plane and the midplane to the next (the grid's
-  /// third axis; its slices): index t in [0, 1/8), [1/8, 1/4), [1/4, 3/8), [3/8, 1/2] of
-  /// a slice from the nearest plane of centres. Between thick slices the interpolant
-  /// cuts an oblique boundary's corners, so the volume wants a higher level there than at
-  /// the slices (0.02 -> 0.16 mm on a kidney's 5 mm slices; across the pixels, within
-  /// 0.02 mm): one level for all is generous at the slices and short between them, and
-  /// an organ moved by less than a slice along them gains or loses up to 2% of its count
-  /// with the phase (docs/decisions.md). Found with volume_level(), adopted with it.
+  /// The organ's levels (mm), as a model file keeps them. level_mm: volume_level().
+  /// by_slice_phase_mm: the level found as volume_level() is, apart for the samples in each
+  /// quarter of the half slice between a voxel centre's plane and the midplane to the next
+  /// (the grid's third axis; its slices): index t in [0, 1/8), [1/8, 1/4), [1/4, 3/8),
+  /// [3/8, 1/2] of a slice from the nearest plane of centres. Between thick slices the
+  /// interpolant cuts an oblique boundary's corners, so the volume wants a higher level
+  /// there than at the slices (0.02 -> 0.16 mm on a kidney's 5 mm slices; across the
+  /// pixels, within 0.02 mm): one level for all is generous at the slices and short between
+  /// them, and an organ moved by less than a slice along them gains or loses up to 2% of
+  /// its count with the phase (docs/decisions.md).
   using LevelsBySlicePhase = std::array<double, 4>;
-  LevelsBySlicePhase volume_levels_by_slice_phase() const;
-  /// The organ's level at `p_mm` (mm): volume_levels_by_slice_phase() taken at the centres
-  /// of their quarters (t = 1/16, 3/16, 5/16, 7/16) and joined linearly (beyond the first
-  /// and last, their line extended), kept within half the smallest spacing of 0 (within
-  /// the unsmoothed values' gap: at a voxel centre, t = 0, every centre keeps its side).
-  /// The organ is {p : at(p) < volume_level_at(p)}.
+  struct VolumeLevels {
+    double level_mm = 0;
+    LevelsBySlicePhase by_slice_phase_mm{};
+  };
+  /// Both levels, found together on first use (as volume_level() says).
+  VolumeLevels volume_levels() const { return found_levels(); }
+  /// Takes `levels` as volume_levels(): those found before for this same mask (a saved
+  /// model's; finding them again takes 0.28 s on a 1.5 L liver). No effect once the levels
+  /// are known. Throws std::invalid_argument unless each could_be_volume_level.
+  void adopt_volume_levels(const VolumeLevels& levels) const;
+
+  /// The organ's level at `p_mm` (mm): volume_levels().by_slice_phase_mm taken at the
+  /// centres of their quarters (t = 1/16, 3/16, 5/16, 7/16) and joined linearly (beyond the
+  /// first and last, their line extended), kept within half the smallest spacing of 0
+  /// (within the unsmoothed values' gap: at a voxel centre, t = 0, every centre keeps its
+  /// side). The organ is {p : at(p) < volume_level_at(p)}.
   double volume_level_at(const Eigen::Vector3d& p_mm) const;
   /// at(p_mm) - volume_level_at(p_mm): negative inside the organ; `gradient` as at()'s,
   /// less the level's.
@@ -100,17 +111,6 @@ class SignedDistance {
   double volume_level_slope() const;
   /// The largest volume_level_at over all places (mm).
   double highest_volume_level() const;
-
-  /// volume_level() and volume_levels_by_slice_phase() together, as a model file keeps them.
-  struct VolumeLevels {
-    double level_mm = 0;
-    LevelsBySlicePhase by_slice_phase_mm{};
-  };
-  VolumeLevels volume_levels() const { return found_levels(); }
-  /// Takes `levels` as volume_levels(): those found before for this same mask (a saved
-  /// model's; finding them again takes 0.28 s on a 1.5 L liver). No effect once the levels
-  /// are known. Throws std::invalid_argument unless each could_be_volume_level.
-  void adopt_volume_levels(const VolumeLevels& levels) const;
 
   const ImageGeometry& geometry() const { return geometry_; }
 
