@@ -177,21 +177,21 @@ LocalFit moving_least_squares(const Eigen::Vector3d& q, const SortedParticles& s
 /// A cell's corner values (corner c at offsets (c & 1, c >> 1 & 1, c >> 2 & 1)) as its
 /// edges' differences: along[a][e], the 4 edges along axis a, e indexing the other two
 /// axes' offsets (the lower axis first).
-struct CellEdges {
-  Eigen::Vector3d along[3][4];
-  explicit CellEdges(const Eigen::Vector3d (&corner)[8]) {
-    for (int e = 0; e < 4; ++e) {
-      const int p = e & 1, q = e >> 1;
-      along[0][e] = corner[1 + 2 * p + 4 * q] - corner[2 * p + 4 * q];
-      along[1][e] = corner[p + 2 + 4 * q] - corner[p + 4 * q];
-      along[2][e] = corner[p + 2 * q + 4] - corner[p + 2 * q];
-    }
+Deformation::CellEdges cell_edges(const Eigen::Vector3d (&corner)[8]) {
+  Deformation::CellEdges cell;
+  for (int e = 0; e < 4; ++e) {
+    const int p = e & 1, q = e >> 1;
+    cell.along[0][e] = corner[1 + 2 * p + 4 * q] - corner[2 * p + 4 * q];
+    cell.along[1][e] = corner[p + 2 + 4 * q] - corner[p + 4 * q];
+    cell.along[2][e] = corner[p + 2 * q + 4] - corner[p + 2 * q];
   }
-};
+  return cell;
+}
 
 /// The gradient of the cell's trilinear interpolant at fraction f of the cell (spacing in
 /// mm): along each axis, the bilinear mean of its 4 edges' differences over the other two.
-Eigen::Matrix3d cell_gradient(const CellEdges& cell, const Eigen::Vector3d& f, double spacing) {
+Eigen::Matrix3d cell_gradient(const Deformation::CellEdges& cell, const Eigen::Vector3d& f,
+                              double spacing) {
   Eigen::Matrix3d g;
   for (int a = 0; a < 3; ++a) {
     const auto [b, c] = detail::other_axes(a);
@@ -335,7 +335,7 @@ Deformation::Deformation(GlobalMap map, particles::Positions placed, particles::
         for (const auto& c : corner)
           still = still && c.isZero(0);
         if (still) continue;
-        const CellEdges cell(corner);
+        const Deformation::CellEdges cell = cell_edges(corner);
         for (int octant = 0; octant < 8; ++octant) {
           const Eigen::Vector3d f(octant & 1 ? 0.75 : 0.25, octant & 2 ? 0.75 : 0.25,
                                   octant & 4 ? 0.75 : 0.25);
@@ -450,19 +450,24 @@ void Deformation::cell_corners(long long v0, Eigen::Vector3d (&corner)[8]) const
                     .cast<double>();
 }
 
-Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det, bool point) const {
-  if (det) *det = 1;
-  if (!q.allFinite() || identity_) return q;  // the identity's q exactly, not M^-1(q)'s rounding
+long long Deformation::cell_at(const Eigen::Vector3d& q, Eigen::Vector3d& f) const {
+  if (values_.empty()) return -1;
   const Eigen::Vector3d t = (q - origin_) / spacing_;
   const Eigen::Vector3d base = t.array().floor();
-  if (values_.empty() || (base.array() < 0).any() || base.x() >= n_[0] - 1 ||
-      base.y() >= n_[1] - 1 || base.z() >= n_[2] - 1)
-    return point ? map_.inverse(q, map_inverse_a_, map_fields_) : q;
-  const long long v0 =
-      static_cast<long long>(base.x()) +
-      1LL * n_[0] *
-          (static_cast<long long>(base.y()) + 1LL * n_[1] * static_cast<long long>(base.z()));
-  const Eigen::Vector3d f = t - base;
+  if ((base.array() < 0).any() || base.x() >= n_[0] - 1 || base.y() >= n_[1] - 1 ||
+      base.z() >= n_[2] - 1)
+    return -1;
+  f = t - base;
+  return static_cast<long long>(base.x()) +
+         1LL * n_[0] *
+             (static_cast<long long>(base.y()) + 1LL * n_[1] * static_cast<long long>(base.z()));
+}
+
+Eigen::Vector3d Deformation::pull_back(const Eigen::Vector3d& q) const {
+  if (!q.allFinite() || identity_) return q;  // the identity's q exactly, not M^-1(q)'s rounding
+  Eigen::Vector3d f;
+  const long long v0 = cell_at(q, f);
+  if (v0 < 0) return map_.inverse(q, map_inverse_a_, map_fields_);
   Eigen::Vector3d u = Eigen::Vector3d::Zero();
   Eigen::Vector3d corner[8];
   cell_corners(v0, corner);
@@ -472,15 +477,7 @@ Eigen::Vector3d Deformation::evaluate(const Eigen::Vector3d& q, double* det, boo
                  wz = dk ? f.z() : 1 - f.z();
     u += wx * wy * wz * corner[c];
   }
-  // The global map keeps volume: det(grad phi^-1) = det(I + grad u).
-  if (det)
-    *det =
-        (Eigen::Matrix3d::Identity() + cell_gradient(CellEdges(corner), f, spacing_)).determinant();
-  return point ? map_.inverse(q + u, map_inverse_a_, map_fields_) : q + u;
-}
-
-Eigen::Vector3d Deformation::pull_back(const Eigen::Vector3d& q) const {
-  return evaluate(q, nullptr);
+  return map_.inverse(q + u, map_inverse_a_, map_fields_);
 }
 
 Eigen::Vector3d Deformation::push_forward(const Eigen::Vector3d& r) const {
@@ -500,8 +497,24 @@ Eigen::Vector3d Deformation::push_forward(const Eigen::Vector3d& r) const {
 }
 
 double Deformation::volume_ratio(const Eigen::Vector3d& q) const {
-  double det = 1;
-  evaluate(q, &det, false);
+  CellCache cache;
+  return volume_ratio(q, cache);
+}
+
+double Deformation::volume_ratio(const Eigen::Vector3d& q, CellCache& cache) const {
+  if (!q.allFinite() || identity_) return 1.0;
+  Eigen::Vector3d f;
+  const long long v0 = cell_at(q, f);
+  if (v0 < 0) return 1.0;  // the global map alone, which keeps volume
+  if (cache.cell != v0) {
+    Eigen::Vector3d corner[8];
+    cell_corners(v0, corner);
+    cache.edges = cell_edges(corner);
+    cache.cell = v0;
+  }
+  // The global map keeps volume: det(grad phi^-1) = det(I + grad u).
+  const double det =
+      (Eigen::Matrix3d::Identity() + cell_gradient(cache.edges, f, spacing_)).determinant();
   return det > 0 ? 1.0 / det : std::numeric_limits<double>::infinity();
 }
 

@@ -127,12 +127,15 @@ double EmbeddedBody::volume_ratio(const geometry::LabelVolume& organ) const {
   long long today = 0;
 #pragma omp parallel for collapse(2) reduction(+ : planning, today)
   for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
+    for (int j = 0; j < g.size[1]; ++j) {
+      Deformation::CellCache cell;  // the row's voxels in order
       for (int i = 0; i < g.size[0]; ++i) {
         if (organ.at(i, j, k) != 1) continue;
         ++today;
-        planning += 1.0 / deformation_->volume_ratio(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+        planning +=
+            1.0 / deformation_->volume_ratio(g.index_to_physical(Eigen::Vector3d(i, j, k)), cell);
       }
+    }
   return planning > 0 ? static_cast<double>(today) / planning : 1.0;
 }
 

@@ -204,14 +204,16 @@ void check_organ(const fitting::EmbeddedBody& organ, const geometry::LabelVolume
   long long changed = 0, n = 0;
   const geometry::ImageGeometry& g = exported.geometry;
   for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
+    for (int j = 0; j < g.size[1]; ++j) {
+      fitting::Deformation::CellCache cell;  // the row's voxels in order
       for (int i = 0; i < g.size[0]; ++i) {
         if (exported.at(i, j, k) != 1) continue;
         const double v =
-            organ.deformation().volume_ratio(g.index_to_physical(Eigen::Vector3d(i, j, k)));
+            organ.deformation().volume_ratio(g.index_to_physical(Eigen::Vector3d(i, j, k)), cell);
         lo = std::min(lo, v), hi = std::max(hi, v), ++n;
         changed += std::abs(v - 1) > 0.01;
       }
+    }
   checks["jacobian"] = {{"organ_min", lo},
                         {"organ_max", hi},
                         {"organ_share_changed_over_1pct", n > 0 ? 1.0 * changed / n : 0.0},
@@ -241,7 +243,8 @@ void sample_deformation(const fitting::Deformation& phi, const geometry::ImageGe
   if (jacobian) jacobian->assign(static_cast<size_t>(total), 1.0f);
 #pragma omp parallel for collapse(2) schedule(static)
   for (int k = 0; k < grid.size[2]; ++k)
-    for (int j = 0; j < grid.size[1]; ++j)
+    for (int j = 0; j < grid.size[1]; ++j) {
+      fitting::Deformation::CellCache cell;  // the row's voxels in order
       for (int i = 0; i < grid.size[0]; ++i) {
         const Eigen::Vector3d q = grid.index_to_physical(Eigen::Vector3d(i, j, k));
         const size_t v = static_cast<size_t>(grid.linear_index(i, j, k));
@@ -250,8 +253,9 @@ void sample_deformation(const fitting::Deformation& phi, const geometry::ImageGe
           for (int a = 0; a < 3; ++a)
             (*field)[3 * v + static_cast<size_t>(a)] = static_cast<float>(d[a]);
         }
-        if (jacobian) (*jacobian)[v] = static_cast<float>(phi.volume_ratio(q));
+        if (jacobian) (*jacobian)[v] = static_cast<float>(phi.volume_ratio(q, cell));
       }
+    }
 }
 }  // namespace
 

@@ -70,6 +70,19 @@ class Deformation {
   /// det(grad phi) at the tissue now at q: the ratio of its volume today to its planning
   /// volume (1 where phi keeps volume).
   double volume_ratio(const Eigen::Vector3d& q_mm) const;
+  /// A lattice cell's edges (the differences of u between its corners: `along[a][e]`, the
+  /// 4 edges along axis a), what det(grad phi) within the cell is made from.
+  struct CellEdges {
+    Eigen::Vector3d along[3][4];
+  };
+  /// The cell volume_ratio read last: a caller walking voxels in order (a row meets each
+  /// cell at several voxels: the lattice is h / 3, a voxel far less) reads its corners once.
+  struct CellCache {
+    long long cell = -1;  // the cell's lowest node; -1: none read
+    CellEdges edges;
+  };
+  /// volume_ratio(q_mm), the same number, with the cell kept in `cache`.
+  double volume_ratio(const Eigen::Vector3d& q_mm, CellCache& cache) const;
 
   /// How phi^-1 = M^-1(q + u(q)) stretches distances over today's points in `box` (mm) is
   /// bounded by two parts: |phi^-1(p) - phi^-1(q)| <= stretch (1 + G) |p - q| + slack_mm,
@@ -129,9 +142,9 @@ class Deformation {
   /// u (mm) at the 8 nodes of the cell whose lowest node is v0: corner c at offsets
   /// (c & 1, c >> 1 & 1, c >> 2 & 1).
   void cell_corners(long long v0, Eigen::Vector3d (&corner)[8]) const;
-  /// phi^-1(q), and det(grad phi^-1) at q when asked; without `point` the global map is
-  /// not inverted (its exponentials dominate on a large organ) and q + u(q) is returned.
-  Eigen::Vector3d evaluate(const Eigen::Vector3d& q, double* det, bool point = true) const;
+  /// The lattice cell holding q (its lowest node) and q's fraction f of it along each
+  /// axis; -1 beyond the lattice (or without one), where u is zero.
+  long long cell_at(const Eigen::Vector3d& q_mm, Eigen::Vector3d& f) const;
 };
 
 }  // namespace organfit::fitting
