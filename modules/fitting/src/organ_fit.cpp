@@ -187,9 +187,11 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     // tenths of a mm from it (0.26 mm RMS on a GTV at radius 3 mm), enough to put the organ
     // left as it was above the stated noise and let flexible maps fit the difference
     // (docs/decisions.md). An analytic body's reference is its organ.
+    // Its single level, of all slice phases together: that smoothing evens out the phases.
     std::optional<const geometry::SignedDistance> organ_distance;
     if (organ_has_own_distance)
-      organ_distance.emplace(model.shape.distance->smoothed_within_slices(model.shape.level_mm));
+      organ_distance.emplace(
+          model.shape.distance->smoothed_within_slices(model.shape.distance->volume_level()));
     std::vector<GlobalMap> equally_good;
     const GlobalMap map =
         fit_global_map(samples, points, global_options,

@@ -202,8 +202,9 @@ Shape make_mask_shape(std::shared_ptr<const LabelVolume> mask,
   // would take 8 bytes a voxel.
   auto distance = std::make_shared<SignedDistance>(cropped_organ(*mask), false);
   if (levels) distance->adopt_volume_levels(*levels);
-  s.level_mm = distance->volume_level();
-  (void)distance->gradient_bound();  // found here, not by the first of many threads asking
+  // Its levels and gradient bound found here, not by the first of many threads asking.
+  (void)distance->volume_level();
+  (void)distance->gradient_bound();
   s.distance = std::move(distance);
   s.mask = std::move(mask);
   return s;

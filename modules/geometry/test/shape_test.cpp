@@ -113,16 +113,15 @@ TEST(Shapes, AMasksOrganBetweenThickSlicesIsInterpolatedByShape) {
         mask->at(i, j, k) = std::hypot(p.x(), p.y()) <= (p.z() < 1 ? 9.0 : 5.0);
       }
   const Shape s = make_mask_shape(mask);
-  EXPECT_EQ(s.level_mm, s.distance->volume_level());
   EXPECT_TRUE(inside_interpolated(*mask, {8, 0, 1.5}));  // the union at the midplane
   EXPECT_FALSE(s.inside({8, 0, 1.5}));
   EXPECT_TRUE(s.inside({6, 0, 1.5}));
   EXPECT_TRUE(s.inside({8.9, 0, 0}));  // on a slice, its contour
   EXPECT_FALSE(s.inside({9.6, 0, 0}));
   // Saved levels are taken as they are.
-  SignedDistance::VolumeLevels levels{0.5 * s.level_mm, {0.01, 0.02, 0.03, 0.04}};
+  SignedDistance::VolumeLevels levels{0.5 * s.distance->volume_level(), {0.01, 0.02, 0.03, 0.04}};
   const Shape saved = make_mask_shape(mask, levels);
-  EXPECT_EQ(saved.level_mm, levels.level_mm);
+  EXPECT_EQ(saved.distance->volume_level(), levels.level_mm);
   EXPECT_EQ(saved.distance->volume_levels().by_slice_phase_mm, levels.by_slice_phase_mm);
 }
 

@@ -240,8 +240,8 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
   EXPECT_TRUE(same(fitting::planning_volume_levels(back.model), found));
   // The organ a session loads is the organ planned: the same levels, the same inside test
   // (its distance made on the saved crop, the planning one's on the whole grid).
-  EXPECT_EQ(organ.level_mm, found.level_mm);
-  EXPECT_EQ(back.model.shape.level_mm, found.level_mm);
+  EXPECT_EQ(organ.distance->volume_level(), found.level_mm);
+  EXPECT_EQ(back.model.shape.distance->volume_level(), found.level_mm);
   int inside = 0, tried = 0;
   for (double x = -10; x <= 10; x += 0.37)
     for (const double z : {-10.2, -9.0, -7.4, -3.3, 0.0, 2.9, 4.6}) {

@@ -27,10 +27,6 @@ struct Shape {
   /// Not the 0.5 level of the mask's trilinear interpolation, which holds a contour to the
   /// midplane between thick slices (docs/decisions.md, "A mask organ is one surface").
   std::shared_ptr<const SignedDistance> distance;
-  /// kind "mask": the volume level of all slice phases together (SignedDistance::
-  /// volume_level): the level of the distance smoothed within slices that the fit measures
-  /// points against (that smoothing evens out the slices' phases too).
-  double level_mm = 0;
   Aabb box;  ///< kind "mask": bounds of its voxels, half a voxel more (where the level lies)
   bool inside(const Eigen::Vector3d& p) const;
   /// Whether inside() answers the same for every point within `radius_mm` of p, and what:
