@@ -8,6 +8,8 @@ usage: make_corpus.py OUT_DIR ORGANFIT_BINARY SHARED_DATA_DIR
 """
 import json, os, shutil, subprocess, sys
 import pydicom
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'cli'))
+import model_checksum
 
 out, organfit, data = sys.argv[1], sys.argv[2], sys.argv[3]
 os.makedirs(out, exist_ok=True)
@@ -420,7 +422,25 @@ d = case('export_model_uncertainty_a_residual_short',
          'fitted.json: invalid model: uncertainty: SurfaceUncertainty: one residual per point', ct=False)
 model = json.load(open(os.path.join(fitted, 'out', 'fitted.json')))
 model['uncertainty']['residuals_mm'].pop()
-json.dump(model, open(os.path.join(d, 'fitted.json'), 'w'))
+model_checksum.write_model(model, os.path.join(d, 'fitted.json'))
+# A model changed after organfit wrote it, still valid JSON and a plausible model (a digit of
+# a position; the organ's mask moved by 3 mm): refused by its checksum, by a session and by
+# an export alike.
+planned_text = open(os.path.join(planning, 'out', 'model.json')).read()
+at = planned_text.index('"positions_mm":[') + len('"positions_mm":[') + 1
+changed_digit = planned_text[:at] + ('2' if planned_text[at] == '1' else '1') + planned_text[at + 1:]
+moved = json.loads(planned_text)
+moved.pop('checksum')
+moved['shape']['mask']['origin_mm'][0] += 3
+moved_mask = json.dumps(moved, separators=(',', ':'))[:-1] + planned_text[planned_text.rindex(',"checksum":"'):]
+for name, text in [('digit', changed_digit), ('mask_moved', moved_mask)]:
+    d = case('session_model_changed_after_writing_' + name, ['--quiet', 'run', '{case}/scene.yaml', '--out', '{case}/out'],
+             'model.json: the file was changed or damaged after organfit wrote it', ct=False, cls='disagree')
+    open(os.path.join(d, 'model.json'), 'w').write(text)
+    open(os.path.join(d, 'scene.yaml'), 'w').write(SESSION.replace('../_planning/out/model.json', 'model.json').replace('ct:\n  folder: ct\n', ''))
+    d = case('export_model_changed_after_writing_' + name, ['export', '--model', '{case}/model.json', '--mesh', '{case}/out/m.stl'],
+             'model.json: the file was changed or damaged after organfit wrote it', ct=False, cls='disagree')
+    open(os.path.join(d, 'model.json'), 'w').write(text)
 def points_in_ct(name, series, frame, expect, code=2):
     d = case(name, ['--quiet', 'run', '{case}/scene.yaml', '--out', '{case}/out'], expect, code=code, ct=False, cls='disagree')
     open(os.path.join(d, 'points.csv'), 'w').write(

@@ -477,15 +477,17 @@ assert s == e and 'Bladder' in s and 'Prostate' not in s, (s, e)
 d = pydicom.dcmread('$tmp/wf/out/session-copy/prostate_session_rtstruct.dcm')
 assert [r.ROIName for r in d.StructureSetROISequence] == ['Prostate_fit'] + s"
 /usr/bin/python3 -c "
-import json; m = json.load(open('$tmp/wf/out/prostate-planning/prostate_model.json')); del m['ct']['structure_set']
-json.dump(m, open('$tmp/wf/no_rtss_model.json', 'w'))"
+import json, sys; sys.path.insert(0, '$src/tests/cli'); import model_checksum
+m = json.load(open('$tmp/wf/out/prostate-planning/prostate_model.json')); del m['ct']['structure_set']
+model_checksum.write_model(m, '$tmp/wf/no_rtss_model.json')"
 expect workflow.session_copy_needs_a_structure_set_in_the_model 2 "the planning model records no structure set" -- --quiet run "$tmp/wf/pipelines/prostate-session.yaml" --set "planning.model=$tmp/wf/no_rtss_model.json" --set export.copy_other_rois=true --out "$tmp/wf/out/no-copy"
 check workflow.refused_copy_wrote_nothing test ! -e "$tmp/wf/out/no-copy"
 # The planning CT moved after planning: said before the fit, with the key that says where
 # it is now; with it, the session runs.
 /usr/bin/python3 -c "
-import json; m = json.load(open('$tmp/wf/out/prostate-planning/prostate_model.json')); m['ct']['folder'] = '$tmp/wf/moved_ct'
-json.dump(m, open('$tmp/wf/moved_ct_model.json', 'w'))"
+import json, sys; sys.path.insert(0, '$src/tests/cli'); import model_checksum
+m = json.load(open('$tmp/wf/out/prostate-planning/prostate_model.json')); m['ct']['folder'] = '$tmp/wf/moved_ct'
+model_checksum.write_model(m, '$tmp/wf/moved_ct_model.json')"
 expect workflow.session_with_the_planning_ct_gone_is_refused 2 "moved_ct_model.json: the planning CT it records, $tmp/wf/moved_ct, is not there: give the session scene ct.folder" -- --quiet run "$tmp/wf/pipelines/prostate-session.yaml" --set "planning.model=$tmp/wf/moved_ct_model.json" --out "$tmp/wf/out/moved"
 check workflow.refused_moved_ct_wrote_nothing test ! -e "$tmp/wf/out/moved"
 expect export.with_the_planning_ct_gone_is_refused 2 "moved_ct_model.json: the planning CT it records, $tmp/wf/moved_ct, is not there: give --ct" -- export --model "$tmp/wf/moved_ct_model.json" --rtstruct "$tmp/moved_export/moved.dcm"

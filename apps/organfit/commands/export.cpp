@@ -51,6 +51,8 @@ nlohmann::json run_export_command(const ExportCommand& c) {
       check_output_location(f.parent_path().empty() ? fs::path(".") : f.parent_path(), inputs,
                             "the output", OutputKind::kFile);
   const pipeline::SavedModel saved = pipeline::load_model(c.model);
+  if (const std::string w = pipeline::unchecked_model_warning(c.model, saved); !w.empty())
+    spdlog::warn(w);
   if (saved.ct)
     for (const auto& f : outputs)
       if (!f.empty())

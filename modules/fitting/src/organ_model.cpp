@@ -117,30 +117,18 @@ geometry::SignedDistance::VolumeLevels planning_volume_levels(const OrganModel& 
   return m.planning_distance->volume_levels();
 }
 
-namespace {
-/// Folds `bytes` bytes at `data` into `h`, 8 at a time (the last word zero-padded).
-std::uint64_t fold_bytes(std::uint64_t h, const void* data, size_t bytes) {
-  const auto* p = static_cast<const unsigned char*>(data);
-  for (size_t at = 0; at < bytes; at += 8) {
-    std::uint64_t word = 0;
-    std::memcpy(&word, p + at, std::min<size_t>(8, bytes - at));
-    h = geometry::splitmix64(h ^ word);
-  }
-  return geometry::splitmix64(h ^ bytes);
-}
-}  // namespace
-
 std::uint64_t planning_fingerprint(const OrganModel& m) {
   const geometry::ImageGeometry& g = m.reference.geometry;
   const double radius = m.model->radius_mm();
   std::uint64_t h = 0;
-  h = fold_bytes(h, m.state.x.data(), sizeof(double) * static_cast<size_t>(m.state.x.size()));
-  h = fold_bytes(h, &radius, sizeof radius);
-  h = fold_bytes(h, g.size.data(), sizeof(g.size[0]) * 3);
-  h = fold_bytes(h, g.spacing_mm.data(), sizeof(double) * 3);
-  h = fold_bytes(h, g.origin_mm.data(), sizeof(double) * 3);
-  h = fold_bytes(h, g.direction.data(), sizeof(double) * 9);
-  return fold_bytes(h, m.reference.labels.data(), m.reference.labels.size());
+  h = geometry::hash_bytes(h, m.state.x.data(),
+                           sizeof(double) * static_cast<size_t>(m.state.x.size()));
+  h = geometry::hash_bytes(h, &radius, sizeof radius);
+  h = geometry::hash_bytes(h, g.size.data(), sizeof(g.size[0]) * 3);
+  h = geometry::hash_bytes(h, g.spacing_mm.data(), sizeof(double) * 3);
+  h = geometry::hash_bytes(h, g.origin_mm.data(), sizeof(double) * 3);
+  h = geometry::hash_bytes(h, g.direction.data(), sizeof(double) * 9);
+  return geometry::hash_bytes(h, m.reference.labels.data(), m.reference.labels.size());
 }
 
 PlanningVolumes planning_volumes(const OrganModel& m) {

@@ -7,8 +7,11 @@
 #include <cctype>
 #include <cmath>
 #include <fstream>
+#include <iterator>
 #include <stdexcept>
+#include <string_view>
 
+#include "organfit/geometry/counter_random.h"
 #include "organfit/geometry/signed_distance.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
@@ -20,6 +23,17 @@ namespace {
 
 constexpr const char* kFormat = "organfit-model";
 constexpr int kFormatVersion = 1;
+
+// The file's checksum, its last key: 16 hexadecimal digits of geometry::hash_bytes over the
+// file's text before this key. The text it covers is the file's own bytes, so that damage
+// or an edit after organfit wrote the file (a moved mask origin, a changed position: either
+// is valid JSON and a plausible model) is found when the file is read.
+constexpr std::string_view kChecksumKey = ",\"checksum\":\"";
+constexpr int kChecksumDigits = 16;
+
+std::string checksum_of(std::string_view text) {
+  return fmt::format("{:016x}", geometry::hash_bytes(0, text.data(), text.size()));
+}
 
 nlohmann::json vec(const Eigen::Vector3d& v) {
   return {v.x(), v.y(), v.z()};
@@ -183,17 +197,29 @@ void save_model(const fs::path& file, const ModelStageResult& m, const std::stri
     j["embedding"] = nullptr;
   }
   j["uncertainty"] = uncertainty ? uncertainty_to_json(*uncertainty) : nlohmann::json(nullptr);
-  write_file_atomically(file, j.dump() + "\n");
+  std::string text = j.dump();
+  text.pop_back();  // the object's closing brace: the checksum is its last key
+  const std::string checksum = checksum_of(text);
+  write_file_atomically(file, text + std::string(kChecksumKey) + checksum + "\"}\n");
+}
+
+std::string unchecked_model_warning(const fs::path& file, const SavedModel& saved) {
+  if (saved.checksum_verified) return "";
+  return file.string() +
+         ": the model file has no checksum (written by an organfit before model files kept "
+         "one): read as it is, not checked for changes since it was written";
 }
 
 SavedModel load_model(const fs::path& file) {
   const std::string where = file.string();
   auto fail = [&](const std::string& why) -> void { throw InputError(where + ": " + why); };
-  std::ifstream in(file);
+  std::ifstream in(file, std::ios::binary);
   if (!in) fail("cannot read the model file");
+  const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  if (in.bad()) fail("cannot read the model file");
   nlohmann::json j;
   try {
-    j = nlohmann::json::parse(in);
+    j = nlohmann::json::parse(text);
   } catch (const nlohmann::json::exception&) {
     fail("not an organfit model (not JSON)");
   }
@@ -205,6 +231,23 @@ SavedModel load_model(const fs::path& file) {
     fail(fmt::format("model format version {} is not {} (made by another organfit version)",
                      version == j.end() ? "0" : version->dump(), kFormatVersion));
   SavedModel saved;
+  // The checksum, where organfit writes it (the last key), against the text before it.
+  if (const auto given = j.find("checksum"); given != j.end()) {
+    const size_t at = text.rfind(kChecksumKey);
+    const bool well_formed =
+        given->is_string() && given->get_ref<const std::string&>().size() == kChecksumDigits &&
+        at != std::string::npos &&
+        text.compare(at + kChecksumKey.size(), kChecksumDigits, given->get<std::string>()) == 0;
+    if (!well_formed)
+      fail(
+          "checksum: not 16 hexadecimal digits as organfit writes them, last (the file was "
+          "rewritten after organfit wrote it): use the file as written, or plan again");
+    if (checksum_of(std::string_view(text).substr(0, at)) != given->get<std::string>())
+      fail(
+          "the file was changed or damaged after organfit wrote it (its checksum does not "
+          "match its content): use the file as written, or plan again");
+    saved.checksum_verified = true;
+  }
   try {
     ModelStageResult& m = saved.model;
     m.settings = model_settings_from_json(j.at("settings"), where);

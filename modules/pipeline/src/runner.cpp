@@ -127,6 +127,7 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     Stopwatch clock;
     const fs::path file = scene.path("planning", "model");
     SavedModel saved = load_model(file);
+    if (const std::string w = unchecked_model_warning(file, saved); !w.empty()) warn(w);
     model = std::move(saved.model);
     organ_name = saved.organ_name;
     organ_look = saved.organ_look;

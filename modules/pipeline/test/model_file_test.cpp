@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <iterator>
 
 #include "organfit/fitting/organ_model.h"
 #include "organfit/geometry/signed_distance.h"
@@ -40,6 +41,14 @@ class ModelFile : public ::testing::Test {
       return e.what();
     }
     return "no error";
+  }
+  // A saved model as a test edits it: its checksum dropped, as a file written before
+  // organfit kept one (read with a warning), so that what is refused is what the edit made
+  // wrong rather than the edit itself.
+  static nlohmann::json edited(const fs::path& file) {
+    nlohmann::json j = nlohmann::json::parse(std::ifstream(file));
+    j.erase("checksum");
+    return j;
   }
   fs::path dir_;
 };
@@ -84,7 +93,7 @@ TEST_F(ModelFile, SavedAndLoadedModelsAreTheSame) {
   EXPECT_EQ(kept.fingerprint, planned.fingerprint);
   EXPECT_EQ(fitting::planning_fingerprint(back.model), planned.fingerprint);
   // A file written before they were kept loads; its session measures them.
-  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  nlohmann::json j = edited(dir_ / "m.json");
   j["organ"].erase("planning_volumes");
   std::ofstream(dir_ / "old.json") << j.dump();
   const SavedModel old = load_model(dir_ / "old.json");
@@ -128,20 +137,20 @@ TEST_F(ModelFile, AFittedModelKeepsHowItsOrganFollowsTheParticles) {
           .norm(),
       0, 1e-6);
   // Shear fields whose heights do not match their grid are refused, naming the key.
-  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir_ / "fitted.json"));
+  nlohmann::json j = edited(dir_ / "fitted.json");
   j["embedding"]["global_shear_fields"]["weights_mm"].erase(0);
   EXPECT_NE(error_of(j.dump()).find("bad.json: embedding.global_shear_fields.weights_mm needs"),
             std::string::npos)
       << error_of(j.dump());
   // Likewise a flow's potentials.
-  j = nlohmann::json::parse(std::ifstream(dir_ / "fitted.json"));
+  j = edited(dir_ / "fitted.json");
   j["embedding"]["global_flow"]["potentials_mm"].erase(0);
   EXPECT_NE(error_of(j.dump()).find("bad.json: embedding.global_flow.potentials_mm needs"),
             std::string::npos)
       << error_of(j.dump());
   // Models written before the last two shears have nine coefficients: they load, the
   // last two shears none; any other count is refused, naming the key.
-  nlohmann::json old = nlohmann::json::parse(std::ifstream(dir_ / "fitted.json"));
+  nlohmann::json old = edited(dir_ / "fitted.json");
   std::vector<double> nine = old["embedding"]["global_shears"];
   nine.resize(9);
   old["embedding"]["global_shears"] = nine;
@@ -191,11 +200,11 @@ TEST_F(ModelFile, AFittedModelKeepsItsUncertainty) {
   save_model(dir_ / "plain.json", m, "Prostate", OrganLook{}, std::nullopt, {});
   EXPECT_EQ(load_model(dir_ / "plain.json").uncertainty, nullptr);
   // Residuals that are not one per point are refused, naming the file and the key.
-  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir_ / "fitted.json"));
+  nlohmann::json j = edited(dir_ / "fitted.json");
   j["uncertainty"]["residuals_mm"].erase(0);
   EXPECT_NE(error_of(j.dump()).find("bad.json: invalid model: uncertainty: "), std::string::npos)
       << error_of(j.dump());
-  j = nlohmann::json::parse(std::ifstream(dir_ / "fitted.json"));
+  j = edited(dir_ / "fitted.json");
   j["uncertainty"]["points_mm"].erase(0);
   EXPECT_NE(error_of(j.dump()).find("uncertainty.points_mm needs x, y, z per point"),
             std::string::npos)
@@ -257,7 +266,7 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
   // Files written before the levels by slice phase were kept (the single level alone) or
   // before any level was: the session finds the same levels itself, and measures the
   // planning volumes again (they were measured on the organ at its single level).
-  nlohmann::json j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  nlohmann::json j = edited(dir_ / "m.json");
   ASSERT_TRUE(j["organ"].contains("planning_volumes"));
   j["organ"].erase("volume_level_by_slice_phase_mm");
   std::ofstream(dir_ / "single.json") << j.dump();
@@ -271,6 +280,49 @@ TEST_F(ModelFile, AMaskShapeRoundTripsThroughItsRunLengths) {
   }
 }
 
+// The file's checksum covers every byte before it: an edit that leaves a valid, plausible
+// model (a position's digit, the mask moved 3 mm) is refused, as is the file rewritten by
+// another JSON writer; a file without a checksum is read, and said to be unchecked.
+TEST_F(ModelFile, AFileChangedAfterItWasWrittenIsRefused) {
+  const ModelStageResult m = build("body:\n  shape: egg\n  size_mm: [30, 24, 20]\n");
+  save_model(dir_ / "m.json", m, "X", OrganLook{}, std::nullopt, nlohmann::json::object());
+  const SavedModel as_written = load_model(dir_ / "m.json");
+  EXPECT_TRUE(as_written.checksum_verified);
+  EXPECT_EQ(unchecked_model_warning(dir_ / "m.json", as_written), "");
+  std::ifstream in(dir_ / "m.json", std::ios::binary);
+  const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  ASSERT_EQ(text.substr(text.size() - 32, 13), ",\"checksum\":\"");  // last, as documented
+  const std::string f = (dir_ / "bad.json").string();
+  const std::string changed = f +
+                              ": the file was changed or damaged after organfit wrote it (its "
+                              "checksum does not match its content): use the file as written, "
+                              "or plan again";
+  // One digit of the first position, the file still valid JSON.
+  const size_t at = text.find("\"positions_mm\":[") + 16;
+  ASSERT_TRUE(std::isdigit(static_cast<unsigned char>(text[at + 1])));
+  std::string digit = text;
+  digit[at + 1] = digit[at + 1] == '1' ? '2' : '1';
+  ASSERT_TRUE(nlohmann::json::accept(digit));
+  EXPECT_EQ(error_of(digit), changed);
+  // A byte after the checksum is not covered by it, and is not there to change: the text
+  // ends with the checksum's object and a line end.
+  EXPECT_EQ(text.back(), '\n');
+  // Rewritten by another writer (keys sorted, spaces): its checksum is not where organfit
+  // writes it.
+  const nlohmann::json j = nlohmann::json::parse(text);
+  EXPECT_NE(error_of(j.dump(2)).find(": checksum: not 16 hexadecimal digits as organfit writes"),
+            std::string::npos)
+      << error_of(j.dump(2));
+  // Without a checksum: read as it is, and said to be.
+  std::ofstream(dir_ / "old.json") << edited(dir_ / "m.json").dump();
+  const SavedModel old = load_model(dir_ / "old.json");
+  EXPECT_FALSE(old.checksum_verified);
+  EXPECT_EQ((old.model.state.x - m.state.x).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_NE(unchecked_model_warning(dir_ / "old.json", old)
+                .find("old.json: the model file has no checksum"),
+            std::string::npos);
+}
+
 TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
   const std::string f = (dir_ / "bad.json").string();
   EXPECT_EQ(error_of("not json"), f + ": not an organfit model (not JSON)");
@@ -280,49 +332,48 @@ TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
             f + ": model format version 9 is not 1 (made by another organfit version)");
   const ModelStageResult m = build("body:\n");
   save_model(dir_ / "m.json", m, "X", OrganLook{}, std::nullopt, nlohmann::json::object());
-  std::ifstream in(dir_ / "m.json");
-  nlohmann::json j = nlohmann::json::parse(in);
+  nlohmann::json j = edited(dir_ / "m.json");
   j["particles"] = j["particles"].get<int>() + 1;
   EXPECT_NE(error_of(j.dump()).find("particles but"), std::string::npos);
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["settings"].erase("mass");
   EXPECT_EQ(error_of(j.dump()), f + ": model setting 'mass' is missing or not a number");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["settings"]["radius_mm"] = -1;  // within the range the scene key declares
   EXPECT_EQ(error_of(j.dump()), f + ": model setting 'radius_mm' is -1, out of range [0, 100]");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["settings"]["time_step_fraction"] = 1e-300;
   EXPECT_EQ(error_of(j.dump()), "no error");
   j["settings"]["time_step_fraction"] = 0.95;
   EXPECT_EQ(error_of(j.dump()),
             f + ": model setting 'time_step_fraction' is 0.95, out of range (0, 0.9]");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["format"] = 1e-300;
   EXPECT_EQ(error_of(j.dump()), f + ": not an organfit model (no 'format: organfit-model')");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["organ"]["colour"] = {255, 0, 3.5};
   EXPECT_EQ(error_of(j.dump()), f + ": organ.colour: three integers from 0 to 255");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["shape"]["kind"] = "mask";  // this model's shape is an analytic body: no mask in the file
   EXPECT_EQ(error_of(j.dump()), f + ": shape: a mask is given exactly when shape.kind is 'mask'");
   j["shape"]["kind"] = 1e308;
   EXPECT_EQ(error_of(j.dump()), f + ": shape.kind: the organ's kind of shape, a text");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["format_version"] = nullptr;
   EXPECT_EQ(error_of(j.dump()),
             f + ": model format version null is not 1 (made by another organfit version)");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["provenance"] = 3.5;
   EXPECT_EQ(error_of(j.dump()),
             f + ": provenance: an object whose modelling_wall_s is a number and scene a text");
   j["provenance"] = {{"modelling_wall_s", "1 s"}};
   EXPECT_EQ(error_of(j.dump()),
             f + ": provenance: an object whose modelling_wall_s is a number and scene a text");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["organ"]["volume_level_mm"] = 40.0;  // farther than a voxel: not this organ's level
   EXPECT_EQ(error_of(j.dump()),
             f + ": organ.volume_level_mm: not finite, or farther from 0 than a voxel");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["organ"]["volume_level_by_slice_phase_mm"][2] = -40.0;
   EXPECT_EQ(error_of(j.dump()), f + ": organ.volume_level_by_slice_phase_mm: not finite, or "
                                     "farther from 0 than a voxel");
@@ -334,25 +385,25 @@ TEST_F(ModelFile, BadFilesAreRefusedNamingTheFile) {
   j["organ"].erase("volume_level_mm");
   EXPECT_EQ(error_of(j.dump()), f + ": organ.volume_level_by_slice_phase_mm is given without "
                                     "organ.volume_level_mm");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["organ"]["planning_volumes"]["organ_mm3"] = -5.0;
   EXPECT_EQ(error_of(j.dump()), f + ": organ.planning_volumes: voxel_mm, organ_mm3 and "
                                     "particle_body_mm3 must be > 0");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["organ"]["planning_volumes"]["fingerprint"] = "-00000000000001f";
   EXPECT_EQ(error_of(j.dump()),
             f + ": organ.planning_volumes.fingerprint needs 16 hexadecimal digits");
   // The organ's box and the reference's volume, written for the reader, are read too: a
   // file with them broken or not matching its shape is refused.
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["shape"]["size_mm"] = {1.0, 2.0};
   EXPECT_EQ(error_of(j.dump()), f + ": shape.size_mm needs 3 numbers");
   j["shape"]["size_mm"] = {1.0, 2.0, -1e308};
   EXPECT_EQ(error_of(j.dump()), f + ": shape.size_mm must be > 0 along each axis");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   j["shape"]["centre_mm"] = {0.0, "x", 1.0};
   EXPECT_EQ(error_of(j.dump()), f + ": shape.centre_mm needs 3 numbers");
-  j = nlohmann::json::parse(std::ifstream(dir_ / "m.json"));
+  j = edited(dir_ / "m.json");
   const double volume = j["organ"]["reference_volume_mm3"].get<double>();
   j["organ"]["reference_volume_mm3"] = nlohmann::json::object();
   EXPECT_NE(error_of(j.dump()).find(f + ": organ.reference_volume_mm3: {} in the file, but its "

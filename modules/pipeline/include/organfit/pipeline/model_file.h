@@ -16,6 +16,9 @@
 //                 prior's variance field, so that an export from the file writes the
 //                 run's sigma exactly (null: a planning model, or none computed)
 //   provenance    organfit version, scene, date, and the planning run's stage times
+//   checksum      last: 16 hexadecimal digits, a hash of the file's text before it
+//                 (geometry::hash_bytes). A file changed after it was written is refused;
+//                 one written before the checksum was kept is read with a warning.
 // Positions are written with full double precision: a loaded model is the saved one.
 #include <array>
 #include <filesystem>
@@ -52,7 +55,13 @@ struct SavedModel {
   nlohmann::json provenance;
   /// the fit's uncertainty, rebuilt from the file (null: none saved)
   std::shared_ptr<const fitting::SurfaceUncertainty> uncertainty;
+  /// The file's checksum was there and matched its content; false for a file written
+  /// before organfit kept one (read as it is: unchecked_model_warning says so).
+  bool checksum_verified = false;
 };
+
+/// The warning for a model file read without a checksum (empty when it had one).
+std::string unchecked_model_warning(const std::filesystem::path& file, const SavedModel& saved);
 
 /// Writes the model (atomically). `organ_name` names the organ for exports; `uncertainty`
 /// (optional) is the fit's.
@@ -62,8 +71,8 @@ void save_model(const std::filesystem::path& file, const ModelStageResult& model
                 const fitting::SurfaceUncertainty* uncertainty = nullptr);
 
 /// Reads a model file and rebuilds its force terms. Throws InputError "FILE: reason" on
-/// a file that is not an organfit model, of another format version, or inconsistent
-/// (counts, non-finite positions, bad settings).
+/// a file that is not an organfit model, of another format version, changed after it was
+/// written (its checksum), or inconsistent (counts, non-finite positions, bad settings).
 SavedModel load_model(const std::filesystem::path& file);
 
 }  // namespace organfit::pipeline
