@@ -83,6 +83,34 @@ ds.Rows = 32
 ds.PixelData = ds.PixelData[: 32 * 64 * 2]
 ds.save_as(os.path.join(d, 'ct', ct_files[2]))
 
+# --- one slice of another scan, or edited: named, never read as if it were the series' -----------
+def set_attr(name, value):
+    def edit(ds):
+        if value is None:
+            delattr(ds, name)
+        else:
+            setattr(ds, name, value)
+    return edit
+for name, edit, expect in [
+        ('another_frame_of_reference', set_attr('FrameOfReferenceUID', '1.2.826.0.1.3680043.2.1125.99.7'),
+         "slice CT0004.dcm's Frame of Reference UID is not the other slices'"),
+        ('another_study', set_attr('StudyInstanceUID', '1.2.826.0.1.3680043.2.1125.99.8'),
+         "slice CT0004.dcm's Study Instance UID is not the other slices'"),
+        ('no_sop_instance_uid', set_attr('SOPInstanceUID', ''), 'slice CT0004.dcm has no SOP Instance UID'),
+        ('no_rescale_intercept', set_attr('RescaleIntercept', None),
+         'slice CT0004.dcm states no Rescale Intercept where the other slices do'),
+        ('bits_stored_differ', set_attr('BitsStored', 7), "slice CT0004.dcm's pixels are described otherwise"),
+        ('pixel_data_short', lambda ds: setattr(ds, 'PixelData', ds.PixelData[: len(ds.PixelData) // 2]),
+         'CT0004.dcm: its pixel data hold 4096 bytes where its 64 x 64 pixels of 2 bytes take 8192'),
+        ('pixel_data_long', lambda ds: setattr(ds, 'PixelData', ds.PixelData * 2),
+         'CT0004.dcm: its pixel data hold 16384 bytes where'),
+        ('rescale_not_ct_numbers', set_attr('RescaleSlope', 1e30), 'CT0004.dcm: its Rescale Slope 1e+30'),
+        ]:
+    d = case('ct_slice_' + name, SEGMENT, expect, names='CT0004.dcm', cls='disagree')
+    edit_ct(d, 3, edit)
+d = case('ct_bits_no_dicom_layout', SEGMENT, 'stored 12, high bit 3 and pixel representation 0: not a layout', cls='disagree')
+edit_all(d, set_attr('HighBit', 3))
+
 # --- RT Structure Set defects -------------------------------------------------------
 case('rtss_roi_missing', IMPORT[:-3] + ['Bladderr', '--out', '{case}/out/mask.nrrd'], "no ROI named 'Bladderr'", rtstruct=True)
 def edit_rtss(d, fn):

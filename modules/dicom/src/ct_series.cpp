@@ -17,6 +17,7 @@
 #include <cmath>
 #include <map>
 #include <sstream>
+#include <tuple>
 
 #include "dicom_values.h"
 #include "dicom_writing.h"
@@ -33,7 +34,10 @@ const gdcm::Tag kModality(0x0008, 0x0060), kSeriesUid(0x0020, 0x000e),
     kPosition(0x0020, 0x0032), kOrientation(0x0020, 0x0037), kPixelSpacing(0x0028, 0x0030),
     kRows(0x0028, 0x0010), kColumns(0x0028, 0x0011), kFrameOfReference(0x0020, 0x0052),
     kGantryTilt(0x0018, 0x1120), kSliceThickness(0x0018, 0x0050),
-    kSpacingBetweenSlices(0x0018, 0x0088);
+    kSpacingBetweenSlices(0x0018, 0x0088), kStudyUid(0x0020, 0x000d),
+    kRescaleIntercept(0x0028, 0x1052), kRescaleSlope(0x0028, 0x1053),
+    kSamplesPerPixel(0x0028, 0x0002), kPhotometric(0x0028, 0x0004), kBitsAllocated(0x0028, 0x0100),
+    kBitsStored(0x0028, 0x0101), kHighBit(0x0028, 0x0102), kPixelRepresentation(0x0028, 0x0103);
 
 std::string trimmed(const char* v) {
   if (!v) return {};
@@ -46,7 +50,11 @@ std::string trimmed(const char* v) {
 using detail::numbers;
 
 struct Header {
-  std::string file, series_uid, description, sop_uid, sop_class, frame_of_reference;
+  std::string file, series_uid, description, sop_uid, sop_class, frame_of_reference, study_uid;
+  std::string intercept, slope;  ///< as stated (empty: not stated)
+  /// Samples per pixel, photometric interpretation, bits allocated, stored, high bit and
+  /// pixel representation, as stated: how its stored values are laid out.
+  std::array<std::string, 6> pixel_layout;
   std::vector<double> position, orientation, spacing;
   int rows = 0, columns = 0;
   double tilt = 0, thickness = 0, spacing_between = 0;  ///< mm; 0 when not stated
@@ -104,7 +112,16 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
                                    kFrameOfReference,
                                    kGantryTilt,
                                    kSliceThickness,
-                                   kSpacingBetweenSlices};
+                                   kSpacingBetweenSlices,
+                                   kStudyUid,
+                                   kRescaleIntercept,
+                                   kRescaleSlope,
+                                   kSamplesPerPixel,
+                                   kPhotometric,
+                                   kBitsAllocated,
+                                   kBitsStored,
+                                   kHighBit,
+                                   kPixelRepresentation};
   gdcm::Scanner scanner;
   for (const auto& t : header_tags)
     scanner.AddTag(t);
@@ -158,6 +175,11 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     h.sop_uid = value(kSopUid);
     h.sop_class = value(kSopClass);
     h.frame_of_reference = value(kFrameOfReference);
+    h.study_uid = value(kStudyUid);
+    h.intercept = value(kRescaleIntercept);
+    h.slope = value(kRescaleSlope);
+    h.pixel_layout = {value(kSamplesPerPixel), value(kPhotometric), value(kBitsAllocated),
+                      value(kBitsStored),      value(kHighBit),     value(kPixelRepresentation)};
     h.position = numbers(value(kPosition));
     h.orientation = numbers(value(kOrientation));
     h.spacing = numbers(value(kPixelSpacing));
@@ -276,6 +298,58 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
       fail(fmt::format("gantry tilt of {} degrees: tilted series are not supported", h.tilt));
     if (!reference) reference = &h;
   }
+  // One scan: every slice of the series in the same study and frame of reference, each with
+  // the SOP Instance UID an exported structure set references it by, and its stored values
+  // mapped to HU alike (a slice without the Rescale Intercept the others state would be off
+  // by it, -1024 HU on most scanners). A slice that differs is of another scan, or edited.
+  for (const auto& h : slices)
+    if (h.sop_uid.empty())
+      fail("slice " + name_of(h) +
+           " has no SOP Instance UID (an exported structure set could not reference it)");
+  const std::string frame = most_common([](const Header& h) { return h.frame_of_reference; });
+  const std::string study = most_common([](const Header& h) { return h.study_uid; });
+  const bool intercepts = most_common([](const Header& h) { return !h.intercept.empty(); });
+  const bool slopes = most_common([](const Header& h) { return !h.slope.empty(); });
+  const auto layout = most_common([](const Header& h) { return h.pixel_layout; });
+  for (const auto& h : slices) {
+    if (h.frame_of_reference != frame)
+      fail("slice " + name_of(h) +
+           "'s Frame of Reference UID is not the other slices' (a slice of another scan, or an "
+           "edited one)");
+    if (h.study_uid != study)
+      fail("slice " + name_of(h) +
+           "'s Study Instance UID is not the other slices' (a slice of another study, or an "
+           "edited one)");
+    for (const auto& [stated, most, what] :
+         {std::tuple{!h.intercept.empty(), intercepts, "Rescale Intercept"},
+          std::tuple{!h.slope.empty(), slopes, "Rescale Slope"}})
+      if (stated != most)
+        fail("slice " + name_of(h) + (most ? " states no " : " alone states a ") + what +
+             " where the other slices " + (most ? "do" : "do not") +
+             ": its HU would not be theirs");
+    if (h.pixel_layout != layout)
+      fail("slice " + name_of(h) +
+           "'s pixels are described otherwise than the other slices' (samples per pixel, "
+           "photometric interpretation, bits allocated, stored, high bit or pixel "
+           "representation)");
+  }
+  // The layout they share, as DICOM allows it: whole bytes allocated, the stored bits
+  // within them and ending at the high bit, unsigned or two's complement.
+  {
+    auto as_int = [](const std::string& v) { return v.empty() ? -1 : std::atoi(v.c_str()); };
+    const int allocated = as_int(layout[2]), stored = as_int(layout[3]), high = as_int(layout[4]),
+              representation = as_int(layout[5]);
+    if (!(allocated == 8 || allocated == 16 || allocated == 32) || stored < 1 ||
+        stored > allocated || high != stored - 1 || (representation != 0 && representation != 1))
+      fail(fmt::format(
+          "its slices state bits allocated {}, stored {}, high bit {} and pixel representation "
+          "{}: not a layout of stored values DICOM allows",
+          echo(layout[2], 8), echo(layout[3], 8), echo(layout[4], 8), echo(layout[5], 8)));
+  }
+  if (!intercepts && !slopes)
+    series.warnings.push_back(where +
+                              ": no slice states a Rescale Slope or Intercept: the stored values "
+                              "are taken as HU");
   const Header first = *reference;  // a copy: the slices are sorted below
   const Eigen::Vector3d row_dir(first.orientation[0], first.orientation[1], first.orientation[2]);
   const Eigen::Vector3d col_dir(first.orientation[3], first.orientation[4], first.orientation[5]);
@@ -383,6 +457,18 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     if (!image.GetBuffer(buffer.data())) fail("cannot decode the pixels of " + name);
     if (buffer.size() < per_slice * pf.GetPixelSize())
       fail(name + ": pixel data shorter than its size says");
+    // Native pixel data hold exactly the image's bytes (one more to make the length even):
+    // a shorter element leaves part of the slice unread (GDCM fills it without a word), a
+    // longer one is not the image its rows, columns and bits allocated describe.
+    if (const gdcm::ByteValue* stored = image.GetDataElement().GetByteValue();
+        stored && !reader.GetFile().GetHeader().GetDataSetTransferSyntax().IsEncapsulated()) {
+      const size_t expected = per_slice * pf.GetPixelSize();
+      const size_t length = stored->GetLength();
+      if (length != expected && length != expected + expected % 2)
+        fail(fmt::format(
+            "{}: its pixel data hold {} bytes where its {} x {} pixels of {} bytes take {}", name,
+            length, first.columns, first.rows, pf.GetPixelSize(), expected));
+    }
     // GDCM reads a file cut short inside its pixel data with only a warning: refuse it.
     if (!reader.GetFile().GetHeader().GetDataSetTransferSyntax().IsEncapsulated() &&
         !detail::native_pixel_data_complete(slices[s].file))
@@ -415,6 +501,15 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
       }
       out[v] = static_cast<float>(raw * slope + intercept);
     }
+    // CT numbers run from -1024 HU (air) to a few tens of thousands on an extended scale
+    // (metal): a slope or intercept that maps the stored values far beyond is not a CT's.
+    constexpr double kLargestHu = 1e5;
+    const auto [lo, hi] = std::minmax_element(out, out + per_slice);
+    if (per_slice > 0 && !(std::abs(*lo) <= kLargestHu && std::abs(*hi) <= kLargestHu))
+      fail(fmt::format(
+          "{}: its Rescale Slope {:g} and Intercept {:g} map its stored values to {:g} .. {:g} "
+          "HU: not CT numbers",
+          name, slope, intercept, *lo, *hi));
     series.slices.push_back(
         {slices[s].sop_uid, slices[s].sop_class,
          Eigen::Vector3d(slices[s].position[0], slices[s].position[1], slices[s].position[2]),
