@@ -130,6 +130,25 @@ def two(ds):
     c = prostate(ds).ContourSequence[0]
     c.ContourData = c.ContourData[:6]
     c.NumberOfContourPoints = 2
+# A slice's contours are read by the even-odd rule: a contour exported twice would cancel
+# itself out (read once, said); two contours that overlap are refused; one within another is
+# a hole.
+import copy
+def repeat_contour(ds, dx, scale=1.0):
+    contours = prostate(ds).ContourSequence
+    middle = contours[len(contours) // 2]
+    points = [float(v) for v in middle.ContourData]
+    centre = [sum(points[a::3]) / (len(points) // 3) for a in range(2)]
+    again = copy.deepcopy(middle)
+    again.ContourData = [v if i % 3 == 2 else centre[i % 3] + scale * (v - centre[i % 3]) + (dx if i % 3 == 0 else 0)
+                         for i, v in enumerate(points)]
+    contours.append(again)
+d = case('tolerated_contour_exported_twice', IMPORT, 'encloses the same voxels as contour 5 on slice 6', code=0, rtstruct=True, cls='geometry')
+edit_rtss(d, lambda ds: repeat_contour(ds, 0.0))
+d = case('rtss_contours_overlapping', IMPORT, 'overlap: neither apart nor one within the other', rtstruct=True, cls='geometry')
+edit_rtss(d, lambda ds: repeat_contour(ds, 4.0))
+d = case('tolerated_contour_with_a_hole', IMPORT, '', code=0, rtstruct=True, cls='geometry')
+edit_rtss(d, lambda ds: repeat_contour(ds, 0.0, 0.5))
 d = case('rtss_open_contour', IMPORT, 'OPEN_PLANAR', rtstruct=True)
 edit_rtss(d, lambda ds: setattr(prostate(ds).ContourSequence[0], 'ContourGeometricType', 'OPEN_PLANAR'))
 d = case('rtss_other_frame_of_reference', IMPORT, 'Frame of Reference', rtstruct=True)

@@ -38,18 +38,20 @@ check prostate.checks_hold checks_hold "$tmp/session/run.json"
 # volume change does not explain, on the CT's own grid and on average over its shifted
 # copies: warned.
 $py -c "
-import json; d = json.load(open('$tmp/plan/prostate_model.json'))
+import json, sys; sys.path.insert(0, '$src/tests/cli'); import model_checksum
+d = json.load(open('$tmp/plan/prostate_model.json'))
 d['organ']['volume_level_mm'] += 0.6
 d['organ']['volume_level_by_slice_phase_mm'] = [c + 0.6 for c in d['organ']['volume_level_by_slice_phase_mm']]
-json.dump(d, open('$tmp/level_off.json', 'w'))"
+model_checksum.write_model(d, '$tmp/level_off.json')"
 check prostate.level_off_refused_as_read bash -c "! '$bin' --quiet run '$src/pipelines/prostate-session.yaml' --out '$tmp/level_off' \
   --set 'planning.model=$tmp/level_off.json' 2>'$tmp/level_off.err' &&
   grep -q 'level_off.json: organ.reference_volume_mm3: [0-9.]* in the file, but its shape gives [0-9.]* mm3 here' '$tmp/level_off.err' &&
   test ! -e '$tmp/level_off'"
 $py -c "
-import json, re; d = json.load(open('$tmp/level_off.json'))
+import json, re, sys; sys.path.insert(0, '$src/tests/cli'); import model_checksum
+d = json.load(open('$tmp/level_off.json'))
 d['organ']['reference_volume_mm3'] = float(re.search(r'its shape gives ([0-9.]+) mm3', open('$tmp/level_off.err').read()).group(1))
-json.dump(d, open('$tmp/level_off.json', 'w'))"
+model_checksum.write_model(d, '$tmp/level_off.json')"
 check prostate.volume_off_by_a_layer_warned bash -c "'$bin' --quiet run '$src/pipelines/prostate-session.yaml' --out '$tmp/level_off' \
   --set 'planning.model=$tmp/level_off.json' 2>'$tmp/level_off.err' &&
   grep -q 'warning: export: the exported organ is 3[6-9]\.[0-9]* cm3 on the CT grid and 3[6-9]\.[0-9]* cm3 on average over it and 16 copies' '$tmp/level_off.err' &&

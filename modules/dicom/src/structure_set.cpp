@@ -182,6 +182,34 @@ double twice_area(const std::vector<Eigen::Vector2d>& poly) {
   return a;
 }
 
+/// The voxel centres of an nx x ny slice (index (i, j) at i + nx j) that the polygons (in
+/// continuous index) enclose by the even-odd rule, as `set(i, j)` calls, row by row.
+template <class Set>
+void fill_even_odd(const std::vector<const std::vector<Eigen::Vector2d>*>& polys, int nx, int ny,
+                   Set&& set) {
+  std::vector<double> crossings;
+  for (int j = 0; j < ny; ++j) {
+    crossings.clear();
+    const double y = j;
+    for (const auto* poly : polys) {
+      for (size_t e = 0; e < poly->size(); ++e) {
+        const Eigen::Vector2d& a = (*poly)[e];
+        const Eigen::Vector2d& b = (*poly)[(e + 1) % poly->size()];
+        if ((a.y() <= y) == (b.y() <= y)) continue;  // edge does not cross this row
+        crossings.push_back(a.x() + (y - a.y()) * (b.x() - a.x()) / (b.y() - a.y()));
+      }
+    }
+    // Pairs of the sorted crossings of all contours: the even-odd rule (holes, islands).
+    std::sort(crossings.begin(), crossings.end());
+    for (size_t c = 0; c + 1 < crossings.size(); c += 2) {
+      const int i0 = std::max(0, static_cast<int>(std::ceil(crossings[c])));
+      const int i1 = std::min(nx - 1, static_cast<int>(std::floor(crossings[c + 1])));
+      for (int i = i0; i <= i1; ++i)
+        set(i, j);
+    }
+  }
+}
+
 /// True when a contour's Contour Data holds 3 values per declared point.
 bool value_count_agrees(const Contour& c) {
   return c.declared_points < 0 ? c.value_count % 3 == 0 : c.value_count == 3 * c.declared_points;
@@ -296,8 +324,13 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
   out.interpreted_type = roi->interpreted_type;
   const auto slice_of_uid = slices_by_uid(ct);
 
-  // Group each contour's polygon (in continuous i, j index) under its slice.
-  std::vector<std::vector<std::vector<Eigen::Vector2d>>> polygons(g.size[2]);
+  // Group each contour's polygon (in continuous i, j index) under its slice, with its number
+  // (1-based, as errors name it).
+  struct Polygon {
+    size_t number = 0;
+    std::vector<Eigen::Vector2d> vertices;
+  };
+  std::vector<std::vector<Polygon>> polygons(g.size[2]);
   int placed = 0;
   for (size_t c = 0; c < roi->contours.size(); ++c) {
     const Contour& contour = roi->contours[c];
@@ -344,7 +377,7 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
     if (xmax->x() < -0.5 || ymax->y() < -0.5 || xmin->x() > g.size[0] - 0.5 ||
         ymin->y() > g.size[1] - 0.5)
       fail(which + " lies outside the image");
-    polygons[slice].push_back(std::move(poly));
+    polygons[slice].push_back({c + 1, std::move(poly)});
     ++placed;
   }
   out.contours = placed;
@@ -358,30 +391,53 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
                     "lie on; matched by position",
                     source, out.matched_by_position, out.contours, shown));
 
-  // Even-odd scanline fill per slice, over all the slice's contours together.
+  // A slice's contours are read together by the even-odd rule, meant for contours apart or
+  // nested (a contour within another is a hole). Each contour's voxels alone, pair by pair:
+  // the same voxels twice (a contour exported twice) would cancel each other and take that
+  // slice's part of the organ away: read once, said. Voxels partly shared (contours that
+  // overlap, neither apart nor nested) would have their overlap cut out, and which area they
+  // mean cannot be told: refused.
+  const int nx = g.size[0], ny = g.size[1];
+  for (int k = 0; k < g.size[2]; ++k) {
+    std::vector<Polygon>& on_slice = polygons[k];
+    if (on_slice.size() < 2) continue;
+    std::vector<std::vector<std::uint8_t>> alone;
+    for (const auto& p : on_slice) {
+      alone.emplace_back(static_cast<size_t>(nx) * ny, 0);
+      fill_even_odd({&p.vertices}, nx, ny,
+                    [&](int i, int j) { alone.back()[static_cast<size_t>(i + nx * j)] = 1; });
+    }
+    for (size_t a = 0; a < on_slice.size(); ++a)
+      for (size_t b = a + 1; b < on_slice.size();) {
+        long long in_a = 0, in_b = 0, shared = 0;
+        for (size_t v = 0; v < alone[a].size(); ++v)
+          in_a += alone[a][v], in_b += alone[b][v], shared += alone[a][v] & alone[b][v];
+        if (shared > 0 && shared == in_a && shared == in_b) {
+          out.warnings.push_back(fmt::format(
+              "{}: ROI '{}' contour {} encloses the same voxels as contour {} on slice {} (a "
+              "contour exported twice?): read once",
+              source, shown, on_slice[b].number, on_slice[a].number, k));
+          on_slice.erase(on_slice.begin() + static_cast<long>(b));
+          alone.erase(alone.begin() + static_cast<long>(b));
+          continue;
+        }
+        if (shared > 0 && shared < in_a && shared < in_b)
+          fail(fmt::format(
+              "ROI '{}' contours {} and {} on slice {} overlap: neither apart nor one within "
+              "the other, so the area they mean cannot be told (read together by the even-odd "
+              "rule, the {} voxels they share would be cut out)",
+              shown, on_slice[a].number, on_slice[b].number, k, shared));
+        ++b;
+      }
+  }
+
+  // The even-odd fill per slice, over all the slice's contours together.
   for (int k = 0; k < g.size[2]; ++k) {
     if (polygons[k].empty()) continue;
-    std::vector<double> crossings;
-    for (int j = 0; j < g.size[1]; ++j) {
-      crossings.clear();
-      const double y = j;
-      for (const auto& poly : polygons[k]) {
-        for (size_t e = 0; e < poly.size(); ++e) {
-          const Eigen::Vector2d& a = poly[e];
-          const Eigen::Vector2d& b = poly[(e + 1) % poly.size()];
-          if ((a.y() <= y) == (b.y() <= y)) continue;  // edge does not cross this row
-          crossings.push_back(a.x() + (y - a.y()) * (b.x() - a.x()) / (b.y() - a.y()));
-        }
-      }
-      // Pairs of the sorted crossings of all contours: the even-odd rule (holes, islands).
-      std::sort(crossings.begin(), crossings.end());
-      for (size_t c = 0; c + 1 < crossings.size(); c += 2) {
-        const int i0 = std::max(0, static_cast<int>(std::ceil(crossings[c])));
-        const int i1 = std::min(g.size[0] - 1, static_cast<int>(std::floor(crossings[c + 1])));
-        for (int i = i0; i <= i1; ++i)
-          out.mask.at(i, j, k) = 1;
-      }
-    }
+    std::vector<const std::vector<Eigen::Vector2d>*> polys;
+    for (const auto& p : polygons[k])
+      polys.push_back(&p.vertices);
+    fill_even_odd(polys, nx, ny, [&](int i, int j) { out.mask.at(i, j, k) = 1; });
   }
   return out;
 }
