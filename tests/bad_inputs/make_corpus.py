@@ -149,6 +149,15 @@ d = case('rtss_contours_overlapping', IMPORT, 'overlap: neither apart nor one wi
 edit_rtss(d, lambda ds: repeat_contour(ds, 4.0))
 d = case('tolerated_contour_with_a_hole', IMPORT, '', code=0, rtstruct=True, cls='geometry')
 edit_rtss(d, lambda ds: repeat_contour(ds, 0.0, 0.5))
+# CLOSED_PLANAR means every point on the contour's slice, not only their mean (one point
+# 1.5 mm off the phantom's 5 mm slices); a slice left out between contoured ones is said.
+def lift_one_point(ds):
+    c = prostate(ds).ContourSequence[4]
+    c.ContourData = [float(v) + 1.5 if i == 2 else float(v) for i, v in enumerate(c.ContourData)]
+d = case('rtss_contour_not_planar', IMPORT, 'is not planar: a point of it lies 1.50 mm off that slice', rtstruct=True, cls='geometry')
+edit_rtss(d, lift_one_point)
+d = case('tolerated_contour_slice_left_out', IMPORT, 'has no contour on 1 slice(s) between its first and last', code=0, rtstruct=True, cls='geometry')
+edit_rtss(d, lambda ds: prostate(ds).ContourSequence.__delitem__(4))
 d = case('rtss_open_contour', IMPORT, 'OPEN_PLANAR', rtstruct=True)
 edit_rtss(d, lambda ds: setattr(prostate(ds).ContourSequence[0], 'ContourGeometricType', 'OPEN_PLANAR'))
 d = case('rtss_other_frame_of_reference', IMPORT, 'Frame of Reference', rtstruct=True)

@@ -369,6 +369,15 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
           fmt::format("{} lies on no slice of the CT (at {:.2f} mm along the slice normal, more "
                       "than {} slice gap from the nearest)",
                       which, along, kContourSliceTolerance));
+    // CLOSED_PLANAR: every point on the slice it is placed on, not only their mean.
+    double farthest = 0;
+    for (const auto& p : contour.points_mm)
+      farthest = std::max(farthest, std::abs(g.physical_to_index(p).z() - slice));
+    if (farthest > kContourSliceTolerance)
+      fail(fmt::format(
+          "{} {} is not planar: a point of it lies {:.2f} mm off that slice (more than {} slice "
+          "gap)",
+          which, on_slice, farthest * g.spacing_mm.z(), kContourSliceTolerance));
     if (how == Placement::kByPosition) ++out.matched_by_position;
     const auto [xmin, xmax] = std::minmax_element(poly.begin(), poly.end(),
                                                   [](auto& a, auto& b) { return a.x() < b.x(); });
@@ -385,6 +394,28 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
     fail(
         fmt::format("ROI '{}' has no usable contour ({} skipped: fewer than 3 points or zero area)",
                     shown, out.skipped));
+  // A slice without a contour between contoured ones: the organ is read with that gap (a
+  // slice left out in contouring, or a contour skipped above), said with the slices.
+  {
+    std::vector<int> gaps;
+    int first = g.size[2], last = -1;
+    for (int k = 0; k < g.size[2]; ++k)
+      if (!polygons[k].empty()) first = std::min(first, k), last = k;
+    for (int k = first + 1; k < last; ++k)
+      if (polygons[k].empty()) gaps.push_back(k);
+    if (!gaps.empty()) {
+      std::string named;
+      for (size_t n = 0; n < gaps.size() && n < 5; ++n)
+        named += fmt::format("{}{} (z {:.2f} mm)", n ? ", " : "", gaps[n],
+                             g.direction.col(2).dot(g.index_to_physical(
+                                 Eigen::Vector3d(0, 0, static_cast<double>(gaps[n])))));
+      out.warnings.push_back(fmt::format(
+          "{}: ROI '{}' has no contour on {} slice(s) between its first and last ({}{}): read "
+          "with {} gap (a slice left out in contouring?)",
+          source, shown, gaps.size(), named, gaps.size() > 5 ? ", ..." : "",
+          gaps.size() == 1 ? "that" : "those"));
+    }
+  }
   if (out.matched_by_position > 0)
     out.warnings.push_back(
         fmt::format("{}: {} of {} contours of ROI '{}' reference no slice of this series that they "
