@@ -182,6 +182,19 @@ open(os.path.join(d, 'tracker.mha'), 'wb').write(tracker.replace(b'ToolToTracker
 d = case('us_every_status_invalid', ['us-points', '--us', '{data}/us-plus/Prostate10_video.igs.mhd', '--tracker', '{case}/tracker.mha', '--out', '{case}/out/p.csv'], 'no usable frame', ct=False)
 open(os.path.join(d, 'tracker.mha'), 'wb').write(tracker.replace(b'TransformStatus = OK', b'TransformStatus = INVALID'))
 d = case('us_registration_not_rigid', ['us-points', '--us', '{data}/us-plus/BoneUltrasound_L14.igs.mha', '--registration', '1,0,0,0,0,3,0,0,0,0,1,0,0,0,0,1', '--out', '{case}/out/p.csv'], 'not a rigid transform', ct=False)
+# A damaged calibration: a region beyond the image, a pixel size a unit off (1e-9 cm: the
+# boundary search had stepped by half of it, for minutes and gigabytes), a volume's spacing.
+def aloka(d, name, fn):
+    ds = pydicom.dcmread(os.path.join(data, 'us-dicom', 'gdcm-US-ALOKA-16.dcm'))
+    fn(ds.SequenceOfUltrasoundRegions[0])
+    ds.save_as(os.path.join(d, name))
+d = case('us_dicom_region_beyond_the_image', ['us-points', '--us', '{case}/us.dcm', '--out', '{case}/out/p.csv'], 'its ultrasound region 1 spans pixels (32, 24) to (65535, 415), not within its 640 x 480 pixels', ct=False, cls='geometry')
+aloka(d, 'us.dcm', lambda r: setattr(r, 'RegionLocationMaxX1', 65535))
+d = case('us_dicom_pixel_size_not_ultrasound', ['us-points', '--us', '{case}/us.dcm', '--out', '{case}/out/p.csv'], 'not an ultrasound image', ct=False, cls='geometry')
+aloka(d, 'us.dcm', lambda r: setattr(r, 'PhysicalDeltaX', 1e-9))
+d = case('us_volume_spacing_not_ultrasound', ['us-points', '--us', '{case}/v.mha', '--out', '{case}/out/p.csv'], 'v.mha: its field of view is 0.147 x 0.106 x 0.104 mm: not an ultrasound image', ct=False, cls='geometry')
+spine = open(os.path.join(data, 'us-plus', 'SpinePhantomFreehandReconstructed.mha'), 'rb').read()
+open(os.path.join(d, 'v.mha'), 'wb').write(spine.replace(b'ElementSpacing = 0.5 0.5 0.5', b'ElementSpacing = 0.001 0.001 0.001', 1))
 d = case('us_not_an_image', ['us-points', '--us', '{case}/x.nrrd', '--out', '{case}/out/p.csv'], 'x.nrrd', ct=False)
 open(os.path.join(d, 'x.nrrd'), 'w').write('NRRD0004\ntype: garbage\n\n')
 

@@ -109,6 +109,13 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
     summary["centre_mm"] = {o.centre_mm.x(), o.centre_mm.y(), o.centre_mm.z()};
     summary["radius_mm"] = o.r_max_mm;
   };
+  auto sweep_points = [&](const ultrasound::TrackedSweep& sweep) {
+    try {
+      return ultrasound::sweep_boundary_points(sweep, o);
+    } catch (const std::invalid_argument& e) {
+      throw InputError(c.input.string() + ": " + e.what());
+    }
+  };
   auto sweep_roi = [&](const ultrasound::TrackedSweep& sweep) {
     const auto& f = sweep.frames[sweep.frames.size() / 2];
     const Eigen::Vector4d mid =
@@ -145,7 +152,7 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
     summary["pixel_size_from"] =
         us.calibrated && c.pixel_mm <= 0 ? "ultrasound region" : "--pixel-mm";
     summary["frames"] = us.frames;
-    found = ultrasound::sweep_boundary_points(sweep, o);
+    found = sweep_points(sweep);
   } else if ((ends_with(name, ".mha") || ends_with(name, ".mhd")) && has_sequence_fields(c.input)) {
     const ultrasound::SequenceMetafile video = ultrasound::read_sequence_metafile(c.input);
     std::optional<ultrasound::SequenceMetafile> tracker;
@@ -163,7 +170,7 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
     summary["frames_skipped"] = {{"image_status", sweep.skipped_image_status},
                                  {"transform_status", sweep.skipped_transform_status},
                                  {"no_pose", sweep.skipped_no_pose}};
-    found = ultrasound::sweep_boundary_points(sweep, o);
+    found = sweep_points(sweep);
   } else {
     if (!c.tracker.empty())
       throw InputError(c.input.string() + ": --tracker applies to a tracked sweep, not a volume");

@@ -122,6 +122,14 @@ UsImage read_us_image(const std::filesystem::path& file, double pixel_mm) {
         out.pixel_mm_x = 10 * dx, out.pixel_mm_y = 10 * dy;  // cm -> mm
         value_of(item, 0x0018, 0x6018, x0), value_of(item, 0x0018, 0x601a, y0);
         value_of(item, 0x0018, 0x601c, x1), value_of(item, 0x0018, 0x601e, y1);
+        // Its last pixel as DICOM states it (inclusive), or one past it as some vendors
+        // write it (a Philips CX50's 800 x 600 image states x1 = 800): either is within.
+        if (!(x0 <= x1 && y0 <= y1 && x1 <= static_cast<std::uint32_t>(out.width) &&
+              y1 <= static_cast<std::uint32_t>(out.height)))
+          fail(fmt::format(
+              "its ultrasound region {} spans pixels ({}, {}) to ({}, {}), not within its {} x "
+              "{} pixels",
+              i, x0, y0, x1, y1, out.width, out.height));
         out.region = {static_cast<int>(x0), static_cast<int>(y0), static_cast<int>(x1),
                       static_cast<int>(y1)};
       }

@@ -1,11 +1,15 @@
 #include "organfit/ultrasound/boundary_points.h"
 
+#include <fmt/format.h>
+
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "organfit/geometry/image_geometry.h"
 #include "organfit/ultrasound/sequence_metafile.h"
@@ -54,6 +58,21 @@ void gaussian_smooth(std::vector<float>& v, const std::array<int, 3>& size,
 
 }  // namespace
 
+void check_field_of_view(const std::vector<double>& extent_mm) {
+  constexpr double kSmallestMm = 1, kLargestMm = 1000;
+  std::string sides;
+  bool plausible = true;
+  for (const double e : extent_mm) {
+    sides += fmt::format("{}{:g}", sides.empty() ? "" : " x ", e);
+    plausible = plausible && e >= kSmallestMm && e <= kLargestMm;
+  }
+  if (!plausible)
+    throw std::invalid_argument(fmt::format(
+        "its field of view is {} mm: not an ultrasound image's ({:g} mm to {:g} m a side; its "
+        "pixel size or calibration in another unit, or damaged?)",
+        sides, kSmallestMm, kLargestMm / 1000));
+}
+
 BoundaryResult boundary_points(const geometry::ImageGeometry& g,
                                const std::vector<float>& intensity,
                                const std::vector<std::uint8_t>* in_view, const BoundaryOptions& o) {
@@ -62,6 +81,8 @@ BoundaryResult boundary_points(const geometry::ImageGeometry& g,
     throw std::invalid_argument("boundary_points: image sizes do not match the geometry");
   if (!(o.r_max_mm > o.r_min_mm) || o.rays < 16)
     throw std::invalid_argument("boundary_points: bad search range");
+  check_field_of_view(
+      {g.size[0] * g.spacing_mm[0], g.size[1] * g.spacing_mm[1], g.size[2] * g.spacing_mm[2]});
   const Eigen::Vector3d c_idx = g.physical_to_index(o.centre_mm);
   for (int d = 0; d < 3; ++d)
     if (!(c_idx[d] > -0.5 && c_idx[d] < g.size[d] - 0.5))
@@ -146,6 +167,8 @@ BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOp
   for (const auto& f : sweep.frames) {
     if (f.pixels.size() != static_cast<size_t>(f.width) * f.height || f.width < 4 || f.height < 4)
       continue;
+    check_field_of_view({f.pixel_to_ct_mm.block<3, 1>(0, 0).norm() * f.width,
+                         f.pixel_to_ct_mm.block<3, 1>(0, 1).norm() * f.height});
     Plane pl;
     pl.frame = &f;
     pl.origin = f.pixel_to_ct_mm.block<3, 1>(0, 3);

@@ -51,9 +51,15 @@ struct BoundaryResult {
   int rays = 0, rays_in_view = 0, rejected = 0, weak = 0;
 };
 
+/// An ultrasound image shows millimetres to tens of centimetres: throws
+/// std::invalid_argument, naming the extents, when one of `extent_mm` (an image's or a
+/// volume's sides, mm) lies outside 1 mm to 1 m or is not finite (a pixel size in the wrong
+/// unit, or a damaged calibration: the search steps by half a pixel across the region).
+void check_field_of_view(const std::vector<double>& extent_mm);
+
 /// Finds boundary points in `intensity` on `geometry`; `in_view` (optional, same size)
-/// marks the field of view. Throws std::invalid_argument on sizes that do not match or a
-/// centre outside the volume.
+/// marks the field of view. Throws std::invalid_argument on sizes that do not match, a
+/// centre outside the volume, or a volume that is not an ultrasound's (check_field_of_view).
 BoundaryResult boundary_points(const geometry::ImageGeometry& geometry,
                                const std::vector<float>& intensity,
                                const std::vector<std::uint8_t>* in_view,
@@ -63,7 +69,8 @@ struct TrackedSweep;
 
 /// The same on a tracked 2D sweep (see sequence_metafile.h): in each frame whose plane
 /// passes within r_max of the centre, `rays_per_frame` rays in the plane from the centre's
-/// projection; neighbours are the adjacent rays of the same frame. Points in CT mm.
+/// projection; neighbours are the adjacent rays of the same frame. Points in CT mm. Throws
+/// std::invalid_argument on a frame that is not an ultrasound image (check_field_of_view).
 BoundaryResult sweep_boundary_points(const TrackedSweep& sweep, const BoundaryOptions& options,
                                      int rays_per_frame = 180);
 
