@@ -156,6 +156,21 @@ def lift_one_point(ds):
     c.ContourData = [float(v) + 1.5 if i == 2 else float(v) for i, v in enumerate(c.ContourData)]
 d = case('rtss_contour_not_planar', IMPORT, 'is not planar: a point of it lies 1.50 mm off that slice', rtstruct=True, cls='geometry')
 edit_rtss(d, lift_one_point)
+# A contour crossing itself: wound twice around its area (its points gone round again),
+# the even-odd rule would read a hole: refused; a figure eight (each lobe wound once) is read.
+def wind_twice(ds):
+    c = prostate(ds).ContourSequence[4]
+    c.ContourData = list(c.ContourData) * 2
+    c.NumberOfContourPoints = 2 * int(c.NumberOfContourPoints)
+d = case('rtss_contour_wound_twice', IMPORT, 'crosses itself and winds twice around', rtstruct=True, cls='geometry')
+edit_rtss(d, wind_twice)
+def figure_eight(ds):
+    c = prostate(ds).ContourSequence[4]
+    z = float(c.ContourData[2])
+    c.ContourData = [v for x, y in [(-12, -8), (12, 8), (12, -8), (-12, 8)] for v in (x, y, z)]
+    c.NumberOfContourPoints = 4
+d = case('tolerated_contour_figure_eight', IMPORT, '', code=0, rtstruct=True, cls='geometry')
+edit_rtss(d, figure_eight)
 d = case('tolerated_contour_slice_left_out', IMPORT, 'has no contour on 1 slice(s) between its first and last', code=0, rtstruct=True, cls='geometry')
 edit_rtss(d, lambda ds: prostate(ds).ContourSequence.__delitem__(4))
 d = case('rtss_open_contour', IMPORT, 'OPEN_PLANAR', rtstruct=True)

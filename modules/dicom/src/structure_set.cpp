@@ -171,15 +171,23 @@ int slice_of_contour(const Contour& contour, const CtSeries& ct,
   return static_cast<int>(nearest);
 }
 
-/// Twice the signed area of a polygon in the plane.
-double twice_area(const std::vector<Eigen::Vector2d>& poly) {
-  double a = 0;
-  for (size_t e = 0; e < poly.size(); ++e) {
-    const Eigen::Vector2d& p = poly[e];
-    const Eigen::Vector2d& q = poly[(e + 1) % poly.size()];
-    a += p.x() * q.y() - q.x() * p.y();
+/// Whether a polygon's points all lie within `tolerance` of one line: it encloses no area.
+/// (Its signed area would also be zero for a figure eight whose lobes are alike, which
+/// does enclose some.)
+bool encloses_no_area(const std::vector<Eigen::Vector2d>& poly, double tolerance) {
+  if (poly.empty()) return true;
+  const Eigen::Vector2d& p0 = poly.front();
+  Eigen::Vector2d far = p0;
+  for (const auto& p : poly)
+    if ((p - p0).squaredNorm() > (far - p0).squaredNorm()) far = p;
+  const Eigen::Vector2d along = far - p0;
+  if (!(along.norm() > tolerance)) return true;
+  const Eigen::Vector2d unit = along / along.norm();
+  for (const auto& p : poly) {
+    const Eigen::Vector2d d = p - p0;
+    if (std::abs(unit.x() * d.y() - unit.y() * d.x()) > tolerance) return false;
   }
-  return a;
+  return true;
 }
 
 /// The voxel centres of an nx x ny slice (index (i, j) at i + nx j) that the polygons (in
@@ -210,6 +218,41 @@ void fill_even_odd(const std::vector<const std::vector<Eigen::Vector2d>*>& polys
   }
 }
 
+/// The voxel centres of an nx x ny slice around which a closed polygon (in continuous
+/// index) winds an even number of times other than zero: where it overlaps itself, and
+/// where the even-odd rule would read a hole the contour does not draw. A simple polygon,
+/// or a figure eight (its lobes wound once each way), has none.
+long long voxels_wound_twice(const std::vector<Eigen::Vector2d>& poly, int nx, int ny) {
+  double y_lo = HUGE_VAL, y_hi = -HUGE_VAL;
+  for (const auto& v : poly)
+    y_lo = std::min(y_lo, v.y()), y_hi = std::max(y_hi, v.y());
+  long long count = 0;
+  std::vector<std::pair<double, int>> crossings;  // x, and +1 upward or -1 downward
+  const int j_lo = std::max(0, static_cast<int>(std::ceil(y_lo)));
+  const int j_hi = std::min(ny - 1, static_cast<int>(std::floor(y_hi)));
+  for (int j = j_lo; j <= j_hi; ++j) {
+    crossings.clear();
+    const double y = j;
+    for (size_t e = 0; e < poly.size(); ++e) {
+      const Eigen::Vector2d& a = poly[e];
+      const Eigen::Vector2d& b = poly[(e + 1) % poly.size()];
+      if ((a.y() <= y) == (b.y() <= y)) continue;  // as fill_even_odd counts crossings
+      crossings.emplace_back(a.x() + (y - a.y()) * (b.x() - a.x()) / (b.y() - a.y()),
+                             b.y() > a.y() ? 1 : -1);
+    }
+    std::sort(crossings.begin(), crossings.end());
+    int winding = 0;
+    for (size_t c = 0; c + 1 < crossings.size(); ++c) {
+      winding += crossings[c].second;
+      if (winding == 0 || winding % 2 != 0) continue;
+      const int i0 = std::max(0, static_cast<int>(std::ceil(crossings[c].first)));
+      const int i1 = std::min(nx - 1, static_cast<int>(std::floor(crossings[c + 1].first)));
+      count += std::max(0, i1 - i0 + 1);
+    }
+  }
+  return count;
+}
+
 /// True when a contour's Contour Data holds 3 values per declared point.
 bool value_count_agrees(const Contour& c) {
   return c.declared_points < 0 ? c.value_count % 3 == 0 : c.value_count == 3 * c.declared_points;
@@ -235,7 +278,7 @@ RoiOnSlices roi_on_slices(const Roi& roi, const CtSeries& ct) {
     std::vector<Eigen::Vector2d> poly;
     for (const auto& p : contour.points_mm)
       poly.emplace_back(p.x(), p.y());
-    if (k < 0 || !(std::abs(twice_area(poly)) > 0)) {
+    if (k < 0 || encloses_no_area(poly, 0.0)) {
       ++out.skipped;
       continue;
     }
@@ -355,7 +398,7 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
     const std::string on_slice = slice >= 0 ? fmt::format("on slice {} (z {:.2f} mm)", slice, along)
                                             : fmt::format("at z {:.2f} mm", along);
     // Degenerate contours carry no area: skipped, as plastimatch does, the organ kept.
-    if (contour.points_mm.size() < 3 || !(std::abs(twice_area(poly)) > 1e-9)) {
+    if (contour.points_mm.size() < 3 || encloses_no_area(poly, 1e-9)) {
       out.warnings.push_back(
           fmt::format("{}: {} {} {}: skipped", source, which, on_slice,
                       contour.points_mm.size() < 3
@@ -378,6 +421,11 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
           "{} {} is not planar: a point of it lies {:.2f} mm off that slice (more than {} slice "
           "gap)",
           which, on_slice, farthest * g.spacing_mm.z(), kContourSliceTolerance));
+    if (const long long twice = voxels_wound_twice(poly, g.size[0], g.size[1]); twice > 0)
+      fail(fmt::format(
+          "{} {} crosses itself and winds twice around {} voxel(s): read by the even-odd rule "
+          "they would be a hole it does not draw",
+          which, on_slice, twice));
     if (how == Placement::kByPosition) ++out.matched_by_position;
     const auto [xmin, xmax] = std::minmax_element(poly.begin(), poly.end(),
                                                   [](auto& a, auto& b) { return a.x() < b.x(); });
