@@ -190,28 +190,35 @@ bool encloses_no_area(const std::vector<Eigen::Vector2d>& poly, double tolerance
   return true;
 }
 
+/// Where a closed polygon's edges (continuous index) cross row y: x, and +1 for an edge
+/// going up, -1 down, appended to `out`. An edge crosses when one end lies on or below y and
+/// the other above it.
+void row_crossings(const std::vector<Eigen::Vector2d>& poly, double y,
+                   std::vector<std::pair<double, int>>& out) {
+  for (size_t e = 0; e < poly.size(); ++e) {
+    const Eigen::Vector2d& a = poly[e];
+    const Eigen::Vector2d& b = poly[(e + 1) % poly.size()];
+    if ((a.y() <= y) == (b.y() <= y)) continue;
+    out.emplace_back(a.x() + (y - a.y()) * (b.x() - a.x()) / (b.y() - a.y()),
+                     b.y() > a.y() ? 1 : -1);
+  }
+}
+
 /// The voxel centres of an nx x ny slice (index (i, j) at i + nx j) that the polygons (in
 /// continuous index) enclose by the even-odd rule, as `set(i, j)` calls, row by row.
 template <class Set>
 void fill_even_odd(const std::vector<const std::vector<Eigen::Vector2d>*>& polys, int nx, int ny,
                    Set&& set) {
-  std::vector<double> crossings;
+  std::vector<std::pair<double, int>> crossings;
   for (int j = 0; j < ny; ++j) {
     crossings.clear();
-    const double y = j;
-    for (const auto* poly : polys) {
-      for (size_t e = 0; e < poly->size(); ++e) {
-        const Eigen::Vector2d& a = (*poly)[e];
-        const Eigen::Vector2d& b = (*poly)[(e + 1) % poly->size()];
-        if ((a.y() <= y) == (b.y() <= y)) continue;  // edge does not cross this row
-        crossings.push_back(a.x() + (y - a.y()) * (b.x() - a.x()) / (b.y() - a.y()));
-      }
-    }
+    for (const auto* poly : polys)
+      row_crossings(*poly, j, crossings);
     // Pairs of the sorted crossings of all contours: the even-odd rule (holes, islands).
     std::sort(crossings.begin(), crossings.end());
     for (size_t c = 0; c + 1 < crossings.size(); c += 2) {
-      const int i0 = std::max(0, static_cast<int>(std::ceil(crossings[c])));
-      const int i1 = std::min(nx - 1, static_cast<int>(std::floor(crossings[c + 1])));
+      const int i0 = std::max(0, static_cast<int>(std::ceil(crossings[c].first)));
+      const int i1 = std::min(nx - 1, static_cast<int>(std::floor(crossings[c + 1].first)));
       for (int i = i0; i <= i1; ++i)
         set(i, j);
     }
@@ -227,19 +234,12 @@ long long voxels_wound_twice(const std::vector<Eigen::Vector2d>& poly, int nx, i
   for (const auto& v : poly)
     y_lo = std::min(y_lo, v.y()), y_hi = std::max(y_hi, v.y());
   long long count = 0;
-  std::vector<std::pair<double, int>> crossings;  // x, and +1 upward or -1 downward
+  std::vector<std::pair<double, int>> crossings;
   const int j_lo = std::max(0, static_cast<int>(std::ceil(y_lo)));
   const int j_hi = std::min(ny - 1, static_cast<int>(std::floor(y_hi)));
   for (int j = j_lo; j <= j_hi; ++j) {
     crossings.clear();
-    const double y = j;
-    for (size_t e = 0; e < poly.size(); ++e) {
-      const Eigen::Vector2d& a = poly[e];
-      const Eigen::Vector2d& b = poly[(e + 1) % poly.size()];
-      if ((a.y() <= y) == (b.y() <= y)) continue;  // as fill_even_odd counts crossings
-      crossings.emplace_back(a.x() + (y - a.y()) * (b.x() - a.x()) / (b.y() - a.y()),
-                             b.y() > a.y() ? 1 : -1);
-    }
+    row_crossings(poly, j, crossings);
     std::sort(crossings.begin(), crossings.end());
     int winding = 0;
     for (size_t c = 0; c + 1 < crossings.size(); ++c) {
