@@ -480,17 +480,26 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
   for (int k = 0; k < g.size[2]; ++k) {
     std::vector<Polygon>& on_slice = polygons[k];
     if (on_slice.size() < 2) continue;
-    std::vector<std::vector<std::uint8_t>> alone;
+    struct Voxels {
+      std::vector<std::uint8_t> in;  // nx x ny
+      long long count = 0;
+    };
+    std::vector<Voxels> alone;
     for (const auto& p : on_slice) {
-      alone.emplace_back(static_cast<size_t>(nx) * ny, 0);
-      fill_even_odd({&p.vertices}, nx, ny,
-                    [&](int i, int j) { alone.back()[static_cast<size_t>(i + nx * j)] = 1; });
+      Voxels& v = alone.emplace_back();
+      v.in.assign(static_cast<size_t>(nx) * ny, 0);
+      fill_even_odd({&p.vertices}, nx, ny, [&](int i, int j) {
+        std::uint8_t& here = v.in[static_cast<size_t>(i + nx * j)];
+        v.count += here == 0;  // a voxel at two intervals' shared end is one voxel
+        here = 1;
+      });
     }
     for (size_t a = 0; a < on_slice.size(); ++a)
       for (size_t b = a + 1; b < on_slice.size();) {
-        long long in_a = 0, in_b = 0, shared = 0;
-        for (size_t v = 0; v < alone[a].size(); ++v)
-          in_a += alone[a][v], in_b += alone[b][v], shared += alone[a][v] & alone[b][v];
+        const long long in_a = alone[a].count, in_b = alone[b].count;
+        long long shared = 0;
+        for (size_t v = 0; v < alone[a].in.size(); ++v)
+          shared += alone[a].in[v] & alone[b].in[v];
         if (shared > 0 && shared == in_a && shared == in_b) {
           out.warnings.push_back(fmt::format(
               "{}: ROI '{}' contour {} encloses the same voxels as contour {} on slice {} (a "
