@@ -32,6 +32,24 @@ check prostate.session_bend_10mm "$bin" --quiet run "$src/pipelines/prostate-ses
   --set export.labels=fit.nrrd --set export.displacement_field=vf.mha --set export.jacobian=jacobian.nrrd \
   --set export.registration=reg.dcm
 check prostate.checks_hold checks_hold "$tmp/session/run.json"
+# A disk that fills while the outputs are written (a tmpfs of half the output's size, in a
+# mount namespace of our own): exit 2, one line naming the file that could not be written,
+# and nothing left there. Each output's writer is met on its own: GDCM's (the REG object, an
+# RT Structure Set: it aborted on a failed stream), ITK's MetaImage (the field: it printed
+# the failure and carried on), VTK's XML (a mesh) and our own (a model file).
+printf 'scene:\n  name: full-disk\nplanning:\n  model: %s\npoints:\n  bend_mm: 10\nfit:\n  measure_truth: false\nexport:\n  registration: reg.dcm\n  displacement_field: vf.mha\n  mesh: fit.vtp\n  rtstruct: fit.dcm\n  model: fitted.json\n' \
+  "$tmp/plan/prostate_model.json" >"$tmp/full-disk-all.yaml"
+check disk_full.outputs_written_with_room "$bin" --quiet run "$tmp/full-disk-all.yaml" --out "$tmp/full-disk-all"
+for spec in registration:reg.dcm displacement_field:vf.mha mesh:fit.vtp rtstruct:fit.dcm model:fitted.json; do
+  key=${spec%%:*} file=${spec#*:}
+  sed "/^export:/q" "$tmp/full-disk-all.yaml" >"$tmp/full-disk.yaml" && printf '  %s: %s\n' "$key" "$file" >>"$tmp/full-disk.yaml"
+  half_kib=$(($(stat -c %s "$tmp/full-disk-all/$file") / 2048))
+  check "disk_full.$key" unshare -rm bash -c "mkdir -p '$tmp/tiny' && mount -t tmpfs -o size=${half_kib}k tmpfs '$tmp/tiny' &&
+    { '$bin' --quiet run '$tmp/full-disk.yaml' --out '$tmp/tiny/out' 2>'$tmp/tiny.err'; test \$? -eq 2; } &&
+    test \$(grep -c . '$tmp/tiny.err') -eq 1 && grep -Eq '/$file: cannot write: (no space left on its file system|No space left on device)\$' '$tmp/tiny.err' &&
+    test -z \"\$(ls -A '$tmp/tiny')\" || { cat '$tmp/tiny.err'; ls -AR '$tmp/tiny'; false; }"
+done
+
 # A model file whose organ levels are 0.6 mm off (the organ a 0.6 mm layer larger, about
 # 8%): refused as it is read, its reference body no longer the volume the file states.
 # With that volume made to agree, the export's volume check catches it: the organ the fit's

@@ -138,9 +138,8 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
     meta.SetDataSetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
     meta.SetSourceApplicationEntityTitle("ORGANFIT");
     const fs::path file = temp.path() / slice.file.filename();
-    writer.SetFileName(file.string().c_str());
-    if (!writer.Write())
-      throw InputError(fmt::format("{}: cannot write {}", where, file.filename().string()));
+    detail::write_dicom_file(writer, file, folder / file.filename(),
+                             fmt::format("{}: cannot write {}", where, file.filename().string()));
     slices.push_back(std::move(slice));
   }
   temp.commit();

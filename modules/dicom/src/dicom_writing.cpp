@@ -99,6 +99,17 @@ gdcm::Item slice_reference(const CtSlice& slice) {
   return item;
 }
 
+void write_dicom_file(gdcm::Writer& writer, const std::filesystem::path& path,
+                      const std::filesystem::path& final_path, const std::string& failed) {
+  // GDCM asserts (aborts) on a stream that failed mid-element: it writes to a stream that
+  // never fails, judged when closed.
+  CheckedFileStream out(path, final_path);
+  writer.SetStream(out);
+  const bool written = writer.Write();
+  out.close();
+  if (!written) throw InputError(failed);
+}
+
 void write_explicit_vr(gdcm::Writer& writer, const std::filesystem::path& file,
                        const std::string& what) {
   const std::string failed = file.string() + ": cannot write the " + what;
@@ -110,8 +121,7 @@ void write_explicit_vr(gdcm::Writer& writer, const std::filesystem::path& file,
   explicit_vr.SetChangePrivateTags(false);
   if (!explicit_vr.Change()) throw InputError(failed);
   TempPath temp(file);
-  writer.SetFileName(temp.path().string().c_str());
-  if (!writer.Write()) throw InputError(failed);
+  write_dicom_file(writer, temp.path(), file, failed);
   temp.commit();
 }
 

@@ -53,6 +53,12 @@ void put_sequence(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element,
 /// slice; a slice read without a SOP Class UID is referenced as a CT Image.
 gdcm::Item slice_reference(const CtSlice& slice);
 
+/// Writes the writer's file to `path` (a temporary name of `final_path`) through a stream
+/// that never fails under GDCM (it asserts on one that does); throws InputError
+/// "FINAL: cannot write: REASON" when a write failed, `failed` when GDCM refused.
+void write_dicom_file(gdcm::Writer& writer, const std::filesystem::path& path,
+                      const std::filesystem::path& final_path, const std::string& failed);
+
 /// Writes the data set as Explicit VR Little Endian (source AE ORGANFIT) under a temporary
 /// name, renamed when whole. Attributes copied from an implicit-VR CT (a sequence's nested
 /// elements) get their VRs from the dictionary, as explicit VR needs. Throws InputError

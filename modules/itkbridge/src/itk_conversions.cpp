@@ -12,7 +12,9 @@
 
 #include <algorithm>
 #include <cstring>
+#include <iostream>
 #include <mutex>
+#include <sstream>
 #include <stdexcept>
 
 #include "organfit/support/atomic_file.h"
@@ -117,9 +119,18 @@ void write_image(const fs::path& file, const Image* image, bool compress) {
   writer->SetFileName(temp.path().string());
   writer->SetInput(image);
   writer->SetUseCompression(compress);
+  // ITK's MetaImage writer reports a failed write on std::cerr and carries on: the failure
+  // is found by the room it left (TempPath::commit) and reported in one line, so its text
+  // is kept off the user's stderr while ITK writes (on this thread; no other writes there).
+  std::ostringstream library_messages;
+  struct Restore {
+    std::streambuf* cerr;
+    ~Restore() { std::cerr.rdbuf(cerr); }
+  } restore{std::cerr.rdbuf(library_messages.rdbuf())};
   try {
     writer->Update();
   } catch (const itk::ExceptionObject& e) {
+    check_room_left(temp.path().parent_path(), file);
     throw InputError(file.string() + ": cannot write the image");
   }
   temp.commit();

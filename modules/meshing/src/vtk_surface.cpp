@@ -9,6 +9,7 @@
 #include <vtkMatrix3x3.h>
 #include <vtkNew.h>
 #include <vtkOBJWriter.h>
+#include <vtkObject.h>
 #include <vtkPLYWriter.h>
 #include <vtkPointData.h>
 #include <vtkPolyData.h>
@@ -177,6 +178,14 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
 
   TempPath temp(file);
   const std::string name = temp.path().string();
+  // A writer's failure is ours to report in one line (below, or TempPath's on a full
+  // disk): VTK's own messages of it, several lines on stderr, are not shown.
+  const bool vtk_messages = vtkObject::GetGlobalWarningDisplay();
+  vtkObject::GlobalWarningDisplayOff();
+  struct Restore {
+    bool on;
+    ~Restore() { vtkObject::SetGlobalWarningDisplay(on); }
+  } restore{vtk_messages};
   int ok = 0;
   if (stl) {
     vtkNew<vtkSTLWriter> w;
@@ -211,7 +220,10 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
     w->SetFileName(name.c_str());
     ok = w->Write();
   }
-  if (!ok || !fs::exists(temp.path())) throw InputError(file + ": cannot write the mesh");
+  if (!ok || !fs::exists(temp.path())) {
+    check_room_left(temp.path().parent_path(), file);
+    throw InputError(file + ": cannot write the mesh");
+  }
   temp.commit();
   return report;
 }

@@ -55,6 +55,37 @@ TEST(AtomicFile, UnwritableFolderIsAnInputErrorNamingTheFile) {
   }
 }
 
+// /dev/full fails every write with ENOSPC, as a full disk does.
+TEST(CheckedFileStream, AFailedWriteLeavesTheStreamGoodAndIsReportedAtClose) {
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  CheckedFileStream out("/dev/full", "/plans/reg.dcm");
+  const std::string block(100000, 'x');  // beyond the stream's own buffer
+  for (int i = 0; i < 3; ++i)
+    out << block;
+  EXPECT_TRUE(out.good());  // a writer that asserts on a failed stream runs to its end
+  try {
+    out.close();
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "/plans/reg.dcm: cannot write: No space left on device");
+  }
+}
+
+TEST(CheckedFileStream, WritesWhatItIsGiven) {
+  const auto dir = fresh_dir("checked");
+  {
+    CheckedFileStream out(dir / "a.bin", dir / "final.bin");
+    for (int i = 0; i < 30000; ++i)
+      out << i << '\n';
+    out.close();
+  }
+  std::ostringstream expected;
+  for (int i = 0; i < 30000; ++i)
+    expected << i << '\n';
+  EXPECT_EQ(read_all(dir / "a.bin"), expected.str());
+  EXPECT_THROW(CheckedFileStream("/nonexistent_dir_organfit/a.bin", "/x/a.bin"), InputError);
+}
+
 TEST(ExitCode, MapsErrorsToTheirCodesAndOthersToInternal) {
   EXPECT_EQ(exit_code_of(InputError("x")), ExitCode::kBadInput);
   EXPECT_EQ(exit_code_of(TargetNotMetError("x")), ExitCode::kTargetNotMet);

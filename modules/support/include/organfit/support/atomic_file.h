@@ -5,6 +5,13 @@
 // under a temporary name in the same folder and renamed when complete (rename is
 // atomic within a file system). An AtomicFile destroyed without commit() removes its
 // temporary file: an exception or a signal never leaves a half-written final file.
+//
+// A write that fails (a full disk, an I/O error) is an error naming the final file and
+// the reason (exit 2, as an output folder that cannot be written). Not every library
+// reports one: ITK's MetaImage writer prints it and carries on, GDCM asserts (aborts) on a
+// stream that failed. So a file system a write left with no space free to users is taken
+// as having cut that write short (check_room_left), whichever library wrote it, and GDCM
+// writes to a CheckedFileStream, which never fails under it.
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -59,6 +66,33 @@ class TempPath {
   std::unique_ptr<PartialPath> partial_;
   bool committed_ = false;
 };
+
+/// An output stream on a file that stays good when a write fails: the first failure's
+/// reason (errno) is kept, the rest of the output dropped, and close() reports it. For
+/// writers that abort on a failed stream: they run to their end, and the file is judged.
+class CheckedFileStream : public std::ostream {
+ public:
+  /// Opens (creates or truncates) `path`; throws InputError naming `final_path` when it
+  /// cannot be.
+  CheckedFileStream(const std::filesystem::path& path, const std::filesystem::path& final_path);
+  ~CheckedFileStream() override;
+  CheckedFileStream(const CheckedFileStream&) = delete;
+  CheckedFileStream& operator=(const CheckedFileStream&) = delete;
+
+  /// Flushes and closes; throws InputError "FINAL: cannot write: REASON" when any write
+  /// (or the close) failed, or when the file system was left full (check_room_left).
+  void close();
+
+ private:
+  class Buffer;
+  std::unique_ptr<Buffer> buffer_;
+  std::filesystem::path path_, final_path_;
+};
+
+/// Throws InputError "FINAL: cannot write: no space left on its file system" when the file
+/// system holding `written` has no block free to users (a write there may have been cut
+/// short without its writer saying so). File systems that state no size are not judged.
+void check_room_left(const std::filesystem::path& written, const std::filesystem::path& final_path);
 
 /// Writes `content` to `path` atomically.
 void write_file_atomically(const std::filesystem::path& path, const std::string& content);
