@@ -3,10 +3,11 @@
 // in commands/.
 //
 // Exit codes: 0 success, 1 internal error, 2 bad input (usage, scene, data, a DICOM node
-// that cannot be reached, refuses or fails), 3 ran but did not meet its target. Errors
-// are one line on stderr.
+// that cannot be reached, refuses or fails; an output that cannot be written; out of
+// memory), 3 ran but did not meet its target. Errors are one line on stderr.
 #include <CLI/CLI.hpp>
 #include <iostream>
+#include <new>
 #include <string>
 
 #include "commands/commands.h"
@@ -100,8 +101,14 @@ int main(int argc, char** argv) {
     organfit::mark_finishing();
   } catch (const organfit::Error& e) {
     organfit::mark_finishing();
-    std::cerr << "organfit: error: " << one_line(e.what()) << "\n";
+    std::cerr << (e.code() == ExitCode::kInternal ? "organfit: internal error: "
+                                                  : "organfit: error: ")
+              << one_line(e.what()) << "\n";
     code = static_cast<int>(e.code());
+  } catch (const std::bad_alloc&) {  // out of memory: the environment, not a bug
+    organfit::mark_finishing();
+    std::cerr << "organfit: error: " << organfit::out_of_memory_message() << "\n";
+    code = static_cast<int>(ExitCode::kBadInput);
   } catch (const std::invalid_argument& e) {  // a force term or integrator refused its input
     organfit::mark_finishing();
     std::cerr << "organfit: error: " << one_line(e.what()) << "\n";

@@ -50,6 +50,14 @@ for spec in registration:reg.dcm displacement_field:vf.mha mesh:fit.vtp rtstruct
     test -z \"\$(ls -A '$tmp/tiny')\" || { cat '$tmp/tiny.err'; ls -AR '$tmp/tiny'; false; }"
 done
 
+# Out of memory (an address space of 600 MB, 3 million particles asked for): exit 2 in one
+# line saying so, nothing left (it was an internal error, or an abort from a thread).
+check out_of_memory.one_line_exit_2 bash -c "ulimit -v 600000 &&
+  { '$bin' --quiet run '$tmp/planning.yaml' --out '$tmp/oom' --set model.radius_mm=0 \
+      --set model.particles=3000000 2>'$tmp/oom.err'; test \$? -eq 2; } &&
+  test \$(grep -c . '$tmp/oom.err') -eq 1 && grep -q '^organfit: error: out of memory: ' '$tmp/oom.err' &&
+  test ! -e '$tmp/oom' || { cat '$tmp/oom.err'; false; }"
+
 # A model file whose organ levels are 0.6 mm off (the organ a 0.6 mm layer larger, about
 # 8%): refused as it is read, its reference body no longer the volume the file states.
 # With that volume made to agree, the export's volume check catches it: the organ the fit's

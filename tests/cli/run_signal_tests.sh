@@ -110,13 +110,15 @@ else
   failed=$((failed + 1))
 fi
 
-# The whole run's wall budget (scene.max_wall_s) ends it like a signal, exit 3.
+# The whole run's wall budget (scene.max_wall_s) ends it like a signal, exit 3: within the
+# budget, the watchdog's 0.5 s grace and the program's start (about 2 s on a quiet machine;
+# 2.6 s beside two busy loops on 2 cores), well before the 7 s the scene takes.
 sed 's/^scene:$/scene:\n  max_wall_s: 1.5/' "$scene" > "$tmp/budget.yaml"
 start=$(date +%s%N)
 "$bin" --quiet run "$tmp/budget.yaml" --out "$tmp/budget" > /dev/null 2> "$tmp/err"
 code=$?
 took_ms=$((($(date +%s%N) - start) / 1000000))
-if [[ $code -eq 3 && $took_ms -lt 2500 && ! -e "$tmp/budget" ]] && grep -q "took longer than scene.max_wall_s (1.5 s)" "$tmp/err"; then
+if [[ $code -eq 3 && $took_ms -lt 4000 && ! -e "$tmp/budget" ]] && grep -q "took longer than scene.max_wall_s (1.5 s)" "$tmp/err"; then
   echo "ok   budget.whole_run ($took_ms ms)"
   passed=$((passed + 1))
 else

@@ -66,6 +66,14 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
              ply = ends_with(file, ".ply"), obj = ends_with(file, ".obj");
   if (!file.empty() && !stl && !vtp && !ply && !obj)
     throw InputError(file + ": unknown mesh format (use .stl, .vtp, .ply or .obj)");
+  // A failure is ours to report in one line (below, TempPath's on a full disk, or out of
+  // memory): VTK's own messages of it, several lines on stderr, are not shown.
+  const bool vtk_messages = vtkObject::GetGlobalWarningDisplay();
+  vtkObject::GlobalWarningDisplayOff();
+  struct Restore {
+    bool on;
+    ~Restore() { vtkObject::SetGlobalWarningDisplay(on); }
+  } restore{vtk_messages};
   const geometry::PlainGeometry& g = m.geometry;
   // Pad by one empty voxel all round so the surface closes at the grid border.
   const int nx = g.size[0] + 2, ny = g.size[1] + 2, nz = g.size[2] + 2;
@@ -178,14 +186,6 @@ PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file
 
   TempPath temp(file);
   const std::string name = temp.path().string();
-  // A writer's failure is ours to report in one line (below, or TempPath's on a full
-  // disk): VTK's own messages of it, several lines on stderr, are not shown.
-  const bool vtk_messages = vtkObject::GetGlobalWarningDisplay();
-  vtkObject::GlobalWarningDisplayOff();
-  struct Restore {
-    bool on;
-    ~Restore() { vtkObject::SetGlobalWarningDisplay(on); }
-  } restore{vtk_messages};
   int ok = 0;
   if (stl) {
     vtkNew<vtkSTLWriter> w;

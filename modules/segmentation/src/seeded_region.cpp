@@ -10,6 +10,7 @@
 #include <itkCurvatureFlowImageFilter.h>
 #include <itkRelabelComponentImageFilter.h>
 
+#include <new>
 #include <string>
 
 #include "organfit/itkbridge/itk_conversions.h"
@@ -17,8 +18,9 @@
 
 namespace organfit::segmentation {
 
+// ITK says it ran out of memory in its own exception: the run's out of memory (exit 2).
 itkbridge::PlainMask seeded_region(const itkbridge::PlainFloatImage& hu,
-                                   const PlainSeedOptions& o) {
+                                   const PlainSeedOptions& o) try {
   using itkbridge::FloatImage;
   using itkbridge::MaskImage;
   auto fmt3 = [](const std::array<double, 3>& p) {
@@ -82,6 +84,8 @@ itkbridge::PlainMask seeded_region(const itkbridge::PlainFloatImage& hu,
   fill->SetForegroundValue(1);
   fill->Update();
   return itkbridge::to_plain(fill->GetOutput());
+} catch (const itk::MemoryAllocationError&) {
+  throw std::bad_alloc();
 }
 
 }  // namespace organfit::segmentation

@@ -1,5 +1,10 @@
 #include "organfit/support/error.h"
 
+#include <sys/resource.h>
+
+#include <cstdio>
+#include <new>
+
 namespace organfit {
 
 std::string echo(const std::string& value, size_t max_chars) {
@@ -33,8 +38,25 @@ std::string echo(const std::string& value, size_t max_chars) {
   return out;
 }
 
+const char* out_of_memory_message() {
+  // Into a buffer of its own: no memory is asked for while there is none.
+  static char text[256];
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY)
+    std::snprintf(text, sizeof text,
+                  "out of memory: the run needed more than this process may use (its address "
+                  "space is limited to %llu MB: ulimit -v); nothing was written",
+                  static_cast<unsigned long long>(limit.rlim_cur >> 20));
+  else
+    std::snprintf(text, sizeof text,
+                  "out of memory: the run needed more than the machine had free; nothing was "
+                  "written");
+  return text;
+}
+
 ExitCode exit_code_of(const std::exception& e) {
   if (const auto* err = dynamic_cast<const Error*>(&e)) return err->code();
+  if (dynamic_cast<const std::bad_alloc*>(&e)) return ExitCode::kBadInput;
   return ExitCode::kInternal;
 }
 

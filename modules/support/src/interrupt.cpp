@@ -1,18 +1,24 @@
 #include "organfit/support/interrupt.h"
 
+#include <dirent.h>
 #include <fcntl.h>
 #include <pthread.h>
 #include <spawn.h>
 #include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <cstring>
+#include <exception>
 #include <map>
 #include <mutex>
+#include <new>
 #include <set>
 #include <string>
 #include <thread>
@@ -22,7 +28,7 @@
 namespace organfit {
 namespace {
 
-enum Stop : int { kRunning = 0, kSignalled = 1, kOutOfTime = 2 };
+enum Stop : int { kRunning = 0, kSignalled = 1, kOutOfTime = 2, kFailed = 3 };
 std::atomic<int> g_stop{kRunning};
 // Who ends a stopped process and prints its one line: the run's thread (kByRun, once it
 // is printing its message) or the watchdog (kByWatchdog, its forced exit). Claimed once.
@@ -33,6 +39,13 @@ std::atomic<double> g_deadline_s{0};  // on the steady clock; 0: none
 // Set while the watchdog removes partial outputs before it ends the process: a library
 // writing into them may then fail an assertion, which is not the run's error.
 std::atomic<bool> g_ending{false};
+// kFailed: an exception that could not unwind to the command (thrown on a worker thread,
+// out of an OpenMP region): its message (one line) and exit code, set once.
+char g_failure[1024];
+std::atomic<int> g_failure_code{static_cast<int>(ExitCode::kInternal)};
+// Said after a crash when the process's address space is limited: a library that failed to
+// get memory and went on is the likely cause. Made at start-up (no formatting then).
+char g_crash_hint[160];
 const char* g_budget_name = "the wall budget";
 double g_budget_s = 0;
 
@@ -73,7 +86,19 @@ bool children_left() {
   return false;
 }
 
+int stop_code() {
+  switch (g_stop.load()) {
+    case kOutOfTime:
+      return static_cast<int>(ExitCode::kTargetNotMet);
+    case kFailed:
+      return g_failure_code.load();
+    default:
+      return static_cast<int>(ExitCode::kInterrupted);
+  }
+}
+
 std::string stop_message() {
+  if (g_stop.load() == kFailed) return g_failure;
   if (g_stop.load() == kOutOfTime) {
     char text[256];
     std::snprintf(text, sizeof text,
@@ -82,6 +107,34 @@ std::string stop_message() {
     return text;
   }
   return "interrupted (SIGINT or SIGTERM): nothing was written";
+}
+
+/// Removes `name` (relative to the folder `dir_fd`, or a path), a file or a folder with all
+/// it holds, by system calls alone: no memory is asked for (the process may be ending for
+/// the lack of it, or for a heap a crash left broken). Not across symbolic links.
+void remove_tree(int dir_fd, const char* name, int depth) {
+  if (::unlinkat(dir_fd, name, 0) == 0 || errno == ENOENT) return;
+  if (depth > 64) return;
+  const int fd = ::openat(dir_fd, name, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
+  if (fd < 0) return;
+  alignas(8) char entries[2048];
+  // Listed again from the start while something was removed: removing entries while a
+  // listing goes on may make it skip some.
+  for (int pass = 0; pass < 8; ++pass) {
+    bool removed = false;
+    ::lseek(fd, 0, SEEK_SET);
+    for (ssize_t n; (n = ::getdents64(fd, entries, sizeof entries)) > 0;)
+      for (ssize_t at = 0; at < n;) {
+        const auto* e = reinterpret_cast<const struct dirent64*>(entries + at);
+        at += e->d_reclen;
+        if (std::strcmp(e->d_name, ".") == 0 || std::strcmp(e->d_name, "..") == 0) continue;
+        remove_tree(fd, e->d_name, depth + 1);
+        removed = true;
+      }
+    if (!removed) break;
+  }
+  ::close(fd);
+  ::unlinkat(dir_fd, name, AT_REMOVEDIR);
 }
 
 /// The watchdog: takes SIGINT and SIGTERM (blocked in every other thread), watches the
@@ -102,7 +155,8 @@ void watchdog(sigset_t signals) {
     }
     if (g_stop.load() == kRunning) continue;
     if (stop_at == 0) {
-      stop_at = now_s() + kStopGrace;
+      // A failure cannot unwind: ended at once.
+      stop_at = now_s() + (g_stop.load() == kFailed ? 0.0 : kStopGrace);
       stop_children();
     }
     if (now_s() < stop_at || g_committing.load() > 0) continue;
@@ -118,25 +172,35 @@ void watchdog(sigset_t signals) {
       std::lock_guard<std::mutex> lock(g_partial_mutex);
       g_ending = true;
       for (auto it = g_partial.rbegin(); it != g_partial.rend(); ++it) {
-        std::error_code ec;
-        const std::filesystem::path& path = it->second.path;
+        const char* path = it->second.path.c_str();
         if (it->second.only_if_empty) {
-          if (std::filesystem::is_empty(path, ec)) std::filesystem::remove(path, ec);
+          ::rmdir(path);  // fails, as wanted, on a folder that holds something
           continue;
         }
         // Moved aside first, then removed: the run's thread may still be writing into it
-        // (a file made between remove_all's listing and its last rmdir left the folder
+        // (a file made between the removal's listing and its last rmdir left the folder
         // behind), and a path it opens after the move no longer leads there.
         // Named for this process: one left by an earlier crash would make the move fail.
-        std::filesystem::path aside = path;
-        aside += ".removing-" + std::to_string(::getpid());
-        std::filesystem::rename(path, aside, ec);
-        std::filesystem::remove_all(ec ? path : aside, ec);
+        char aside[4096];
+        const int n = std::snprintf(aside, sizeof aside, "%s.removing-%ld", path,
+                                    static_cast<long>(::getpid()));
+        const bool moved =
+            n > 0 && static_cast<size_t>(n) < sizeof aside && ::rename(path, aside) == 0;
+        remove_tree(AT_FDCWD, moved ? aside : path, 0);
       }
-      const std::string line = "organfit: error: " + stop_message() + "\n";
-      (void)!::write(2, line.data(), line.size());
-      ::_exit(g_stop.load() == kOutOfTime ? static_cast<int>(ExitCode::kTargetNotMet)
-                                          : static_cast<int>(ExitCode::kInterrupted));
+      const int code = stop_code();
+      const char* prefix = code == static_cast<int>(ExitCode::kInternal)
+                               ? "organfit: internal error: "
+                               : "organfit: error: ";
+      (void)!::write(2, prefix, std::strlen(prefix));
+      if (g_stop.load() == kFailed) {  // written without asking for memory
+        (void)!::write(2, g_failure, std::strlen(g_failure));
+      } else {
+        const std::string message = stop_message();
+        (void)!::write(2, message.data(), message.size());
+      }
+      (void)!::write(2, "\n", 1);
+      ::_exit(code);
     }
   }
 }
@@ -145,11 +209,54 @@ void watchdog(sigset_t signals) {
 
 void install_abort_guard();
 
+namespace {
+
+/// std::terminate's handler: an exception that could not unwind to the command (thrown
+/// on an OpenMP worker, or out of an OpenMP region, where the runtime cannot carry it)
+/// ends the process as a stop does, at once: the partial outputs removed by the watchdog,
+/// one line, the exception's exit code (out of memory: 2, as out_of_memory_message says).
+[[noreturn]] void on_terminate() {
+  static std::atomic<bool> once{false};
+  if (!once.exchange(true)) {
+    // No memory asked for from here, nor by the watchdog's ending: there may be none.
+    // Without an exception: a library called std::terminate (ITK does when it cannot
+    // start its threads: their stacks are address space too).
+    const char* message = "the process was terminated (std::terminate)";
+    const char* hint = g_crash_hint;
+    const char* tail = "; nothing was written";
+    int code = static_cast<int>(ExitCode::kInternal);
+    try {
+      if (const std::exception_ptr e = std::current_exception()) std::rethrow_exception(e);
+    } catch (const std::bad_alloc&) {
+      message = out_of_memory_message(), code = static_cast<int>(ExitCode::kBadInput);
+      hint = tail = "";  // its message says so
+    } catch (const Error& e) {
+      message = e.what(), code = static_cast<int>(e.code()), hint = tail = "";
+    } catch (const std::exception& e) {
+      message = e.what(), hint = "";
+    } catch (...) {
+      message = "an unknown exception", hint = "";
+    }
+    size_t n = 0;
+    for (const char* p : {message, hint, tail})
+      for (; *p && n + 1 < sizeof g_failure; ++p)
+        g_failure[n++] = static_cast<unsigned char>(*p) < 0x20 ? ' ' : *p;
+    g_failure[n] = 0;
+    g_failure_code = code;
+    int running = kRunning;
+    g_stop.compare_exchange_strong(running, kFailed);  // a stop already under way stands
+  }
+  for (;;)
+    ::pause();  // the watchdog ends the process
+}
+}  // namespace
+
 void install_interrupt_handlers() {
   static bool installed = false;
   if (installed) return;
   installed = true;
   install_abort_guard();
+  std::set_terminate(on_terminate);
   sigset_t signals;
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
@@ -168,8 +275,7 @@ bool interrupted() {
 
 void throw_if_interrupted() {
   if (!interrupted()) return;
-  throw Error(g_stop.load() == kOutOfTime ? ExitCode::kTargetNotMet : ExitCode::kInterrupted,
-              stop_message());
+  throw Error(static_cast<ExitCode>(stop_code()), stop_message());
 }
 
 void set_wall_budget(double seconds, const char* what) {
@@ -266,26 +372,43 @@ const char* g_library = "";
 volatile sig_atomic_t g_is_reading = 0;
 int g_saved_stderr = -1;  // stderr while a library reads: /dev/null (its assertion texts)
 
-void on_abort(int) {
+/// A crash (a fault, an abort, a failed assertion) ends the process as a stop does: the
+/// watchdog removes the partial outputs (by system calls alone: a heap the crash broke is
+/// not used) and says so in one line. While a library reads an input (ReadingInput), the
+/// input is what it gave up on: exit 2 naming it; else an internal error, exit 1. This
+/// thread waits for the watchdog; should the watchdog itself be the one that crashed,
+/// SIGALRM's default ends the process 5 s later.
+[[noreturn]] void on_crash(int sig) {
   // The watchdog is removing what this thread was writing (GDCM asserts that the file it
-  // opens is open): it ends the process itself in a moment, with the interrupt's message.
-  if (g_ending.load())
-    for (;;)
-      ::pause();
-  if (g_is_reading) {
-    if (g_saved_stderr >= 0) ::dup2(g_saved_stderr, 2);
-    const char* parts[] = {"organfit: error: ", g_reading, ": malformed input: the ", g_library,
-                           " library gave up on it\n"};
-    for (const char* p : parts) {
-      size_t n = 0;
-      while (p[n])
-        ++n;
-      (void)!::write(2, p, n);
+  // opens is open): it ends the process itself in a moment, with its own message.
+  static std::atomic<bool> once{false};
+  if (!g_ending.load() && !once.exchange(true)) {
+    size_t n = 0;
+    auto say = [&n](const char* p) {
+      for (; *p && n + 1 < sizeof g_failure; ++p)
+        g_failure[n++] = *p;
+    };
+    if (g_is_reading) {
+      if (g_saved_stderr >= 0) ::dup2(g_saved_stderr, 2);  // the library's text was silenced
+      say(g_reading), say(": malformed input: the "), say(g_library), say(" library gave up on it");
+      g_failure_code = static_cast<int>(ExitCode::kBadInput);
+    } else {
+      say("the process crashed (");
+      say(sig == SIGSEGV  ? "a segmentation fault"
+          : sig == SIGBUS ? "a bus error"
+          : sig == SIGFPE ? "an arithmetic fault"
+          : sig == SIGILL ? "an illegal instruction"
+                          : "an abort");
+      say(")"), say(g_crash_hint), say("; nothing was written");
+      g_failure_code = static_cast<int>(ExitCode::kInternal);
     }
-    ::_exit(2);
+    g_failure[n] = 0;
+    int running = kRunning;
+    g_stop.compare_exchange_strong(running, kFailed);
+    ::alarm(5);
   }
-  std::signal(SIGABRT, SIG_DFL);
-  std::raise(SIGABRT);
+  for (;;)
+    ::pause();
 }
 }  // namespace
 
@@ -310,7 +433,29 @@ ReadingInput::~ReadingInput() {
 }
 
 void install_abort_guard() {
-  std::signal(SIGABRT, on_abort);
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY)
+    std::snprintf(g_crash_hint, sizeof g_crash_hint,
+                  " with its address space limited to %llu MB (ulimit -v): a library may have "
+                  "failed for want of memory",
+                  static_cast<unsigned long long>(limit.rlim_cur >> 20));
+  // The main thread's faults are handled on a stack of their own (one that overflowed has
+  // no room left for the handler).
+  static char alternate_stack[1 << 16];
+  stack_t stack{};
+  stack.ss_sp = alternate_stack;
+  stack.ss_size = sizeof alternate_stack;
+  ::sigaltstack(&stack, nullptr);
+  struct sigaction action {};
+  action.sa_handler = on_crash;
+  action.sa_flags = SA_ONSTACK;
+  sigemptyset(&action.sa_mask);
+  for (int sig : {SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGILL}) {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+    if (sig != SIGABRT) continue;  // a sanitizer's own report of a fault says more
+#endif
+    ::sigaction(sig, &action, nullptr);
+  }
 }
 
 }  // namespace organfit

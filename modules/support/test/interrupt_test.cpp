@@ -9,8 +9,11 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <new>
 #include <string>
 #include <thread>
 
@@ -84,6 +87,62 @@ TEST(RunCommandDeathTest, ACommandThatIgnoresTheStopIsKilledAndTheProcessEndsWit
       },
       ::testing::ExitedWithCode(static_cast<int>(ExitCode::kInterrupted)),
       "^organfit: error: interrupted \\(SIGINT or SIGTERM\\): nothing was written\n$");
+}
+
+// An exception that cannot unwind to the command (here out of a thread's function; in a run,
+// out of an OpenMP region) ends the process as a stop does: partial outputs removed, one line.
+TEST(FailureDeathTest, OutOfMemoryOnAWorkerEndsTheProcessWithOneLineAndExit2) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const fs::path staging = scratch("oom_staging");
+  EXPECT_EXIT(
+      {
+        install_interrupt_handlers();
+        fs::create_directories(staging / "inside");
+        std::ofstream(staging / "inside" / "half.nrrd") << "partial";
+        const PartialPath partial(staging);
+        std::thread([] { throw std::bad_alloc(); }).join();
+        std::_Exit(3);  // not reached: the process ends in the handler and the watchdog
+      },
+      ::testing::ExitedWithCode(static_cast<int>(ExitCode::kBadInput)),
+      "^organfit: error: out of memory: the run needed more than .*; nothing was written\n$");
+  EXPECT_FALSE(fs::exists(staging));
+}
+
+TEST(FailureDeathTest, ACrashEndsTheProcessWithOneLineAndNothingPartialLeft) {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  GTEST_SKIP() << "faults are the sanitizer's to report";
+#endif
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const fs::path staging = scratch("crash_staging");
+  EXPECT_EXIT(
+      {
+        install_interrupt_handlers();
+        fs::create_directories(staging);
+        const PartialPath partial(staging);
+        ::raise(SIGSEGV);
+        std::_Exit(3);
+      },
+      ::testing::ExitedWithCode(static_cast<int>(ExitCode::kInternal)),
+      "^organfit: internal error: the process crashed \\(a segmentation fault\\).*; nothing "
+      "was written\n$");
+  EXPECT_FALSE(fs::exists(staging));
+}
+
+TEST(FailureDeathTest, ALibraryThatFaultsOnAnInputNamesTheInputAndExits2) {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  GTEST_SKIP() << "faults are the sanitizer's to report";
+#endif
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  EXPECT_EXIT(
+      {
+        install_interrupt_handlers();
+        const ReadingInput reading("/data/points.ply", "VTK");
+        std::fputs("a library's own complaint\n", stderr);  // kept off stderr
+        ::raise(SIGSEGV);
+        std::_Exit(3);
+      },
+      ::testing::ExitedWithCode(static_cast<int>(ExitCode::kBadInput)),
+      "^organfit: error: /data/points.ply: malformed input: the VTK library gave up on it\n$");
 }
 
 }  // namespace

@@ -45,6 +45,12 @@ class TargetNotMetError : public Error {
 /// readable line whatever a file holds. Cut on a UTF-8 character boundary.
 std::string echo(const std::string& value, size_t max_chars = 80);
 
+/// What a run out of memory says (std::bad_alloc; exit 2, as an environment that cannot
+/// hold the run): "out of memory: ...", with the process's address-space limit when one is
+/// set (ulimit -v), and that nothing was written. Made without allocating (a static buffer,
+/// rewritten by each call).
+const char* out_of_memory_message();
+
 /// Maps an exception escaping a command to its exit code (Error: its own; else kInternal).
 ExitCode exit_code_of(const std::exception& e);
 

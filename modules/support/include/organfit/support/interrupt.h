@@ -19,7 +19,11 @@ namespace organfit {
 constexpr double kStopGrace = 0.5;
 
 /// Installs the handlers and the watchdog (once, at start-up of the command, before any
-/// other thread exists: the signals are taken by the watchdog thread alone).
+/// other thread exists: the signals are taken by the watchdog thread alone). Also
+/// std::terminate's handler: an exception that cannot unwind to the command (thrown out of
+/// an OpenMP region, where the runtime cannot carry it; out of memory, mostly) ends the
+/// process as a stop does, at once: partial outputs removed, one line ("organfit: error:
+/// out of memory: ..."), its exit code (2 for memory, an Error's own, else 1).
 void install_interrupt_handlers();
 /// True once SIGINT or SIGTERM arrived, or the wall budget ran out (both as the watchdog
 /// saw them: within 20 ms).
@@ -68,12 +72,14 @@ class ScopedCommit {
   ScopedCommit& operator=(const ScopedCommit&) = delete;
 };
 
-/// The last line of defence against third-party aborts on malformed input: GDCM 3.0
+/// The last line of defence against third-party crashes on malformed input: GDCM 3.0
 /// asserts on some corrupt files that organfit's own checks let through (found by
-/// fuzzing). While a ReadingInput is alive, an abort prints
+/// fuzzing), VTK 9.1's PLY reader faults on a header cut short. While a ReadingInput is
+/// alive, the library's messages are kept off stderr, and an abort or a fault ends the
+/// process as a stop does (partial outputs removed) with
 ///   organfit: error: FILE: malformed input: the <what> library gave up on it
-/// and exits with code 2 (nothing is being written while inputs are read). Installed by
-/// install_interrupt_handlers().
+/// and exit code 2. Installed by install_interrupt_handlers(), with the same ending for
+/// any other crash (exit 1).
 class ReadingInput {
  public:
   ReadingInput(const char* file, const char* library);
