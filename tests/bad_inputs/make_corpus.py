@@ -6,7 +6,7 @@ phantom written by `organfit synth pelvis` and altered with pydicom.
 
 usage: make_corpus.py OUT_DIR ORGANFIT_BINARY SHARED_DATA_DIR
 """
-import json, os, shutil, subprocess, sys
+import json, os, shutil, struct, subprocess, sys
 import pydicom
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'cli'))
 import model_checksum
@@ -225,6 +225,29 @@ points_case('points_text', 'x,y,z\n1,two,3\n', "'two' is not a number")
 points_case('points_missing_column', 'x,y,z\n1,2\n', 'expected x,y,z[,confidence], got 2 columns')
 points_case('points_bad_confidence', 'x,y,z,c\n1,2,3,1.5\n', 'confidence must be in (0, 1]')
 points_case('points_empty', 'x,y,z\n', 'no points')
+
+# Point sets in VTK's formats, damaged: VTK 9.1 read a file cut short without a word (the
+# points it lacked as copies or zeros), faulted on a PLY without a 'y', and printed several
+# lines on a broken XML file.
+def points_file_case(name, file, content, expect, cls='points'):
+    d = case(name, ['run', '{case}/scene.yaml', '--out', '{case}/out'], expect, ct=False, cls=cls)
+    open(os.path.join(d, file), 'wb').write(content if isinstance(content, bytes) else content.encode())
+    open(os.path.join(d, 'scene.yaml'), 'w').write('body:\n  size_mm: [20, 16, 12]\nmodel:\n  radius_mm: 1.5\n'
+                                                   'points:\n  source: file\n  file: ' + file + '\nfit:\n  method: spread\n')
+PLY_HEADER = 'ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nend_header\n'
+points_file_case('points_ply_cut_short', 'p.ply', PLY_HEADER + '10 0 0\n-10 0 0\n',
+                 'p.ply: its header declares 4 vertices, but the file holds 2: cut short or damaged')
+points_file_case('points_ply_binary_cut_short', 'p.ply',
+                 PLY_HEADER.replace('ascii', 'binary_little_endian').encode() + struct.pack('<7f', 10, 0, 0, -10, 0, 0, 0),
+                 'p.ply: its header declares 4 vertices (48 bytes of data), but the file holds 28 bytes after its header: cut short or damaged')
+points_file_case('points_ply_value_not_a_number', 'p.ply', PLY_HEADER + '10 0 0\n-10 0 0\n0 8-1 0\n0 0 7\n',
+                 "p.ply:10: '8-1' is not a number: damaged")
+points_file_case('points_ply_no_y', 'p.ply', PLY_HEADER.replace('property float y', 'property double x') + '10 0 0\n-10 0 0\n0 8 0\n0 0 7\n',
+                 "p.ply: header: element vertex has two properties 'x'")
+points_file_case('points_vtk_cut_short', 'p.vtk', '# vtk DataFile Version 3.0\np\nASCII\nDATASET POLYDATA\nPOINTS 3 float\n10 0 0 -10 0 0 0 8\n',
+                 'p.vtk: POINTS declares 3 points (9 values), but the file holds 8 values: cut short or damaged')
+points_file_case('points_vtp_broken_xml', 'p.vtp', '<?xml version="1.0"?>\n<VTKFile type="PolyData"><garbage',
+                 'p.vtp: no points (or not readable)')
 
 # --- scene files ------------------------------------------------------------------------------
 def scene_case(name, text, expect, args=None, cls='scenes'):

@@ -2,6 +2,7 @@
 #include "organfit/meshing/surface.h"
 
 #include "organfit/meshing/plain_mesh.h"
+#include "point_file_check.h"
 
 namespace organfit::meshing {
 
@@ -43,6 +44,7 @@ SurfaceMesh surface_mesh(const geometry::LabelVolume& mask) {
 }
 
 std::vector<std::array<double, 4>> read_point_set(const std::filesystem::path& file) {
+  detail::check_point_file_complete(file);
   const PlainPointSet p = vtk_read_points(file.string());
   std::vector<std::array<double, 4>> out;
   for (size_t i = 0; i < p.confidence.size(); ++i)

@@ -11,6 +11,7 @@
 
 #include "organfit/meshing/plain_mesh.h"
 #include "organfit/support/error.h"
+#include "organfit/support/interrupt.h"
 
 namespace organfit::meshing {
 
@@ -22,6 +23,9 @@ PlainPointSet vtk_read_points(const std::string& file) {
     const std::string s(e);
     return file.size() >= s.size() && file.compare(file.size() - s.size(), s.size(), s) == 0;
   };
+  // VTK's readers print their complaints over several lines, and its PLY reader faults on
+  // a header cut short: organfit says what was wrong, in one line (ReadingInput).
+  const ReadingInput reading(file.c_str(), "VTK");
   vtkPolyData* poly = nullptr;
   vtkNew<vtkPLYReader> ply;
   vtkNew<vtkPolyDataReader> legacy;
