@@ -38,15 +38,20 @@ std::string echo(const std::string& value, size_t max_chars) {
   return out;
 }
 
+long long address_space_limit_mb() {
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_AS, &limit) != 0 || limit.rlim_cur == RLIM_INFINITY) return -1;
+  return static_cast<long long>(limit.rlim_cur >> 20);
+}
+
 const char* out_of_memory_message() {
   // Into a buffer of its own: no memory is asked for while there is none.
   static char text[256];
-  rlimit limit{};
-  if (::getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY)
+  if (const long long mb = address_space_limit_mb(); mb >= 0)
     std::snprintf(text, sizeof text,
                   "out of memory: the run needed more than this process may use (its address "
-                  "space is limited to %llu MB: ulimit -v); nothing was written",
-                  static_cast<unsigned long long>(limit.rlim_cur >> 20));
+                  "space is limited to %lld MB: ulimit -v); nothing was written",
+                  mb);
   else
     std::snprintf(text, sizeof text,
                   "out of memory: the run needed more than the machine had free; nothing was "

@@ -5,7 +5,6 @@
 #include <pthread.h>
 #include <spawn.h>
 #include <sys/prctl.h>
-#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -433,12 +432,11 @@ ReadingInput::~ReadingInput() {
 }
 
 void install_abort_guard() {
-  rlimit limit{};
-  if (::getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY)
+  if (const long long mb = address_space_limit_mb(); mb >= 0)
     std::snprintf(g_crash_hint, sizeof g_crash_hint,
-                  " with its address space limited to %llu MB (ulimit -v): a library may have "
+                  " with its address space limited to %lld MB (ulimit -v): a library may have "
                   "failed for want of memory",
-                  static_cast<unsigned long long>(limit.rlim_cur >> 20));
+                  mb);
   // The main thread's faults are handled on a stack of their own (one that overflowed has
   // no room left for the handler).
   static char alternate_stack[1 << 16];

@@ -45,6 +45,9 @@ class TargetNotMetError : public Error {
 /// readable line whatever a file holds. Cut on a UTF-8 character boundary.
 std::string echo(const std::string& value, size_t max_chars = 80);
 
+/// The process's address-space limit (ulimit -v) in MB; -1 when none is set.
+long long address_space_limit_mb();
+
 /// What a run out of memory says (std::bad_alloc; exit 2, as an environment that cannot
 /// hold the run): "out of memory: ...", with the process's address-space limit when one is
 /// set (ulimit -v), and that nothing was written. Made without allocating (a static buffer,
