@@ -91,6 +91,11 @@ void check_ply(const std::string& text, const std::string& file) {
       if (!(words >> e.name >> e.count) || e.count < 0)
         throw InputError(
             fmt::format("{}: header line '{}' is not 'element NAME COUNT'", file, echo(line)));
+      if (e.count > static_cast<long long>(text.size()))  // each takes a byte at least
+        throw InputError(fmt::format(
+            "{}: its header declares {} {} records, but the file holds {} bytes: cut short or "
+            "damaged",
+            file, e.count, echo(e.name, 40), text.size()));
       elements.push_back(e);
     } else if (key == "property") {
       if (elements.empty())
@@ -196,6 +201,10 @@ void check_legacy_vtk(const std::string& text, const std::string& file) {
   long long n = -1;
   if (!(points >> key >> n >> type) || n < 0)
     throw InputError(fmt::format("{}: '{}' is not 'POINTS n type'", file, echo(lines.back())));
+  if (n > static_cast<long long>(text.size()))  // 3 values a point, a byte each at least
+    throw InputError(fmt::format(
+        "{}: POINTS declares {} points, but the file holds {} bytes: cut short or damaged", file, n,
+        text.size()));
   if (binary) {
     static const std::map<std::string, int> bytes = {{"float", 4}, {"double", 8}};
     const auto it = bytes.find(type);
