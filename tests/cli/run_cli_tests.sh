@@ -332,6 +332,16 @@ mkdir -p "$tmp/scene_dir" && cp "$scenes/small-model.yaml" "$tmp/scene_dir/s.yam
 expect run.out_equal_to_scene_folder 2 "--out is the folder of input" -- run "$tmp/scene_dir/s.yaml" --out "$tmp/scene_dir"
 check run.scene_folder_untouched test "$(ls "$tmp/scene_dir")" = "s.yaml"
 expect run.unwritable_out 2 "/dev/null/out: cannot create the output folder" -- run "$scenes/small-model.yaml" --out /dev/null/out
+# A run into a folder of an earlier run replaces that run whole: an output it does not write
+# (a mesh, a report of another fit) does not stay beside its own. Another file is left alone.
+expect run.earlier_run_with_more_outputs 0 "" -- --quiet run "$scenes/small-model.yaml" --out "$tmp/rerun" \
+  --set export.mesh=m.stl --set report.file=r.html
+touch "$tmp/rerun/notes.txt"
+expect run.again_with_fewer_outputs 0 "" -- --quiet run "$scenes/small-model.yaml" --out "$tmp/rerun"
+check run.earlier_outputs_not_rewritten_are_gone python3 -c "
+import json, os; d = '$tmp/rerun'
+listed = set(json.load(open(d + '/run.json'))['outputs'])
+assert set(os.listdir(d)) == listed | {'notes.txt'}, (sorted(os.listdir(d)), sorted(listed))"
 expect run.bad_scene_writes_nothing 2 "unknown key" -- run "$scenes/bad-misspelled-key.yaml" --out "$tmp/run2"
 check run.bad_scene_left_no_outputs test ! -e "$tmp/run2/run.json"
 

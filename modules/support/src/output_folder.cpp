@@ -1,9 +1,14 @@
 #include "organfit/support/output_folder.h"
 
+#include <fcntl.h>
 #include <fmt/format.h>
+#include <fmt/ranges.h>
+#include <spdlog/spdlog.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstdlib>
 #include <fstream>
 #include <iterator>
@@ -107,28 +112,60 @@ void CreatedFolders::keep() {
   partial_.clear();
 }
 
+namespace {
+/// The outputs the run.json in `dir` lists (an earlier organfit run's own), with the data
+/// files beside a listed .mhd or .nhdr, and run.json itself; empty when there is none.
+std::set<std::string> earlier_outputs(const fs::path& dir) {
+  std::set<std::string> names;
+  std::ifstream earlier(dir / "run.json");
+  if (!earlier) return names;
+  const nlohmann::json run = nlohmann::json::parse(earlier, nullptr, false);
+  if (!run.is_object() || !run.contains("organfit_version") || !run.contains("outputs") ||
+      !run["outputs"].is_array())
+    return names;
+  for (const auto& o : run["outputs"])
+    if (o.is_string()) {
+      std::string name = o.get<std::string>();
+      if (!name.empty() && name.back() == '/') name.pop_back();
+      // Plain names only: an output is an entry of the folder, never a path out of it.
+      if (name.empty() || name == "." || name == ".." || name.find('/') != std::string::npos)
+        continue;
+      names.insert(name);
+      const fs::path p(name);
+      if (p.extension() == ".mhd" || p.extension() == ".nhdr")
+        for (const char* ext : {".raw", ".zraw", ".raw.gz"})
+          names.insert(p.stem().string() + ext);
+    }
+  names.insert("run.json");
+  return names;
+}
+
+/// An exclusive lock on the folder while it lives (flock on the folder itself): two runs
+/// into one --out commit one after the other, never interleaved.
+class FolderLock {
+ public:
+  explicit FolderLock(const fs::path& dir)
+      : fd_(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC)) {
+    if (fd_ >= 0)
+      while (::flock(fd_, LOCK_EX) != 0 && errno == EINTR) {
+      }
+  }
+  ~FolderLock() {
+    if (fd_ >= 0) ::close(fd_);  // releases the lock
+  }
+  FolderLock(const FolderLock&) = delete;
+  FolderLock& operator=(const FolderLock&) = delete;
+
+ private:
+  int fd_;
+};
+}  // namespace
+
 OutputFolder::OutputFolder(const fs::path& dir, const std::set<std::string>& names_to_write,
                            const std::string& option)
     : dir_(dir), option_(option), created_(dir) {
   // An earlier run's own outputs, which this one may replace.
-  std::ifstream earlier(dir_ / "run.json");
-  if (earlier) {
-    const nlohmann::json run = nlohmann::json::parse(earlier, nullptr, false);
-    if (run.is_object() && run.contains("organfit_version") && run.contains("outputs") &&
-        run["outputs"].is_array()) {
-      for (const auto& o : run["outputs"])
-        if (o.is_string()) {
-          std::string name = o.get<std::string>();
-          if (!name.empty() && name.back() == '/') name.pop_back();
-          earlier_outputs_.insert(name);
-          const fs::path p(name);
-          if (p.extension() == ".mhd" || p.extension() == ".nhdr")
-            for (const char* ext : {".raw", ".zraw", ".raw.gz"})
-              earlier_outputs_.insert(p.stem().string() + ext);
-        }
-      earlier_outputs_.insert("run.json");
-    }
-  }
+  earlier_outputs_ = earlier_outputs(dir_);
   for (std::string name : names_to_write) {
     if (!name.empty() && name.back() == '/') name.pop_back();
     check_replaceable(name);
@@ -161,13 +198,37 @@ OutputFolder::~OutputFolder() {
 void OutputFolder::commit() {
   throw_if_interrupted();  // the last moment a run can still stop with nothing written
   const ScopedCommit committing;
+  // What the folder holds now, under the lock: another run may have committed into it
+  // since this one started.
+  const FolderLock lock(dir_);
+  earlier_outputs_ = earlier_outputs(dir_);
   std::error_code ec;
   std::vector<fs::path> entries;
+  std::set<std::string> names;
   for (const auto& e : fs::directory_iterator(staging_, ec))
-    entries.push_back(e.path());
+    entries.push_back(e.path()), names.insert(e.path().filename().string());
   if (ec) throw InputError(staging_.string() + ": cannot list the staged outputs: " + ec.message());
   for (const auto& e : entries)
     check_replaceable(e.filename().string());
+  // The earlier run is replaced whole: its outputs this run does not write go first (a
+  // report, a field or a REG object of another fit must not lie beside this one's), while
+  // its old run.json still lists them.
+  std::vector<std::string> removed;
+  for (const std::string& name : earlier_outputs_)
+    if (!names.count(name) && fs::exists(fs::symlink_status(dir_ / name, ec))) {
+      fs::remove_all(dir_ / name, ec);
+      if (ec)
+        throw InputError((dir_ / name).string() +
+                         ": cannot remove (an earlier run's "
+                         "output this run does not replace): " +
+                         ec.message());
+      removed.push_back(name);
+    }
+  if (!removed.empty())
+    spdlog::info(
+        "{}: {} output(s) of the earlier run there that this run does not write were "
+        "removed ({})",
+        dir_.string(), removed.size(), fmt::join(removed, ", "));
   // run.json last: while it is absent or old, no reader takes the folder for a finished run.
   std::stable_partition(entries.begin(), entries.end(),
                         [](const fs::path& p) { return p.filename() != "run.json"; });

@@ -55,7 +55,11 @@ class CreatedFolders {
 /// it into the output folder. An entry may replace one already there only when an
 /// earlier organfit run wrote it: it is listed in that run's run.json "outputs" (with a
 /// detached data file beside a listed .mhd or .nhdr); anything else is refused naming the
-/// file, before work starts (names_to_write) and again at commit.
+/// file, before work starts (names_to_write) and again at commit. The earlier run is
+/// replaced whole: its outputs this run does not write are removed at commit (a report or
+/// a field of another fit must not lie beside this run's), and other files left alone.
+/// Commits into one folder hold a lock on it (flock): two runs started together end as the
+/// later one's outputs alone, never a mix.
 class OutputFolder {
  public:
   /// `names_to_write`: the entries the run expects to write (a folder ends in '/').
