@@ -210,12 +210,14 @@ void OutputFolder::commit() {
   if (ec) throw InputError(staging_.string() + ": cannot list the staged outputs: " + ec.message());
   for (const auto& e : entries)
     check_replaceable(e.filename().string());
-  // The earlier run is replaced whole: its outputs this run does not write go first (a
-  // report, a field or a REG object of another fit must not lie beside this one's), while
-  // its old run.json still lists them.
+  // A run (it writes a run.json) replaces the earlier run whole: that run's outputs this
+  // one does not write go first (a report, a field or a REG object of another fit must not
+  // lie beside this one's), while its old run.json still lists them. What writes no
+  // run.json (a `dicom pull`) only adds its own entries.
   std::vector<std::string> removed;
+  const bool replaces_the_run = names.count("run.json") > 0;
   for (const std::string& name : earlier_outputs_)
-    if (!names.count(name) && fs::exists(fs::symlink_status(dir_ / name, ec))) {
+    if (replaces_the_run && !names.count(name) && fs::exists(fs::symlink_status(dir_ / name, ec))) {
       fs::remove_all(dir_ / name, ec);
       if (ec)
         throw InputError((dir_ / name).string() +

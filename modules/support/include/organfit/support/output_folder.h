@@ -55,9 +55,10 @@ class CreatedFolders {
 /// it into the output folder. An entry may replace one already there only when an
 /// earlier organfit run wrote it: it is listed in that run's run.json "outputs" (with a
 /// detached data file beside a listed .mhd or .nhdr); anything else is refused naming the
-/// file, before work starts (names_to_write) and again at commit. The earlier run is
-/// replaced whole: its outputs this run does not write are removed at commit (a report or
-/// a field of another fit must not lie beside this run's), and other files left alone.
+/// file, before work starts (names_to_write) and again at commit. A run that writes a
+/// run.json replaces the earlier run whole: that run's outputs this one does not write are
+/// removed at commit (a report or a field of another fit must not lie beside this run's);
+/// one that writes none (`dicom pull`) only adds its entries. Other files are left alone.
 /// Commits into one folder hold a lock on it (flock): two runs started together end as the
 /// later one's outputs alone, never a mix.
 class OutputFolder {
