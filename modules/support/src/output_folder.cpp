@@ -127,9 +127,9 @@ std::set<std::string> earlier_outputs(const fs::path& dir) {
     if (o.is_string()) {
       std::string name = o.get<std::string>();
       if (!name.empty() && name.back() == '/') name.pop_back();
-      // Plain names only: an output is an entry of the folder, never a path out of it.
-      if (name.empty() || name == "." || name == ".." || name.find('/') != std::string::npos)
-        continue;
+      // Plain, visible names only: an output is an entry of the folder, never a path out of
+      // it, nor a run's hidden staging folder.
+      if (name.empty() || name[0] == '.' || name.find('/') != std::string::npos) continue;
       names.insert(name);
       const fs::path p(name);
       if (p.extension() == ".mhd" || p.extension() == ".nhdr")
