@@ -73,15 +73,14 @@ std::set<std::string> names_written(const config::Scene& scene) {
 
 }  // namespace
 
-nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
-                         const RunOptions& run_options) {
+namespace {
+
+/// The run, its outputs written under `output`'s staging folder and moved into --out at
+/// the end.
+nlohmann::json run_into(const config::Scene& scene, const fs::path& out_dir,
+                        const RunOptions& run_options, OutputFolder& output) {
   std::error_code ec;
-  if (fs::exists(out_dir, ec) && !fs::is_directory(out_dir, ec))
-    throw InputError(out_dir.string() + ": --out exists and is not a folder");
-  check_output_location(out_dir, scene_inputs(scene), "--out");
-  // Everything is written under the staging folder and moved into --out at the end.
   const std::set<std::string> names = names_written(scene);
-  OutputFolder output(out_dir, names);
   const fs::path& staging = output.staging();
   const long long threads = scene.integer("scene", "threads");
   if (threads > 0) omp_set_num_threads(static_cast<int>(threads));
@@ -571,6 +570,24 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
     throw dicomnet::NodeError(send_failure + "; the written files are in " + out_dir.string());
   if (!not_converged.empty()) throw TargetNotMetError(not_converged);
   return run;
+}
+
+}  // namespace
+
+nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
+                         const RunOptions& run_options) {
+  std::error_code ec;
+  if (fs::exists(out_dir, ec) && !fs::is_directory(out_dir, ec))
+    throw InputError(out_dir.string() + ": --out exists and is not a folder");
+  check_output_location(out_dir, scene_inputs(scene), "--out");
+  OutputFolder output(out_dir, names_written(scene));
+  // An error names a file where the user will look for it, not in the staging folder it
+  // was being written in.
+  try {
+    return run_into(scene, out_dir, run_options, output);
+  } catch (const Error& e) {
+    throw Error(e.code(), output.in_final_names(e.what()));
+  }
 }
 
 }  // namespace organfit::pipeline

@@ -178,6 +178,14 @@ OutputFolder::OutputFolder(const fs::path& dir, const std::set<std::string>& nam
     throw InputError(dir_.string() + ": cannot write in the output folder: " + ec.message());
 }
 
+std::string OutputFolder::in_final_names(const std::string& text) const {
+  const std::string from = staging_.string() + "/", to = dir_.string() + "/";
+  std::string out = text;
+  for (size_t at = 0; (at = out.find(from, at)) != std::string::npos; at += to.size())
+    out.replace(at, from.size(), to);
+  return out;
+}
+
 void OutputFolder::check_replaceable(const std::string& name) const {
   std::error_code ec;
   const fs::path target = dir_ / name;

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "organfit/support/error.h"
+#include "organfit/support/output_folder.h"
 
 namespace fs = std::filesystem;
 
@@ -84,6 +85,16 @@ TEST(CheckedFileStream, WritesWhatItIsGiven) {
     expected << i << '\n';
   EXPECT_EQ(read_all(dir / "a.bin"), expected.str());
   EXPECT_THROW(CheckedFileStream("/nonexistent_dir_organfit/a.bin", "/x/a.bin"), InputError);
+}
+
+TEST(OutputFolder, MessagesNameAStagedFileWhereItWillBe) {
+  const auto dir = fresh_dir("final_names");
+  const OutputFolder out(dir / "out", {"fit.dcm"});
+  const std::string staged = (out.staging() / "fit.dcm").string();
+  EXPECT_EQ(out.in_final_names(staged + ": cannot write: No space left on device; " + staged),
+            (dir / "out" / "fit.dcm").string() + ": cannot write: No space left on device; " +
+                (dir / "out" / "fit.dcm").string());
+  EXPECT_EQ(out.in_final_names("points.csv:3: not a number"), "points.csv:3: not a number");
 }
 
 TEST(ExitCode, MapsErrorsToTheirCodesAndOthersToInternal) {

@@ -71,6 +71,9 @@ class OutputFolder {
   OutputFolder& operator=(const OutputFolder&) = delete;
 
   const std::filesystem::path& staging() const { return staging_; }
+  /// `text` with every path in the staging folder named as the output it stands for
+  /// (`OUT/.organfit-run-PID/fit.dcm` as `OUT/fit.dcm`): for messages.
+  std::string in_final_names(const std::string& text) const;
   const std::filesystem::path& dir() const { return dir_; }
   /// Moves the staged entries into place (signals are not looked at: it takes
   /// milliseconds, and a run that got this far is whole).
