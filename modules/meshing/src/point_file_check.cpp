@@ -157,6 +157,7 @@ void check_ply(const std::string& text, const std::string& file) {
   }
   // ASCII: one line a record; a vertex line holds one value a property.
   const PlyElement& vertex = elements[vertex_index];
+  const long long first_vertex = records - vertices;  // the records before it: other elements
   long long line_number = static_cast<long long>(lines.size()), record = 0;
   std::istringstream data(text.substr(data_at));
   std::string line;
@@ -164,7 +165,6 @@ void check_ply(const std::string& text, const std::string& file) {
     ++line_number;
     std::istringstream words(line);
     long long values = 0;
-    const long long first_vertex = records - vertices;
     for (std::string w; words >> w; ++values)
       if (record >= first_vertex && !is_number(w))
         throw InputError(
@@ -187,7 +187,7 @@ void check_ply(const std::string& text, const std::string& file) {
   if (record < records)
     throw InputError(fmt::format(
         "{}: its header declares {} vertices, but the file holds {}: cut short or damaged", file,
-        vertices, std::max(0LL, record - (records - vertices))));
+        vertices, std::max(0LL, record - first_vertex)));
 }
 
 void check_legacy_vtk(const std::string& text, const std::string& file) {

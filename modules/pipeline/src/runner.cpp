@@ -75,12 +75,12 @@ std::set<std::string> names_written(const config::Scene& scene) {
 
 namespace {
 
-/// The run, its outputs written under `output`'s staging folder and moved into --out at
-/// the end.
+/// The run, its outputs (`names`, as names_written gives them) written under `output`'s
+/// staging folder and moved into --out at the end.
 nlohmann::json run_into(const config::Scene& scene, const fs::path& out_dir,
-                        const RunOptions& run_options, OutputFolder& output) {
+                        const RunOptions& run_options, const std::set<std::string>& names,
+                        OutputFolder& output) {
   std::error_code ec;
-  const std::set<std::string> names = names_written(scene);
   const fs::path& staging = output.staging();
   const long long threads = scene.integer("scene", "threads");
   if (threads > 0) omp_set_num_threads(static_cast<int>(threads));
@@ -580,11 +580,12 @@ nlohmann::json run_scene(const config::Scene& scene, const fs::path& out_dir,
   if (fs::exists(out_dir, ec) && !fs::is_directory(out_dir, ec))
     throw InputError(out_dir.string() + ": --out exists and is not a folder");
   check_output_location(out_dir, scene_inputs(scene), "--out");
-  OutputFolder output(out_dir, names_written(scene));
+  const std::set<std::string> names = names_written(scene);
+  OutputFolder output(out_dir, names);
   // An error names a file where the user will look for it, not in the staging folder it
   // was being written in.
   try {
-    return run_into(scene, out_dir, run_options, output);
+    return run_into(scene, out_dir, run_options, names, output);
   } catch (const Error& e) {
     throw Error(e.code(), output.in_final_names(e.what()));
   }

@@ -111,7 +111,6 @@ void TempPath::commit() {
 class CheckedFileStream::Buffer : public std::streambuf {
  public:
   explicit Buffer(int fd) : fd_(fd) { setp(data_, data_ + sizeof data_); }
-  int error() const { return error_; }
   int close() {
     sync();
     if (fd_ >= 0 && ::close(fd_) != 0 && error_ == 0) error_ = errno;

@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <initializer_list>
 #include <map>
 #include <mutex>
 #include <new>
@@ -38,8 +39,9 @@ std::atomic<double> g_deadline_s{0};  // on the steady clock; 0: none
 // Set while the watchdog removes partial outputs before it ends the process: a library
 // writing into them may then fail an assertion, which is not the run's error.
 std::atomic<bool> g_ending{false};
-// kFailed: an exception that could not unwind to the command (thrown on a worker thread,
-// out of an OpenMP region): its message (one line) and exit code, set once.
+// kFailed: a failure that could not unwind to the command (an exception out of an OpenMP
+// region or a worker thread, a crash): its message (one line) and exit code, set once
+// (record_failure).
 char g_failure[1024];
 std::atomic<int> g_failure_code{static_cast<int>(ExitCode::kInternal)};
 // Said after a crash when the process's address space is limited: a library that failed to
@@ -106,6 +108,26 @@ std::string stop_message() {
     return text;
   }
   return "interrupted (SIGINT or SIGTERM): nothing was written";
+}
+
+/// Records a failure that cannot unwind (the first one only: a second, on another thread
+/// or from the ending itself, does not overwrite it): its line from `parts` (control
+/// characters as spaces) and its exit code, then the stop the watchdog ends the process on.
+/// No memory is asked for (there may be none, or the heap may be broken): it may run in a
+/// signal handler. Should the watchdog itself be the thread that failed, SIGALRM's default
+/// ends the process 5 s later: never a hang.
+void record_failure(std::initializer_list<const char*> parts, int code) {
+  static std::atomic<bool> recorded{false};
+  if (recorded.exchange(true)) return;
+  size_t n = 0;
+  for (const char* p : parts)
+    for (; *p && n + 1 < sizeof g_failure; ++p)
+      g_failure[n++] = static_cast<unsigned char>(*p) < 0x20 ? ' ' : *p;
+  g_failure[n] = 0;
+  g_failure_code = code;
+  int running = kRunning;
+  g_stop.compare_exchange_strong(running, kFailed);  // a stop already under way stands
+  ::alarm(5);
 }
 
 /// Removes `name` (relative to the folder `dir_fd`, or a path), a file or a folder with all
@@ -215,36 +237,25 @@ namespace {
 /// ends the process as a stop does, at once: the partial outputs removed by the watchdog,
 /// one line, the exception's exit code (out of memory: 2, as out_of_memory_message says).
 [[noreturn]] void on_terminate() {
-  static std::atomic<bool> once{false};
-  if (!once.exchange(true)) {
-    // No memory asked for from here, nor by the watchdog's ending: there may be none.
-    // Without an exception: a library called std::terminate (ITK does when it cannot
-    // start its threads: their stacks are address space too).
-    const char* message = "the process was terminated (std::terminate)";
-    const char* hint = g_crash_hint;
-    const char* tail = "; nothing was written";
-    int code = static_cast<int>(ExitCode::kInternal);
-    try {
-      if (const std::exception_ptr e = std::current_exception()) std::rethrow_exception(e);
-    } catch (const std::bad_alloc&) {
-      message = out_of_memory_message(), code = static_cast<int>(ExitCode::kBadInput);
-      hint = tail = "";  // its message says so
-    } catch (const Error& e) {
-      message = e.what(), code = static_cast<int>(e.code()), hint = tail = "";
-    } catch (const std::exception& e) {
-      message = e.what(), hint = "";
-    } catch (...) {
-      message = "an unknown exception", hint = "";
-    }
-    size_t n = 0;
-    for (const char* p : {message, hint, tail})
-      for (; *p && n + 1 < sizeof g_failure; ++p)
-        g_failure[n++] = static_cast<unsigned char>(*p) < 0x20 ? ' ' : *p;
-    g_failure[n] = 0;
-    g_failure_code = code;
-    int running = kRunning;
-    g_stop.compare_exchange_strong(running, kFailed);  // a stop already under way stands
+  // Without an exception: a library called std::terminate (ITK does when it cannot start
+  // its threads: their stacks are address space too).
+  const char* message = "the process was terminated (std::terminate)";
+  const char* hint = g_crash_hint;
+  const char* tail = "; nothing was written";
+  int code = static_cast<int>(ExitCode::kInternal);
+  try {
+    if (const std::exception_ptr e = std::current_exception()) std::rethrow_exception(e);
+  } catch (const std::bad_alloc&) {
+    message = out_of_memory_message(), code = static_cast<int>(ExitCode::kBadInput);
+    hint = tail = "";  // its message says so
+  } catch (const Error& e) {
+    message = e.what(), code = static_cast<int>(e.code()), hint = tail = "";
+  } catch (const std::exception& e) {
+    message = e.what(), hint = "";
+  } catch (...) {
+    message = "an unknown exception", hint = "";
   }
+  record_failure({message, hint, tail}, code);
   for (;;)
     ::pause();  // the watchdog ends the process
 }
@@ -380,31 +391,21 @@ int g_saved_stderr = -1;  // stderr while a library reads: /dev/null (its assert
 [[noreturn]] void on_crash(int sig) {
   // The watchdog is removing what this thread was writing (GDCM asserts that the file it
   // opens is open): it ends the process itself in a moment, with its own message.
-  static std::atomic<bool> once{false};
-  if (!g_ending.load() && !once.exchange(true)) {
-    size_t n = 0;
-    auto say = [&n](const char* p) {
-      for (; *p && n + 1 < sizeof g_failure; ++p)
-        g_failure[n++] = *p;
-    };
+  if (!g_ending.load()) {
     if (g_is_reading) {
       if (g_saved_stderr >= 0) ::dup2(g_saved_stderr, 2);  // the library's text was silenced
-      say(g_reading), say(": malformed input: the "), say(g_library), say(" library gave up on it");
-      g_failure_code = static_cast<int>(ExitCode::kBadInput);
+      record_failure({g_reading, ": malformed input: the ", g_library, " library gave up on it"},
+                     static_cast<int>(ExitCode::kBadInput));
     } else {
-      say("the process crashed (");
-      say(sig == SIGSEGV  ? "a segmentation fault"
-          : sig == SIGBUS ? "a bus error"
-          : sig == SIGFPE ? "an arithmetic fault"
-          : sig == SIGILL ? "an illegal instruction"
-                          : "an abort");
-      say(")"), say(g_crash_hint), say("; nothing was written");
-      g_failure_code = static_cast<int>(ExitCode::kInternal);
+      record_failure({"the process crashed (",
+                      sig == SIGSEGV  ? "a segmentation fault"
+                      : sig == SIGBUS ? "a bus error"
+                      : sig == SIGFPE ? "an arithmetic fault"
+                      : sig == SIGILL ? "an illegal instruction"
+                                      : "an abort",
+                      ")", g_crash_hint, "; nothing was written"},
+                     static_cast<int>(ExitCode::kInternal));
     }
-    g_failure[n] = 0;
-    int running = kRunning;
-    g_stop.compare_exchange_strong(running, kFailed);
-    ::alarm(5);
   }
   for (;;)
     ::pause();
