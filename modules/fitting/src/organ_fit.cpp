@@ -11,6 +11,7 @@
 
 #include "mapped_samples.h"
 #include "organfit/fitting/embedded_body.h"
+#include "organfit/fitting/global_map_posterior.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/signed_distance.h"
 #include "organfit/particles/diagnostics.h"
@@ -211,6 +212,23 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     undecided = undecided_by(map, equally_good, samples);
     global.equally_good_sd_mm =
         undecided.variance_mm2.size() > 0 ? std::sqrt(undecided.variance_mm2.mean()) : 0.0;
+    // How far the points leave the map's affine part free (global_map_posterior.h): the
+    // larger of that and the equally good maps' spread, place by place, is u(x)^2 (two
+    // measures of one thing, the organ's place the points do not decide).
+    const GlobalMapPosterior posterior = global_map_posterior(
+        map, samples, points, global_options.noise_mm, common.unseen_motion_sd_mm,
+        common.unseen_change_sd_mm, embedding_support_mm(model.lattice_spacing_mm),
+        global_options.outlier_mads);
+    global.posterior_sd_mm = std::sqrt(posterior.variance_mm2.mean());
+    global.posterior_max_sd_mm = std::sqrt(posterior.variance_mm2.maxCoeff());
+    if (undecided.variance_mm2.size() == 0) {
+      undecided.at_mm.resize(3, samples.points.cols());
+      for (Eigen::Index j = 0; j < samples.points.cols(); ++j)
+        undecided.at_mm.col(j) = map.apply(samples.points.col(j));
+      undecided.variance_mm2 = posterior.variance_mm2;
+    } else {
+      undecided.variance_mm2 = undecided.variance_mm2.cwiseMax(posterior.variance_mm2);
+    }
     model.global_map = map;
     if (model.skeleton) {
       m.remove(*model.skeleton);

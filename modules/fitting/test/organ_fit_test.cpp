@@ -111,6 +111,34 @@ TEST(FitSpread, FitsAVolumePreservingStretchAndLeavesTheModelPassedInAsItWas) {
   EXPECT_EQ(fitted.model.placed.cols(), fitted.model.state.x.cols());
 }
 
+// Points on one plane (a single 2D ultrasound frame: the ellipsoid's section z = 0) fix the
+// organ's place across the plane far less than 87 points over it do, and the uncertainty
+// says so where the plane's points are farthest, at the poles (0, 0, +-12): the global
+// map's posterior (global_map_posterior.h) widens the prior there beyond the local change's.
+TEST(FitSpread, PointsOnOnePlaneLeaveTheOrgansPlaceAcrossItUncertain) {
+  const OrganModel planning = ellipsoid_model();
+  std::vector<AttractivePoint> plane;
+  for (int k = 0; k < 87; ++k) {
+    const double phi = 2 * M_PI * k / 87;
+    plane.push_back({Eigen::Vector3d(18 * std::cos(phi), 14 * std::sin(phi), 0), 1.0});
+  }
+  const FittedOrgan over =
+      fit_spread(copy_model(planning), stretched_surface(1.0, 87), default_spread_options());
+  const FittedOrgan one_plane = fit_spread(copy_model(planning), plane, default_spread_options());
+  const double s0 = default_spread_options().fit.unseen_change_sd_mm;
+  ASSERT_TRUE(over.report.global && one_plane.report.global);
+  ASSERT_TRUE(over.report.uncertainty && one_plane.report.uncertainty);
+  EXPECT_GT(one_plane.report.global->posterior_max_sd_mm,
+            2 * over.report.global->posterior_max_sd_mm);
+  for (const double z : {12.0, -12.0}) {
+    const Eigen::Vector3d pole(0, 0, z);
+    // Beyond the local change's prior s0 alone (1.77 mm there without the posterior, 0.65
+    // with the points over the organ; 2.95 with it).
+    EXPECT_GT(one_plane.report.uncertainty->sd_mm(pole), std::hypot(s0, 1.5)) << z;
+    EXPECT_LT(over.report.uncertainty->sd_mm(pole), 1.0) << z;
+  }
+}
+
 // The local stage reshapes the organ but leaves its pose to the global stage: with 87
 // points on the ellipsoid's surface, those on its +x end 1.5 mm farther out (a bulge the
 // global maps do not make), the particles' centroid ends where the global stage placed it

@@ -168,6 +168,8 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
         {"shape_change_mm", g.shape_change_mm},
         {"equally_good_fits", g.equally_good_fits},
         {"equally_good_sd_mm", g.equally_good_sd_mm},
+        {"posterior_sd_mm", g.posterior_sd_mm},
+        {"posterior_max_sd_mm", g.posterior_max_sd_mm},
         {"refill_passes", g.refill_passes},
         {"particles_after_refill", g.particles_after_refill},
         {"volume_change_after_settling_pct", g.volume_change_after_settling_pct},

@@ -40,6 +40,11 @@ const config::Binding<fitting::OrganFitOptions>& fit() {
                   "the uncertainty's prior: how far the surface may change locally where no "
                   "point is (1.7 mm: the prostate between fractions, Nakazawa et al. 2015)",
                   true)
+          .number("unseen_motion_sd_mm", &O::unseen_motion_sd_mm, "mm", 0.0, 500.0,
+                  "the uncertainty's prior: how far the whole organ may have moved since "
+                  "planning where the points do not tell (4 mm: the prostate between fractions, "
+                  "1.5 to 4.1 mm SD per axis, Langen and Jones 2001)",
+                  true)
           .number("volume_tolerance_pct", &O::volume_tolerance_pct, "%", 0.0, 100.0,
                   "the organ's volume change a fit may make (either way): beyond it the spread "
                   "fit's local stage is undone, and the run warns",

@@ -46,6 +46,9 @@ struct OrganFitOptions {
   /// The prior standard deviation (mm) of the local change where no point is, for the
   /// fit's uncertainty (surface_uncertainty.h).
   double unseen_change_sd_mm = 1.7;
+  /// The prior standard deviation (mm) of the organ's move since planning where the points
+  /// do not tell it (the global map's affine part, global_map_posterior.h), likewise.
+  double unseen_motion_sd_mm = 4.0;
   /// The organ's volume change (%, either way) a fit may make: beyond it the spread fit's
   /// local stage is undone, and a run warns of either method's.
   double volume_tolerance_pct = 1.0;
@@ -87,6 +90,9 @@ struct GlobalStageReport {
   /// surface along its normal (mm): how far the points leave the organ's place undecided.
   int equally_good_fits = 1;
   double equally_good_sd_mm = 0;
+  /// The affine part's posterior (global_map_posterior.h): the surface's standard deviation
+  /// from it along its normal, RMS over the surface and largest (mm).
+  double posterior_sd_mm = 0, posterior_max_sd_mm = 0;
   int refill_passes = 0;  ///< re-fills until the settled volume matched
   int particles_after_refill = 0;
   double volume_change_after_settling_pct = 0;
