@@ -206,7 +206,14 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
   Parser parser(file, schema);
   YAML::Node root;
   try {
-    root = YAML::Load(text);
+    // One document: a second one (after a '---') would be read by nobody.
+    const std::vector<YAML::Node> documents = YAML::LoadAll(text);
+    if (!documents.empty()) root = documents.front();
+    for (size_t d = 1; d < documents.size(); ++d)
+      if (documents[d] && !documents[d].IsNull())
+        parser.fail(documents[d].Mark().line, "",
+                    "a second YAML document: a scene file holds one, and the run would ignore "
+                    "this one");
   } catch (const YAML::Exception& e) {
     parser.fail(std::max(0, e.mark.line), "", "YAML syntax error: " + e.msg);
   }

@@ -117,6 +117,13 @@ TEST(SceneParse, DuplicatesSyntaxAndShapeErrors) {
   EXPECT_EQ(error_of("model: 3\n"), "/scenes/s.yaml:1: model: a section is a mapping of keys");
   EXPECT_EQ(error_of("model:\n  radius_mm: [1]\n"),
             "/scenes/s.yaml:2: model.radius_mm: expected a number, got 'a list'");
+  // A second document would be read by nobody (it had been dropped without a word); a
+  // document's end marker, or a '---' with nothing after it, holds nothing to ignore.
+  EXPECT_EQ(error_of("---\nmodel:\n  radius_mm: 1\n---\nmodel:\n  radius_mm: 2\n"),
+            "/scenes/s.yaml:5: a second YAML document: a scene file holds one, and the run "
+            "would ignore this one");
+  EXPECT_EQ(error_of("model:\n  radius_mm: 1\n...\n"), "no error");
+  EXPECT_EQ(error_of("model:\n  radius_mm: 1\n---\n"), "no error");
 }
 
 TEST(SceneParse, RelativePathsResolveAgainstTheSceneFolder) {
