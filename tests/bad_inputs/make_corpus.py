@@ -267,6 +267,9 @@ scene_case('scene_yaml_syntax', 'body: [1, 2\nmodel:\n', 'scene.yaml:')
 scene_case('scene_missing_required', 'phantom:\norgan:\n  source: rtstruct\n', 'organ.roi')
 scene_case('scene_registration_not_rigid', 'body:\nmodel:\npoints:\n  source: ultrasound\nultrasound:\n  source: volume\n  file: scene.yaml\n  registration: [2,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]\n', 'not a rigid transform')
 scene_case('scene_export_into_a_folder', 'body:\nmodel:\nexport:\n  mesh: sub/organ.stl\n', 'a file name inside --out')
+scene_case('scene_output_named_as_the_run_record', 'body:\nmodel:\nexport:\n  model: run.json\n', "export.model: 'run.json' is already the run's record's name in --out")
+scene_case('scene_output_named_twice', 'body:\nmodel:\nexport:\n  mesh: organ.stl\nreport:\n  file: organ.stl\n', "report.file: 'organ.stl' is already export.mesh's name in --out")
+scene_case('scene_second_document', 'body:\nmodel:\n---\nexport:\n  mesh: organ.stl\n', 'scene.yaml:4: a second YAML document')
 scene_case('scene_not_a_file', '', 'cannot read the scene file', args=['run', '{case}/missing.yaml', '--out', '{case}/out'])
 
 # --- commands -------------------------------------------------------------------------------
@@ -521,6 +524,9 @@ for key in ['labels: l.nrrd', 'uncertainty: s.nrrd']:
 fitted = shared_run('_fitted',
     'planning:\n  model: ../_planning_body/out/model.json\npoints:\n  count: 20\nfit:\n  method: spread\n'
     'export:\n  model: fitted.json\n')
+case('export_two_outputs_one_file',
+     ['export', '--model', '{case}/../_planning/out/model.json', '--labels', '{case}/out/x.nrrd', '--jacobian', '{case}/out/x.nrrd'],
+     'named by both --labels and --jacobian', ct=False)
 case('export_uncertainty_of_a_planning_model',
      ['export', '--model', '{case}/../_planning_body/out/model.json', '--uncertainty', '{case}/out/s.nrrd'],
      "model.json: the model holds no fit's uncertainty", ct=False, cls='disagree')

@@ -34,6 +34,14 @@ struct ExportCommand {
   std::filesystem::path copy_rois_from;  ///< an RT Structure Set whose ROIs are copied alongside
 };
 
+/// Whether two paths name one file (through "..", symbolic links and the working folder).
+bool same_place(const fs::path& a, const fs::path& b) {
+  std::error_code ea, eb;
+  const fs::path ca = fs::weakly_canonical(a, ea), cb = fs::weakly_canonical(b, eb);
+  if (ea || eb) return fs::absolute(a).lexically_normal() == fs::absolute(b).lexically_normal();
+  return ca == cb;
+}
+
 /// Runs the export; returns the summary (as run.json's "export"). Throws InputError on
 /// bad input (nothing written then): no output named, a CT whose series or Frame of
 /// Reference is not the model's, a model outside the CT.
@@ -45,6 +53,17 @@ nlohmann::json run_export_command(const ExportCommand& c) {
     throw InputError(
         "export: name at least one output (--rtstruct, --labels, --mesh, "
         "--displacement-field, --registration, --jacobian, --uncertainty)");
+  // Two outputs at one path: the later would replace the earlier without a word.
+  const std::vector<const char*> flags = {"--rtstruct",           "--labels",   "--mesh",
+                                          "--displacement-field", "--jacobian", "--registration",
+                                          "--uncertainty"};
+  for (size_t i = 0; i < outputs.size(); ++i)
+    for (size_t j = 0; j < i; ++j)
+      if (!outputs[i].empty() && !outputs[j].empty() && same_place(outputs[i], outputs[j]))
+        throw InputError(
+            fmt::format("{}: named by both {} and {}: each output needs a file of "
+                        "its own",
+                        outputs[i].string(), flags[j], flags[i]));
   std::vector<fs::path> inputs = {c.model, c.ct, c.copy_rois_from};
   for (const auto& f : outputs)
     if (!f.empty())

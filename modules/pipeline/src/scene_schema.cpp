@@ -5,6 +5,8 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <initializer_list>
+#include <map>
+#include <string>
 
 #include "organfit/dicomnet/node.h"
 #include "organfit/pipeline/export_stage.h"
@@ -602,6 +604,34 @@ const config::Schema& scene_schema() {
   return schema;
 }
 
+/// Each output its own visible name in --out: two outputs of one name, or one with the name
+/// of the run's own files, leave one of them (a model named run.json was overwritten by the
+/// run's record, exit 0); a hidden one is not replaced by the next run into the folder.
+void check_output_names(const config::Scene& scene) {
+  std::map<std::string, std::string> taken = {{"run.json", "the run's record"},
+                                              {"resolved.yaml", "the resolved scene"}};
+  if (scene.has_section("fit")) taken.emplace("history.csv", "the fit's history");
+  if (scene.has_section("phantom")) taken.emplace("phantom", "the phantom's folder");
+  if ((scene.has_section("ct") && scene.is_given("ct", "node")) ||
+      (scene.has_section("organ") && scene.is_given("organ", "node")))
+    taken.emplace("cache", "the DICOM node's cache");
+  auto claim = [&](const char* section, const char* key) {
+    if (!scene.has_section(section)) return;
+    const std::string& name = scene.text(section, key);
+    if (name.empty()) return;
+    if (name.front() == '.')
+      scene.fail(section, key, "a visible file name in --out (not starting with '.')");
+    const auto [it, fresh] = taken.emplace(name, std::string(section) + "." + key);
+    if (!fresh)
+      scene.fail(section, key, fmt::format("'{}' is already {}'s name in --out", name, it->second));
+  };
+  for (const char* key : {"rtstruct", "labels", "mesh", "model", "displacement_field",
+                          "registration", "jacobian", "uncertainty"})
+    claim("export", key);
+  claim("ultrasound", "save_volume");
+  claim("report", "file");
+}
+
 void check_scene_rules(const config::Scene& scene) {
   if (scene.has_section("export")) {
     const Eigen::Vector3d c = scene.vec3("export", "roi_color");
@@ -756,6 +786,7 @@ void check_scene_rules(const config::Scene& scene) {
     if (!has_model) scene.fail("fit", "method", "a fit needs a 'model' (or 'planning') section");
     if (!scene.has_section("points")) scene.fail("fit", "method", "a fit needs a 'points' section");
   }
+  check_output_names(scene);
   check_network_rules(scene);
 }
 

@@ -44,6 +44,22 @@ TEST(SceneRules, ThePaperForcesInfluenceBoundIsNotBelowItsStart) {
             "is below its value at contact (1.2 r0)");
 }
 
+// Each output has a visible name of its own in --out: a model or mesh named as the run's
+// own files, or as another output, would leave one of them (a model named run.json had been
+// overwritten by the run's record, exit 0).
+TEST(SceneRules, EachOutputHasAVisibleNameOfItsOwn) {
+  EXPECT_EQ(error_of("body:\nmodel:\nexport:\n  mesh: run.json\n"),
+            "/s.yaml:4: export.mesh: 'run.json' is already the run's record's name in --out");
+  EXPECT_EQ(error_of("body:\nmodel:\npoints:\nfit:\nexport:\n  model: history.csv\n"),
+            "/s.yaml:6: export.model: 'history.csv' is already the fit's history's name in --out");
+  EXPECT_EQ(error_of("body:\nmodel:\nexport:\n  mesh: organ.stl\nreport:\n  file: organ.stl\n"),
+            "/s.yaml:6: report.file: 'organ.stl' is already export.mesh's name in --out");
+  EXPECT_EQ(error_of("body:\nmodel:\nexport:\n  mesh: .organ.stl\n"),
+            "/s.yaml:4: export.mesh: a visible file name in --out (not starting with '.')");
+  EXPECT_EQ(error_of("body:\nmodel:\nexport:\n  mesh: organ.stl\n  model: organ.json\n"),
+            "no error");
+}
+
 // Each method's settings are the scene's: a default scene gives the option structs'
 // own defaults, and a key of fit.spread reaches the field it names.
 TEST(SceneSchema, TheFitsOptionsAreTheStructsDefaultsAndTheScenesValues) {
