@@ -362,10 +362,11 @@ nlohmann::json run_into(const config::Scene& scene, const fs::path& out_dir,
         fit.fit_summary["volume_change_pct"].get<double>());
     // Where the surface may be, given the points: a fit can converge on points that fix
     // little (one plane, one line), and this is where that shows.
-    if (const auto& u = fit.fit_summary["uncertainty"]; u.is_object() && u.contains("all"))
+    if (const auto u = fit.fit_summary.find("uncertainty");
+        u != fit.fit_summary.end() && u->is_object() && u->contains("all"))
       spdlog::info(
           "fit: uncertainty of the surface (sd) median {:.2f} mm, 95th percentile {:.2f} mm",
-          u["all"]["median_mm"].get<double>(), u["all"]["p95_mm"].get<double>());
+          (*u)["all"]["median_mm"].get<double>(), (*u)["all"]["p95_mm"].get<double>());
     if (!fit.truth_summary.is_null()) {
       spdlog::info(
           "truth: mean surface distance {:.3f} mm (undeformed {:.3f}, floor {:.3f}), HD95 {:.3f} "

@@ -597,13 +597,6 @@ void check_network_rules(const config::Scene& scene) {
   }
 }
 
-}  // namespace
-
-const config::Schema& scene_schema() {
-  static const config::Schema schema = build_schema();
-  return schema;
-}
-
 /// Each output its own visible name in --out: two outputs of one name, or one with the name
 /// of the run's own files, leave one of them (a model named run.json was overwritten by the
 /// run's record, exit 0); a hidden one is not replaced by the next run into the folder.
@@ -630,6 +623,13 @@ void check_output_names(const config::Scene& scene) {
     claim("export", key);
   claim("ultrasound", "save_volume");
   claim("report", "file");
+}
+
+}  // namespace
+
+const config::Schema& scene_schema() {
+  static const config::Schema schema = build_schema();
+  return schema;
 }
 
 void check_scene_rules(const config::Scene& scene) {
