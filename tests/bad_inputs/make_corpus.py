@@ -524,6 +524,9 @@ for key in ['labels: l.nrrd', 'uncertainty: s.nrrd']:
 fitted = shared_run('_fitted',
     'planning:\n  model: ../_planning_body/out/model.json\npoints:\n  count: 20\nfit:\n  method: spread\n'
     'export:\n  model: fitted.json\n')
+case('export_roi_name_not_a_dicom_lo',
+     ['export', '--model', '{case}/../_planning/out/model.json', '--rtstruct', '{case}/out/f.dcm', '--roi-name', 'P' * 65],
+     '--roi-name: a ROI Name is at most 64 characters', ct=False)
 case('export_two_outputs_one_file',
      ['export', '--model', '{case}/../_planning/out/model.json', '--labels', '{case}/out/x.nrrd', '--jacobian', '{case}/out/x.nrrd'],
      'named by both --labels and --jacobian', ct=False)

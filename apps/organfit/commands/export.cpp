@@ -53,6 +53,8 @@ nlohmann::json run_export_command(const ExportCommand& c) {
     throw InputError(
         "export: name at least one output (--rtstruct, --labels, --mesh, "
         "--displacement-field, --registration, --jacobian, --uncertainty)");
+  if (const std::string why = pipeline::roi_name_problem(c.roi_name); !why.empty())
+    throw InputError("--roi-name: " + why);
   // Two outputs at one path: the later would replace the earlier without a word.
   const std::vector<const char*> flags = {"--rtstruct",           "--labels",   "--mesh",
                                           "--displacement-field", "--jacobian", "--registration",
@@ -88,7 +90,7 @@ nlohmann::json run_export_command(const ExportCommand& c) {
                      ": the model holds no fit's uncertainty (a planning model, or a fitted one "
                      "saved before models kept it); --uncertainty needs a session's model");
   request.field_spacing_mm = c.field_spacing_mm;
-  request.roi_name = c.roi_name.empty() ? saved.organ_name + "_fit" : c.roi_name;
+  request.roi_name = c.roi_name.empty() ? pipeline::fitted_roi_name(saved.organ_name) : c.roi_name;
   request.roi_colour = saved.organ_look.colour;
   request.roi_type = saved.organ_look.interpreted_type;
   std::optional<dicom::CtSeries> ct;

@@ -30,6 +30,41 @@ void PendingExport::commit() {
 }
 
 namespace {
+
+/// Characters of UTF-8 text (bytes that do not continue a character).
+int utf8_characters(const std::string& text) {
+  return static_cast<int>(std::count_if(text.begin(), text.end(), [](char c) {
+    return (static_cast<unsigned char>(c) & 0xC0) != 0x80;
+  }));
+}
+
+}  // namespace
+
+std::string fitted_roi_name(const std::string& organ_name) {
+  const std::string suffix = "_fit";
+  std::string organ = organ_name;
+  while (utf8_characters(organ) > kRoiNameCharacters - static_cast<int>(suffix.size())) {
+    // The last character: its continuation bytes, then the byte that starts it.
+    while (!organ.empty() && (static_cast<unsigned char>(organ.back()) & 0xC0) == 0x80)
+      organ.pop_back();
+    if (!organ.empty()) organ.pop_back();
+  }
+  return organ + suffix;
+}
+
+std::string roi_name_problem(const std::string& name) {
+  if (utf8_characters(name) > kRoiNameCharacters)
+    return fmt::format("a ROI Name is at most {} characters (DICOM's LO); this one has {}",
+                       kRoiNameCharacters, utf8_characters(name));
+  if (name.find('\\') != std::string::npos)
+    return "a ROI Name holds no backslash (DICOM's separator of values)";
+  if (std::any_of(name.begin(), name.end(),
+                  [](char c) { return static_cast<unsigned char>(c) < 0x20 || c == 0x7f; }))
+    return "a ROI Name holds no control characters";
+  return "";
+}
+
+namespace {
 /// An RT ROI Interpreted Type as read, if it is a DICOM code string (A-Z, 0-9, space,
 /// underscore; at most 16 characters), else ORGAN.
 std::string type_or_organ(const std::string& type) {
@@ -482,7 +517,7 @@ ExportRequest export_request_from(const config::Scene& scene, const std::filesys
   request.field_spacing_mm = scene.number("export", "field_spacing_mm");
   request.roi_name = scene.text("export", "roi_name");
   request.fixed_uids = scene.flag("export", "fixed_uids");
-  if (request.roi_name.empty()) request.roi_name = organ_name + "_fit";
+  if (request.roi_name.empty()) request.roi_name = fitted_roi_name(organ_name);
   request.roi_colour = look.colour;
   request.roi_type = look.interpreted_type;
   if (const Eigen::Vector3d c = scene.vec3("export", "roi_color");

@@ -736,6 +736,8 @@ void check_scene_rules(const config::Scene& scene) {
       scene.fail("export", "uncertainty", "the uncertainty is the fit's: add a 'fit' section");
     if (writes({"uncertainty"}) && !has_ct && !scene.has_section("planning"))
       scene.fail("export", "uncertainty", "written on the planning CT's grid: add a 'ct' section");
+    if (const std::string why = roi_name_problem(scene.text("export", "roi_name")); !why.empty())
+      scene.fail("export", "roi_name", why);
     for (const char* key : {"rtstruct", "labels", "mesh", "model", "displacement_field",
                             "registration", "jacobian", "uncertainty"}) {
       const std::string& name = scene.text("export", key);

@@ -2,6 +2,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include "organfit/pipeline/export_stage.h"
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_stage.h"
 #include "organfit/pipeline/scene_schema.h"
@@ -58,6 +59,30 @@ TEST(SceneRules, EachOutputHasAVisibleNameOfItsOwn) {
             "/s.yaml:4: export.mesh: a visible file name in --out (not starting with '.')");
   EXPECT_EQ(error_of("body:\nmodel:\nexport:\n  mesh: organ.stl\n  model: organ.json\n"),
             "no error");
+}
+
+// The exported ROI's name fits DICOM's ROI Name (LO, 64 characters): the default cuts the
+// organ's name at a character, never within one; a name given that does not fit is refused.
+TEST(RoiName, TheDefaultFitsALoAndAGivenOneThatDoesNotIsRefused) {
+  EXPECT_EQ(fitted_roi_name("Prostate"), "Prostate_fit");
+  EXPECT_EQ(fitted_roi_name(std::string(63, 'P')), std::string(60, 'P') + "_fit");
+  std::string accented;
+  for (int i = 0; i < 63; ++i)
+    accented += "\xc3\xa9";  // e acute, 2 bytes
+  std::string cut;
+  for (int i = 0; i < 60; ++i)
+    cut += "\xc3\xa9";
+  EXPECT_EQ(fitted_roi_name(accented), cut + "_fit");
+  EXPECT_EQ(roi_name_problem(cut + "_fit"), "");
+  EXPECT_EQ(roi_name_problem(std::string(65, 'P')),
+            "a ROI Name is at most 64 characters (DICOM's LO); this one has 65");
+  EXPECT_EQ(roi_name_problem("GTV\\1"),
+            "a ROI Name holds no backslash (DICOM's separator of values)");
+  EXPECT_EQ(roi_name_problem("GTV\t1"), "a ROI Name holds no control characters");
+  EXPECT_EQ(
+      error_of("body:\nmodel:\nexport:\n  mesh: m.stl\n  roi_name: " + std::string(65, 'P') + "\n"),
+      "/s.yaml:5: export.roi_name: a ROI Name is at most 64 characters (DICOM's LO); this "
+      "one has 65");
 }
 
 // Each method's settings are the scene's: a default scene gives the option structs'

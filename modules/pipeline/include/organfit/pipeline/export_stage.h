@@ -102,6 +102,19 @@ dicom::StructureSet read_rois_to_copy(const std::filesystem::path& file, const d
 PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho_mm,
                              const dicom::CtSeries* ct, const ExportRequest& request);
 
+/// DICOM's bound on a ROI Name (VR LO), in characters.
+inline constexpr int kRoiNameCharacters = 64;
+
+/// The exported ROI's name when none is given: the organ's + "_fit", the organ's cut at a
+/// character (UTF-8) so that the whole is at most kRoiNameCharacters (a 63-character organ
+/// name had given a 67-character ROI Name, which dciodvfy flags and a planning system may
+/// cut or refuse).
+std::string fitted_roi_name(const std::string& organ_name);
+
+/// Why `name` cannot be a ROI Name, or empty when it can: more than kRoiNameCharacters
+/// characters, a backslash (DICOM's separator of values) or a control character.
+std::string roi_name_problem(const std::string& name);
+
 /// The scene's `export` section as a request: each file key under `staging` (empty: not
 /// written), the ROI named `organ_name` + "_fit" unless export.roi_name says otherwise,
 /// in the source ROI's colour and type unless export.roi_color is given. `sigma` and the
