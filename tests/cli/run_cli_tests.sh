@@ -475,6 +475,13 @@ assert d['roi'] == 'Prostate_fit' and 'Bladder' in d['copied_rois'] and 'Prostat
 assert d['mesh']['boundary_edges'] == 0 and d['mesh']['non_manifold_edges'] == 0 and d['mesh']['outward']"
 cp "$tmp/out" "$tmp/wf/export_summary.json"
 check export.wrote_the_three_files test -s "$tmp/wf/e.dcm" -a -s "$tmp/wf/e.nrrd" -a -s "$tmp/wf/e.stl"
+# A ROI to copy with the fitted ROI's name is not copied, and the run says so: two ROIs of
+# one name, a planning system picks one.
+expect export.a_roi_of_the_fitted_name_is_not_copied 0 "ROI 'Bladder' not copied: the fitted ROI has its name" -- --quiet export --model "$tmp/wf/out/prostate-planning/prostate_model.json" --rtstruct "$tmp/wf/e2.dcm" --roi-name Bladder --copy-rois-from "$tmp/wf/out/prostate-planning/phantom/rtstruct.dcm"
+check export.one_roi_of_each_name /usr/bin/python3 -c "
+import pydicom
+names = [r.ROIName for r in pydicom.dcmread('$tmp/wf/e2.dcm').StructureSetROISequence]
+assert names.count('Bladder') == 1 and names[0] == 'Bladder' and 'Prostate' not in names, names"
 # A session copies the planning structure set's other ROIs from where its model file says
 # they came from: the same set as organfit export --copy-rois-from, the fitted ROI's
 # source (Prostate) not among them.

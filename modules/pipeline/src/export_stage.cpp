@@ -389,7 +389,14 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
       nlohmann::json copied = nlohmann::json::array();
       if (r.copy_rois_from) {
         for (const auto& roi : r.copy_rois_from->rois) {
-          if (roi.name == r.skip_roi || roi.name == r.roi_name) continue;
+          if (roi.name == r.skip_roi) continue;  // the fitted ROI replaces its source
+          if (roi.name == r.roi_name) {  // two ROIs of one name: a planning system picks one
+            out.warnings.push_back(fmt::format(
+                "export: ROI '{}' not copied: the fitted ROI has its name (export.roi_name "
+                "names it otherwise)",
+                roi.name));
+            continue;
+          }
           dicom::RoiOnSlices placed = dicom::roi_on_slices(roi, *ct);
           if (placed.skipped > 0)
             out.warnings.push_back(fmt::format(
