@@ -266,6 +266,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     const MappedSamples mapped = map_samples(map, samples);  // once, for both measures
     global.moves = mapped.moves;
     global.shape_change_mm = shape_change_of(mapped.full, samples.points);
+    global.organ_move_mm = (mapped.full - samples.points).rowwise().mean().norm();
     global.refill_passes = passes;
     global.particles_after_refill = state.size();
     global.volume_change_after_settling_pct = settled_change_pct;

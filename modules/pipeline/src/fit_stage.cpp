@@ -165,6 +165,7 @@ nlohmann::json fit_summary(const fitting::FitReport& r) {
         {"flow_largest_move_mm", g.moves.flow_mm},
         {"found_by", map.found_by},
         {"kept_share", map.kept_share},
+        {"organ_move_mm", g.organ_move_mm},
         {"shape_change_mm", g.shape_change_mm},
         {"equally_good_fits", g.equally_good_fits},
         {"equally_good_sd_mm", g.equally_good_sd_mm},

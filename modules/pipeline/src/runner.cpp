@@ -360,8 +360,13 @@ nlohmann::json run_into(const config::Scene& scene, const fs::path& out_dir,
         fit.report.method, fit.report.fit.stop_reason, fit.report.fit.steps, fit.report.fit.wall_s,
         fit.report.fit.residual_mean_mm, fit.report.fit.residual_max_mm,
         fit.fit_summary["volume_change_pct"].get<double>());
-    // Where the surface may be, given the points: a fit can converge on points that fix
-    // little (one plane, one line), and this is where that shows.
+    // How far the organ went, and where it may be given the points: a fit converges on
+    // points of another organ or on points that fix little (one plane, one line), and this
+    // is where that shows.
+    if (const auto g = fit.fit_summary.find("global"); g != fit.fit_summary.end())
+      spdlog::info(
+          "fit: the organ moved {:.1f} mm and changed shape by {:.1f} mm (the global stage)",
+          (*g)["organ_move_mm"].get<double>(), (*g)["shape_change_mm"].get<double>());
     if (const auto u = fit.fit_summary.find("uncertainty");
         u != fit.fit_summary.end() && u->is_object() && u->contains("all"))
       spdlog::info(

@@ -85,6 +85,7 @@ struct GlobalStageReport {
   Eigen::Vector3d principal_stretches = Eigen::Vector3d::Ones();  ///< singular values of a
   LargestMoves moves;          ///< largest moves of the shears and fields (mm)
   double shape_change_mm = 0;  ///< shape_change_mm(map, surface)
+  double organ_move_mm = 0;    ///< the map's move of the organ: its surface's mean move (mm)
   /// The fits the points could not tell from the map (fit_global_map's equally_good, the map
   /// included), and the RMS over the surface and over them of their distance from the map's
   /// surface along its normal (mm): how far the points leave the organ's place undecided.
