@@ -527,6 +527,9 @@ fitted = shared_run('_fitted',
 case('export_roi_name_not_a_dicom_lo',
      ['export', '--model', '{case}/../_planning/out/model.json', '--rtstruct', '{case}/out/f.dcm', '--roi-name', 'P' * 65],
      '--roi-name: a ROI Name is at most 64 characters', ct=False)
+case('export_registration_grid_beyond_dicom',
+     ['export', '--model', '{case}/../_planning/out/model.json', '--registration', '{case}/out/reg.dcm', '--field-spacing', '0.25'],
+     'is more than a DICOM registration\'s Vector Grid Data holds', ct=False)
 case('export_two_outputs_one_file',
      ['export', '--model', '{case}/../_planning/out/model.json', '--labels', '{case}/out/x.nrrd', '--jacobian', '{case}/out/x.nrrd'],
      'named by both --labels and --jacobian', ct=False)
