@@ -406,8 +406,8 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
           if (roi.name == r.skip_roi) continue;  // the fitted ROI replaces its source
           if (roi.name == r.roi_name) {  // two ROIs of one name: a planning system picks one
             out.warnings.push_back(fmt::format(
-                "export: ROI '{}' not copied: the fitted ROI has its name (export.roi_name "
-                "names it otherwise)",
+                "export: ROI '{}' not copied: the fitted ROI has its name (export.roi_name, "
+                "or export --roi-name, names it otherwise)",
                 roi.name));
             continue;
           }
