@@ -13,6 +13,8 @@
 #include <string>
 
 #include "commands.h"
+#include "organfit/itkbridge/itk_images.h"
+#include "organfit/meshing/plain_mesh.h"
 #include "organfit/pipeline/export_stage.h"
 #include "organfit/pipeline/model_file.h"
 #include "organfit/support/error.h"
@@ -55,6 +57,14 @@ nlohmann::json run_export_command(const ExportCommand& c) {
         "--displacement-field, --registration, --jacobian, --uncertainty)");
   if (const std::string why = pipeline::roi_name_problem(c.roi_name); !why.empty())
     throw InputError("--roi-name: " + why);
+  // Each writer's format, before any work.
+  for (const fs::path* image : {&c.labels, &c.displacement_field, &c.jacobian, &c.uncertainty})
+    if (!image->empty())
+      if (const std::string why = itkbridge::image_file_name_problem(*image); !why.empty())
+        throw InputError(image->string() + ": " + why);
+  if (!c.mesh.empty())
+    if (const std::string why = meshing::mesh_file_name_problem(c.mesh.string()); !why.empty())
+      throw InputError(c.mesh.string() + ": " + why);
   // Two outputs at one path: the later would replace the earlier without a word.
   const std::vector<const char*> flags = {"--rtstruct",           "--labels",   "--mesh",
                                           "--displacement-field", "--jacobian", "--registration",

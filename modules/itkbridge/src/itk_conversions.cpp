@@ -101,18 +101,23 @@ PlainMask to_plain(const MaskImage* image) {
   return out;
 }
 
+std::string image_file_name_problem(const fs::path& file) {
+  const std::string name = file.filename().string();
+  const char* known[] = {".nrrd", ".nhdr", ".mha", ".mhd", ".nii", ".nii.gz"};
+  if (std::any_of(std::begin(known), std::end(known),
+                  [&](const char* e) { return ends_with(name, e); }))
+    return "";
+  return "unknown image format (use .nrrd, .nhdr, .mha, .mhd, .nii or .nii.gz)";
+}
+
 namespace {
 /// Writes an ITK image under a temporary name, renamed when whole.
 /// `compress`: zlib, as ITK writes it (small and quick for masks; for float fields of tens
 /// of MB it costs seconds and gains little: their mantissas are noise to zlib).
 template <class Image>
 void write_image(const fs::path& file, const Image* image, bool compress) {
-  const std::string name = file.filename().string();
-  const char* known[] = {".nrrd", ".nhdr", ".mha", ".mhd", ".nii", ".nii.gz"};
-  if (std::none_of(std::begin(known), std::end(known),
-                   [&](const char* e) { return ends_with(name, e); }))
-    throw InputError(file.string() +
-                     ": unknown image format (use .nrrd, .nhdr, .mha, .mhd, .nii or .nii.gz)");
+  if (const std::string why = image_file_name_problem(file); !why.empty())
+    throw InputError(file.string() + ": " + why);
   register_formats();
   TempPath temp(file);
   auto writer = itk::ImageFileWriter<Image>::New();

@@ -60,12 +60,19 @@ double signed_volume(vtkPolyData* poly) {
 
 }  // namespace
 
+std::string mesh_file_name_problem(const std::string& file) {
+  for (const char* e : {".stl", ".vtp", ".ply", ".obj"})
+    if (ends_with(file, e)) return "";
+  return "unknown mesh format (use .stl, .vtp, .ply or .obj)";
+}
+
 PlainSurfaceReport vtk_write_surface(const PlainMask& m, const std::string& file, bool keep_mesh,
                                      const PointScalar* scalar) {
   const bool stl = ends_with(file, ".stl"), vtp = ends_with(file, ".vtp"),
-             ply = ends_with(file, ".ply"), obj = ends_with(file, ".obj");
-  if (!file.empty() && !stl && !vtp && !ply && !obj)
-    throw InputError(file + ": unknown mesh format (use .stl, .vtp, .ply or .obj)");
+             ply = ends_with(file, ".ply");
+  if (!file.empty())
+    if (const std::string why = mesh_file_name_problem(file); !why.empty())
+      throw InputError(file + ": " + why);
   // A failure is ours to report in one line (below, TempPath's on a full disk, or out of
   // memory): VTK's own messages of it, several lines on stderr, are not shown.
   const bool vtk_messages = vtkObject::GetGlobalWarningDisplay();

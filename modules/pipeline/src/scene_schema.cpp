@@ -9,6 +9,8 @@
 #include <string>
 
 #include "organfit/dicomnet/node.h"
+#include "organfit/itkbridge/itk_images.h"
+#include "organfit/meshing/plain_mesh.h"
 #include "organfit/pipeline/export_stage.h"
 #include "organfit/pipeline/fit_stage.h"
 #include "organfit/pipeline/model_stage.h"
@@ -599,7 +601,9 @@ void check_network_rules(const config::Scene& scene) {
 
 /// Each output its own visible name in --out: two outputs of one name, or one with the name
 /// of the run's own files, leave one of them (a model named run.json was overwritten by the
-/// run's record, exit 0); a hidden one is not replaced by the next run into the folder.
+/// run's record, exit 0); a hidden one is not replaced by the next run into the folder. And
+/// a name its writer knows the format of, said before the run (m.STL was refused after the
+/// fit, when the mesh was written).
 void check_output_names(const config::Scene& scene) {
   std::map<std::string, std::string> taken = {{"run.json", "the run's record"},
                                               {"resolved.yaml", "the resolved scene"}};
@@ -608,21 +612,32 @@ void check_output_names(const config::Scene& scene) {
   if ((scene.has_section("ct") && scene.is_given("ct", "node")) ||
       (scene.has_section("organ") && scene.is_given("organ", "node")))
     taken.emplace("cache", "the DICOM node's cache");
-  auto claim = [&](const char* section, const char* key) {
+  // What each writes: an image (ITK's formats), a mesh (VTK's) or any name (DICOM, JSON).
+  enum class Kind { kAny, kImage, kMesh };
+  auto claim = [&](const char* section, const char* key, Kind kind) {
     if (!scene.has_section(section)) return;
     const std::string& name = scene.text(section, key);
     if (name.empty()) return;
+    const std::string format = kind == Kind::kImage  ? itkbridge::image_file_name_problem(name)
+                               : kind == Kind::kMesh ? meshing::mesh_file_name_problem(name)
+                                                     : std::string();
+    if (!format.empty()) scene.fail(section, key, name + ": " + format);
     if (name.front() == '.')
       scene.fail(section, key, "a visible file name in --out (not starting with '.')");
     const auto [it, fresh] = taken.emplace(name, std::string(section) + "." + key);
     if (!fresh)
       scene.fail(section, key, fmt::format("'{}' is already {}'s name in --out", name, it->second));
   };
-  for (const char* key : {"rtstruct", "labels", "mesh", "model", "displacement_field",
-                          "registration", "jacobian", "uncertainty"})
-    claim("export", key);
-  claim("ultrasound", "save_volume");
-  claim("report", "file");
+  claim("export", "rtstruct", Kind::kAny);
+  claim("export", "labels", Kind::kImage);
+  claim("export", "mesh", Kind::kMesh);
+  claim("export", "model", Kind::kAny);
+  claim("export", "displacement_field", Kind::kImage);
+  claim("export", "registration", Kind::kAny);
+  claim("export", "jacobian", Kind::kImage);
+  claim("export", "uncertainty", Kind::kImage);
+  claim("ultrasound", "save_volume", Kind::kImage);
+  claim("report", "file", Kind::kAny);
 }
 
 }  // namespace

@@ -49,8 +49,8 @@ TEST(SceneRules, ThePaperForcesInfluenceBoundIsNotBelowItsStart) {
 // own files, or as another output, would leave one of them (a model named run.json had been
 // overwritten by the run's record, exit 0).
 TEST(SceneRules, EachOutputHasAVisibleNameOfItsOwn) {
-  EXPECT_EQ(error_of("body:\nmodel:\nexport:\n  mesh: run.json\n"),
-            "/s.yaml:4: export.mesh: 'run.json' is already the run's record's name in --out");
+  EXPECT_EQ(error_of("body:\nmodel:\nexport:\n  model: run.json\n"),
+            "/s.yaml:4: export.model: 'run.json' is already the run's record's name in --out");
   EXPECT_EQ(error_of("body:\nmodel:\npoints:\nfit:\nexport:\n  model: history.csv\n"),
             "/s.yaml:6: export.model: 'history.csv' is already the fit's history's name in --out");
   EXPECT_EQ(error_of("body:\nmodel:\nexport:\n  mesh: organ.stl\nreport:\n  file: organ.stl\n"),
@@ -59,6 +59,21 @@ TEST(SceneRules, EachOutputHasAVisibleNameOfItsOwn) {
             "/s.yaml:4: export.mesh: a visible file name in --out (not starting with '.')");
   EXPECT_EQ(error_of("body:\nmodel:\nexport:\n  mesh: organ.stl\n  model: organ.json\n"),
             "no error");
+}
+
+// An output's format is its writer's, said when the scene is read: an upper-case mesh or
+// image ending had been refused only when the file was written, after the fit.
+TEST(SceneRules, EachOutputHasAFormatItsWriterKnows) {
+  EXPECT_EQ(error_of("body:\nmodel:\nexport:\n  mesh: organ.STL\n"),
+            "/s.yaml:4: export.mesh: organ.STL: unknown mesh format (use .stl, .vtp, .ply or "
+            ".obj)");
+  EXPECT_EQ(error_of("phantom:\norgan:\n  roi: Prostate\nmodel:\nexport:\n  labels: organ.png\n"),
+            "/s.yaml:6: export.labels: organ.png: unknown image format (use .nrrd, .nhdr, .mha, "
+            ".mhd, .nii or .nii.gz)");
+  EXPECT_EQ(
+      error_of("phantom:\norgan:\n  roi: Prostate\nmodel:\nexport:\n  labels: organ.nii.gz\n  "
+               "mesh: organ.obj\n  rtstruct: organ.txt\n"),
+      "no error");
 }
 
 // The exported ROI's name fits DICOM's ROI Name (LO, 64 characters): the default cuts the

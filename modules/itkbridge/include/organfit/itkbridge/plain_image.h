@@ -7,6 +7,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include "organfit/geometry/plain_image.h"
@@ -20,6 +21,10 @@ struct PlainFloatImage {
   PlainGeometry geometry;
   std::vector<float> values;  ///< i fastest
 };
+
+/// Why `file` cannot be written as an image, or empty when it can: its name must end in
+/// one of the writers' formats, .nrrd, .nhdr, .mha, .mhd, .nii or .nii.gz.
+std::string image_file_name_problem(const std::filesystem::path& file);
 
 /// Writes a mask; the format follows the extension (.nrrd, .nhdr, .mha, .mhd, .nii,
 /// .nii.gz). Written under a temporary name and renamed: whole or not at all. Throws

@@ -25,6 +25,10 @@ struct PointScalar {
   std::function<double(const double*)> at_mm;  ///< its value at x, y, z (mm)
 };
 
+/// Why `file` cannot be written as a mesh, or empty when it can: its name must end in one
+/// of vtk_write_surface's formats, .stl, .vtp, .ply or .obj.
+std::string mesh_file_name_problem(const std::string& file);
+
 /// Surface of the mask written to `file` (none when empty); with `keep_mesh` the
 /// report carries the triangles; with `scalar` the points carry it: a point array in
 /// .vtp, vertex colours in .ply (blue 0 to red at its largest; the range in a header
