@@ -27,7 +27,8 @@ GlobalMapPosterior global_map_posterior(const GlobalMap& map, const SurfaceSampl
   sd.head<3>().setConstant(motion_sd_mm);
   sd.tail<9>().setConstant(motion_sd_mm / std::max(radius, 1e-9));
   const Eigen::Matrix3d normal_map = map.affine.a.inverse().transpose();
-  Eigen::Matrix3Xd mapped(3, n);
+  Eigen::Matrix3Xd& mapped = out.at_mm;
+  mapped.resize(3, n);
   std::vector<Vec12> g(static_cast<size_t>(n));
 #pragma omp parallel for schedule(static)
   for (Eigen::Index j = 0; j < n; ++j) {

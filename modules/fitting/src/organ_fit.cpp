@@ -222,9 +222,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     global.posterior_sd_mm = std::sqrt(posterior.variance_mm2.mean());
     global.posterior_max_sd_mm = std::sqrt(posterior.variance_mm2.maxCoeff());
     if (undecided.variance_mm2.size() == 0) {
-      undecided.at_mm.resize(3, samples.points.cols());
-      for (Eigen::Index j = 0; j < samples.points.cols(); ++j)
-        undecided.at_mm.col(j) = map.apply(samples.points.col(j));
+      undecided.at_mm = posterior.at_mm;
       undecided.variance_mm2 = posterior.variance_mm2;
     } else {
       undecided.variance_mm2 = undecided.variance_mm2.cwiseMax(posterior.variance_mm2);

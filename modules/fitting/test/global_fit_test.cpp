@@ -11,6 +11,7 @@
 
 #include "../src/central_differences.h"
 #include "../src/global_solvers.h"
+#include "ellipsoid_mask.h"
 #include "organfit/fitting/skin.h"
 #include "organfit/geometry/mask_ops.h"
 #include "organfit/geometry/sample_grid.h"
@@ -89,23 +90,8 @@ double mean_surface_error(const GlobalMap& map, const Map& truth, const SurfaceS
   return sum / static_cast<double>(s.points.cols());
 }
 
-/// The ellipsoid as a mask of 0.75 mm voxels.
-geometry::LabelVolume ellipsoid_mask() {
-  const Eigen::Vector3d semi(25, 20, 17);
-  const geometry::ImageGeometry g = geometry::grid_covering({-semi, semi}, 0.75, 3.0);
-  geometry::LabelVolume mask(g);
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        mask.at(i, j, k) =
-            g.index_to_physical(Eigen::Vector3d(i, j, k)).cwiseQuotient(semi).squaredNorm() <= 1;
-  return mask;
-}
-
-/// The ellipsoid mask's surface, sampled as the fit stage samples it.
-SurfaceSamples ellipsoid_mask_surface() {
-  return reference_surface(ellipsoid_mask(), 2);
-}
+using test::ellipsoid_mask;
+using test::ellipsoid_mask_surface;
 
 /// The ellipsoid's samples with sample 7 repeated last: a tie, which goes to the lower index.
 SurfaceSamples ellipsoid_with_a_duplicate() {

@@ -5,26 +5,12 @@
 #include <cmath>
 #include <random>
 
-#include "organfit/geometry/mask_ops.h"
-#include "organfit/geometry/signed_distance.h"
+#include "ellipsoid_mask.h"
 
 namespace organfit::fitting {
 namespace {
 
-const Eigen::Vector3d kSemi(25, 20, 17);  // mm
-
-/// The ellipsoid x^2/25^2 + y^2/20^2 + z^2/17^2 <= 1 as a mask of 0.75 mm voxels, sampled as
-/// the fit samples its reference.
-SurfaceSamples ellipsoid_surface() {
-  const geometry::ImageGeometry g = geometry::grid_covering({-kSemi, kSemi}, 0.75, 3.0);
-  geometry::LabelVolume mask(g);
-  for (int k = 0; k < g.size[2]; ++k)
-    for (int j = 0; j < g.size[1]; ++j)
-      for (int i = 0; i < g.size[0]; ++i)
-        mask.at(i, j, k) =
-            g.index_to_physical(Eigen::Vector3d(i, j, k)).cwiseQuotient(kSemi).squaredNorm() <= 1;
-  return reference_surface(mask, 2);
-}
+const Eigen::Vector3d& kSemi = test::kEllipsoidSemiAxesMm;
 
 /// `count` points on the ellipsoid, all over it or (`plane`) on its section z = 0.
 std::vector<AttractivePoint> points_on_ellipsoid(int count, bool plane, unsigned seed) {
@@ -45,7 +31,7 @@ constexpr double kNoise = 0.5, kMotion = 4.0, kLocal = 1.7, kLength = 7.0, kMads
 // plane (one 2D frame) leave it nearly as free as the prior does, most of all far from
 // the plane.
 TEST(GlobalMapPosterior, PointsOverTheOrganFixTheMapAndPointsOnOnePlaneDoNot) {
-  const SurfaceSamples surface = ellipsoid_surface();
+  const SurfaceSamples surface = test::ellipsoid_mask_surface();
   const GlobalMap identity;
   const GlobalMapPosterior over =
       global_map_posterior(identity, surface, points_on_ellipsoid(200, false, 1), kNoise, kMotion,
@@ -75,7 +61,7 @@ TEST(GlobalMapPosterior, PointsOverTheOrganFixTheMapAndPointsOnOnePlaneDoNot) {
 // c^2 less what the constraint takes from dA_zz (tr dA = 0: dA_zz's variance 2/3 of the
 // prior's).
 TEST(GlobalMapPosterior, WithoutPointsIsThePrior) {
-  const SurfaceSamples surface = ellipsoid_surface();
+  const SurfaceSamples surface = test::ellipsoid_mask_surface();
   const GlobalMapPosterior none =
       global_map_posterior(GlobalMap{}, surface, {}, kNoise, kMotion, kLocal, kLength, kMads);
   const Eigen::Vector3d c = surface.points.rowwise().mean();

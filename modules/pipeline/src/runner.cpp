@@ -19,6 +19,7 @@
 #include "organfit/pipeline/organ_stage.h"
 #include "organfit/pipeline/phantom_stage.h"
 #include "organfit/pipeline/report_stage.h"
+#include "organfit/pipeline/scene_schema.h"
 #include "organfit/pipeline/ultrasound_stage.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
@@ -55,19 +56,9 @@ std::vector<fs::path> scene_inputs(const config::Scene& scene) {
 
 /// The entries of --out a run of this scene writes (a folder ends in '/').
 std::set<std::string> names_written(const config::Scene& scene) {
-  std::set<std::string> names = {"run.json", "resolved.yaml"};
-  if (scene.has_section("phantom")) names.insert("phantom/");
-  if ((scene.has_section("ct") && scene.is_given("ct", "node")) ||
-      (scene.has_section("organ") && scene.is_given("organ", "node")))
-    names.insert("cache/");
-  if (scene.has_section("fit")) names.insert("history.csv");
-  if (scene.has_section("export"))
-    for (const char* key : {"rtstruct", "labels", "mesh", "model", "displacement_field",
-                            "registration", "jacobian", "uncertainty"})
-      if (!scene.text("export", key).empty()) names.insert(scene.text("export", key));
-  if (scene.has_section("ultrasound") && !scene.text("ultrasound", "save_volume").empty())
-    names.insert(scene.text("ultrasound", "save_volume"));
-  if (scene.has_section("report")) names.insert(scene.text("report", "file"));
+  std::set<std::string> names;
+  for (const SceneOutput& o : scene_outputs(scene))
+    names.insert(o.name);
   return names;
 }
 

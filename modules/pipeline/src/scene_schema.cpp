@@ -7,6 +7,7 @@
 #include <initializer_list>
 #include <map>
 #include <string>
+#include <string_view>
 
 #include "organfit/dicomnet/node.h"
 #include "organfit/itkbridge/itk_images.h"
@@ -599,48 +600,72 @@ void check_network_rules(const config::Scene& scene) {
   }
 }
 
+/// The keys that name an output, with their writer's formats.
+struct OutputKey {
+  const char* section;
+  const char* key;
+  SceneOutput::Format format;
+};
+constexpr OutputKey kOutputKeys[] = {{"export", "rtstruct", SceneOutput::Format::kAny},
+                                     {"export", "labels", SceneOutput::Format::kImage},
+                                     {"export", "mesh", SceneOutput::Format::kMesh},
+                                     {"export", "model", SceneOutput::Format::kAny},
+                                     {"export", "displacement_field", SceneOutput::Format::kImage},
+                                     {"export", "registration", SceneOutput::Format::kAny},
+                                     {"export", "jacobian", SceneOutput::Format::kImage},
+                                     {"export", "uncertainty", SceneOutput::Format::kImage},
+                                     {"ultrasound", "save_volume", SceneOutput::Format::kImage},
+                                     {"report", "file", SceneOutput::Format::kAny}};
+
 /// Each output its own visible name in --out: two outputs of one name, or one with the name
 /// of the run's own files, leave one of them (a model named run.json was overwritten by the
 /// run's record, exit 0); a hidden one is not replaced by the next run into the folder. And
 /// a name its writer knows the format of, said before the run (m.STL was refused after the
 /// fit, when the mesh was written).
 void check_output_names(const config::Scene& scene) {
-  std::map<std::string, std::string> taken = {{"run.json", "the run's record"},
-                                              {"resolved.yaml", "the resolved scene"}};
-  if (scene.has_section("fit")) taken.emplace("history.csv", "the fit's history");
-  if (scene.has_section("phantom")) taken.emplace("phantom", "the phantom's folder");
-  if ((scene.has_section("ct") && scene.is_given("ct", "node")) ||
-      (scene.has_section("organ") && scene.is_given("organ", "node")))
-    taken.emplace("cache", "the DICOM node's cache");
-  // What each writes: an image (ITK's formats), a mesh (VTK's) or any name (DICOM, JSON).
-  enum class Kind { kAny, kImage, kMesh };
-  auto claim = [&](const char* section, const char* key, Kind kind) {
-    if (!scene.has_section(section)) return;
-    const std::string& name = scene.text(section, key);
-    if (name.empty()) return;
-    const std::string format = kind == Kind::kImage  ? itkbridge::image_file_name_problem(name)
-                               : kind == Kind::kMesh ? meshing::mesh_file_name_problem(name)
-                                                     : std::string();
+  const std::vector<SceneOutput> outputs = scene_outputs(scene);
+  std::map<std::string, const SceneOutput*> taken;
+  for (const SceneOutput& o : outputs) {
+    std::string name = o.name;
+    if (!name.empty() && name.back() == '/') name.pop_back();
+    if (o.key.empty()) {  // the run's own (first): names a key may not take
+      taken.emplace(name, &o);
+      continue;
+    }
+    const char* section = o.section.c_str();
+    const char* key = o.key.c_str();
+    const std::string format =
+        o.format == SceneOutput::Format::kImage  ? itkbridge::image_file_name_problem(name)
+        : o.format == SceneOutput::Format::kMesh ? meshing::mesh_file_name_problem(name)
+                                                 : std::string();
     if (!format.empty()) scene.fail(section, key, name + ": " + format);
     if (name.front() == '.')
       scene.fail(section, key, "a visible file name in --out (not starting with '.')");
-    const auto [it, fresh] = taken.emplace(name, std::string(section) + "." + key);
-    if (!fresh)
-      scene.fail(section, key, fmt::format("'{}' is already {}'s name in --out", name, it->second));
-  };
-  claim("export", "rtstruct", Kind::kAny);
-  claim("export", "labels", Kind::kImage);
-  claim("export", "mesh", Kind::kMesh);
-  claim("export", "model", Kind::kAny);
-  claim("export", "displacement_field", Kind::kImage);
-  claim("export", "registration", Kind::kAny);
-  claim("export", "jacobian", Kind::kImage);
-  claim("export", "uncertainty", Kind::kImage);
-  claim("ultrasound", "save_volume", Kind::kImage);
-  claim("report", "file", Kind::kAny);
+    const auto [it, fresh] = taken.emplace(name, &o);
+    if (!fresh) {
+      const SceneOutput& other = *it->second;
+      scene.fail(section, key,
+                 fmt::format("'{}' is already {}'s name in --out", name,
+                             other.key.empty() ? other.what : other.section + "." + other.key));
+    }
+  }
 }
 
 }  // namespace
+
+std::vector<SceneOutput> scene_outputs(const config::Scene& scene) {
+  std::vector<SceneOutput> out = {{"run.json", "", "", "the run's record"},
+                                  {"resolved.yaml", "", "", "the resolved scene"}};
+  if (scene.has_section("fit")) out.push_back({"history.csv", "", "", "the fit's history"});
+  if (scene.has_section("phantom")) out.push_back({"phantom/", "", "", "the phantom's folder"});
+  if ((scene.has_section("ct") && scene.is_given("ct", "node")) ||
+      (scene.has_section("organ") && scene.is_given("organ", "node")))
+    out.push_back({"cache/", "", "", "the DICOM node's cache"});
+  for (const OutputKey& k : kOutputKeys)
+    if (scene.has_section(k.section) && !scene.text(k.section, k.key).empty())
+      out.push_back({scene.text(k.section, k.key), k.section, k.key, "", k.format});
+  return out;
+}
 
 const config::Schema& scene_schema() {
   static const config::Schema schema = build_schema();
@@ -753,11 +778,11 @@ void check_scene_rules(const config::Scene& scene) {
       scene.fail("export", "uncertainty", "written on the planning CT's grid: add a 'ct' section");
     if (const std::string why = roi_name_problem(scene.text("export", "roi_name")); !why.empty())
       scene.fail("export", "roi_name", why);
-    for (const char* key : {"rtstruct", "labels", "mesh", "model", "displacement_field",
-                            "registration", "jacobian", "uncertainty"}) {
-      const std::string& name = scene.text("export", key);
+    for (const OutputKey& k : kOutputKeys) {
+      if (std::string_view(k.section) != "export") continue;
+      const std::string& name = scene.text("export", k.key);
       if (name.find('/') != std::string::npos || name == "." || name == "..")
-        scene.fail("export", key, "a file name inside --out, without folders");
+        scene.fail("export", k.key, "a file name inside --out, without folders");
     }
   }
   if (scene.has_section("ultrasound")) {

@@ -31,7 +31,8 @@
 namespace organfit::fitting {
 
 struct GlobalMapPosterior {
-  /// var(x) (mm^2) at each sample of `surface` as the map moves it (same order).
+  /// Each sample of `surface` as the map moves it (mm), and var(x) there (mm^2).
+  Eigen::Matrix3Xd at_mm;
   Eigen::VectorXd variance_mm2;
 };
 

@@ -44,4 +44,18 @@ config::Scene load_and_check_scene(const std::filesystem::path& file,
 /// The cross-key rules alone (for scenes parsed from text in tests).
 void check_scene_rules(const config::Scene& scene);
 
+/// An entry of --out that a run of a scene writes.
+struct SceneOutput {
+  enum class Format { kAny, kImage, kMesh };  ///< its writer's: any name, ITK's, VTK's
+  std::string name;                           ///< the entry (a folder ends in '/')
+  std::string section, key;  ///< the key that names it; empty for the run's own entries
+  std::string what;          ///< the run's own entry: what it is ("the run's record")
+  Format format = Format::kAny;
+};
+
+/// The entries a run of `scene` writes: the run's own first (run.json, resolved.yaml,
+/// history.csv with a fit, phantom/ with a phantom, cache/ with a DICOM node), then those its
+/// keys name (export's files, ultrasound.save_volume, report.file; not the empty ones).
+std::vector<SceneOutput> scene_outputs(const config::Scene& scene);
+
 }  // namespace organfit::pipeline
