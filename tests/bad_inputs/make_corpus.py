@@ -66,6 +66,33 @@ d = case('ct_inconsistent_pixel_spacing', SEGMENT, 'pixel spacing')
 edit_ct(d, 4, lambda ds: setattr(ds, 'PixelSpacing', [5.5, 5.5]))
 d = case('ct_gantry_tilt', SEGMENT, 'gantry tilt')
 edit_all(d, lambda ds: setattr(ds, 'GantryDetectorTilt', 12))
+# A scanner's Enhanced CT: the whole scan in one multi-frame object, its geometry in
+# functional groups (no Image Position at the top level): named as what it is.
+d = case('ct_enhanced_multi_frame', SEGMENT, 'enhanced.dcm is a multi-frame CT object (Enhanced CT, 12 frames)',
+         names='enhanced.dcm')
+slices = sorted((pydicom.dcmread(os.path.join(d, 'ct', f)) for f in ct_files),
+                key=lambda ds: float(ds.ImagePositionPatient[2]))
+ds = slices[0]
+ds.SOPClassUID = ds.file_meta.MediaStorageSOPClassUID = '1.2.840.10008.5.1.4.1.1.2.1'
+ds.NumberOfFrames = len(slices)
+shared, measures, plane = pydicom.Dataset(), pydicom.Dataset(), pydicom.Dataset()
+measures.PixelSpacing, measures.SliceThickness = ds.PixelSpacing, ds.SliceThickness
+plane.ImageOrientationPatient = ds.ImageOrientationPatient
+shared.PixelMeasuresSequence, shared.PlaneOrientationSequence = [measures], [plane]
+ds.SharedFunctionalGroupsSequence = [shared]
+frames = []
+for s in slices:
+    frame, position = pydicom.Dataset(), pydicom.Dataset()
+    position.ImagePositionPatient = s.ImagePositionPatient
+    frame.PlanePositionSequence = [position]
+    frames.append(frame)
+ds.PerFrameFunctionalGroupsSequence = frames
+for t in ('ImagePositionPatient', 'ImageOrientationPatient', 'PixelSpacing', 'SliceThickness'):
+    delattr(ds, t)
+ds.PixelData = b''.join(s.PixelData for s in slices)
+for f in ct_files:
+    os.remove(os.path.join(d, 'ct', f))
+ds.save_as(os.path.join(d, 'ct', 'enhanced.dcm'))
 d = case('ct_non_axial', SEGMENT, 'non-axial')
 edit_all(d, lambda ds: setattr(ds, 'ImageOrientationPatient', [1, 0, 0, 0, 0, -1]))
 d = case('ct_irregular_spacing', SEGMENT, 'irregular slice spacing')

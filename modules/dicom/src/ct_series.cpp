@@ -37,7 +37,8 @@ const gdcm::Tag kModality(0x0008, 0x0060), kSeriesUid(0x0020, 0x000e),
     kSpacingBetweenSlices(0x0018, 0x0088), kStudyUid(0x0020, 0x000d),
     kRescaleIntercept(0x0028, 0x1052), kRescaleSlope(0x0028, 0x1053),
     kSamplesPerPixel(0x0028, 0x0002), kPhotometric(0x0028, 0x0004), kBitsAllocated(0x0028, 0x0100),
-    kBitsStored(0x0028, 0x0101), kHighBit(0x0028, 0x0102), kPixelRepresentation(0x0028, 0x0103);
+    kBitsStored(0x0028, 0x0101), kHighBit(0x0028, 0x0102), kPixelRepresentation(0x0028, 0x0103),
+    kNumberOfFrames(0x0028, 0x0008);
 
 std::string trimmed(const char* v) {
   if (!v) return {};
@@ -56,7 +57,7 @@ struct Header {
   /// pixel representation, as stated: how its stored values are laid out.
   std::array<std::string, 6> pixel_layout;
   std::vector<double> position, orientation, spacing;
-  int rows = 0, columns = 0;
+  int rows = 0, columns = 0, frames = 1;
   double tilt = 0, thickness = 0, spacing_between = 0;  ///< mm; 0 when not stated
 };
 
@@ -121,7 +122,8 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
                                    kBitsAllocated,
                                    kBitsStored,
                                    kHighBit,
-                                   kPixelRepresentation};
+                                   kPixelRepresentation,
+                                   kNumberOfFrames};
   gdcm::Scanner scanner;
   for (const auto& t : header_tags)
     scanner.AddTag(t);
@@ -185,6 +187,8 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     h.spacing = numbers(value(kPixelSpacing));
     h.rows = std::atoi(value(kRows).c_str());
     h.columns = std::atoi(value(kColumns).c_str());
+    if (const std::string frames = value(kNumberOfFrames); !frames.empty())
+      h.frames = std::atoi(frames.c_str());
     const std::string tilt = value(kGantryTilt);
     h.tilt = tilt.empty() ? 0.0 : std::atof(tilt.c_str());
     auto positive = [&](const gdcm::Tag& t) {
@@ -258,6 +262,16 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   // Consistent geometry across slices, judged against what most slices say, so that an
   // error names the odd slice rather than whichever was read first.
   auto name_of = [](const Header& h) { return fs::path(h.file).filename().string(); };
+  for (const auto& h : slices)
+    // An Enhanced CT (or a legacy series converted to one) holds the whole scan in one
+    // object, its geometry frame by frame in functional groups.
+    if (h.frames > 1 || h.sop_class == "1.2.840.10008.5.1.4.1.1.2.1" ||
+        h.sop_class == "1.2.840.10008.5.1.4.1.1.2.2")
+      fail(fmt::format(
+          "{} is a multi-frame CT object (Enhanced CT, {} frames): organfit reads a series of "
+          "single-frame CT images (CT Image Storage); export the scan as those from the "
+          "scanner or PACS",
+          name_of(h), h.frames));
   for (const auto& h : slices)
     if (h.orientation.size() != 6 || h.spacing.size() != 2 || h.position.size() != 3 ||
         h.rows <= 0 || h.columns <= 0)
