@@ -1,8 +1,10 @@
 #include "organfit/fitting/embedded_body.h"
 
+#include <Eigen/SVD>
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 
 #include "organfit/geometry/image_geometry.h"
@@ -11,6 +13,45 @@
 #include "organfit/geometry/sample_grid.h"
 
 namespace organfit::fitting {
+namespace {
+/// A box holding phi(the organ of `mask`) (mm): the centres of the mask's boundary voxels
+/// (labelled, with a face on an unlabelled voxel or the grid's edge) moved by M, grown by
+/// the largest |u| (phi(r) = M(r) - u(phi(r))) and by 1.5 voxel diagonals stretched by M's
+/// affine part (the surface lies within a voxel of those centres; the half for M's
+/// nonlinear parts, whose stretch the fit bounds). The image of the surface bounds the
+/// image of what it encloses. The mask's own box at rest; nothing for an empty mask.
+std::optional<geometry::Aabb> moved_organ_box(const geometry::LabelVolume& mask,
+                                              const Deformation& phi) {
+  const geometry::ImageGeometry& g = mask.geometry;
+  const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
+  double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+  const bool moved = !phi.identity();
+#pragma omp parallel for collapse(2) schedule(static) reduction(min                     \
+                                                                : lo[:3]) reduction(max \
+                                                                                    : hi[:3])
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        if (!mask.at(i, j, k)) continue;
+        const bool boundary = i == 0 || j == 0 || k == 0 || i + 1 == nx || j + 1 == ny ||
+                              k + 1 == nz || !mask.at(i - 1, j, k) || !mask.at(i + 1, j, k) ||
+                              !mask.at(i, j - 1, k) || !mask.at(i, j + 1, k) ||
+                              !mask.at(i, j, k - 1) || !mask.at(i, j, k + 1);
+        if (!boundary) continue;
+        const Eigen::Vector3d r = g.index_to_physical(Eigen::Vector3d(i, j, k));
+        const Eigen::Vector3d q = moved ? phi.map(r) : r;
+        for (int d = 0; d < 3; ++d)
+          lo[d] = std::min(lo[d], q[d]), hi[d] = std::max(hi[d], q[d]);
+      }
+  if (!(lo[0] <= hi[0])) return std::nullopt;
+  const double stretch =
+      moved ? Eigen::JacobiSVD<Eigen::Matrix3d>(phi.global_map().affine.a).singularValues()[0]
+            : 1.0;
+  const double grow = phi.largest_u_mm() + 1.5 * stretch * g.spacing_mm.norm();
+  return geometry::Aabb{Eigen::Vector3d(lo[0], lo[1], lo[2]).array() - grow,
+                        Eigen::Vector3d(hi[0], hi[1], hi[2]).array() + grow};
+}
+}  // namespace
 
 EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> reference, GlobalMap map,
                            particles::Positions placed, particles::Positions current,
@@ -34,21 +75,19 @@ EmbeddedBody::EmbeddedBody(std::shared_ptr<const geometry::LabelVolume> referenc
       deformation_(std::move(deformation)) {
   if (!reference_ || !distance_) throw std::invalid_argument("embedded body: no reference body");
   if (!deformation_) throw std::invalid_argument("embedded body: no deformation");
+  const std::optional<geometry::Aabb> organ = moved_organ_box(*reference_, *deformation_);
+  const geometry::Aabb particles = deformation_->particle_box();
+  if (!((particles.max_mm - particles.min_mm).array() > 0).all())
+    bounds_ = organ.value_or(geometry::Aabb{});
+  else if (!organ)
+    bounds_ = particles;
+  else
+    bounds_ = {organ->min_mm.cwiseMin(particles.min_mm), organ->max_mm.cwiseMax(particles.max_mm)};
 }
 
 bool EmbeddedBody::inside(const Eigen::Vector3d& q) const {
   const Eigen::Vector3d r = pull_back(q);
   return r.allFinite() && distance_->beyond_level(r) < 0;
-}
-
-geometry::Aabb EmbeddedBody::bounds() const {
-  const geometry::Aabb b = deformation_->particle_box();
-  if (((b.max_mm - b.min_mm).array() > 0).all()) return b;
-  // No particles: the reference's box moved by the global map (its corners' images:
-  // exact for an affine map).
-  const geometry::Aabb r = reference_->geometry.bounds_mm();
-  return geometry::image_of_box(
-      r, [this](const Eigen::Vector3d& p) { return deformation_->push_forward(p); });
 }
 
 geometry::LabelVolume EmbeddedBody::on_grid(const geometry::ImageGeometry& grid) const {

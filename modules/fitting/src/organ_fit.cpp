@@ -98,6 +98,10 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
   const double volume_voxel = planned.voxel_mm;
   report.volume_voxel_mm = volume_voxel;
   const particles::Positions start = state.x;
+  // The pieces the body was planned in (particles within 1.5 r0 joined, as the planning
+  // run counts them): the re-fill keeps as many, and only more after the fit is a tear.
+  report.planning_pieces =
+      state.size() > 0 ? particles::connected_components(start, 1.5 * law.r0()) : 1;
   out.before.emplace(organ_body(model));
   const double v0 = planned.particle_body_mm3;
   report.volume_before_mm3 = planned.organ_mm3;
@@ -244,7 +248,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     const MappedBodySites sites(model.reference, *reference_exact, model.lattice_spacing_mm, map);
     while (passes < 3) {
       ++passes;
-      state = particles::State(sites.fill(count));
+      state = particles::State(sites.fill(count, report.planning_pieces));
       if (model.settings.skeleton) {
         if (model.skeleton) m.remove(*model.skeleton);
         const particles::Skeleton sk = particles::medial_skeleton(state.x, model.lattice_spacing_mm,
@@ -325,10 +329,11 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     report.fit.stop_reason = why + "; the global stage's organ kept" +
                              (report.fit.converged ? ", which explains the points" : "");
   };
-  int pieces = 1;
+  int pieces = report.planning_pieces;
   if (spread && state.size() > 0 &&
-      (pieces = particles::connected_components(state.x, 1.5 * law.r0())) > 1)
-    undo_local_stage("the local stage tore the organ into " + std::to_string(pieces) + " pieces");
+      (pieces = particles::connected_components(state.x, 1.5 * law.r0())) > report.planning_pieces)
+    undo_local_stage("the local stage tore the organ into " + std::to_string(pieces) + " pieces (" +
+                     std::to_string(report.planning_pieces) + " at planning)");
   report.pieces = pieces;
   finishing(1, "the pieces");
   auto make_organ_after = [&] {
@@ -339,7 +344,7 @@ FittedOrgan fit_organ(OrganModel model, const std::vector<AttractivePoint>& poin
     }
   };
   make_organ_after();
-  if (spread && pieces == 1 && out.after->deformation().folds()) {
+  if (spread && pieces <= report.planning_pieces && out.after->deformation().folds()) {
     undo_local_stage("the local stage folded the organ (det(grad phi) <= 0)");
     report.local_stage_folded = true;
     make_organ_after();

@@ -62,19 +62,20 @@ MappedBodySites::MappedBodySites(const geometry::LabelVolume& reference,
   std::stable_sort(idx.begin(), idx.end(), [&](int l, int r) { return d[l] > d[r]; });
 }
 
-particles::Positions MappedBodySites::fill(int count) const {
+particles::Positions MappedBodySites::fill(int count, int pieces) const {
   if (count <= 0) return particles::Positions(3, 0);
   const particles::Positions& sites = sites_;
   const std::vector<int>& idx = ranked_;
   const double a_nn_mm = a_nn_mm_;
   const int keep = std::min<int>(count, static_cast<int>(idx.size()));
-  // One body: the largest group of the deepest `keep` sites (joined within 1.2 a_nn),
-  // topped up with the next deepest sites that touch it.
+  // The body: the largest `pieces` groups of the deepest `keep` sites (joined within 1.2
+  // a_nn), topped up with the next deepest sites that touch them.
   const double link2 = (1.2 * a_nn_mm) * (1.2 * a_nn_mm);
   particles::Positions chosen(3, keep);
   for (int s = 0; s < keep; ++s)
     chosen.col(s) = sites.col(idx[s]);
-  const std::vector<int> body = particles::largest_component(chosen, 1.2 * a_nn_mm);
+  const std::vector<int> body =
+      particles::largest_components(chosen, 1.2 * a_nn_mm, std::max(1, pieces));
   std::vector<char> taken(sites.cols(), 0);
   std::vector<int> result;
   for (int b : body)

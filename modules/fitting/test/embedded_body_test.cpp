@@ -250,6 +250,53 @@ TEST(EmbeddedBody, VolumesOnShiftedGridsAverageToItsVolume) {
   EXPECT_THROW(body.volumes_on_shifted_grids(organ.grid, -1), std::invalid_argument);
 }
 
+// A part of the organ no particle fills (an island of a few voxels 16 mm beyond the
+// ellipsoid, a stray of the contouring or a node): at rest the body on its grid is the
+// reference voxel for voxel, the island included; under a global map with a bend the
+// island is where the map puts it, whole. The particles' box had bounded the body, and the
+// island was left out of the exported organ (even at rest).
+TEST(EmbeddedBody, HoldsThePartsOfTheOrganNoParticleFills) {
+  const Eigen::Vector3d c(0, 0, 0), island(36, 0, 0);
+  const geometry::ImageGeometry g =
+      geometry::grid_covering({c - kSemiAxes, island + Eigen::Vector3d::Constant(2)}, 0.75, 3.0);
+  auto mask = std::make_shared<geometry::LabelVolume>(*ellipsoid_on(g, c));
+  const particles::Positions x0 = fill(*mask);  // before the island: none in it
+  int island_voxels = 0;
+  for (int k = 0; k < g.size[2]; ++k)
+    for (int j = 0; j < g.size[1]; ++j)
+      for (int i = 0; i < g.size[0]; ++i)
+        if ((g.index_to_physical(Eigen::Vector3d(i, j, k)) - island).norm() <= 1.6)
+          mask->at(i, j, k) = 1, ++island_voxels;
+  ASSERT_GT(island_voxels, 20);
+  ASSERT_LT(x0.row(0).maxCoeff() + embedding_support_mm(kSpacing), island.x() - 2);
+
+  const EmbeddedBody at_rest(mask, GlobalMap{}, x0, x0, embedding_support_mm(kSpacing));
+  const geometry::LabelVolume same = at_rest.on_grid(g);
+  EXPECT_TRUE(same.labels == mask->labels);
+
+  GlobalMap map;
+  map.affine.a = Eigen::Vector3d(1.1, 1 / std::sqrt(1.1), 1 / std::sqrt(1.1)).asDiagonal();
+  map.affine.t = Eigen::Vector3d(2, -1, 0.5);
+  map.shears.c(3) = 0.004;  // y += 0.004 u_x^2: a bend
+  particles::Positions placed(3, x0.cols());
+  for (Eigen::Index i = 0; i < x0.cols(); ++i)
+    placed.col(i) = map.apply(x0.col(i));
+  const EmbeddedBody moved(mask, map, placed, placed, embedding_support_mm(kSpacing));
+  const geometry::ImageGeometry today = geometry::grid_covering(moved.bounds(), 0.5, 0.0);
+  const geometry::LabelVolume organ = moved.on_grid(today);
+  const Eigen::Vector3d there = map.apply(island);
+  int at_island = 0;
+  for (int k = 0; k < today.size[2]; ++k)
+    for (int j = 0; j < today.size[1]; ++j)
+      for (int i = 0; i < today.size[0]; ++i)
+        if (organ.at(i, j, k) &&
+            (today.index_to_physical(Eigen::Vector3d(i, j, k)) - there).norm() < 3)
+          ++at_island;
+  // The island's volume (the voxels' 0.42 mm3 each) on the finer grid: kept to 20%.
+  EXPECT_NEAR(at_island * 0.125, island_voxels * mask->geometry.spacing_mm.prod(),
+              0.2 * island_voxels * mask->geometry.spacing_mm.prod());
+}
+
 TEST(EmbeddedBody, IsEmptyFarFromTheParticlesAndRefusesBadInput) {
   const auto mask = ellipsoid_mask(Eigen::Vector3d::Zero());
   const particles::Positions x = fill(*mask);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <cstdlib>
 #include <vector>
@@ -143,6 +144,31 @@ bool is_slice_speck(const LabelVolume& mask, int i, int j, int k, bool island) {
 
 Topology topology_of(const LabelVolume& mask) {
   return Pieces(mask).topology();
+}
+
+std::vector<long long> pieces_holding_none(const LabelVolume& mask,
+                                           const Eigen::Matrix3Xd& points_mm) {
+  const Pieces pieces(mask);
+  if (pieces.box.empty()) return {};
+  std::vector<bool> held(pieces.pieces.size(), false);
+  const ImageGeometry& g = mask.geometry;
+  for (Eigen::Index c = 0; c < points_mm.cols(); ++c) {
+    const Eigen::Vector3d idx = g.physical_to_index(points_mm.col(c));
+    if (!idx.allFinite()) continue;
+    const long long i = std::llround(idx.x()), j = std::llround(idx.y()), k = std::llround(idx.z());
+    if (i < pieces.box.lo[0] || j < pieces.box.lo[1] || k < pieces.box.lo[2] ||
+        i > pieces.box.hi[0] || j > pieces.box.hi[1] || k > pieces.box.hi[2])
+      continue;
+    const int p = pieces.id[pieces.index(static_cast<int>(i - pieces.box.lo[0] + 1),
+                                         static_cast<int>(j - pieces.box.lo[1] + 1),
+                                         static_cast<int>(k - pieces.box.lo[2] + 1))];
+    if (p >= 0 && pieces.pieces[static_cast<size_t>(p)].organ) held[static_cast<size_t>(p)] = true;
+  }
+  std::vector<long long> sizes;
+  for (size_t p = 0; p < pieces.pieces.size(); ++p)
+    if (pieces.pieces[p].organ && !held[p]) sizes.push_back(pieces.pieces[p].size);
+  std::sort(sizes.rbegin(), sizes.rend());
+  return sizes;
 }
 
 std::vector<SliceSpecks> slice_specks(const LabelVolume& mask, const SpeckExplained& explained) {

@@ -3,6 +3,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <vector>
+
 #include "organfit/geometry/slice_contours.h"
 
 namespace organfit::geometry {
@@ -36,6 +39,25 @@ TEST(Topology, CountsPiecesCavitiesAndSingleVoxels) {
     open.at(6, 6, k) = 0;
   EXPECT_EQ(topology_of(open), (Topology{1, 0, 0, 0}));
   EXPECT_EQ(topology_of(LabelVolume(ImageGeometry{})), (Topology{}));
+}
+
+// The pieces no point lies in, largest first: the box and two islands, a point in the box
+// and one in the larger island (at a voxel's corner: its nearest centre's piece); points
+// off the grid, in the background or NaN count for nothing.
+TEST(PiecesHoldingNone, AreThePiecesNoPointLiesIn) {
+  LabelVolume m = box_mask(16);             // voxels 2..13 (unit voxels, origin 0)
+  m.at(0, 0, 0) = 1;                        // an island of one voxel
+  m.at(15, 15, 15) = m.at(15, 15, 14) = 1;  // one of two
+  Eigen::Matrix3Xd none(3, 0);
+  EXPECT_EQ(pieces_holding_none(m, none), (std::vector<long long>{12 * 12 * 12, 2, 1}));
+  Eigen::Matrix3Xd points(3, 5);
+  points.col(0) << 6, 7, 8;
+  points.col(1) << 15.4, 14.6, 14.4;  // nearest centre (15, 15, 14)
+  points.col(2) << 50, 0, 0;
+  points.col(3) << 0, 15, 0;
+  points.col(4) << std::nan(""), 0, 0;
+  EXPECT_EQ(pieces_holding_none(m, points), (std::vector<long long>{1}));
+  EXPECT_TRUE(pieces_holding_none(LabelVolume(ImageGeometry{}), points).empty());
 }
 
 // Per-slice contour counts: a hole punched through one slice and an island beside the

@@ -52,14 +52,25 @@ int connected_components(const Positions& x, double link_mm) {
 }
 
 std::vector<int> largest_component(const Positions& x, double link_mm) {
+  return largest_components(x, link_mm, 1);
+}
+
+std::vector<int> largest_components(const Positions& x, double link_mm, int count) {
   const std::vector<int> root = component_roots(x, link_mm);
   std::vector<int> size(root.size(), 0);
   for (int r : root)
     ++size[r];
-  const int biggest = static_cast<int>(std::max_element(size.begin(), size.end()) - size.begin());
+  std::vector<int> roots;  // one per component, ascending: ties keep this order
+  for (int i = 0; i < static_cast<int>(root.size()); ++i)
+    if (root[i] == i) roots.push_back(i);
+  const int keep = std::clamp(count, 0, static_cast<int>(roots.size()));
+  std::stable_sort(roots.begin(), roots.end(), [&](int l, int r) { return size[l] > size[r]; });
+  std::vector<char> kept(root.size(), 0);
+  for (int c = 0; c < keep; ++c)
+    kept[roots[c]] = 1;
   std::vector<int> members;
   for (int i = 0; i < static_cast<int>(root.size()); ++i)
-    if (root[i] == biggest) members.push_back(i);
+    if (kept[root[i]]) members.push_back(i);
   return members;
 }
 

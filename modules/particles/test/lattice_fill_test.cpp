@@ -82,6 +82,25 @@ TEST(LatticeFill, CountsMatchTheLatticeDensity) {
   EXPECT_NEAR(aspect_ratio(ell), 1.0, 0.02);
 }
 
+// Three balls apart and a stray particle: the two largest taken whole, in ascending index,
+// the smallest ball and the stray left out; asking for more pieces than there are takes all.
+TEST(Components, TheLargestOnesAreTakenWholeAndTheRestLeftOut) {
+  const double a = 1.0;
+  const Positions b1 = fill_ellipsoid({10, 10, 10}, {0, 0, 0}, a),
+                  b2 = fill_ellipsoid({8, 8, 8}, {20, 0, 0}, a),
+                  b3 = fill_ellipsoid({4, 4, 4}, {0, 20, 0}, a);
+  Positions x(3, b3.cols() + b1.cols() + 1 + b2.cols());
+  x << b3, b1, Eigen::Vector3d(0, 0, 40), b2;
+  const std::vector<int> two = largest_components(x, 1.1 * a, 2);
+  ASSERT_EQ(two.size(), static_cast<size_t>(b1.cols() + b2.cols()));
+  EXPECT_TRUE(std::is_sorted(two.begin(), two.end()));
+  EXPECT_EQ(two.front(), b3.cols());  // b1's first particle
+  EXPECT_EQ(two.back(), x.cols() - 1);
+  EXPECT_EQ(largest_component(x, 1.1 * a).size(), static_cast<size_t>(b1.cols()));
+  EXPECT_EQ(largest_components(x, 1.1 * a, 9).size(), static_cast<size_t>(x.cols()));
+  EXPECT_EQ(connected_components(x, 1.1 * a), 4);
+}
+
 TEST(LatticeFill, MaskWithRotatedDirectionMatchesTheAnalyticBody) {
   geometry::ImageGeometry g;
   g.size = {60, 50, 40};

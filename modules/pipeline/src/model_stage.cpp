@@ -190,6 +190,12 @@ ModelStageResult run_model_stage(const ModelStageOptions& options, const geometr
   const double body_volume = geometry::particle_body_volume_mm3(result.state.x, 0.5 * cp.r0_mm,
                                                                 0.25 * cp.r0_mm, 0.5 * cp.r0_mm);
   const double reference_volume = result.reference.volume_mm3(1);
+  const std::vector<long long> empty_parts =
+      shape.mask ? geometry::pieces_holding_none(*shape.mask, result.state.x)
+                 : std::vector<long long>{};
+  double empty_parts_mm3 = 0;
+  for (long long voxels : empty_parts)
+    empty_parts_mm3 += static_cast<double>(voxels) * shape.mask->geometry.spacing_mm.prod();
   result.summary = {
       {"particles", n},
       {"radius_mm", 0.5 * cp.r0_mm},
@@ -212,6 +218,10 @@ ModelStageResult run_model_stage(const ModelStageOptions& options, const geometr
       // for the warning when the particles make more: parts of the organ thinner than
       // about two lattice spacings hold no particles, so what they joined falls apart.
       {"organ_components", shape.mask ? geometry::topology_of(*shape.mask).components : 1},
+      // The organ's pieces no particle lies in (an island of a few voxels, or a piece
+      // thinner than the lattice): moved by the deformation about them, not by points.
+      {"organ_parts_without_particles", empty_parts.size()},
+      {"organ_parts_without_particles_cm3", empty_parts_mm3 / 1000.0},
       {"skeleton_nodes", skeleton_nodes},
       {"skeleton_from", skeleton_source},
       {"body_volume_mm3", body_volume},

@@ -263,6 +263,15 @@ nlohmann::json run_into(const config::Scene& scene, const fs::path& out_dir,
           "thinner than about two particles ({:.1f} mm) hold none (a smaller model.radius_mm "
           "follows them; a grown organ may have leaked along them)",
           pieces, organ_pieces, 2 * model->lattice_spacing_mm));
+    if (const int empty = model->summary["organ_parts_without_particles"].get<int>(); empty > 0)
+      warn(fmt::format(
+          "model: parts of the organ hold no particle: {} of its {} ({:.3f} cm3 in all), smaller "
+          "than about one particle ({:.1f} mm); they are exported moved by the deformation "
+          "about them, and points on them do not move them (a smaller model.radius_mm fills "
+          "them)",
+          empty, model->summary["organ_components"].get<int>(),
+          model->summary["organ_parts_without_particles_cm3"].get<double>(),
+          model->lattice_spacing_mm));
   } else if (!model) {
     spdlog::info("the scene names no model");
   }

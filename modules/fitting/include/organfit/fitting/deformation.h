@@ -110,6 +110,10 @@ class Deformation {
   /// largest move (mm): where today's organ lies. Empty without particles.
   geometry::Aabb particle_box() const { return particle_box_; }
   const GlobalMap& global_map() const { return map_; }
+  /// M(r): the global map at r (mm), its shear fields from their table, as phi uses it.
+  Eigen::Vector3d map(const Eigen::Vector3d& r_mm) const { return map_.apply(r_mm, map_fields_); }
+  /// The largest |u| over the lattice (mm; 0 at rest): phi(r) lies within it of M(r).
+  double largest_u_mm() const { return largest_u_mm_; }
   double support_mm() const { return h_; }
   /// The spacing of u's lattice (mm): a third of the support.
   double lattice_mm() const;

@@ -55,9 +55,10 @@ class EmbeddedBody {
   /// use (0.05 to 0.3 s on a real organ), so a body asked only for its deformation does not
   /// pay for it.
   geometry::SignedDistance::VolumeLevels levels() const { return distance_->volume_levels(); }
-  /// A box holding the body (Deformation::particle_box; the reference's box for a
-  /// deformation without particles).
-  geometry::Aabb bounds() const;
+  /// A box holding the body (mm): the particles' box (Deformation::particle_box) and the
+  /// planning organ's surface moved by phi, which also holds the parts of the organ no
+  /// particle fills (an island of a few voxels, a part thinner than the lattice).
+  geometry::Aabb bounds() const { return bounds_; }
   /// The body on a grid (label 1 inside); only the part of the grid within bounds() is
   /// evaluated.
   geometry::LabelVolume on_grid(const geometry::ImageGeometry& grid) const;
@@ -89,6 +90,7 @@ class EmbeddedBody {
   std::shared_ptr<const geometry::LabelVolume> reference_;
   std::shared_ptr<const geometry::SignedDistance> distance_;
   std::shared_ptr<const Deformation> deformation_;
+  geometry::Aabb bounds_;
 };
 
 /// Each particle's foot on a surface given by dense samples with outward normals: the

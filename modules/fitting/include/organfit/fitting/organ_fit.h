@@ -111,12 +111,14 @@ struct FitReport {
   int points = 0, rejected_points = 0;
   /// Every point rejected as an outlier: nothing was fitted, whatever the loop said.
   bool rejected_every_point() const { return points > 0 && rejected_points == points; }
-  int pieces = 1;                   ///< > 1: the local stage tore the organ; it was undone
+  /// The particles' pieces at planning (an organ in parts is filled in parts) and after the
+  /// local stage: more than at planning, the local stage tore the organ; it was undone.
+  int planning_pieces = 1, pieces = 1;
   bool local_stage_folded = false;  ///< the local stage folded the organ; it was undone
   /// The local stage changed the organ's volume by more than volume_tolerance_pct; undone.
   bool local_stage_changed_volume = false;
   bool local_stage_undone() const {
-    return pieces > 1 || local_stage_folded || local_stage_changed_volume;
+    return pieces > planning_pieces || local_stage_folded || local_stage_changed_volume;
   }
   double volume_tolerance_pct = 1.0;     ///< the options' (fit_warnings reads it)
   double residual_floor_mm = 0;          ///< a point on the model's own surface, on average

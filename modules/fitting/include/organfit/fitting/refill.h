@@ -13,7 +13,7 @@ namespace organfit::fitting {
 /// The model's reference body (the mask it was filled from) mapped by `map`, and the
 /// sites of an fcc lattice of spacing `a_nn_mm` over it ranked by their signed depth in
 /// the reference (made once per map: the map's inverse at every site). fill(count) takes
-/// the deepest `count` as one body: same count, same density, the same volume, for
+/// the deepest `count` as the body: same count, same density, the same volume, for
 /// re-fills of one map with several counts. The reference, not the particles' own ball
 /// surface, is mapped: re-sampling the balls would add a second discretisation error to
 /// the first. `depth` is the reference's unsmoothed signed distance
@@ -23,9 +23,11 @@ class MappedBodySites {
  public:
   MappedBodySites(const geometry::LabelVolume& reference, const geometry::SignedDistance& depth,
                   double a_nn_mm, const GlobalMap& map);
-  /// The deepest `count` sites (fewer when the lattice has fewer) as one body: the
-  /// largest connected group of them, topped up with the next deepest that touch it.
-  particles::Positions fill(int count) const;
+  /// The deepest `count` sites (fewer when the lattice has fewer) as a body of `pieces`
+  /// pieces (the planning body's: an organ in two parts stays in two): the largest
+  /// `pieces` connected groups of them, topped up with the next deepest that touch one.
+  /// Smaller groups are sites of thin parts cut off at the count's depth, dropped.
+  particles::Positions fill(int count, int pieces = 1) const;
 
  private:
   double a_nn_mm_ = 1;

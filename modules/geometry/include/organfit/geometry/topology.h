@@ -6,6 +6,7 @@
 //               that do not reach the grid's border: holes sealed inside the organ
 // A one-voxel component is an island; a one-voxel cavity, a pinhole. The pair (26, 6)
 // is the one for which a digital surface separates inside from outside.
+#include <Eigen/Core>
 #include <functional>
 #include <vector>
 
@@ -25,6 +26,13 @@ struct Topology {
 
 /// The topology of label 1 of `mask` (only the box of its voxels plus one is visited).
 Topology topology_of(const LabelVolume& mask);
+
+/// The sizes (voxels), largest first, of the pieces of label 1 (26-connected) that hold
+/// none of `points_mm` (3 x N; a point is in the piece of the voxel whose centre is
+/// nearest it, when that voxel is labelled 1): the parts of an organ a particle model
+/// leaves empty.
+std::vector<long long> pieces_holding_none(const LabelVolume& mask,
+                                           const Eigen::Matrix3Xd& points_mm);
 
 /// One-pixel pieces of one slice k of label 1, as its contours show them: an island (a
 /// voxel of the organ none of whose 8 in-slice neighbours is) and a hole (a voxel outside

@@ -14,6 +14,11 @@ int connected_components(const Positions& x, double link_mm);
 /// Indices of the particles in the largest connected component (link as above).
 std::vector<int> largest_component(const Positions& x, double link_mm);
 
+/// Indices, ascending, of the particles in the `count` largest connected components (link
+/// as above; components of one size in a fixed order): the
+/// pieces of a body of `count` pieces, without the stray ones.
+std::vector<int> largest_components(const Positions& x, double link_mm, int count);
+
 /// Standard deviations of the positions along their principal axes, largest first (mm).
 Eigen::Vector3d principal_extents(const Positions& x);
 
