@@ -148,16 +148,23 @@ double radical_inverse(int i, int base) {
 
 std::vector<double> EmbeddedBody::volumes_on_shifted_grids(const geometry::ImageGeometry& grid,
                                                            int count) const {
+  return on_shifted_grids(grid, count,
+                          [](const geometry::LabelVolume& body) { return body.volume_mm3(1); });
+}
+
+std::vector<double> EmbeddedBody::on_shifted_grids(
+    const geometry::ImageGeometry& grid, int count,
+    const std::function<double(const geometry::LabelVolume&)>& measure) const {
   if (count < 0) throw std::invalid_argument("shifted grids: the count must be >= 0");
-  std::vector<double> volumes;
+  std::vector<double> values;
   for (int s = 1; s <= count; ++s) {
     const Eigen::Vector3d move_voxels(radical_inverse(s, 2) - 0.5, radical_inverse(s, 3) - 0.5,
                                       radical_inverse(s, 5) - 0.5);
     geometry::ImageGeometry shifted = grid;
     shifted.origin_mm += grid.direction * move_voxels.cwiseProduct(grid.spacing_mm);
-    volumes.push_back(on_grid(shifted).volume_mm3(1));
+    values.push_back(measure(on_grid(shifted)));
   }
-  return volumes;
+  return values;
 }
 
 double EmbeddedBody::volume_ratio(const geometry::LabelVolume& organ) const {

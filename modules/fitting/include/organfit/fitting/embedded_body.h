@@ -16,6 +16,7 @@
 // the level, not zero, so that the voxels' convex edges are not rounded off: moved by
 // parts of a voxel, the organ keeps its voxel count on average.
 #include <Eigen/Core>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -72,6 +73,10 @@ class EmbeddedBody {
   /// errors at the boundary voxels gives. Their mean is the body's volume without it.
   std::vector<double> volumes_on_shifted_grids(const geometry::ImageGeometry& grid,
                                                int count) const;
+  /// `measure` of the body on each of the same copies of `grid`, in that order.
+  std::vector<double> on_shifted_grids(
+      const geometry::ImageGeometry& grid, int count,
+      const std::function<double(const geometry::LabelVolume&)>& measure) const;
   /// The organ's volume today over its planning volume, from the deformation's Jacobian
   /// over `organ` (this body on some grid): N / sum of det(grad phi^-1) over its N
   /// voxels. Both sums count the same voxels, so the grid's sampling of the surface,
