@@ -23,7 +23,7 @@ using detail::put_sequence;
 
 void write_deformable_registration(const fs::path& file, const CtSeries& ct,
                                    const geometry::ImageGeometry& grid,
-                                   const std::vector<float>& vectors_mm,
+                                   std::vector<float> vectors_mm,
                                    const RegistrationWriteOptions& options) {
   const std::string where = file.string();
   const long long points = grid.voxel_count();
@@ -86,6 +86,7 @@ void write_deformable_registration(const fs::path& file, const CtSeries& ct,
   vectors.SetVR(V::OF);
   vectors.SetByteValue(reinterpret_cast<const char*>(vectors_mm.data()),
                        static_cast<uint32_t>(vectors_mm.size() * sizeof(float)));
+  std::vector<float>().swap(vectors_mm);  // GDCM holds its copy
   gds.Replace(vectors);
 
   // The planning CT's slices: registered in the item, and listed by the Common Instance

@@ -25,8 +25,9 @@ namespace fs = std::filesystem;
 namespace organfit::itkbridge {
 namespace {
 
+/// An image of geometry `g` with no pixels yet.
 template <class Image>
-typename Image::Pointer allocate(const PlainGeometry& g) {
+typename Image::Pointer shaped(const PlainGeometry& g) {
   auto image = Image::New();
   typename Image::RegionType region;
   typename Image::SizeType size;
@@ -45,7 +46,25 @@ typename Image::Pointer allocate(const PlainGeometry& g) {
   image->SetSpacing(spacing);
   image->SetOrigin(origin);
   image->SetDirection(direction);
+  return image;
+}
+
+template <class Image>
+typename Image::Pointer allocate(const PlainGeometry& g) {
+  auto image = shaped<Image>(g);
   image->Allocate();
+  return image;
+}
+
+/// An image of geometry `g` over `pixels` (g.voxel_count() of them), not copied: for a
+/// writer, which only reads them (a field on a CT's grid is hundreds of MB; its copy was
+/// the export's high-water mark). It must not outlive them.
+template <class Image>
+typename Image::Pointer over(const PlainGeometry& g, const typename Image::PixelType* pixels) {
+  auto image = shaped<Image>(g);
+  image->GetPixelContainer()->SetImportPointer(const_cast<typename Image::PixelType*>(pixels),
+                                               static_cast<itk::SizeValueType>(g.voxel_count()),
+                                               false);
   return image;
 }
 
@@ -147,7 +166,14 @@ void write_mask(const fs::path& file, const PlainMask& mask) {
 }
 
 void write_float_image(const fs::path& file, const PlainFloatImage& image) {
-  write_image(file, to_itk(image).GetPointer(), false);
+  write_float_image(file, image.geometry, image.values);
+}
+
+void write_float_image(const fs::path& file, const PlainGeometry& geometry,
+                       const std::vector<float>& values) {
+  if (values.size() != geometry.voxel_count())
+    throw std::invalid_argument("write_float_image: one value per voxel needed");
+  write_image(file, over<FloatImage>(geometry, values.data()).GetPointer(), false);
 }
 
 void write_vector_image(const fs::path& file, const PlainGeometry& geometry,
@@ -155,9 +181,12 @@ void write_vector_image(const fs::path& file, const PlainGeometry& geometry,
   using VectorImage = itk::Image<itk::Vector<float, 3>, 3>;
   if (xyz.size() != 3 * geometry.voxel_count())
     throw std::invalid_argument("write_vector_image: 3 values per voxel needed");
-  auto image = allocate<VectorImage>(geometry);
-  std::copy(xyz.begin(), xyz.end(), reinterpret_cast<float*>(image->GetBufferPointer()));
-  write_image(file, image.GetPointer(), false);
+  static_assert(sizeof(VectorImage::PixelType) == 3 * sizeof(float));
+  write_image(
+      file,
+      over<VectorImage>(geometry, reinterpret_cast<const VectorImage::PixelType*>(xyz.data()))
+          .GetPointer(),
+      false);
 }
 
 PlainGeometry read_vector_image(const fs::path& file, std::vector<float>& xyz) {

@@ -13,7 +13,7 @@ geometry::LabelVolume read_label_volume(const std::filesystem::path& file) {
 
 void write_float_volume(const std::filesystem::path& file, const geometry::ImageGeometry& g,
                         const std::vector<float>& values) {
-  write_float_image(file, {to_plain(g), values});
+  write_float_image(file, to_plain(g), values);
 }
 
 void write_vector_volume(const std::filesystem::path& file, const geometry::ImageGeometry& g,

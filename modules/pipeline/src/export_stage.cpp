@@ -543,8 +543,10 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
                                      {"grid", {grid.size[0], grid.size[1], grid.size[2]}}};
       dicom::RegistrationWriteOptions options;
       options.fixed_uids_and_dates = r.fixed_uids;
+      // The field's last use (written after the displacement field): moved into the writer,
+      // which lets it go once GDCM has copied it.
       out.writes_.push_back([file, field, grid, ct, options](nlohmann::json&) {
-        dicom::write_deformable_registration(file, *ct, grid, *field, options);
+        dicom::write_deformable_registration(file, *ct, grid, std::move(*field), options);
       });
     }
     if (!r.jacobian.empty()) {

@@ -30,9 +30,11 @@ struct RegistrationWriteOptions {
 /// name and renamed. Throws InputError naming the file when it cannot be written, or
 /// std::invalid_argument when the vectors do not fill the grid, the grid is not
 /// right-handed, or it exceeds what Vector Grid Data holds (4 GB).
+/// `vectors_mm` is taken (move it in) and let go once GDCM holds its own copy: on a CT's
+/// grid each is hundreds of MB.
 void write_deformable_registration(const std::filesystem::path& file, const CtSeries& ct,
                                    const geometry::ImageGeometry& grid,
-                                   const std::vector<float>& vectors_mm,
+                                   std::vector<float> vectors_mm,
                                    const RegistrationWriteOptions& options = {});
 
 }  // namespace organfit::dicom

@@ -33,6 +33,9 @@ void write_mask(const std::filesystem::path& file, const PlainMask& mask);
 /// A scalar float image (e.g. a Jacobian determinant), written as write_mask writes but
 /// uncompressed.
 void write_float_image(const std::filesystem::path& file, const PlainFloatImage& image);
+/// The same from a geometry and its values (one per voxel, i fastest), not copied.
+void write_float_image(const std::filesystem::path& file, const PlainGeometry& geometry,
+                       const std::vector<float>& values);
 /// A field of 3-vectors (x, y, z per voxel, i fastest; mm in the image's physical frame),
 /// written as an ITK vector image of float (.mha, .nrrd, .nii): the form plastimatch
 /// reads as a vector field (`--xf`). Written as write_mask writes but uncompressed.
