@@ -220,32 +220,23 @@ if [[ -d "$src/../shared/data/ct-sts-004" ]]; then
   data="$src/../shared/data/ct-sts-004"
   $py -c "
 import copy, glob, numpy as np, pydicom
-rs = pydicom.dcmread('$data/rtstruct.dcm')
 zs = sorted(float(pydicom.dcmread(f, stop_before_pixels=True).ImagePositionPatient[2]) for f in glob.glob('$data/ct/*'))
-seq = rs.ROIContourSequence[0].ContourSequence
-c, R = np.array([-45.0, 10.0, 700.0]), 8.0
-for z in zs:
-    if abs(z - c[2]) >= R: continue
-    r, t = np.sqrt(R * R - (z - c[2]) ** 2), np.linspace(0, 2 * np.pi, 48, endpoint=False)
-    item = copy.deepcopy(seq[0]); del item.ContourImageSequence
-    item.ContourData = [f'{v:.3f}' for v in np.stack([c[0] + r * np.cos(t), c[1] + r * np.sin(t), np.full_like(t, z)], 1).ravel()]
-    item.NumberOfContourPoints = 48
-    seq.append(item)
-rs.save_as('$tmp/two_parts.dcm')
-# The ball replaced by an island: a ball of 2 mm radius at (-40, 30, 700) mm, on the two
-# slices it cuts (0.4 and 1.5 mm in radius there), where no site of the model's lattice
-# falls (the model's summary says so: asserted below).
-rs = pydicom.dcmread('$data/rtstruct.dcm')
-seq = rs.ROIContourSequence[0].ContourSequence
-c, R = np.array([-40.0, 30.0, 700.0]), 2.0
-for z in zs:
-    if abs(z - c[2]) >= R: continue
-    r, t = np.sqrt(R * R - (z - c[2]) ** 2), np.linspace(0, 2 * np.pi, 48, endpoint=False)
-    item = copy.deepcopy(seq[0]); del item.ContourImageSequence
-    item.ContourData = [f'{v:.3f}' for v in np.stack([c[0] + r * np.cos(t), c[1] + r * np.sin(t), np.full_like(t, z)], 1).ravel()]
-    item.NumberOfContourPoints = 48
-    seq.append(item)
-rs.save_as('$tmp/island.dcm')"
+def with_ball(centre, R, out):  # the GTV's ROI and a ball contoured on the slices it cuts
+    rs = pydicom.dcmread('$data/rtstruct.dcm')
+    seq = rs.ROIContourSequence[0].ContourSequence
+    c = np.array(centre)
+    for z in zs:
+        if abs(z - c[2]) >= R: continue
+        r, t = np.sqrt(R * R - (z - c[2]) ** 2), np.linspace(0, 2 * np.pi, 48, endpoint=False)
+        item = copy.deepcopy(seq[0]); del item.ContourImageSequence
+        item.ContourData = [f'{v:.3f}' for v in np.stack([c[0] + r * np.cos(t), c[1] + r * np.sin(t), np.full_like(t, z)], 1).ravel()]
+        item.NumberOfContourPoints = 48
+        seq.append(item)
+    rs.save_as(out)
+with_ball([-45.0, 10.0, 700.0], 8.0, '$tmp/two_parts.dcm')
+# An island: a ball of 2 mm radius on the two slices it cuts (0.4 and 1.5 mm in radius
+# there), where no site of the model's lattice falls (the model's summary says so: below).
+with_ball([-40.0, 30.0, 700.0], 2.0, '$tmp/island.dcm')"
   check real.two_parts.session "$bin" --quiet run "$src/pipelines/real-sts-002.yaml" --out "$tmp/two-parts" \
     --set "ct.folder=$data/ct" --set "organ.rtstruct=$tmp/two_parts.dcm" --set export.labels=fit.nrrd
   check real.two_parts.checks_hold checks_hold "$tmp/two-parts/run.json"
