@@ -24,32 +24,34 @@ std::optional<geometry::Aabb> moved_organ_box(const geometry::LabelVolume& mask,
                                               const Deformation& phi) {
   const geometry::ImageGeometry& g = mask.geometry;
   const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
-  double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(HUGE_VAL), hi = -lo;
   const bool moved = !phi.identity();
-#pragma omp parallel for collapse(2) schedule(static) reduction(min                     \
-                                                                : lo[:3]) reduction(max \
-                                                                                    : hi[:3])
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < ny; ++j)
-      for (int i = 0; i < nx; ++i) {
-        if (!mask.at(i, j, k)) continue;
-        const bool boundary = i == 0 || j == 0 || k == 0 || i + 1 == nx || j + 1 == ny ||
-                              k + 1 == nz || !mask.at(i - 1, j, k) || !mask.at(i + 1, j, k) ||
-                              !mask.at(i, j - 1, k) || !mask.at(i, j + 1, k) ||
-                              !mask.at(i, j, k - 1) || !mask.at(i, j, k + 1);
-        if (!boundary) continue;
-        const Eigen::Vector3d r = g.index_to_physical(Eigen::Vector3d(i, j, k));
-        const Eigen::Vector3d q = moved ? phi.map(r) : r;
-        for (int d = 0; d < 3; ++d)
-          lo[d] = std::min(lo[d], q[d]), hi[d] = std::max(hi[d], q[d]);
-      }
-  if (!(lo[0] <= hi[0])) return std::nullopt;
+#pragma omp parallel
+  {
+    Eigen::Vector3d thread_lo = Eigen::Vector3d::Constant(HUGE_VAL), thread_hi = -thread_lo;
+#pragma omp for collapse(2) schedule(static) nowait
+    for (int k = 0; k < nz; ++k)
+      for (int j = 0; j < ny; ++j)
+        for (int i = 0; i < nx; ++i) {
+          if (!mask.at(i, j, k)) continue;
+          const bool boundary = i == 0 || j == 0 || k == 0 || i + 1 == nx || j + 1 == ny ||
+                                k + 1 == nz || !mask.at(i - 1, j, k) || !mask.at(i + 1, j, k) ||
+                                !mask.at(i, j - 1, k) || !mask.at(i, j + 1, k) ||
+                                !mask.at(i, j, k - 1) || !mask.at(i, j, k + 1);
+          if (!boundary) continue;
+          const Eigen::Vector3d r = g.index_to_physical(Eigen::Vector3d(i, j, k));
+          const Eigen::Vector3d q = moved ? phi.map(r) : r;
+          thread_lo = thread_lo.cwiseMin(q), thread_hi = thread_hi.cwiseMax(q);
+        }
+#pragma omp critical(organfit_moved_organ_box)
+    lo = lo.cwiseMin(thread_lo), hi = hi.cwiseMax(thread_hi);
+  }
+  if (!(lo.x() <= hi.x())) return std::nullopt;
   const double stretch =
       moved ? Eigen::JacobiSVD<Eigen::Matrix3d>(phi.global_map().affine.a).singularValues()[0]
             : 1.0;
   const double grow = phi.largest_u_mm() + 1.5 * stretch * g.spacing_mm.norm();
-  return geometry::Aabb{Eigen::Vector3d(lo[0], lo[1], lo[2]).array() - grow,
-                        Eigen::Vector3d(hi[0], hi[1], hi[2]).array() + grow};
+  return geometry::Aabb{lo.array() - grow, hi.array() + grow};
 }
 }  // namespace
 
