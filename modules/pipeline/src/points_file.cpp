@@ -219,6 +219,45 @@ std::string header_mismatch(const std::vector<std::string>& cells) {
                          letters[0], letters[1], letters[2], axes[0], axes[1], axes[2]);
   return "";
 }
+
+/// 3D Slicer's markups table (.fcsv) declares its columns and frame in comment lines:
+/// "# columns = id,x,y,z,ow,..." and "# CoordinateSystem = LPS" (or RAS; Slicer 4 wrote 0
+/// for RAS, 1 for LPS). Its rows hold text (an id, a label) beside the numbers.
+struct DeclaredColumns {
+  int x = -1, y = -1, z = -1;  ///< the coordinates' columns; -1: no columns declared
+  bool ras = false;            ///< x and y point the other way: negated into LPS
+  bool declared() const { return x >= 0; }
+};
+
+/// Takes a "# key = value" comment line into `d`; returns why it cannot be read, or "".
+std::string take_slicer_declaration(const std::string& comment, DeclaredColumns& d) {
+  const auto equals = comment.find('=');
+  if (equals == std::string::npos) return "";
+  const std::string key = trim(comment.substr(0, equals));
+  const std::string value = trim(comment.substr(equals + 1));
+  if (key == "CoordinateSystem") {
+    if (value == "LPS" || value == "1") {
+      d.ras = false;
+    } else if (value == "RAS" || value == "0") {
+      d.ras = true;
+    } else {
+      return fmt::format("CoordinateSystem '{}': LPS or RAS expected", echo(value));
+    }
+  } else if (key == "columns") {
+    const std::vector<std::string> names = cells_of(value);
+    for (size_t c = 0; c < names.size(); ++c) {
+      const std::string n = trim(names[c]);
+      const int at = static_cast<int>(c);
+      if (n == "x") d.x = at;
+      if (n == "y") d.y = at;
+      if (n == "z") d.z = at;
+    }
+    if (d.x < 0 || d.y < 0 || d.z < 0)
+      return "its declared columns name no x, y and z: " + echo(value);
+  }
+  return "";
+}
+
 }  // namespace
 
 std::vector<fitting::AttractivePoint> read_points_csv(const fs::path& file) {
@@ -233,6 +272,7 @@ PointsTable read_points_table(const fs::path& file) {
   std::vector<fitting::AttractivePoint>& points = table.points;
   int line_no = 0;
   bool header_seen = false;
+  DeclaredColumns declared;
   size_t at = 0;
   while (at <= text.size()) {
     size_t end = text.find_first_of("\r\n", at);
@@ -247,9 +287,19 @@ PointsTable read_points_table(const fs::path& file) {
     if (first == std::string::npos) continue;
     if (line[first] == '#') {
       take_declaration(line.substr(first + 1), table.ct);
+      if (const std::string why = take_slicer_declaration(line.substr(first + 1), declared);
+          !why.empty())
+        fail(why);
       continue;
     }
-    const std::vector<std::string> cells = cells_of(line);
+    std::vector<std::string> cells = cells_of(line);
+    if (declared.declared()) {  // the declared columns alone, in x, y, z order
+      const int last = std::max({declared.x, declared.y, declared.z});
+      if (static_cast<int>(cells.size()) <= last)
+        fail(fmt::format("{} columns where its declared columns need {}", cells.size(), last + 1));
+      cells = {cells[static_cast<size_t>(declared.x)], cells[static_cast<size_t>(declared.y)],
+               cells[static_cast<size_t>(declared.z)]};
+    }
     std::vector<double> v;
     for (const auto& c : cells) {
       double d = 0;
@@ -285,6 +335,7 @@ PointsTable read_points_table(const fs::path& file) {
     if (static_cast<long>(points.size()) == kMaxPointsInFile)
       throw InputError(fmt::format("{}: more than {} points (the most a points file may hold)",
                                    name, kMaxPointsInFile));
+    if (declared.ras) v[0] = -v[0], v[1] = -v[1];  // into LPS
     points.push_back({Eigen::Vector3d(v[0], v[1], v[2]), v.size() == 4 ? v[3] : 1.0});
   }
   if (points.empty()) throw InputError(name + ": no points in the file");

@@ -402,8 +402,8 @@ config::Schema build_schema() {
               "generate on the deformed body (truth known), read from points.file, or segment the "
               "'ultrasound'")
       .input_path("file",
-                  "points in mm: CSV x,y,z[,confidence], or the vertices of a .ply/.vtk/.vtp "
-                  "(source: file)",
+                  "points in mm: CSV x,y,z[,confidence], 3D Slicer's markups (.fcsv), or the "
+                  "vertices of a .ply/.vtk/.vtp (source: file)",
                   false)
       .used_when({{"points.source", {"file"}}})
       .integer("count", evaluation::SamplingOptions{}.count, 1, 100000,

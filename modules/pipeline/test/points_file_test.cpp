@@ -1,5 +1,6 @@
 #include "organfit/pipeline/points_file.h"
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -117,6 +118,33 @@ TEST_F(PointsFile, RefusesAHeaderNamingAnotherUnitOrFrame) {
                                    "x,y,z,m",  // a fourth column is not a coordinate
                                    "m1,m2,m3", "P1 (mm),P2 (mm),P3 (mm)"})  // numbered, not m
     EXPECT_EQ(read_points_csv(write(header + "\n1,2,3\n")).size(), 1u) << header;
+}
+
+// 3D Slicer's markups table: its declared columns (an id and a label beside x, y, z) and
+// its frame (RAS negated into LPS; Slicer 4's 0 and 1). A declaration it cannot read, or a
+// row short of its columns, is refused naming the line.
+TEST_F(PointsFile, ReadsSlicerMarkupsByTheirDeclaredColumnsAndFrame) {
+  const std::string head =
+      "# Markups fiducial file version = 4.11\n# CoordinateSystem = {}\n"
+      "# columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID\n";
+  const std::string rows =
+      "vtkMRMLMarkupsFiducialNode_0,1.5,-2,30,0,0,0,1,1,1,0,F-1,,\n"
+      "vtkMRMLMarkupsFiducialNode_1,-4,5.25,31,0,0,0,1,1,1,0,F-2,a note,\n";
+  for (const auto& [frame, sign] :
+       std::vector<std::pair<std::string, double>>{{"LPS", 1}, {"1", 1}, {"RAS", -1}, {"0", -1}}) {
+    const std::string text = fmt::format(fmt::runtime(head), frame) + rows;
+    const std::vector<fitting::AttractivePoint> p = read_points_csv(write(text));
+    ASSERT_EQ(p.size(), 2u) << frame;
+    EXPECT_EQ(p[0].p_mm, Eigen::Vector3d(sign * 1.5, sign * -2, 30)) << frame;
+    EXPECT_EQ(p[1].p_mm, Eigen::Vector3d(sign * -4, sign * 5.25, 31)) << frame;
+    EXPECT_EQ(p[1].confidence, 1.0);
+  }
+  EXPECT_EQ(error_of(fmt::format(fmt::runtime(head), "IJK") + rows),
+            ":2: CoordinateSystem 'IJK': LPS or RAS expected");
+  EXPECT_EQ(error_of("# columns = id,a,b,c\n" + rows),
+            ":1: its declared columns name no x, y and z: id,a,b,c");
+  EXPECT_EQ(error_of(fmt::format(fmt::runtime(head), "LPS") + "id_0,1,2\n"),
+            ":4: 3 columns where its declared columns need 4");
 }
 
 TEST_F(PointsFile, ReadsTheCtItDeclaresWithItsPointsInOnePass) {

@@ -10,6 +10,11 @@
 // coordinate column named in another unit ("x_cm", "Y (m)", "z inches"), the columns named
 // R, A, S (or RAS), i, j, k (voxel indices), or the axes in another order ("z,y,x").
 //
+// 3D Slicer's markups table (.fcsv) is read by what its comment lines declare: "# columns =
+// id,x,y,z,..." (its x, y and z columns taken, the id and label beside them left) and
+// "# CoordinateSystem = LPS" or RAS (Slicer 4 wrote 1 or 0): RAS is turned into LPS (x and y
+// negated), since the file says which it is.
+//
 // The CT the points are in may be declared in comment lines, as `organfit us-points --ct`
 // writes them: "# series_instance_uid: UID" and "# frame_of_reference_uid: UID". A run
 // refuses points declared in another CT than its planning CT.
