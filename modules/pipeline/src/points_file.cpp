@@ -225,9 +225,35 @@ std::string header_mismatch(const std::vector<std::string>& cells) {
 /// for RAS, 1 for LPS). Its rows hold text (an id, a label) beside the numbers.
 struct DeclaredColumns {
   int x = -1, y = -1, z = -1;  ///< the coordinates' columns; -1: no columns declared
+  int confidence = -1;         ///< the confidence's column; -1: none
   bool ras = false;            ///< x and y point the other way: negated into LPS
   bool declared() const { return x >= 0; }
 };
+
+/// A header line's columns by name, when it names x, y and z (a column's first word, as
+/// header_mismatch reads it: "x", "X (mm)", "x_mm") other than first, second and third
+/// ("id,x,y,z", "z,y,x"): those, and a column named "confidence". Otherwise none: the first
+/// three columns are x, y, z and a fourth the confidence, as for a table without a header.
+DeclaredColumns columns_named(const std::vector<std::string>& cells) {
+  DeclaredColumns d;
+  for (size_t c = 0; c < cells.size(); ++c) {
+    std::string word;
+    for (const char ch : cells[c]) {
+      if (!std::isalpha(static_cast<unsigned char>(ch))) {
+        if (!word.empty()) break;
+        continue;
+      }
+      word += static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    }
+    const int at = static_cast<int>(c);
+    if (word == "x" && d.x < 0) d.x = at;
+    if (word == "y" && d.y < 0) d.y = at;
+    if (word == "z" && d.z < 0) d.z = at;
+    if (word == "confidence" && d.confidence < 0) d.confidence = at;
+  }
+  if (d.x < 0 || d.y < 0 || d.z < 0 || (d.x == 0 && d.y == 1 && d.z == 2)) return {};
+  return d;
+}
 
 /// Takes a "# key = value" comment line into `d`; returns why it cannot be read, or "".
 std::string take_slicer_declaration(const std::string& comment, DeclaredColumns& d) {
@@ -293,12 +319,16 @@ PointsTable read_points_table(const fs::path& file) {
       continue;
     }
     std::vector<std::string> cells = cells_of(line);
-    if (declared.declared()) {  // the declared columns alone, in x, y, z order
-      const int last = std::max({declared.x, declared.y, declared.z});
+    if (declared.declared()) {  // the named columns alone: x, y, z[, confidence]
+      const int last = std::max({declared.x, declared.y, declared.z, declared.confidence});
       if (static_cast<int>(cells.size()) <= last)
-        fail(fmt::format("{} columns where its declared columns need {}", cells.size(), last + 1));
-      cells = {cells[static_cast<size_t>(declared.x)], cells[static_cast<size_t>(declared.y)],
-               cells[static_cast<size_t>(declared.z)]};
+        fail(fmt::format("{} columns where its named columns need {}", cells.size(), last + 1));
+      std::vector<std::string> named = {cells[static_cast<size_t>(declared.x)],
+                                        cells[static_cast<size_t>(declared.y)],
+                                        cells[static_cast<size_t>(declared.z)]};
+      if (declared.confidence >= 0)
+        named.push_back(cells[static_cast<size_t>(declared.confidence)]);
+      cells = std::move(named);
     }
     std::vector<double> v;
     for (const auto& c : cells) {
@@ -307,11 +337,22 @@ PointsTable read_points_table(const fs::path& file) {
         // One line of column names may come before the first point; what it says of the
         // unit and frame is not ignored.
         if (points.empty() && v.empty() && !header_seen) {
-          const std::string mismatch = header_mismatch(cells);
+          // Its coordinate columns: those it names x, y, z, or its first three.
+          const DeclaredColumns named = declared.declared() ? declared : columns_named(cells);
+          const std::string mismatch = header_mismatch(
+              named.declared() ? std::vector<std::string>{cells[static_cast<size_t>(named.x)],
+                                                          cells[static_cast<size_t>(named.y)],
+                                                          cells[static_cast<size_t>(named.z)]}
+                               : cells);
           if (!mismatch.empty())
             fail(mismatch +
                  "; points are read in mm, in the planning CT's patient coordinates "
                  "(LPS)");
+          if (!declared.declared()) {
+            const bool ras = declared.ras;
+            declared = named;
+            declared.ras = ras;
+          }
           break;
         }
         fail(fmt::format("'{}' is not a number", echo(c)));

@@ -104,10 +104,10 @@ TEST_F(PointsFile, RefusesAHeaderNamingAnotherUnitOrFrame) {
   EXPECT_EQ(error_of("R,A,S\n1,2,3\n"), ":1" + ras);
   EXPECT_EQ(error_of("x_ras,y_ras,z_ras\n1,2,3\n"), ":1" + ras);
   EXPECT_EQ(error_of("R (mm),A (mm),S (mm)\n1,2,3\n"), ":1" + ras);
-  EXPECT_EQ(error_of("z,y,x\n1,2,3\n"),
-            ":1: its columns are named z, y, x: they are read as x, y, z" + why);
-  EXPECT_EQ(error_of("Y (mm),X (mm),Z (mm),confidence\n1,2,3,1\n"),
-            ":1: its columns are named y, x, z: they are read as x, y, z" + why);
+  EXPECT_EQ(error_of("id,x_cm,y_cm,z_cm\n7,1,2,3\n"),
+            ":1: its columns are named in centimetres" + why);
+  EXPECT_EQ(error_of("label,note,x (m),y (m),z (m)\np,q,1,2,3\n"),
+            ":1: its columns are named in metres" + why);
   EXPECT_EQ(error_of("S,P,L\n1,2,3\n"),
             ":1: its columns are named s, p, l: they are read as l, p, s" + why);
   EXPECT_EQ(error_of("i,j,k\n1,2,3\n"),
@@ -144,7 +144,34 @@ TEST_F(PointsFile, ReadsSlicerMarkupsByTheirDeclaredColumnsAndFrame) {
   EXPECT_EQ(error_of("# columns = id,a,b,c\n" + rows),
             ":1: its declared columns name no x, y and z: id,a,b,c");
   EXPECT_EQ(error_of(fmt::format(fmt::runtime(head), "LPS") + "id_0,1,2\n"),
-            ":4: 3 columns where its declared columns need 4");
+            ":4: 3 columns where its named columns need 4");
+}
+
+// A header line that names x, y and z other than first, second and third ("id,x,y,z", as
+// spreadsheets of marked points have; "z,y,x"): those columns read, and one named
+// confidence; their names' units and frame judged as a header's are. The id had been read
+// as x and z as a confidence ("confidence must be in (0, 1]"). A header naming x, y, z
+// first keeps its fourth column as the confidence, whatever its name.
+TEST_F(PointsFile, ReadsTheColumnsAHeaderNamesXYZ) {
+  auto read = [&](const std::string& text) { return read_points_csv(write(text)); };
+  std::vector<fitting::AttractivePoint> p = read("id,x,y,z\n7,1.5,-2,30\n8,-4,5,31\n");
+  ASSERT_EQ(p.size(), 2u);
+  EXPECT_EQ(p[0].p_mm, Eigen::Vector3d(1.5, -2, 30));
+  EXPECT_EQ(p[1].p_mm, Eigen::Vector3d(-4, 5, 31));
+  EXPECT_EQ(p[1].confidence, 1.0);
+  p = read("label;Z (mm);X (mm);Y (mm);confidence\np1;30;1,5;-2;0,5\n");
+  ASSERT_EQ(p.size(), 1u);
+  EXPECT_EQ(p[0].p_mm, Eigen::Vector3d(1.5, -2, 30));
+  EXPECT_EQ(p[0].confidence, 0.5);
+  p = read("x,y,z,weight\n1,2,3,0.25\n");
+  EXPECT_EQ(p[0].confidence, 0.25);
+  EXPECT_EQ(error_of("id,x,y,z\n7,1.5,-2\n"), ":2: 3 columns where its named columns need 4");
+  // Named in another order: read by their names (they had been refused, read by place).
+  p = read("z,y,x\n30,-2,1.5\n");
+  EXPECT_EQ(p[0].p_mm, Eigen::Vector3d(1.5, -2, 30));
+  p = read("Y (mm),X (mm),Z (mm),confidence\n-2,1.5,30,0.75\n");
+  EXPECT_EQ(p[0].p_mm, Eigen::Vector3d(1.5, -2, 30));
+  EXPECT_EQ(p[0].confidence, 0.75);
 }
 
 TEST_F(PointsFile, ReadsTheCtItDeclaresWithItsPointsInOnePass) {

@@ -5,10 +5,13 @@
 // as Excel's "Unicode text" writes it); line ends LF, CRLF or CR. Columns x, y, z in mm
 // (patient coordinates) and an optional confidence in (0, 1], separated by commas,
 // semicolons (then a decimal comma is allowed: "1,5;2;3"), tabs or spaces; cells may
-// be quoted. '#' starts a comment line; one header line of text may come first. The
-// numbers are read as x, y, z in mm LPS, so a header saying otherwise is refused: a
-// coordinate column named in another unit ("x_cm", "Y (m)", "z inches"), the columns named
-// R, A, S (or RAS), i, j, k (voxel indices), or the axes in another order ("z,y,x").
+// be quoted. '#' starts a comment line; one header line of text may come first. A header
+// that names its columns x, y and z other than first, second and third ("id,x,y,z",
+// "label;Z (mm);X (mm);Y (mm)") has those columns read, and one named "confidence"; else the
+// first three are x, y, z and a fourth the confidence. The numbers are read as mm LPS, so
+// a header saying otherwise of its coordinate columns is refused: named in another unit
+// ("x_cm", "Y (m)", "z inches"), named R, A, S (or RAS), i, j, k (voxel indices), or L, P,
+// S in another order ("S,P,L").
 //
 // 3D Slicer's markups table (.fcsv) is read by what its comment lines declare: "# columns =
 // id,x,y,z,..." (its x, y and z columns taken, the id and label beside them left) and
