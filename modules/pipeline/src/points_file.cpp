@@ -336,9 +336,10 @@ PointsTable read_points_table(const fs::path& file) {
       if (!parse_number(c, d)) {
         // One line of column names may come before the first point; what it says of the
         // unit and frame is not ignored.
-        if (points.empty() && v.empty() && !header_seen) {
+        // (Not where its columns were declared: a row there is a row.)
+        if (points.empty() && v.empty() && !header_seen && !declared.declared()) {
           // Its coordinate columns: those it names x, y, z, or its first three.
-          const DeclaredColumns named = declared.declared() ? declared : columns_named(cells);
+          const DeclaredColumns named = columns_named(cells);
           const std::string mismatch = header_mismatch(
               named.declared() ? std::vector<std::string>{cells[static_cast<size_t>(named.x)],
                                                           cells[static_cast<size_t>(named.y)],
@@ -348,11 +349,9 @@ PointsTable read_points_table(const fs::path& file) {
             fail(mismatch +
                  "; points are read in mm, in the planning CT's patient coordinates "
                  "(LPS)");
-          if (!declared.declared()) {
-            const bool ras = declared.ras;
-            declared = named;
-            declared.ras = ras;
-          }
+          const bool ras = declared.ras;  // a "# CoordinateSystem" comment before it
+          declared = named;
+          declared.ras = ras;
           break;
         }
         fail(fmt::format("'{}' is not a number", echo(c)));

@@ -145,6 +145,9 @@ TEST_F(PointsFile, ReadsSlicerMarkupsByTheirDeclaredColumnsAndFrame) {
             ":1: its declared columns name no x, y and z: id,a,b,c");
   EXPECT_EQ(error_of(fmt::format(fmt::runtime(head), "LPS") + "id_0,1,2\n"),
             ":4: 3 columns where its named columns need 4");
+  // Its first row is a row, not a header: text where a coordinate is is refused.
+  EXPECT_EQ(error_of(fmt::format(fmt::runtime(head), "LPS") + "id_0,one,2,3\n" + rows),
+            ":4: 'one' is not a number");
 }
 
 // A header line that names x, y and z other than first, second and third ("id,x,y,z", as
