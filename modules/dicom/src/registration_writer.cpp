@@ -29,7 +29,7 @@ void write_deformable_registration(const fs::path& file, const CtSeries& ct,
   const long long points = grid.voxel_count();
   if (points <= 0 || vectors_mm.size() != static_cast<size_t>(3 * points))
     throw std::invalid_argument("registration: the vectors do not fill the grid");
-  if (12.0 * static_cast<double>(points) > 4294967294.0)
+  if (points > kMostRegistrationGridPoints)
     throw std::invalid_argument("registration: the grid is too large for Vector Grid Data");
   const Eigen::Matrix3d& r = grid.direction;
   if (r.col(0).cross(r.col(1)).dot(r.col(2)) < 1 - 1e-6)

@@ -106,12 +106,6 @@ FloatImage::Pointer to_itk(const PlainFloatImage& image) {
   return out;
 }
 
-MaskImage::Pointer to_itk(const PlainMask& mask) {
-  auto out = allocate<MaskImage>(mask.geometry);
-  std::copy(mask.labels.begin(), mask.labels.end(), out->GetBufferPointer());
-  return out;
-}
-
 PlainMask to_plain(const MaskImage* image) {
   PlainMask out;
   out.geometry = geometry_of(image);
@@ -162,7 +156,9 @@ void write_image(const fs::path& file, const Image* image, bool compress) {
 }  // namespace
 
 void write_mask(const fs::path& file, const PlainMask& mask) {
-  write_image(file, to_itk(mask).GetPointer(), true);
+  if (mask.labels.size() != mask.geometry.voxel_count())
+    throw std::invalid_argument("write_mask: one label per voxel needed");
+  write_image(file, over<MaskImage>(mask.geometry, mask.labels.data()).GetPointer(), true);
 }
 
 void write_float_image(const fs::path& file, const PlainFloatImage& image) {

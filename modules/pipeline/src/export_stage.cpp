@@ -418,19 +418,18 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     throw InputError(
         "export: an RT Structure Set, label map, deformation field or uncertainty map needs the "
         "planning CT");
-  // A REG object's Vector Grid Data (VR OF) holds at most 2^32 - 2 bytes, 12 a grid point:
-  // said before the field is sampled (a 0.25 mm grid over a CT's box is hundreds of millions
-  // of points, gigabytes of floats), not by the writer after it.
+  // What a REG object's Vector Grid Data holds is said before the field is sampled (a 0.25
+  // mm grid over a CT's box is hundreds of millions of points, gigabytes of floats), not by
+  // the writer after it.
   if (fields && !r.registration.empty()) {
     const geometry::ImageGeometry grid = field_grid(ct->geometry, r.field_spacing_mm);
-    constexpr long long kMostPoints = 4294967294LL / 12;
-    if (grid.voxel_count() > kMostPoints)
+    if (grid.voxel_count() > dicom::kMostRegistrationGridPoints)
       throw InputError(
           fmt::format("{}: the field's grid of {} x {} x {} points ({:g} mm) is more than a DICOM "
                       "registration's Vector Grid Data holds ({} points, 4 GB): choose a coarser "
                       "export.field_spacing_mm (organfit export --field-spacing)",
                       r.registration.string(), grid.size[0], grid.size[1], grid.size[2],
-                      grid.spacing_mm.minCoeff(), kMostPoints));
+                      grid.spacing_mm.minCoeff(), dicom::kMostRegistrationGridPoints));
   }
   if (on_ct) {
     auto mask = std::make_shared<geometry::LabelVolume>(organ.on_grid(ct->geometry));

@@ -173,26 +173,38 @@ std::string points_ct_comment(const PointsCt& ct) {
 }
 
 namespace {
+/// A column name's words: its runs of letters, lower-cased ("X (cm)": x, cm; "pos_x_metres":
+/// pos, x, metres), each with whether a digit follows it ("m1": a marker's number).
+struct Word {
+  std::string text;
+  bool numbered = false;
+};
+std::vector<Word> words_of(const std::string& cell) {
+  std::vector<Word> words;
+  std::string word;
+  for (const char ch : cell + " ") {
+    if (std::isalpha(static_cast<unsigned char>(ch))) {
+      word += static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    } else if (!word.empty()) {
+      words.push_back({word, std::isdigit(static_cast<unsigned char>(ch)) != 0});
+      word.clear();
+    }
+  }
+  return words;
+}
+
 /// What a header line's coordinate column names say of its unit and frame: nothing, or why
-/// the points are not in mm LPS. Its words are its runs of letters, lower-cased ("X (cm)":
-/// x, cm; "pos_x_metres": pos, x, metres); a column names a unit by a word of its own, so
+/// the points are not in mm LPS. A column names a unit by a word of its own (words_of), so
 /// "x", "xmm" or "index" name none; nor does a word a digit follows ("m1": a marker's
 /// number, not metres).
 std::string header_mismatch(const std::vector<std::string>& cells) {
   std::vector<std::vector<std::string>> words(std::min<size_t>(cells.size(), 3));  // per column
   std::vector<std::string> unit_words;
-  for (size_t c = 0; c < words.size(); ++c) {
-    std::string word;
-    for (const char ch : cells[c] + " ") {
-      if (std::isalpha(static_cast<unsigned char>(ch))) {
-        word += static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-      } else if (!word.empty()) {
-        words[c].push_back(word);
-        if (!std::isdigit(static_cast<unsigned char>(ch))) unit_words.push_back(word);
-        word.clear();
-      }
+  for (size_t c = 0; c < words.size(); ++c)
+    for (const Word& w : words_of(cells[c])) {
+      words[c].push_back(w.text);
+      if (!w.numbered) unit_words.push_back(w.text);
     }
-  }
   auto said = [&](std::initializer_list<const char*> any) {
     for (const std::string& w : unit_words)
       for (const char* a : any)
@@ -230,21 +242,15 @@ struct DeclaredColumns {
   bool declared() const { return x >= 0; }
 };
 
-/// A header line's columns by name, when it names x, y and z (a column's first word, as
-/// header_mismatch reads it: "x", "X (mm)", "x_mm") other than first, second and third
+/// A header line's columns by name, when it names x, y and z (a column's first word,
+/// words_of: "x", "X (mm)", "x_mm") other than first, second and third
 /// ("id,x,y,z", "z,y,x"): those, and a column named "confidence". Otherwise none: the first
 /// three columns are x, y, z and a fourth the confidence, as for a table without a header.
 DeclaredColumns columns_named(const std::vector<std::string>& cells) {
   DeclaredColumns d;
   for (size_t c = 0; c < cells.size(); ++c) {
-    std::string word;
-    for (const char ch : cells[c]) {
-      if (!std::isalpha(static_cast<unsigned char>(ch))) {
-        if (!word.empty()) break;
-        continue;
-      }
-      word += static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-    }
+    const std::vector<Word> words = words_of(cells[c]);
+    const std::string word = words.empty() ? "" : words.front().text;
     const int at = static_cast<int>(c);
     if (word == "x" && d.x < 0) d.x = at;
     if (word == "y" && d.y < 0) d.y = at;
@@ -339,7 +345,7 @@ PointsTable read_points_table(const fs::path& file) {
         // (Not where its columns were declared: a row there is a row.)
         if (points.empty() && v.empty() && !header_seen && !declared.declared()) {
           // Its coordinate columns: those it names x, y, z, or its first three.
-          const DeclaredColumns named = columns_named(cells);
+          DeclaredColumns named = columns_named(cells);
           const std::string mismatch = header_mismatch(
               named.declared() ? std::vector<std::string>{cells[static_cast<size_t>(named.x)],
                                                           cells[static_cast<size_t>(named.y)],
@@ -349,9 +355,8 @@ PointsTable read_points_table(const fs::path& file) {
             fail(mismatch +
                  "; points are read in mm, in the planning CT's patient coordinates "
                  "(LPS)");
-          const bool ras = declared.ras;  // a "# CoordinateSystem" comment before it
+          named.ras = declared.ras;  // a "# CoordinateSystem" comment before it
           declared = named;
-          declared.ras = ras;
           break;
         }
         fail(fmt::format("'{}' is not a number", echo(c)));

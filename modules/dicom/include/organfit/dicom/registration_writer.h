@@ -17,6 +17,10 @@
 
 namespace organfit::dicom {
 
+/// The most grid points a REG object's Vector Grid Data (VR OF, at most 2^32 - 2 bytes)
+/// holds: 12 bytes (x, y, z as float) a point.
+inline constexpr long long kMostRegistrationGridPoints = 4294967294LL / 12;
+
 struct RegistrationWriteOptions {
   /// Deterministic UIDs and dates (tests): derived from the CT's series UID.
   bool fixed_uids_and_dates = false;

@@ -10,7 +10,6 @@ using FloatImage = itk::Image<float, 3>;
 using MaskImage = itk::Image<unsigned char, 3>;
 
 FloatImage::Pointer to_itk(const PlainFloatImage& image);
-MaskImage::Pointer to_itk(const PlainMask& mask);
 PlainMask to_plain(const MaskImage* image);
 
 }  // namespace organfit::itkbridge
