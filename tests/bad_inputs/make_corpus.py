@@ -557,6 +557,11 @@ case('export_roi_name_not_a_dicom_lo',
 case('export_registration_grid_beyond_dicom',
      ['export', '--model', '{case}/../_planning/out/model.json', '--registration', '{case}/out/reg.dcm', '--field-spacing', '0.25'],
      'is more than a DICOM registration\'s Vector Grid Data holds', ct=False)
+# A field's grid no machine holds (26 TB of floats): refused naming the key, not as a run
+# out of memory.
+case('export_field_grid_beyond_memory',
+     ['export', '--model', '{case}/../_planning/out/model.json', '--displacement-field', '{case}/out/f.mha', '--field-spacing', '0.02'],
+     'is more than this run\'s memory holds: choose a coarser export.field_spacing_mm', ct=False)
 case('export_two_outputs_one_file',
      ['export', '--model', '{case}/../_planning/out/model.json', '--labels', '{case}/out/x.nrrd', '--jacobian', '{case}/out/x.nrrd'],
      'named by both --labels and --jacobian', ct=False)

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <new>
 
 #include "organfit/dicom/registration_writer.h"
 #include "organfit/dicom/rtstruct_writer.h"
@@ -520,8 +521,19 @@ PendingExport prepare_export(const fitting::EmbeddedBody& organ, double rho,
     const geometry::ImageGeometry grid = field_grid(ct->geometry, r.field_spacing_mm);
     auto field = std::make_shared<std::vector<float>>();
     auto jacobian = std::make_shared<std::vector<float>>();
-    sample_deformation(organ.deformation(), grid, vectors ? field.get() : nullptr,
-                       r.jacobian.empty() ? nullptr : jacobian.get());
+    try {
+      sample_deformation(organ.deformation(), grid, vectors ? field.get() : nullptr,
+                         r.jacobian.empty() ? nullptr : jacobian.get());
+    } catch (const std::bad_alloc&) {  // the grid, not the run, is what to change
+      field.reset(), jacobian.reset();
+      const double floats = (vectors ? 3.0 : 0.0) + (r.jacobian.empty() ? 0.0 : 1.0);
+      throw InputError(fmt::format(
+          "export: the deformation's grid of {} x {} x {} points ({:g} mm; {:.1f} GB of floats) "
+          "is more than this run's memory holds: choose a coarser export.field_spacing_mm "
+          "(organfit export --field-spacing)",
+          grid.size[0], grid.size[1], grid.size[2], grid.spacing_mm.minCoeff(),
+          4.0 * floats * static_cast<double>(grid.voxel_count()) / 1e9));
+    }
     progress.update(++done, "the deformation on its grid");
     out.summary["field_grid"] = {
         {"size", {grid.size[0], grid.size[1], grid.size[2]}},
