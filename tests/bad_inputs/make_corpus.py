@@ -56,6 +56,32 @@ for i, name in enumerate(ct_files):
     ds.SOPInstanceUID = f'1.2.826.0.1.3680043.2.1125.99.2.{i}'
     ds.save_as(os.path.join(d, 'ct', 'b_' + name))
 os.rmdir(os.path.join(d, 'tmp'))
+# A study's export as a clinic makes it: the planning CT beside a topogram (a localizer, a
+# projection: left out), and beside a second axial series 1 m away (a 4D average, a CBCT):
+# the one the structure set was drawn on is read; one it does not reference, refused.
+d = case('tolerated_localizer_beside_the_ct', SEGMENT, '1 localizer image(s) (scout or topogram', code=0)
+ds = pydicom.dcmread(os.path.join(d, 'ct', ct_files[0]))
+ds.SeriesInstanceUID, ds.SOPInstanceUID = '1.2.826.0.1.3680043.2.1125.99.31', '1.2.826.0.1.3680043.2.1125.99.32'
+ds.ImageType = ['ORIGINAL', 'PRIMARY', 'LOCALIZER']
+ds.ImageOrientationPatient = [1, 0, 0, 0, 0, -1]
+ds.save_as(os.path.join(d, 'ct', 'topogram.dcm'))
+def second_series(d):
+    for i, name in enumerate(ct_files):
+        ds = pydicom.dcmread(os.path.join(d, 'ct', name))
+        ds.SeriesInstanceUID = '1.2.826.0.1.3680043.2.1125.99.33'
+        ds.SOPInstanceUID = f'1.2.826.0.1.3680043.2.1125.99.34.{i}'
+        ds.ImagePositionPatient[2] += 1000  # the structure set's contours lie on none of it
+        ds.save_as(os.path.join(d, 'ct', 'b_' + name))
+d = case('tolerated_two_series_the_structure_set_chooses', IMPORT, 'read: the series the structure set references, of 2 CT series', code=0, rtstruct=True)
+second_series(d)
+d = case('ct_two_series_the_structure_set_references_neither', IMPORT, '2 CT series; choose one by Series Instance UID or description (the structure set references none of them)', rtstruct=True)
+second_series(d)
+rtss = pydicom.dcmread(os.path.join(d, 'rtstruct.dcm'))
+for f in rtss.ReferencedFrameOfReferenceSequence:
+    for study in f.RTReferencedStudySequence:
+        for series in study.RTReferencedSeriesSequence:
+            series.SeriesInstanceUID = '1.2.826.0.1.3680043.2.1125.99.35'
+rtss.save_as(os.path.join(d, 'rtstruct.dcm'))
 d = case('ct_missing_slice', SEGMENT, 'missing slice')
 os.remove(os.path.join(d, 'ct', ct_files[5]))
 d = case('ct_duplicate_positions', SEGMENT, 'duplicate slice position')
@@ -537,6 +563,13 @@ edit_all(d, other_series)
 open(os.path.join(d, 'scene.yaml'), 'w').write(SESSION)
 d = case('tolerated_session_ct_of_the_model', ['run', '{case}/scene.yaml', '--out', '{case}/out'], '', code=0, cls='disagree')
 open(os.path.join(d, 'scene.yaml'), 'w').write(SESSION)
+# The model's CT folder holding a second series too (a 4D average beside the planning CT):
+# the model's is read, by a session and by an export alike.
+d = case('tolerated_session_ct_folder_of_two_series', ['run', '{case}/scene.yaml', '--out', '{case}/out'], 'read: the series the planning model references, of 2 CT series', code=0, cls='disagree')
+second_series(d)
+open(os.path.join(d, 'scene.yaml'), 'w').write(SESSION)
+d = case('tolerated_export_ct_folder_of_two_series', ['export', '--model', '{case}/../_planning/out/model.json', '--ct', '{case}/ct', '--labels', '{case}/out/l.nrrd'], 'read: the series the model references, of 2 CT series', code=0, cls='disagree')
+second_series(d)
 d = case('export_ct_of_another_series', ['export', '--model', '{case}/../_planning/out/model.json', '--ct', '{case}/ct', '--labels', '{case}/out/l.nrrd'], 'is not the model', cls='disagree')
 edit_all(d, other_series)
 planned_ct = json.load(open(os.path.join(planning, 'out', 'model.json')))['ct']

@@ -113,11 +113,17 @@ nlohmann::json run_export_command(const ExportCommand& c) {
       throw InputError(fmt::format(
           "{}: the planning CT it records, {}, is not there: give --ct (where that CT is now)",
           c.model.string(), folder.string()));
-    // The model's own series when its folder is used; a folder given with --ct must hold
-    // one CT series, and it must be the model's (series and Frame of Reference).
+    // The model's own series when its folder is used; of a folder given with --ct, its one
+    // CT series, or of several the model's, and it must be the model's (series and Frame
+    // of Reference).
     dicom::CtReadOptions o;
     if (saved.ct && c.ct.empty()) o.series_instance_uid = saved.ct->series_instance_uid;
+    if (saved.ct && !c.ct.empty()) {
+      o.referenced_series_uids = {saved.ct->series_instance_uid};
+      o.referenced_by = "the model";
+    }
     ct = dicom::read_ct_series(folder, o);
+    if (!ct->choice.empty()) spdlog::info("ct: {}", ct->choice);
     if (saved.ct && (ct->frame_of_reference_uid != saved.ct->frame_of_reference_uid ||
                      ct->series_instance_uid != saved.ct->series_instance_uid))
       throw InputError(fmt::format(

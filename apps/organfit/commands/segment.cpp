@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -54,13 +55,19 @@ SegmentResult run_segment(const SegmentRequest& r) {
       {r.ct_folder, r.rtstruct}, "--out", OutputKind::kFile);
   dicom::CtReadOptions o;
   o.series_instance_uid = r.series_uid;
+  std::optional<dicom::StructureSet> rtss;
+  if (import) {  // of several CT series, the one it was drawn on
+    rtss = dicom::read_rtstruct(r.rtstruct);
+    o.referenced_series_uids = rtss->referenced_series_uids;
+  }
   const dicom::CtSeries ct = dicom::read_ct_series(r.ct_folder, o);
+  if (!ct.choice.empty()) spdlog::info("ct: {}", ct.choice);
   SegmentResult result;
   result.warnings = ct.warnings;
   geometry::LabelVolume mask;
   if (import) {
-    dicom::RasterisedRoi roi = dicom::rasterise_roi(dicom::read_rtstruct(r.rtstruct), r.roi, ct,
-                                                    r.rtstruct.string(), r.roi_number);
+    dicom::RasterisedRoi roi =
+        dicom::rasterise_roi(*rtss, r.roi, ct, r.rtstruct.string(), r.roi_number);
     result.warnings.insert(result.warnings.end(), roi.warnings.begin(), roi.warnings.end());
     mask = std::move(roi.mask);
   } else {

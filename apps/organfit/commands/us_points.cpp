@@ -202,7 +202,7 @@ nlohmann::json run_us_points(const UsPointsCommand& c) {
   if (found.points.empty())
     throw TargetNotMetError(
         c.input.string() + ": no boundary points found in the region of interest (centre " +
-        summary["centre_mm"].dump() + " mm, radius " + fmt::format("{:.1f}", o.r_max_mm) + " mm)");
+        summary["centre_mm"].dump() + " mm, radius " + fmt::format("{:g}", o.r_max_mm) + " mm)");
   std::string csv;
   if (!c.ct.empty()) {  // the CT these coordinates are in, for a run to check
     const dicom::CtSeries ct = dicom::read_ct_series(c.ct);

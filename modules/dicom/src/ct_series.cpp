@@ -16,6 +16,7 @@
 #include <array>
 #include <cmath>
 #include <map>
+#include <set>
 #include <sstream>
 #include <tuple>
 
@@ -38,7 +39,7 @@ const gdcm::Tag kModality(0x0008, 0x0060), kSeriesUid(0x0020, 0x000e),
     kRescaleIntercept(0x0028, 0x1052), kRescaleSlope(0x0028, 0x1053),
     kSamplesPerPixel(0x0028, 0x0002), kPhotometric(0x0028, 0x0004), kBitsAllocated(0x0028, 0x0100),
     kBitsStored(0x0028, 0x0101), kHighBit(0x0028, 0x0102), kPixelRepresentation(0x0028, 0x0103),
-    kNumberOfFrames(0x0028, 0x0008);
+    kNumberOfFrames(0x0028, 0x0008), kImageType(0x0008, 0x0008);
 
 std::string trimmed(const char* v) {
   if (!v) return {};
@@ -49,6 +50,18 @@ std::string trimmed(const char* v) {
 }
 
 using detail::numbers;
+
+/// Whether an Image Type (0008,0008, as "ORIGINAL\PRIMARY\LOCALIZER") names a localizer:
+/// its third value.
+bool is_localizer(const std::string& image_type) {
+  std::string third;
+  for (size_t at = 0, value = 0; at <= image_type.size(); ++value) {
+    const size_t end = std::min(image_type.find('\\', at), image_type.size());
+    if (value == 2) third = trimmed(image_type.substr(at, end - at).c_str());
+    at = end + 1;
+  }
+  return third == "LOCALIZER";
+}
 
 struct Header {
   std::string file, series_uid, description, sop_uid, sop_class, frame_of_reference, study_uid;
@@ -123,7 +136,8 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
                                    kBitsStored,
                                    kHighBit,
                                    kPixelRepresentation,
-                                   kNumberOfFrames};
+                                   kNumberOfFrames,
+                                   kImageType};
   gdcm::Scanner scanner;
   for (const auto& t : header_tags)
     scanner.AddTag(t);
@@ -136,6 +150,9 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
 
   CtSeries series;
   int not_dicom = unsafe, other_modality = 0;
+  // Localizers (scout, topogram: Image Type's third value LOCALIZER) are projections that
+  // a CT study's export holds beside its volume, never a slice of one: left out, counted.
+  std::map<std::string, std::pair<std::string, int>> localizers;  // series: description, images
   std::map<std::string, std::vector<Header>> by_series;
   for (const auto& f : files) {
     // The scanner reads headers only up to the tags it needs and cannot do so in every
@@ -168,6 +185,12 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     const std::string modality = value(kModality);
     if (modality != "CT") {
       ++other_modality;
+      continue;
+    }
+    if (is_localizer(value(kImageType))) {
+      auto& [description, images] = localizers[value(kSeriesUid)];
+      description = value(kSeriesDescription);
+      ++images;
       continue;
     }
     Header h;
@@ -210,7 +233,21 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   if (other_modality > 0)
     series.warnings.push_back(
         fmt::format("{}: {} DICOM object(s) that are not CT were ignored", where, other_modality));
-  if (by_series.empty()) fail("no CT series (no DICOM file with Modality CT)");
+  if (!localizers.empty()) {
+    int images = 0;
+    std::string named;
+    for (const auto& [uid, seen] : localizers) {
+      images += seen.second;
+      named += fmt::format("{}'{}'", named.empty() ? "" : ", ", echo(seen.first, 40));
+    }
+    series.warnings.push_back(fmt::format(
+        "{}: {} localizer image(s) (scout or topogram: Image Type LOCALIZER) were ignored: series "
+        "{}",
+        where, images, echo(named, 200)));
+  }
+  if (by_series.empty())
+    fail(localizers.empty() ? "no CT series (no DICOM file with Modality CT)"
+                            : "no CT series but localizers (scout or topogram images)");
   // One SOP Instance UID, one image: two files claiming the same one are two exports of a
   // slice, or a copy edited by hand; which is the CT cannot be told.
   {
@@ -254,8 +291,25 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   } else if (by_series.size() == 1) {
     chosen = &by_series.begin()->second;
   } else {
-    fail(fmt::format("{} CT series; choose one by Series Instance UID or description: {}",
-                     by_series.size(), describe()));
+    // The series the inputs reference (a structure set, a planning model), when it is here
+    // and alone.
+    std::set<std::string> referenced;
+    for (const auto& uid : options.referenced_series_uids)
+      if (by_series.count(uid)) referenced.insert(uid);
+    if (referenced.size() != 1)
+      fail(fmt::format("{} CT series; choose one by Series Instance UID or description{}: {}",
+                       by_series.size(),
+                       options.referenced_series_uids.empty()
+                           ? ""
+                           : fmt::format(" ({} references {})", options.referenced_by,
+                                         referenced.empty() ? "none of them" : "several"),
+                       describe()));
+    chosen = &by_series.at(*referenced.begin());
+    series.choice = fmt::format(
+        "series '{}' ({} slices) read: the series {} references, of {} CT "
+        "series",
+        echo(chosen->front().description, 64), chosen->size(), options.referenced_by,
+        by_series.size());
   }
   std::vector<Header> slices = *chosen;
 

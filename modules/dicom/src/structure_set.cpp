@@ -84,9 +84,19 @@ StructureSet read_rtstruct(const fs::path& file) {
   if (std::string utf8; detail::to_utf8(rtss.patient_id, text(ds, 0x0008, 0x0005), utf8))
     rtss.patient_id = utf8;  // compared with the CT's, which is UTF-8 too
   rtss.study_instance_uid = text(ds, 0x0020, 0x000d);
-  if (auto sq = sequence(ds, 0x3006, 0x0010); sq && sq->GetNumberOfItems() > 0)
+  if (auto sq = sequence(ds, 0x3006, 0x0010); sq && sq->GetNumberOfItems() > 0) {
     rtss.referenced_frame_of_reference_uid =
         text(sq->GetItem(1).GetNestedDataSet(), 0x0020, 0x0052);
+    // Frame of Reference > RT Referenced Study (3006,0012) > RT Referenced Series (3006,0014).
+    for (size_t f = 1; f <= sq->GetNumberOfItems(); ++f)
+      if (auto studies = sequence(sq->GetItem(f).GetNestedDataSet(), 0x3006, 0x0012))
+        for (size_t s = 1; s <= studies->GetNumberOfItems(); ++s)
+          if (auto series = sequence(studies->GetItem(s).GetNestedDataSet(), 0x3006, 0x0014))
+            for (size_t e = 1; e <= series->GetNumberOfItems(); ++e)
+              if (std::string uid = text(series->GetItem(e).GetNestedDataSet(), 0x0020, 0x000e);
+                  !uid.empty())
+                rtss.referenced_series_uids.push_back(std::move(uid));
+  }
   std::map<int, Roi> by_number;
   if (auto sq = sequence(ds, 0x3006, 0x0020)) {  // Structure Set ROI Sequence
     for (size_t i = 1; i <= sq->GetNumberOfItems(); ++i) {

@@ -173,8 +173,23 @@ nlohmann::json run_into(const config::Scene& scene, const fs::path& out_dir,
   }
   std::optional<dicom::CtSeries> ct;
   if (scene.has_section("ct") || !ct_folder.empty()) {
-    CtStageResult read =
-        run_ct_stage(ct_stage_options_from(scene), staging, out_dir, ct_folder, ct_home);
+    CtStageOptions ct_options = ct_stage_options_from(scene);
+    // Of a folder's several series, the one the planning model was built on, or the one the
+    // organ's structure set was drawn on (its file read again, in full, by the organ stage,
+    // which reports what is wrong with it).
+    if (ct_reference) {
+      ct_options.read.referenced_series_uids = {ct_reference->series_instance_uid};
+      ct_options.read.referenced_by = "the planning model";
+    }
+    if (scene.has_section("organ") && scene.text("organ", "source") == "rtstruct" &&
+        scene.is_given("organ", "rtstruct")) {
+      try {
+        ct_options.read.referenced_series_uids =
+            dicom::read_rtstruct(scene.path("organ", "rtstruct")).referenced_series_uids;
+      } catch (const InputError&) {
+      }
+    }
+    CtStageResult read = run_ct_stage(ct_options, staging, out_dir, ct_folder, ct_home);
     if (read.pulled) {
       run["ct_pulled"] = read.pulled->summary();
       record_stage("ct_pull", read.pull_wall_s, read.pull_peak_memory_mib);
@@ -191,12 +206,14 @@ nlohmann::json run_into(const config::Scene& scene, const fs::path& out_dir,
           "the scene's CT {}",
           scene.path("planning", "model").string(), ct_home.string()));
     record_stage("ct", read.read_wall_s);
+    if (!ct->choice.empty()) spdlog::info("ct: {}", ct->choice);
     for (const auto& w : ct->warnings)
       warn(w);
     const auto& g = ct->geometry;
     run["ct"] = {{"slices", g.size[2]},
                  {"size", {g.size[0], g.size[1], g.size[2]}},
                  {"spacing_mm", {g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z()}}};
+    if (!ct->choice.empty()) run["ct"]["series_choice"] = ct->choice;
     spdlog::info("ct: {} x {} x {} voxels of {:.3f} x {:.3f} x {:.3f} mm", g.size[0], g.size[1],
                  g.size[2], g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z());
   }

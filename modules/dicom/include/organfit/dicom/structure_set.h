@@ -37,6 +37,9 @@ struct StructureSet {
   /// The Frame of Reference the set declares in its Referenced Frame of Reference Sequence
   /// (3006,0010), used for an ROI that names none itself.
   std::string referenced_frame_of_reference_uid;
+  /// The CT series the set declares it was drawn on (RT Referenced Series in 3006,0010):
+  /// the one chosen when a folder holds several and none is named.
+  std::vector<std::string> referenced_series_uids;
   /// Whose it is, to check it against the CT. Never logged.
   std::string patient_id, study_instance_uid;
   std::vector<Roi> rois;
