@@ -65,6 +65,18 @@ ds.SeriesInstanceUID, ds.SOPInstanceUID = '1.2.826.0.1.3680043.2.1125.99.31', '1
 ds.ImageType = ['ORIGINAL', 'PRIMARY', 'LOCALIZER']
 ds.ImageOrientationPatient = [1, 0, 0, 0, 0, -1]
 ds.save_as(os.path.join(d, 'ct', 'topogram.dcm'))
+# A scanner's dose report: a screen capture (Secondary Capture) of Modality CT, its own
+# series, without a slice's geometry.
+d = case('tolerated_dose_report_beside_the_ct', SEGMENT, '1 object(s) of Modality CT that are not CT images', code=0)
+ds = pydicom.dcmread(os.path.join(d, 'ct', ct_files[0]))
+ds.SOPClassUID = ds.file_meta.MediaStorageSOPClassUID = '1.2.840.10008.5.1.4.1.1.7'
+ds.SeriesInstanceUID, ds.SOPInstanceUID = '1.2.826.0.1.3680043.2.1125.99.36', '1.2.826.0.1.3680043.2.1125.99.37'
+ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
+ds.SeriesDescription = 'Dose Report'
+for keyword in ['ImagePositionPatient', 'ImageOrientationPatient', 'PixelSpacing', 'SliceThickness']:
+    if keyword in ds:
+        delattr(ds, keyword)
+ds.save_as(os.path.join(d, 'ct', 'dose_report.dcm'))
 def second_series(d):
     for i, name in enumerate(ct_files):
         ds = pydicom.dcmread(os.path.join(d, 'ct', name))

@@ -49,6 +49,8 @@ std::string trimmed(const char* v) {
   return b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
 }
 
+using detail::kCtImageStorage, detail::kEnhancedCtImageStorage,
+    detail::kLegacyEnhancedCtImageStorage;
 using detail::numbers;
 
 /// Whether an Image Type (0008,0008, as "ORIGINAL\PRIMARY\LOCALIZER") names a localizer:
@@ -153,6 +155,7 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   // Localizers (scout, topogram: Image Type's third value LOCALIZER) are projections that
   // a CT study's export holds beside its volume, never a slice of one: left out, counted.
   std::map<std::string, std::pair<std::string, int>> localizers;  // series: description, images
+  std::map<std::string, std::pair<std::string, int>> not_images;  // the same, other SOP classes
   std::map<std::string, std::vector<Header>> by_series;
   for (const auto& f : files) {
     // The scanner reads headers only up to the tags it needs and cannot do so in every
@@ -185,6 +188,17 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
     const std::string modality = value(kModality);
     if (modality != "CT") {
       ++other_modality;
+      continue;
+    }
+    // Only CT Image Storage objects are slices (the Enhanced ones are named below): a
+    // scanner's screen captures (a dose report, a protocol page: Secondary Capture) and
+    // private objects carry Modality CT too, in series of their own.
+    if (const std::string sop_class = value(kSopClass);
+        !sop_class.empty() && sop_class != kCtImageStorage &&
+        sop_class != kEnhancedCtImageStorage && sop_class != kLegacyEnhancedCtImageStorage) {
+      auto& [description, objects] = not_images[value(kSeriesUid)];
+      description = value(kSeriesDescription);
+      ++objects;
       continue;
     }
     if (is_localizer(value(kImageType))) {
@@ -233,21 +247,35 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   if (other_modality > 0)
     series.warnings.push_back(
         fmt::format("{}: {} DICOM object(s) that are not CT were ignored", where, other_modality));
-  if (!localizers.empty()) {
-    int images = 0;
+  // Objects left out by series: how many, and the series' descriptions.
+  auto left_out = [](const std::map<std::string, std::pair<std::string, int>>& seen) {
+    int objects = 0;
     std::string named;
-    for (const auto& [uid, seen] : localizers) {
-      images += seen.second;
-      named += fmt::format("{}'{}'", named.empty() ? "" : ", ", echo(seen.first, 40));
+    for (const auto& [uid, series_seen] : seen) {
+      objects += series_seen.second;
+      named += fmt::format("{}'{}'", named.empty() ? "" : ", ", echo(series_seen.first, 40));
     }
-    series.warnings.push_back(fmt::format(
-        "{}: {} localizer image(s) (scout or topogram: Image Type LOCALIZER) were ignored: series "
-        "{}",
-        where, images, echo(named, 200)));
+    return std::make_pair(objects, echo(named, 200));
+  };
+  if (!localizers.empty()) {
+    const auto [images, named] = left_out(localizers);
+    series.warnings.push_back(
+        fmt::format("{}: {} localizer image(s) (scout or topogram: Image Type LOCALIZER) were "
+                    "ignored: series {}",
+                    where, images, named));
+  }
+  if (!not_images.empty()) {
+    const auto [objects, named] = left_out(not_images);
+    series.warnings.push_back(
+        fmt::format("{}: {} object(s) of Modality CT that are not CT images (another SOP Class: a "
+                    "screen capture, a dose report) were ignored: series {}",
+                    where, objects, named));
   }
   if (by_series.empty())
-    fail(localizers.empty() ? "no CT series (no DICOM file with Modality CT)"
-                            : "no CT series but localizers (scout or topogram images)");
+    fail(localizers.empty() && not_images.empty()
+             ? "no CT series (no DICOM file with Modality CT)"
+             : "no CT series: only localizers (scout or topogram images) or other objects of "
+               "Modality CT");
   // One SOP Instance UID, one image: two files claiming the same one are two exports of a
   // slice, or a copy edited by hand; which is the CT cannot be told.
   {
@@ -319,8 +347,8 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   for (const auto& h : slices)
     // An Enhanced CT (or a legacy series converted to one) holds the whole scan in one
     // object, its geometry frame by frame in functional groups.
-    if (h.frames > 1 || h.sop_class == "1.2.840.10008.5.1.4.1.1.2.1" ||
-        h.sop_class == "1.2.840.10008.5.1.4.1.1.2.2")
+    if (h.frames > 1 || h.sop_class == kEnhancedCtImageStorage ||
+        h.sop_class == kLegacyEnhancedCtImageStorage)
       fail(fmt::format(
           "{} is a multi-frame CT object (Enhanced CT, {} frames): organfit reads a series of "
           "single-frame CT images (CT Image Storage); export the scan as those from the "

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "dicom_values.h"
 #include "dicom_writing.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
@@ -15,7 +16,6 @@ namespace fs = std::filesystem;
 
 namespace organfit::dicom {
 namespace {
-constexpr const char* kCtImageClass = "1.2.840.10008.5.1.4.1.1.2";
 constexpr int kIntercept = -1024;  // stored = HU + 1024, 12 bits: HU in [-1024, 3071]
 constexpr int kMaxStored = 4095;
 }  // namespace
@@ -61,7 +61,7 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
   std::vector<std::uint16_t> pixels(per_slice);
   for (int k = 0; k < g.size[2]; ++k) {
     CtSlice slice;
-    slice.sop_class_uid = kCtImageClass;
+    slice.sop_class_uid = detail::kCtImageStorage;
     slice.sop_instance_uid = uid(fmt::format("slice|{}", k));
     slice.position_mm = g.index_to_physical(Eigen::Vector3d(0, 0, k));
     slice.file = folder / fmt::format("CT{:04d}.dcm", k + 1);
@@ -80,7 +80,7 @@ long long write_ct_series(const fs::path& folder, CtSeries& ct, const CtWriteOpt
                                                   : ct.patient.specific_character_set);
     put(ds, 0x0008, 0x0008, V::CS, "ORIGINAL\\PRIMARY\\AXIAL");
     detail::put_patient_study(ds, ct.patient);  // Patient, General Study: verbatim
-    put(ds, 0x0008, 0x0016, V::UI, kCtImageClass);
+    put(ds, 0x0008, 0x0016, V::UI, detail::kCtImageStorage);
     put(ds, 0x0008, 0x0018, V::UI, slice.sop_instance_uid);
     put(ds, 0x0008, 0x0021, V::DA, ct.patient.study_date);
     put(ds, 0x0008, 0x0031, V::TM, ct.patient.study_time);

@@ -7,6 +7,12 @@
 
 namespace organfit::dicom::detail {
 
+/// The SOP Classes of CT slices: CT Image Storage, and the multi-frame Enhanced and Legacy
+/// Converted Enhanced CT Image Storage.
+inline constexpr const char* kCtImageStorage = "1.2.840.10008.5.1.4.1.1.2";
+inline constexpr const char* kEnhancedCtImageStorage = "1.2.840.10008.5.1.4.1.1.2.1";
+inline constexpr const char* kLegacyEnhancedCtImageStorage = "1.2.840.10008.5.1.4.1.1.2.2";
+
 /// GDCM's own warnings and errors off: organfit reports every problem itself, in one line.
 void quiet_gdcm();
 

@@ -9,6 +9,7 @@
 #include <ctime>
 #include <functional>
 
+#include "dicom_values.h"
 #include "organfit/support/atomic_file.h"
 #include "organfit/support/error.h"
 
@@ -94,7 +95,7 @@ void put_sequence(gdcm::DataSet& ds, std::uint16_t group, std::uint16_t element,
 gdcm::Item slice_reference(const CtSlice& slice) {
   gdcm::Item item = new_item();
   put(item.GetNestedDataSet(), 0x0008, 0x1150, gdcm::VR::UI,
-      slice.sop_class_uid.empty() ? "1.2.840.10008.5.1.4.1.1.2" : slice.sop_class_uid);
+      slice.sop_class_uid.empty() ? kCtImageStorage : slice.sop_class_uid);
   put(item.GetNestedDataSet(), 0x0008, 0x1155, gdcm::VR::UI, slice.sop_instance_uid);
   return item;
 }
