@@ -323,6 +323,9 @@ scene_case('scene_unknown_key', 'body:\nmodel:\n  raduis_mm: 2\n', "unknown key 
 scene_case('scene_method_key_one_level_up', 'body:\nmodel:\npoints:\nfit:\n  max_global_stretch: 2\n', "fit.max_global_stretch: unknown key (did you mean 'fit.spread.max_global_stretch'?)")
 scene_case('scene_wrong_type', 'body:\nmodel:\n  radius_mm: two\n', "expected a number, got 'two'")
 scene_case('scene_negative_radius', 'body:\nmodel:\n  radius_mm: -1\n', 'out of range')
+# A radius in the wrong unit (0.01 mm for 1 cm): hundreds of millions of particles, refused
+# before the fill (which had run for minutes into gigabytes).
+scene_case('scene_radius_beyond_a_models_particles', 'body:\nmodel:\n  radius_mm: 0.01\n', 'scene.yaml:3: model.radius_mm: a radius of 0.01 mm fills this organ with about')
 scene_case('scene_m_not_below_n', 'body:\nmodel:\n  exponent_m: 12\n  exponent_n: 6\n', 'must exceed the attractive m')
 scene_case('scene_missing_input', 'ct:\n  folder: no-such-folder\n', 'no such file or folder')
 scene_case('scene_out_is_its_folder', 'body:\nmodel:\n', "--out is the folder of input", args=['run', '{case}/scene.yaml', '--out', '{case}'])

@@ -159,18 +159,27 @@ void add_skeleton_term(OrganModel& model, const particles::Skeleton& skeleton) {
       std::make_unique<particles::SkeletonForce>(skeleton, model.state.x, model.skeleton_params));
 }
 
-double radius_for_count(const ModelSettings& s, const geometry::Shape& shape, long long count) {
-  // The fcc spacing is a fixed multiple of r0 for a law's exponents, cutoff and floor (in
-  // r0), and an fcc lattice of spacing a holds sqrt(2) / a^3 particles per mm^3.
+namespace {
+/// The fcc spacing as a multiple of r0: fixed for a law's exponents, cutoff and floor (in
+/// r0). An fcc lattice of spacing a holds sqrt(2) / a^3 particles per mm^3.
+double spacing_per_r0(const ModelSettings& s) {
   ModelSettings unit = s;
   unit.radius_mm = 0.5;  // r0 = 1 mm
-  const double spacing_per_r0 =
-      particles::fcc_equilibrium_spacing(particles::LennardJones(cohesion_params_from(unit)));
+  return particles::fcc_equilibrium_spacing(particles::LennardJones(cohesion_params_from(unit)));
+}
+}  // namespace
+
+double radius_for_count(const ModelSettings& s, const geometry::Shape& shape, long long count) {
   const double volume_mm3 = shape_volume(shape, 200);
   // The surface's partial cells make the count differ a little from the volume's; a box
   // whose faces lie on lattice planes gains whole face layers (+10% at 6,000 particles).
   const double a = std::cbrt(std::sqrt(2.0) * volume_mm3 / static_cast<double>(count));
-  return 0.5 * a / spacing_per_r0;
+  return 0.5 * a / spacing_per_r0(s);
+}
+
+double particle_count_at(const ModelSettings& s, const geometry::Shape& shape) {
+  const double a = 2.0 * s.radius_mm * spacing_per_r0(s);
+  return std::sqrt(2.0) * shape_volume(shape, 200) / (a * a * a);
 }
 
 OrganModel copy_model(const OrganModel& m) {

@@ -105,6 +105,15 @@ ModelStageResult run_model_stage(const ModelStageOptions& options, const geometr
     spdlog::info("model: radius {:.4f} mm for about {} particles", settings.radius_mm,
                  options.particles);
   }
+  // A radius in the wrong unit (0.01 mm for 1 cm) fills a prostate with billions of
+  // particles: the fill ran for minutes into gigabytes without a word.
+  if (options.settings.radius_mm > 0.0)
+    if (const double expected = fitting::particle_count_at(settings, shape);
+        expected > static_cast<double>(kMostParticles))
+      options.radius_key.fail(
+          fmt::format("a radius of {:g} mm fills this organ with about {:.2g} particles, more "
+                      "than a model holds ({:g}): choose a larger radius, or model.particles",
+                      settings.radius_mm, expected, static_cast<double>(kMostParticles)));
   const particles::CohesionParams cp = cohesion_params_from(settings);
   const particles::LennardJones law(cp);
   const double spacing = particles::fcc_equilibrium_spacing(law);

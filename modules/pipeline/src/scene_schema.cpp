@@ -392,7 +392,7 @@ config::Schema build_schema() {
       .vec3("centre_mm", Vector3d(0, 0, 0), "mm", none, "centre, in patient coordinates");
 
   s.section("model", "the particle model: cohesion (paper eq. 1-4), fill and relaxation")
-      .integer("particles", pipeline::kDefaultParticleCount, 2, 20000000,
+      .integer("particles", pipeline::kDefaultParticleCount, 2, pipeline::kMostParticles,
                "about this many particles, whatever the organ's size: the radius follows its "
                "volume (the default's accuracy and time: docs/benchmarks.md)")
       .used_when({{"model.radius_mm", {"0"}}});

@@ -163,6 +163,9 @@ TEST(ModelStage, ParticlesSetTheRadiusFromTheBodysVolume) {
       parse("body:\n  size_mm: [40, 30, 20]\nmodel:\n  radius_mm: 2\n  skeleton: false\n")));
   EXPECT_EQ(by_radius.settings.radius_mm, 2.0);
   EXPECT_LT(by_radius.state.size(), 1000);  // 12.6 cm3 at r0 = 4 mm: about 300
+  // The count a radius gives, foretold from the volume as the radius for a count is.
+  EXPECT_NEAR(fitting::particle_count_at(by_radius.settings, by_radius.shape),
+              by_radius.state.size(), 0.1 * by_radius.state.size());
   EXPECT_EQ(error_of("body:\nmodel:\n  particles: 5000\n  radius_mm: 2\n"),
             "/s.yaml:3: model.particles: not used when model.radius_mm is '2': the run would "
             "ignore it (it is used with model.radius_mm: 0)");
@@ -249,6 +252,21 @@ TEST(ModelStage, ABridgeThinnerThanTheParticlesLeavesTwoPiecesAndSaysSo) {
       model_stage_options_from(parse("body:\nmodel:\n  radius_mm: 1.25\n")), &organ);
   EXPECT_EQ(r.summary["organ_components"].get<int>(), 1);
   EXPECT_GE(r.summary["components"].get<int>(), 2);  // the balls, and what the rim leaves
+}
+
+// A radius in the wrong unit (0.01 mm): sqrt(2) V / a^3 = 2.4e9 particles in 12.6 cm3 (a =
+// 0.9758 r0), refused before the fill, naming the key.
+TEST(ModelStage, ARadiusFillingTheBodyWithMoreThanAModelHoldsIsRefusedBeforeTheFill) {
+  const config::Scene scene = parse("body:\n  size_mm: [40, 30, 20]\nmodel:\n  radius_mm: 0.01\n");
+  try {
+    run_model_stage(model_stage_options_from(scene));
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/s.yaml:4: model.radius_mm: a radius of 0.01 mm fills "
+                                         "this organ with about 2.4e+09 particles"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(ModelStage, ABodyTooSmallForOneParticleIsABadInputNamingTheKey) {

@@ -82,6 +82,11 @@ struct OrganModel {
 double radius_for_count(const ModelSettings& settings, const geometry::Shape& shape,
                         long long count);
 
+/// About how many particles an fcc lattice at `settings.radius_mm` puts in `shape` (its
+/// volume over a lattice site's, a^3 / sqrt(2)): radius_for_count's inverse, to refuse a
+/// radius that would fill an organ with billions before the fill starts.
+double particle_count_at(const ModelSettings& settings, const geometry::Shape& shape);
+
 /// Cohesion law and integrator settings of a model.
 particles::CohesionParams cohesion_params_from(const ModelSettings& s);
 particles::IntegratorOptions integrator_options_from(const ModelSettings& s,

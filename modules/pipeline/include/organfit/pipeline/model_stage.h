@@ -29,6 +29,9 @@ struct ModelStageResult : fitting::OrganModel {
 /// the least of 1,000, 3,000, 10,000 and 30,000 at which every one of them is within 0.05 mm
 /// MSD of its best count; its update is 0.5 to 1.2 s there (docs/benchmarks.md).
 constexpr long long kDefaultParticleCount = 10000;
+/// The most particles a model is built with (model.particles' range; a radius that would
+/// fill the organ with more is refused before the fill).
+constexpr long long kMostParticles = 20000000;
 
 /// The model stage's settings: the model's, the particle count asked for, and the
 /// analytic body to fill when there is no organ.
