@@ -247,30 +247,23 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   if (other_modality > 0)
     series.warnings.push_back(
         fmt::format("{}: {} DICOM object(s) that are not CT were ignored", where, other_modality));
-  // Objects left out by series: how many, and the series' descriptions.
-  auto left_out = [](const std::map<std::string, std::pair<std::string, int>>& seen) {
+  // Objects left out, in one warning: how many, and their series' descriptions.
+  auto warn_left_out = [&](const std::map<std::string, std::pair<std::string, int>>& seen,
+                           const char* what) {
+    if (seen.empty()) return;
     int objects = 0;
     std::string named;
     for (const auto& [uid, series_seen] : seen) {
       objects += series_seen.second;
       named += fmt::format("{}'{}'", named.empty() ? "" : ", ", echo(series_seen.first, 40));
     }
-    return std::make_pair(objects, echo(named, 200));
+    series.warnings.push_back(
+        fmt::format("{}: {} {} were ignored: series {}", where, objects, what, echo(named, 200)));
   };
-  if (!localizers.empty()) {
-    const auto [images, named] = left_out(localizers);
-    series.warnings.push_back(
-        fmt::format("{}: {} localizer image(s) (scout or topogram: Image Type LOCALIZER) were "
-                    "ignored: series {}",
-                    where, images, named));
-  }
-  if (!not_images.empty()) {
-    const auto [objects, named] = left_out(not_images);
-    series.warnings.push_back(
-        fmt::format("{}: {} object(s) of Modality CT that are not CT images (another SOP Class: a "
-                    "screen capture, a dose report) were ignored: series {}",
-                    where, objects, named));
-  }
+  warn_left_out(localizers, "localizer image(s) (scout or topogram: Image Type LOCALIZER)");
+  warn_left_out(not_images,
+                "object(s) of Modality CT that are not CT images (another SOP Class: a screen "
+                "capture, a dose report)");
   if (by_series.empty())
     fail(localizers.empty() && not_images.empty()
              ? "no CT series (no DICOM file with Modality CT)"
