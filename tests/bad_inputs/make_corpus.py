@@ -77,6 +77,14 @@ for keyword in ['ImagePositionPatient', 'ImageOrientationPatient', 'PixelSpacing
     if keyword in ds:
         delattr(ds, keyword)
 ds.save_as(os.path.join(d, 'ct', 'dose_report.dcm'))
+# A localizer in the CT's own series (some scanners' exports): it had been refused as
+# "slices differ in orientation".
+d = case('tolerated_localizer_in_the_ct_series', SEGMENT, '1 localizer image(s) (scout or topogram', code=0)
+ds = pydicom.dcmread(os.path.join(d, 'ct', ct_files[0]))
+ds.SOPInstanceUID = ds.file_meta.MediaStorageSOPInstanceUID = '1.2.826.0.1.3680043.2.1125.99.38'
+ds.ImageType = ['ORIGINAL', 'PRIMARY', 'LOCALIZER']
+ds.ImageOrientationPatient = [1, 0, 0, 0, 0, -1]
+ds.save_as(os.path.join(d, 'ct', 'scout.dcm'))
 def second_series(d):
     for i, name in enumerate(ct_files):
         ds = pydicom.dcmread(os.path.join(d, 'ct', name))
