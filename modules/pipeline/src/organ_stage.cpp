@@ -55,7 +55,7 @@ OrganAtCtEdge organ_at_ct_edge(const geometry::LabelVolume& mask, const std::str
 
 OrganStageResult run_organ_stage(const OrganStageOptions& options, const dicom::CtSeries& ct,
                                  const fs::path& rtstruct_file, const fs::path& staging,
-                                 const fs::path& out_dir) {
+                                 const fs::path& out_dir, const dicom::StructureSet* rtstruct) {
   OrganStageResult r;
   const std::string& roi = options.roi;
   geometry::LabelVolume mask;
@@ -80,8 +80,10 @@ OrganStageResult run_organ_stage(const OrganStageOptions& options, const dicom::
                    r.pull_wall_s);
     }
     const fs::path& file = r.rtstruct_file;
-    dicom::RasterisedRoi imported = dicom::rasterise_roi(dicom::read_rtstruct(file), roi, ct,
-                                                         file.string(), options.roi_number);
+    std::optional<dicom::StructureSet> read;
+    if (!rtstruct || options.pull) rtstruct = &read.emplace(dicom::read_rtstruct(file));
+    dicom::RasterisedRoi imported =
+        dicom::rasterise_roi(*rtstruct, roi, ct, file.string(), options.roi_number);
     r.warnings = imported.warnings;
     r.summary = {{"roi", roi},
                  {"source", "rtstruct"},

@@ -240,6 +240,15 @@ struct DeclaredColumns {
   int confidence = -1;         ///< the confidence's column; -1: none
   bool ras = false;            ///< x and y point the other way: negated into LPS
   bool declared() const { return x >= 0; }
+  /// A row's cells in the named columns' order: x, y, z, and the confidence when asked and
+  /// named (the row holds them all).
+  std::vector<std::string> taken(const std::vector<std::string>& cells,
+                                 bool with_confidence) const {
+    std::vector<std::string> out = {cells[static_cast<size_t>(x)], cells[static_cast<size_t>(y)],
+                                    cells[static_cast<size_t>(z)]};
+    if (with_confidence && confidence >= 0) out.push_back(cells[static_cast<size_t>(confidence)]);
+    return out;
+  }
 };
 
 /// A header line's columns by name, when it names x, y and z (a column's first word,
@@ -329,12 +338,7 @@ PointsTable read_points_table(const fs::path& file) {
       const int last = std::max({declared.x, declared.y, declared.z, declared.confidence});
       if (static_cast<int>(cells.size()) <= last)
         fail(fmt::format("{} columns where its named columns need {}", cells.size(), last + 1));
-      std::vector<std::string> named = {cells[static_cast<size_t>(declared.x)],
-                                        cells[static_cast<size_t>(declared.y)],
-                                        cells[static_cast<size_t>(declared.z)]};
-      if (declared.confidence >= 0)
-        named.push_back(cells[static_cast<size_t>(declared.confidence)]);
-      cells = std::move(named);
+      cells = declared.taken(cells, true);
     }
     std::vector<double> v;
     for (const auto& c : cells) {
@@ -346,11 +350,8 @@ PointsTable read_points_table(const fs::path& file) {
         if (points.empty() && v.empty() && !header_seen && !declared.declared()) {
           // Its coordinate columns: those it names x, y, z, or its first three.
           DeclaredColumns named = columns_named(cells);
-          const std::string mismatch = header_mismatch(
-              named.declared() ? std::vector<std::string>{cells[static_cast<size_t>(named.x)],
-                                                          cells[static_cast<size_t>(named.y)],
-                                                          cells[static_cast<size_t>(named.z)]}
-                               : cells);
+          const std::string mismatch =
+              header_mismatch(named.declared() ? named.taken(cells, false) : cells);
           if (!mismatch.empty())
             fail(mismatch +
                  "; points are read in mm, in the planning CT's patient coordinates "

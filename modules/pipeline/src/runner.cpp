@@ -172,11 +172,12 @@ nlohmann::json run_into(const config::Scene& scene, const fs::path& out_dir,
     record_stage("phantom", clock.elapsed_s());
   }
   std::optional<dicom::CtSeries> ct;
+  std::optional<dicom::StructureSet> organ_rtstruct;  // the scene's organ.rtstruct, read
   if (scene.has_section("ct") || !ct_folder.empty()) {
     CtStageOptions ct_options = ct_stage_options_from(scene);
     // Of a folder's several series, the one the planning model was built on, or the one the
-    // organ's structure set was drawn on (its file read again, in full, by the organ stage,
-    // which reports what is wrong with it).
+    // organ's structure set was drawn on (read here for the organ stage; one that cannot be
+    // read is left to it to report, after the CT).
     if (ct_reference) {
       ct_options.read.referenced_series_uids = {ct_reference->series_instance_uid};
       ct_options.read.referenced_by = "the planning model";
@@ -184,8 +185,8 @@ nlohmann::json run_into(const config::Scene& scene, const fs::path& out_dir,
     if (scene.has_section("organ") && scene.text("organ", "source") == "rtstruct" &&
         scene.is_given("organ", "rtstruct")) {
       try {
-        ct_options.read.referenced_series_uids =
-            dicom::read_rtstruct(scene.path("organ", "rtstruct")).referenced_series_uids;
+        organ_rtstruct = dicom::read_rtstruct(scene.path("organ", "rtstruct"));
+        ct_options.read.referenced_series_uids = organ_rtstruct->referenced_series_uids;
       } catch (const InputError&) {
       }
     }
@@ -231,7 +232,8 @@ nlohmann::json run_into(const config::Scene& scene, const fs::path& out_dir,
   if (scene.has_section("organ") && ct) {
     Stopwatch clock;
     OrganStageResult made =
-        run_organ_stage(organ_stage_options_from(scene), *ct, rtstruct_file, staging, out_dir);
+        run_organ_stage(organ_stage_options_from(scene), *ct, rtstruct_file, staging, out_dir,
+                        organ_rtstruct ? &*organ_rtstruct : nullptr);
     if (made.pulled) {
       rtstruct_file = made.rtstruct_file;
       organ_structure_set = made.structure_set_home;

@@ -10,6 +10,7 @@
 
 #include "organfit/config/scene.h"
 #include "organfit/dicom/ct_series.h"
+#include "organfit/dicom/structure_set.h"
 #include "organfit/geometry/shape.h"
 #include "organfit/pipeline/model_file.h"
 #include "organfit/pipeline/node_stage.h"
@@ -55,11 +56,13 @@ OrganAtCtEdge organ_at_ct_edge(const geometry::LabelVolume& mask, const std::str
                                const std::string& roi);
 
 /// Makes the organ. `rtstruct_file`: the structure set to import from (the scene's or the
-/// phantom's; ignored for a seed or a pull); `staging`/`out_dir` as for the ct stage.
+/// phantom's; ignored for a seed or a pull), `rtstruct` that file as already read (null:
+/// read here); `staging`/`out_dir` as for the ct stage.
 /// Fails naming organ.roi when the organ covers no voxel.
 OrganStageResult run_organ_stage(const OrganStageOptions& options, const dicom::CtSeries& ct,
                                  const std::filesystem::path& rtstruct_file,
                                  const std::filesystem::path& staging,
-                                 const std::filesystem::path& out_dir);
+                                 const std::filesystem::path& out_dir,
+                                 const dicom::StructureSet* rtstruct = nullptr);
 
 }  // namespace organfit::pipeline
