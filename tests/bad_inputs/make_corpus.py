@@ -340,6 +340,7 @@ scene_case('scene_out_is_its_folder', 'body:\nmodel:\n', "--out is the folder of
 scene_case('scene_out_unwritable', 'body:\nmodel:\n', 'cannot create the output folder', args=['run', '{case}/scene.yaml', '--out', '/proc/organfit/out'])
 scene_case('scene_unknown_section', 'modle:\n  radius_mm: 2\n', "unknown section (did you mean 'model'?)")
 scene_case('scene_yaml_syntax', 'body: [1, 2\nmodel:\n', 'scene.yaml:')
+scene_case('scene_indented_with_a_tab', 'body:\nmodel:\n\tradius_mm: 2\n', 'scene.yaml:3: YAML syntax error: this line is indented with a tab')
 scene_case('scene_missing_required', 'phantom:\norgan:\n  source: rtstruct\n', 'organ.roi')
 scene_case('scene_registration_not_rigid', 'body:\nmodel:\npoints:\n  source: ultrasound\nultrasound:\n  source: volume\n  file: scene.yaml\n  registration: [2,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]\n', 'not a rigid transform')
 scene_case('scene_export_into_a_folder', 'body:\nmodel:\nexport:\n  mesh: sub/organ.stl\n', 'a file name inside --out')

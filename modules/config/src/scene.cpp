@@ -199,6 +199,19 @@ std::string key_hint(const Schema& schema, const std::string& section, const std
   return "";
 }
 
+/// The first line (from 0) whose indentation holds a tab, or -1.
+int first_tab_indented_line(const std::string& text) {
+  int line = 0;
+  for (size_t start = 0; start < text.size(); ++line) {
+    const size_t end = std::min(text.find('\n', start), text.size());
+    const size_t content = text.find_first_not_of(" \t\r", start);
+    if (content != std::string::npos && content < end && text.find('\t', start) < content)
+      return line;
+    start = end + 1;
+  }
+  return -1;
+}
+
 }  // namespace
 
 Scene parse_scene(const std::string& text, const fs::path& file, const Schema& schema,
@@ -215,7 +228,13 @@ Scene parse_scene(const std::string& text, const fs::path& file, const Schema& s
                     "a second YAML document: a scene file holds one, and the run would ignore "
                     "this one");
   } catch (const YAML::Exception& e) {
-    parser.fail(std::max(0, e.mark.line), "", "YAML syntax error: " + e.msg);
+    const int line = std::max(0, e.mark.line);
+    // A tab in a line's indentation is the error editors that insert tabs make, and
+    // yaml-cpp reports it as what follows ("illegal map value"): name the tab.
+    if (const int tab = first_tab_indented_line(text); tab >= 0 && tab <= line + 1)
+      parser.fail(tab, "",
+                  "YAML syntax error: this line is indented with a tab (YAML indents with spaces)");
+    parser.fail(line, "", "YAML syntax error: " + e.msg);
   }
   if ((!root || root.IsNull()) && overrides.empty()) parser.fail(0, "", "the scene is empty");
   if (!root || root.IsNull()) root = YAML::Node(YAML::NodeType::Map);

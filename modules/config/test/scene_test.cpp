@@ -112,6 +112,11 @@ TEST(SceneParse, DuplicatesSyntaxAndShapeErrors) {
             "/scenes/s.yaml:3: model.radius_mm: key given twice");
   EXPECT_NE(error_of("model: [1, 2\n").find("/scenes/s.yaml:"), std::string::npos);
   EXPECT_NE(error_of("model: [1, 2\n").find("YAML syntax error"), std::string::npos);
+  // A tab in the indentation is named at its line (yaml-cpp: "illegal map value").
+  EXPECT_EQ(error_of("scene:\n  name: a\nmodel:\n\tradius_mm: 1\n"),
+            "/scenes/s.yaml:4: YAML syntax error: this line is indented with a tab (YAML indents "
+            "with spaces)");
+  EXPECT_EQ(error_of("model:\n  radius_mm:\t2\n"), "no error");
   EXPECT_EQ(error_of(""), "/scenes/s.yaml:1: the scene is empty");
   EXPECT_EQ(error_of("- a\n- b\n"), "/scenes/s.yaml:1: a scene is a mapping of sections");
   EXPECT_EQ(error_of("model: 3\n"), "/scenes/s.yaml:1: model: a section is a mapping of keys");
