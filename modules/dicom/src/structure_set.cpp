@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <sstream>
 
@@ -493,6 +494,8 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
     struct Voxels {
       std::vector<std::uint8_t> in;  // nx x ny
       long long count = 0;
+      int i0 = std::numeric_limits<int>::max(), i1 = -1, j0 = std::numeric_limits<int>::max(),
+          j1 = -1;  // the box of the voxels in it
     };
     std::vector<Voxels> alone;
     for (const auto& p : on_slice) {
@@ -502,14 +505,22 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
         std::uint8_t& here = v.in[static_cast<size_t>(i + nx * j)];
         v.count += here == 0;  // a voxel at two intervals' shared end is one voxel
         here = 1;
+        v.i0 = std::min(v.i0, i), v.i1 = std::max(v.i1, i);
+        v.j0 = std::min(v.j0, j), v.j1 = std::max(v.j1, j);
       });
     }
     for (size_t a = 0; a < on_slice.size(); ++a)
       for (size_t b = a + 1; b < on_slice.size();) {
         const long long in_a = alone[a].count, in_b = alone[b].count;
+        // The voxels both hold lie in both boxes: a slice of many small contours (islands)
+        // compares each pair over their boxes' common part, not the whole slice.
         long long shared = 0;
-        for (size_t v = 0; v < alone[a].in.size(); ++v)
-          shared += alone[a].in[v] & alone[b].in[v];
+        const Voxels &va = alone[a], &vb = alone[b];
+        for (int j = std::max(va.j0, vb.j0); j <= std::min(va.j1, vb.j1); ++j)
+          for (int i = std::max(va.i0, vb.i0); i <= std::min(va.i1, vb.i1); ++i) {
+            const size_t v = static_cast<size_t>(i + nx * j);
+            shared += va.in[v] & vb.in[v];
+          }
         if (shared > 0 && shared == in_a && shared == in_b) {
           out.warnings.push_back(fmt::format(
               "{}: ROI '{}' contour {} encloses the same voxels as contour {} on slice {} (a "

@@ -21,9 +21,10 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 /// line's, (first + q) step, so that a piece of a line gives the same numbers as the
 /// whole line where the piece decides them. v, z and g are scratch of size n, n+1 and n:
 /// g[k] holds f + p^2 at the envelope's k-th parabola, computed once rather than at every
-/// comparison.
+/// comparison. With `arg`, arg[q] is the sample whose parabola gives d[q] (unset where d
+/// is infinite).
 void edt_1d(const double* f, double* d, int first, int n, double step, std::vector<int>& v,
-            std::vector<double>& z, std::vector<double>& g) {
+            std::vector<double>& z, std::vector<double>& g, int* arg = nullptr) {
   int k = -1;
   for (int q = 0; q < n; ++q) {
     if (f[q] == kInf) continue;
@@ -56,6 +57,7 @@ void edt_1d(const double* f, double* d, int first, int n, double step, std::vect
       ++j;
     const double dq = (q - v[j]) * step;
     d[q] = dq * dq + f[v[j]];
+    if (arg) arg[q] = v[j];
   }
 }
 
@@ -65,9 +67,10 @@ namespace {
 /// Per-thread room for one line's transforms (n voxels).
 struct LineScratch {
   std::vector<double> values, f, out, z, g;
-  std::vector<int> v;
+  std::vector<int> v, arg, id;
   std::vector<std::uint8_t> inside;
-  explicit LineScratch(int n) : values(n), f(n), out(n), z(n + 1), g(n), v(n), inside(n) {}
+  explicit LineScratch(int n)
+      : values(n), f(n), out(n), z(n + 1), g(n), v(n), arg(n), id(n), inside(n) {}
 };
 
 /// fn(first voxel, stride, n, scratch) for every line of the grid along `axis` (1 or 2),
@@ -181,6 +184,59 @@ GridBuffer<double> squared_distance_transform(const std::vector<std::uint8_t>& f
 GridBuffer<double> squared_distance_across(const std::vector<std::uint8_t>& inside,
                                            const ImageGeometry& g) {
   return distance_to_other_side(inside, g, true);
+}
+
+std::vector<int> nearest_feature_transform(const std::vector<std::uint8_t>& feature,
+                                           const ImageGeometry& g) {
+  if (feature.size() != static_cast<size_t>(g.voxel_count()))
+    throw std::invalid_argument("feature transform: size mismatch");
+  if (g.voxel_count() > std::numeric_limits<int>::max())
+    throw std::invalid_argument("feature transform: more than 2^31 voxels");
+  const int nx = g.size[0], ny = g.size[1], nz = g.size[2];
+  GridBuffer<double> d(feature.size());  // the squared distance so far, every voxel set
+  std::vector<int> nearest(feature.size(), -1);
+  // Along x: the nearest feature in the row, by a sweep each way.
+  const double sx = g.spacing_mm[0];
+#pragma omp parallel for schedule(static)
+  for (long long row = 0; row < 1LL * ny * nz; ++row) {
+    const long long base = row * nx;
+    int last = -1;
+    for (int i = 0; i < nx; ++i) {
+      if (feature[static_cast<size_t>(base + i)]) last = i;
+      const double dq = (i - last) * sx;
+      d[base + i] = last >= 0 ? dq * dq : kInf;
+      nearest[static_cast<size_t>(base + i)] = last >= 0 ? static_cast<int>(base + last) : -1;
+    }
+    int next = -1;
+    for (int i = nx - 1; i >= 0; --i) {
+      if (feature[static_cast<size_t>(base + i)]) next = i;
+      if (next < 0) continue;
+      const double dq = (next - i) * sx;
+      if (dq * dq < d[base + i]) {
+        d[base + i] = dq * dq;
+        nearest[static_cast<size_t>(base + i)] = static_cast<int>(base + next);
+      }
+    }
+  }
+  // Along y, then z: each voxel takes the nearest of its line's voxels' nearest features.
+  for (int axis = 1; axis < 3; ++axis) {
+    const double step = g.spacing_mm[axis];
+    along_lines(g, axis, [&](long long base, long long stride, int n, LineScratch& s) {
+      bool finite = false;
+      for (int t = 0; t < n; ++t) {
+        s.values[t] = d[base + t * stride];
+        s.id[t] = nearest[static_cast<size_t>(base + t * stride)];
+        finite = finite || s.values[t] != kInf;
+      }
+      if (!finite) return;
+      edt_1d(s.values.data(), s.out.data(), 0, n, step, s.v, s.z, s.g, s.arg.data());
+      for (int t = 0; t < n; ++t) {
+        d[base + t * stride] = s.out[t];
+        nearest[static_cast<size_t>(base + t * stride)] = s.id[s.arg[t]];
+      }
+    });
+  }
+  return nearest;
 }
 
 ImageGeometry grid_covering(const Aabb& box, double voxel_mm, double margin_mm) {

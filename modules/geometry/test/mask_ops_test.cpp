@@ -36,6 +36,45 @@ TEST(DistanceTransform, MatchesBruteForceOnAnisotropicGrid) {
       }
 }
 
+TEST(FeatureTransform, NamesANearestFeatureVoxelAtTheTransformsDistance) {
+  // Random features from sparse to dense on anisotropic grids, and none: the voxel named is
+  // a feature voxel at the brute-force least distance (within rounding), and the distance
+  // transform's value; -1 everywhere when there is no feature.
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 6; ++trial) {
+    ImageGeometry g;
+    g.size = {12 + trial, 9 + trial % 3, 7 + 2 * (trial % 2)};
+    g.spacing_mm = {0.5 + 0.1 * trial, 0.8, 1.3};
+    std::vector<std::uint8_t> f(g.voxel_count());
+    for (auto& v : f)
+      v = trial == 5 ? 0 : (rng() % (2 + 15 * trial)) == 0;
+    const std::vector<int> nearest = nearest_feature_transform(f, g);
+    const auto d = squared_distance_transform(f, g);
+    ASSERT_EQ(nearest.size(), f.size());
+    auto place = [&g](long long v) {
+      return Eigen::Vector3d(static_cast<double>(v % g.size[0]),
+                             static_cast<double>((v / g.size[0]) % g.size[1]),
+                             static_cast<double>(v / (1LL * g.size[0] * g.size[1])));
+    };
+    for (long long v = 0; v < g.voxel_count(); ++v) {
+      double best = std::numeric_limits<double>::infinity();
+      for (long long w = 0; w < g.voxel_count(); ++w)
+        if (f[static_cast<size_t>(w)])
+          best = std::min(best, g.spacing_mm.cwiseProduct(place(w) - place(v)).squaredNorm());
+      const int got = nearest[static_cast<size_t>(v)];
+      if (std::isinf(best)) {
+        ASSERT_EQ(got, -1) << "trial " << trial;
+        continue;
+      }
+      ASSERT_GE(got, 0);
+      ASSERT_TRUE(f[static_cast<size_t>(got)]) << "trial " << trial << " voxel " << v;
+      EXPECT_NEAR(g.spacing_mm.cwiseProduct(place(got) - place(v)).squaredNorm(), best, 1e-9)
+          << "trial " << trial << " voxel " << v;
+      EXPECT_NEAR(d[static_cast<size_t>(v)], best, 1e-9);
+    }
+  }
+}
+
 TEST(DistanceTransform, AcrossIsBothTransformsEachWhereItIsAsked) {
   // Random masks from sparse to dense on anisotropic grids, lines wholly inside, wholly
   // outside and mixed, and the empty and full masks: to the inside at outside voxels, to

@@ -36,6 +36,14 @@ GridBuffer<double> squared_distance_transform(const std::vector<std::uint8_t>& f
 GridBuffer<double> squared_distance_across(const std::vector<std::uint8_t>& inside,
                                            const ImageGeometry& grid);
 
+/// For every voxel, the linear index of its nearest voxel where `feature` is non-zero (-1
+/// when there is none): the argument of squared_distance_transform's minimum, by the same
+/// exact linear-time passes. Of equidistant feature voxels one is taken, which one decided
+/// by the passes' rounding. Grids of fewer than 2^31 voxels; std::invalid_argument
+/// otherwise.
+std::vector<int> nearest_feature_transform(const std::vector<std::uint8_t>& feature,
+                                           const ImageGeometry& grid);
+
 /// An axis-aligned grid of cubic voxels covering `box` grown by `margin_mm`.
 ImageGeometry grid_covering(const Aabb& box, double voxel_mm, double margin_mm);
 

@@ -52,7 +52,9 @@ Skeleton medial_skeleton(const Positions& rest, double a_nn_mm, double node_spac
 
 /// The same from a segmentation (label != 0 inside; the CT stage's organ mask): voxel
 /// centres stand for the particles, face neighbours for the first shell, voxels with a
-/// face neighbour outside for the surface, and lambda is at least two voxels. A mask's
+/// face neighbour outside for the surface, and lambda is at least two voxels; the depths
+/// and features come from the exact distance transform's passes (linear in the voxels,
+/// over the inside voxels' box; of equidistant surface voxels one is taken). A mask's
 /// surface is the organ's own, not a particle lattice's, so its medial axis does not
 /// depend on how the body was filled. Throws std::invalid_argument on an empty mask or a
 /// non-positive node spacing.
