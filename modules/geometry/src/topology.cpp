@@ -35,37 +35,93 @@ struct Pieces {
         for (int i = 1; i + 1 < n[0]; ++i)
           in[index(i, j, k)] =
               mask.at(box.lo[0] + i - 1, box.lo[1] + j - 1, box.lo[2] + k - 1) == 1;
-    id.assign(static_cast<size_t>(total), -1);
-    std::vector<long long> stack;
-    for (long long v = 0; v < total; ++v) {
-      if (id[static_cast<size_t>(v)] >= 0) continue;
-      const bool organ = in[static_cast<size_t>(v)];
-      Piece p{organ, false, 0};
-      const int label = static_cast<int>(pieces.size());
-      stack.assign(1, v);
-      id[static_cast<size_t>(v)] = label;
-      while (!stack.empty()) {
-        const long long w = stack.back();
-        stack.pop_back();
-        ++p.size;
-        const int i = static_cast<int>(w % n[0]), j = static_cast<int>((w / n[0]) % n[1]),
-                  k = static_cast<int>(w / (1LL * n[0] * n[1]));
-        if (i == 0 || j == 0 || k == 0 || i == n[0] - 1 || j == n[1] - 1 || k == n[2] - 1)
-          p.border = true;
-        for (int dk = -1; dk <= 1; ++dk)
-          for (int dj = -1; dj <= 1; ++dj)
-            for (int di = -1; di <= 1; ++di) {
-              const int steps = std::abs(di) + std::abs(dj) + std::abs(dk);
-              if (steps == 0 || (!organ && steps > 1)) continue;
-              const int a = i + di, b = j + dj, c = k + dk;
-              if (a < 0 || b < 0 || c < 0 || a >= n[0] || b >= n[1] || c >= n[2]) continue;
-              const size_t u = index(a, b, c);
-              if (id[u] >= 0 || in[u] != organ) continue;
-              id[u] = label;
-              stack.push_back(static_cast<long long>(u));
-            }
+    label_runs(in);
+  }
+  /// Labels the padded box by runs along x: a row's runs of one side, joined (union-find)
+  /// to the runs of the same side they touch in the rows before it, 26-connected for the
+  /// organ (the 4 rows j-1 or k-1 about it, a run's ends grown by a voxel) and 6-connected
+  /// for the rest (rows j-1 and k-1, overlapping). Pieces are numbered in the order of their
+  /// first voxel. Linear in the voxels and cache-friendly: a flood fill by a stack of voxels
+  /// took a second on a 2.5 L organ's 15 million voxels (0.8 x 0.8 x 0.5 mm).
+  void label_runs(const std::vector<std::uint8_t>& in) {
+    struct Run {
+      int start, end;  // [start, end) along x
+      bool organ;
+    };
+    std::vector<Run> runs;
+    const long long rows = 1LL * n[1] * n[2];
+    std::vector<long long> row_first(static_cast<size_t>(rows) + 1, 0);
+    for (long long r = 0; r < rows; ++r) {
+      row_first[static_cast<size_t>(r)] = static_cast<long long>(runs.size());
+      const std::uint8_t* row = in.data() + r * n[0];
+      for (int a = 0; a < n[0];) {
+        int b = a + 1;
+        while (b < n[0] && row[b] == row[a])
+          ++b;
+        runs.push_back({a, b, row[a] != 0});
+        a = b;
       }
-      pieces.push_back(p);
+    }
+    row_first[static_cast<size_t>(rows)] = static_cast<long long>(runs.size());
+    std::vector<long long> parent(runs.size());
+    for (size_t r = 0; r < runs.size(); ++r)
+      parent[r] = static_cast<long long>(r);
+    auto find = [&parent](long long x) {
+      while (parent[static_cast<size_t>(x)] != x)
+        x = parent[static_cast<size_t>(x)] =
+            parent[static_cast<size_t>(parent[static_cast<size_t>(x)])];
+      return x;
+    };
+    auto join = [&](long long a, long long b) {
+      a = find(a), b = find(b);
+      if (a != b) parent[static_cast<size_t>(std::max(a, b))] = std::min(a, b);
+    };
+    for (int k = 0; k < n[2]; ++k)
+      for (int j = 0; j < n[1]; ++j) {
+        const long long row = j + 1LL * n[1] * k;
+        const int before[4][2] = {{j - 1, k}, {j, k - 1}, {j - 1, k - 1}, {j + 1, k - 1}};
+        for (int b = 0; b < 4; ++b) {
+          const int jb = before[b][0], kb = before[b][1];
+          if (jb < 0 || kb < 0 || jb >= n[1]) continue;
+          const bool face = b < 2;  // a face neighbour row: the rest joins across it too
+          const long long other = jb + 1LL * n[1] * kb;
+          long long q = row_first[static_cast<size_t>(other)];
+          const long long q_end = row_first[static_cast<size_t>(other) + 1];
+          for (long long r = row_first[static_cast<size_t>(row)];
+               r < row_first[static_cast<size_t>(row) + 1]; ++r) {
+            const Run& run = runs[static_cast<size_t>(r)];
+            if (!run.organ && !face) continue;
+            const int grow = run.organ ? 1 : 0;  // diagonal neighbours along x
+            while (q < q_end && runs[static_cast<size_t>(q)].end + grow <= run.start)
+              ++q;
+            for (long long t = q; t < q_end && runs[static_cast<size_t>(t)].start < run.end + grow;
+                 ++t)
+              if (runs[static_cast<size_t>(t)].organ == run.organ &&
+                  runs[static_cast<size_t>(t)].end + grow > run.start)
+                join(r, t);
+          }
+        }
+      }
+    // Pieces in the order of their first run (the first voxel's), sizes, the border.
+    std::vector<int> label(runs.size(), -1);
+    id.assign(static_cast<size_t>(1LL * rows * n[0]), -1);
+    for (long long row = 0; row < rows; ++row) {
+      const int j = static_cast<int>(row % n[1]), k = static_cast<int>(row / n[1]);
+      const bool edge_row = j == 0 || k == 0 || j == n[1] - 1 || k == n[2] - 1;
+      for (long long r = row_first[static_cast<size_t>(row)];
+           r < row_first[static_cast<size_t>(row) + 1]; ++r) {
+        const Run& run = runs[static_cast<size_t>(r)];
+        const auto root = static_cast<size_t>(find(r));
+        if (label[root] < 0) {
+          label[root] = static_cast<int>(pieces.size());
+          pieces.push_back({run.organ, false, 0});
+        }
+        Piece& p = pieces[static_cast<size_t>(label[root])];
+        p.size += run.end - run.start;
+        p.border = p.border || edge_row || run.start == 0 || run.end == n[0];
+        std::fill(id.begin() + row * n[0] + run.start, id.begin() + row * n[0] + run.end,
+                  label[root]);
+      }
     }
   }
   size_t index(int i, int j, int k) const {
