@@ -185,6 +185,7 @@ Skeleton medial_skeleton(const geometry::LabelVolume& mask, double node_spacing_
     lo[d] = std::max(0, lo[d] - 1), hi[d] = std::min(g.size[d] - 1, hi[d] + 1);
     box.size[d] = hi[d] - lo[d] + 1;
   }
+  box.origin_mm = g.index_to_physical(Eigen::Vector3d(lo[0], lo[1], lo[2]));
   const long long bx = box.size[0], bxy = bx * box.size[1];
   const long long box_voxels = box.voxel_count();
   std::vector<std::uint8_t> inside(static_cast<size_t>(box_voxels)), surface(inside.size(), 0);

@@ -68,6 +68,46 @@ TEST(MedialSkeleton, FromAMaskNodesLieAlongTheLongAxisOfAnEllipsoid) {
   EXPECT_THROW(medial_skeleton(geometry::LabelVolume(g), 6.0), std::invalid_argument);  // empty
 }
 
+TEST(MedialSkeleton, FromAMaskDoesNotDependOnTheGridAroundTheOrgan) {
+  // The spheroid above on a grid of empty margins (7 voxels below, 3 above along each axis)
+  // whose axes run the other way in x and y (a patient lying prone): the organ's box is what
+  // is read, and the nodes are placed in patient space.
+  auto spheroid = [](const geometry::ImageGeometry& g) {
+    geometry::LabelVolume mask(g);
+    for (int k = 0; k < g.size[2]; ++k)
+      for (int j = 0; j < g.size[1]; ++j)
+        for (int i = 0; i < g.size[0]; ++i) {
+          const Eigen::Vector3d p =
+              g.index_to_physical(Eigen::Vector3d(i, j, k)) - Eigen::Vector3d(1, 2, 3);
+          mask.at(i, j, k) =
+              std::pow(p.x() / 20, 2) + std::pow(p.y() / 8, 2) + std::pow(p.z() / 8, 2) < 1;
+        }
+    return mask;
+  };
+  geometry::ImageGeometry g;
+  g.size = {50, 26, 14};
+  g.spacing_mm = Eigen::Vector3d(1, 1, 2);
+  g.origin_mm = Eigen::Vector3d(1 - 24.5, 2 - 12.5, 3 - 13);
+  geometry::ImageGeometry wide = g;
+  wide.size = {60, 36, 24};
+  wide.direction = Eigen::Vector3d(-1, -1, 1).asDiagonal();
+  wide.origin_mm = Eigen::Vector3d(1 + 24.5 + 7, 2 + 12.5 + 7, 3 - 13 - 14);
+  const Skeleton a = medial_skeleton(spheroid(g), 6.0), b = medial_skeleton(spheroid(wide), 6.0);
+  ASSERT_EQ(spheroid(g).count(1), spheroid(wide).count(1));
+  ASSERT_EQ(a.node_count(), b.node_count());
+  // The same medial voxels; the first node (the deepest, ties to the lowest index) may be
+  // another of equal depth, as index order runs the other way: every node of one lies
+  // within a voxel's diagonal of the other's medial axis, each node of b near one of a.
+  for (int k = 0; k < b.node_count(); ++k) {
+    double nearest = 1e9;
+    for (int m = 0; m < a.node_count(); ++m)
+      nearest = std::min(nearest, (a.nodes_mm.col(m) - b.nodes_mm.col(k)).norm());
+    EXPECT_LT(nearest, 6.0) << "node " << k << " at " << b.nodes_mm.col(k).transpose();
+    const Eigen::Vector3d n = b.nodes_mm.col(k) - Eigen::Vector3d(1, 2, 3);
+    EXPECT_LT(std::hypot(n.y(), n.z()), 4.0) << "node " << k << " off the axis";
+  }
+}
+
 TEST(MedialSkeleton, ABodyTooThinForAnAxisGetsOneNode) {
   const Positions two = (Positions(3, 2) << 0, 1, 0, 0, 0, 0).finished();
   EXPECT_EQ(medial_skeleton(two, 1.0, 3.0).node_count(), 1);
