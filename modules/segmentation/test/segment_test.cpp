@@ -4,6 +4,7 @@
 
 #include "organfit/dicom/structure_set.h"
 #include "organfit/support/error.h"
+#include "organfit/support/progress.h"
 
 namespace fs = std::filesystem;
 
@@ -36,7 +37,18 @@ TEST(SegmentFromSeed, SphereInNoiseIsRecoveredWhole) {
   o.seed_mm = {20, 20, 20};
   o.hu_low = 20;
   o.hu_high = 100;
+  // Progress lines as a log shows them (every update drawn): each filter's, the
+  // smoothing's first, and a done line.
+  Progress::set_force_plain(true);
+  Progress::set_plain_interval_s(0);
+  ::testing::internal::CaptureStderr();
   const geometry::LabelVolume m = segment_from_seed(g, hu, o).mask;
+  const std::string err = ::testing::internal::GetCapturedStderr();
+  Progress::set_force_plain(false);
+  Progress::set_plain_interval_s(5.0);
+  EXPECT_NE(err.find("segment: "), std::string::npos) << err;
+  EXPECT_LT(err.find("smoothing"), err.find("filling its holes")) << err;
+  EXPECT_NE(err.find("segment: 100% (700/700)"), std::string::npos) << err;
   EXPECT_NEAR(static_cast<double>(m.count(1)), static_cast<double>(inside), 0.05 * inside);
   EXPECT_EQ(m.at(20, 20, 10), 1);
   EXPECT_EQ(m.at(2, 2, 2), 0);
