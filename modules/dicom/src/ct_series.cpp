@@ -24,6 +24,7 @@
 #include "dicom_writing.h"
 #include "organfit/support/error.h"
 #include "organfit/support/interrupt.h"
+#include "organfit/support/progress.h"
 
 namespace fs = std::filesystem;
 
@@ -528,8 +529,10 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
   // Pixels, in HU.
   const size_t per_slice = static_cast<size_t>(first.rows) * first.columns;
   series.hu.resize(per_slice * slices.size());
+  Progress progress("ct: reading pixels", static_cast<long long>(slices.size()));
   for (size_t s = 0; s < slices.size(); ++s) {
     throw_if_interrupted();
+    progress.update(static_cast<long long>(s));
     const std::string name = fs::path(slices[s].file).filename().string();
     gdcm::ImageReader reader;
     reader.SetFileName(slices[s].file.c_str());
@@ -682,6 +685,7 @@ CtSeries read_ct_series(const fs::path& folder, const CtReadOptions& options) {
       }
     }
   }
+  progress.update(static_cast<long long>(slices.size()));
   return series;
 }
 

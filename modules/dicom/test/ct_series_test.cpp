@@ -8,6 +8,7 @@
 #include <fstream>
 
 #include "organfit/support/error.h"
+#include "organfit/support/progress.h"
 
 namespace fs = std::filesystem;
 
@@ -56,7 +57,17 @@ class Scratch {
 
 TEST(CtSeries, ReadsStsCt002WithItsGeometryAndSliceUids) {
   REQUIRE_DATA("ct-sts-002/ct");
+  // Progress by slice, as a log shows it when every update is drawn (a CT of a thousand
+  // thin slices takes seconds).
+  Progress::set_force_plain(true);
+  Progress::set_plain_interval_s(0);
+  ::testing::internal::CaptureStderr();
   const CtSeries ct = read_ct_series(data("ct-sts-002/ct"));
+  const std::string err = ::testing::internal::GetCapturedStderr();
+  Progress::set_force_plain(false);
+  Progress::set_plain_interval_s(5.0);
+  EXPECT_NE(err.find("ct: reading pixels: 50% (24/48)"), std::string::npos) << err;
+  EXPECT_NE(err.find("ct: reading pixels: 100% (48/48)"), std::string::npos) << err;
   EXPECT_EQ(ct.geometry.size[0], 161);  // columns
   EXPECT_EQ(ct.geometry.size[1], 143);  // rows
   EXPECT_EQ(ct.geometry.size[2], 48);
