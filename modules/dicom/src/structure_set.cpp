@@ -470,9 +470,9 @@ RasterisedRoi rasterise_roi(const StructureSet& rtss, const std::string& name, c
                                  Eigen::Vector3d(0, 0, static_cast<double>(gaps[n])))));
       out.warnings.push_back(fmt::format(
           "{}: ROI '{}' has no contour on {} slice(s) between its first and last ({}{}): read "
-          "with {} gap (a slice left out in contouring?)",
+          "with {} (a slice left out in contouring?)",
           source, shown, gaps.size(), named, gaps.size() > 5 ? ", ..." : "",
-          gaps.size() == 1 ? "that" : "those"));
+          gaps.size() == 1 ? "that gap" : "those gaps"));
     }
   }
   if (out.matched_by_position > 0)
