@@ -40,12 +40,8 @@ TEST(MedialSkeleton, NodesLieAlongTheLongAxisOfAnEllipsoid) {
   EXPECT_LT(max_x - min_x, 34.0);
 }
 
-TEST(MedialSkeleton, FromAMaskNodesLieAlongTheLongAxisOfAnEllipsoid) {
-  // The same spheroid as a segmentation on an anisotropic CT-like grid (1 x 1 x 2 mm).
-  geometry::ImageGeometry g;
-  g.size = {50, 26, 14};
-  g.spacing_mm = Eigen::Vector3d(1, 1, 2);
-  g.origin_mm = Eigen::Vector3d(1 - 24.5, 2 - 12.5, 3 - 13);
+/// A spheroid of semi-axes 20, 8, 8 mm about (1, 2, 3) mm as a segmentation on `g`.
+geometry::LabelVolume spheroid_mask(const geometry::ImageGeometry& g) {
   geometry::LabelVolume mask(g);
   for (int k = 0; k < g.size[2]; ++k)
     for (int j = 0; j < g.size[1]; ++j)
@@ -55,7 +51,23 @@ TEST(MedialSkeleton, FromAMaskNodesLieAlongTheLongAxisOfAnEllipsoid) {
         mask.at(i, j, k) =
             std::pow(p.x() / 20, 2) + std::pow(p.y() / 8, 2) + std::pow(p.z() / 8, 2) < 1;
       }
-  const Skeleton s = medial_skeleton(mask, 6.0);
+  return mask;
+}
+
+/// The spheroid's grid: anisotropic and CT-like (1 x 1 x 2 mm), the organ a voxel or more
+/// from every edge.
+geometry::ImageGeometry spheroid_grid() {
+  geometry::ImageGeometry g;
+  g.size = {50, 26, 14};
+  g.spacing_mm = Eigen::Vector3d(1, 1, 2);
+  g.origin_mm = Eigen::Vector3d(1 - 24.5, 2 - 12.5, 3 - 13);
+  return g;
+}
+
+TEST(MedialSkeleton, FromAMaskNodesLieAlongTheLongAxisOfAnEllipsoid) {
+  // The same spheroid as a segmentation.
+  const geometry::ImageGeometry g = spheroid_grid();
+  const Skeleton s = medial_skeleton(spheroid_mask(g), 6.0);
   ASSERT_GE(s.node_count(), 3);
   double min_x = 1e9, max_x = -1e9;
   for (int k = 0; k < s.node_count(); ++k) {
@@ -72,28 +84,14 @@ TEST(MedialSkeleton, FromAMaskDoesNotDependOnTheGridAroundTheOrgan) {
   // The spheroid above on a grid of empty margins (7 voxels below, 3 above along each axis)
   // whose axes run the other way in x and y (a patient lying prone): the organ's box is what
   // is read, and the nodes are placed in patient space.
-  auto spheroid = [](const geometry::ImageGeometry& g) {
-    geometry::LabelVolume mask(g);
-    for (int k = 0; k < g.size[2]; ++k)
-      for (int j = 0; j < g.size[1]; ++j)
-        for (int i = 0; i < g.size[0]; ++i) {
-          const Eigen::Vector3d p =
-              g.index_to_physical(Eigen::Vector3d(i, j, k)) - Eigen::Vector3d(1, 2, 3);
-          mask.at(i, j, k) =
-              std::pow(p.x() / 20, 2) + std::pow(p.y() / 8, 2) + std::pow(p.z() / 8, 2) < 1;
-        }
-    return mask;
-  };
-  geometry::ImageGeometry g;
-  g.size = {50, 26, 14};
-  g.spacing_mm = Eigen::Vector3d(1, 1, 2);
-  g.origin_mm = Eigen::Vector3d(1 - 24.5, 2 - 12.5, 3 - 13);
+  const geometry::ImageGeometry g = spheroid_grid();
   geometry::ImageGeometry wide = g;
   wide.size = {60, 36, 24};
   wide.direction = Eigen::Vector3d(-1, -1, 1).asDiagonal();
   wide.origin_mm = Eigen::Vector3d(1 + 24.5 + 7, 2 + 12.5 + 7, 3 - 13 - 14);
-  const Skeleton a = medial_skeleton(spheroid(g), 6.0), b = medial_skeleton(spheroid(wide), 6.0);
-  ASSERT_EQ(spheroid(g).count(1), spheroid(wide).count(1));
+  const Skeleton a = medial_skeleton(spheroid_mask(g), 6.0),
+                 b = medial_skeleton(spheroid_mask(wide), 6.0);
+  ASSERT_EQ(spheroid_mask(g).count(1), spheroid_mask(wide).count(1));
   ASSERT_EQ(a.node_count(), b.node_count());
   // The same medial voxels; the first node (the deepest, ties to the lowest index) may be
   // another of equal depth, as index order runs the other way: every node of one lies
