@@ -11,6 +11,25 @@
 namespace organfit::geometry {
 namespace {
 
+/// A voxel's index (i, j, k) on `g` from its linear index.
+Eigen::Vector3d index_of(const ImageGeometry& g, long long v) {
+  return Eigen::Vector3d(static_cast<double>(v % g.size[0]),
+                         static_cast<double>((v / g.size[0]) % g.size[1]),
+                         static_cast<double>(v / (1LL * g.size[0] * g.size[1])));
+}
+
+/// The brute-force squared distance (mm^2) from voxel `v` to the nearest voxel `w` with
+/// target(w), infinity when there is none: every voxel of the grid tried.
+template <class Target>
+double brute_force_squared_distance(const ImageGeometry& g, long long v, Target&& target) {
+  double best = std::numeric_limits<double>::infinity();
+  for (long long w = 0; w < g.voxel_count(); ++w)
+    if (target(w))
+      best =
+          std::min(best, g.spacing_mm.cwiseProduct(index_of(g, w) - index_of(g, v)).squaredNorm());
+  return best;
+}
+
 TEST(DistanceTransform, MatchesBruteForceOnAnisotropicGrid) {
   ImageGeometry g;
   g.size = {13, 9, 7};
@@ -20,20 +39,11 @@ TEST(DistanceTransform, MatchesBruteForceOnAnisotropicGrid) {
   for (auto& v : f)
     v = (rng() % 37) == 0;
   const auto d = squared_distance_transform(f, g);
-  for (int k = 0; k < 7; ++k)
-    for (int j = 0; j < 9; ++j)
-      for (int i = 0; i < 13; ++i) {
-        double best = std::numeric_limits<double>::infinity();
-        for (int c = 0; c < 7; ++c)
-          for (int b = 0; b < 9; ++b)
-            for (int a = 0; a < 13; ++a)
-              if (f[g.linear_index(a, b, c)]) {
-                const Eigen::Vector3d dv =
-                    g.spacing_mm.cwiseProduct(Eigen::Vector3d(a - i, b - j, c - k));
-                best = std::min(best, dv.squaredNorm());
-              }
-        EXPECT_NEAR(d[g.linear_index(i, j, k)], best, 1e-9);
-      }
+  for (long long v = 0; v < g.voxel_count(); ++v)
+    EXPECT_NEAR(
+        d[static_cast<size_t>(v)],
+        brute_force_squared_distance(g, v, [&](long long w) { return f[static_cast<size_t>(w)]; }),
+        1e-9);
 }
 
 TEST(FeatureTransform, NamesANearestFeatureVoxelAtTheTransformsDistance) {
@@ -51,16 +61,9 @@ TEST(FeatureTransform, NamesANearestFeatureVoxelAtTheTransformsDistance) {
     const std::vector<int> nearest = nearest_feature_transform(f, g);
     const auto d = squared_distance_transform(f, g);
     ASSERT_EQ(nearest.size(), f.size());
-    auto place = [&g](long long v) {
-      return Eigen::Vector3d(static_cast<double>(v % g.size[0]),
-                             static_cast<double>((v / g.size[0]) % g.size[1]),
-                             static_cast<double>(v / (1LL * g.size[0] * g.size[1])));
-    };
     for (long long v = 0; v < g.voxel_count(); ++v) {
-      double best = std::numeric_limits<double>::infinity();
-      for (long long w = 0; w < g.voxel_count(); ++w)
-        if (f[static_cast<size_t>(w)])
-          best = std::min(best, g.spacing_mm.cwiseProduct(place(w) - place(v)).squaredNorm());
+      const double best = brute_force_squared_distance(
+          g, v, [&](long long w) { return f[static_cast<size_t>(w)] != 0; });
       const int got = nearest[static_cast<size_t>(v)];
       if (std::isinf(best)) {
         ASSERT_EQ(got, -1) << "trial " << trial;
@@ -68,7 +71,8 @@ TEST(FeatureTransform, NamesANearestFeatureVoxelAtTheTransformsDistance) {
       }
       ASSERT_GE(got, 0);
       ASSERT_TRUE(f[static_cast<size_t>(got)]) << "trial " << trial << " voxel " << v;
-      EXPECT_NEAR(g.spacing_mm.cwiseProduct(place(got) - place(v)).squaredNorm(), best, 1e-9)
+      EXPECT_NEAR(g.spacing_mm.cwiseProduct(index_of(g, got) - index_of(g, v)).squaredNorm(), best,
+                  1e-9)
           << "trial " << trial << " voxel " << v;
       EXPECT_NEAR(d[static_cast<size_t>(v)], best, 1e-9);
     }
@@ -102,24 +106,17 @@ TEST(DistanceTransform, AcrossIsBothTransformsEachWhereItIsAsked) {
     const auto to_outside = squared_distance_transform(outside, g);
     for (size_t v = 0; v < inside.size(); ++v)
       ASSERT_EQ(across[v], inside[v] ? to_outside[v] : to_inside[v]) << "trial " << trial;
-    for (int k = 0; k < g.size[2]; ++k)
-      for (int j = 0; j < g.size[1]; ++j)
-        for (int i = 0; i < g.size[0]; ++i) {
-          const bool here = inside[g.linear_index(i, j, k)];
-          double best = std::numeric_limits<double>::infinity();
-          for (int c = 0; c < g.size[2]; ++c)
-            for (int b = 0; b < g.size[1]; ++b)
-              for (int a = 0; a < g.size[0]; ++a)
-                if (static_cast<bool>(inside[g.linear_index(a, b, c)]) != here)
-                  best =
-                      std::min(best, g.spacing_mm.cwiseProduct(Eigen::Vector3d(a - i, b - j, c - k))
-                                         .squaredNorm());
-          const double got = across[g.linear_index(i, j, k)];
-          if (std::isinf(best))
-            ASSERT_TRUE(std::isinf(got)) << "trial " << trial;
-          else
-            ASSERT_NEAR(got, best, 1e-9) << "trial " << trial;
-        }
+    for (long long v = 0; v < g.voxel_count(); ++v) {
+      const bool here = inside[static_cast<size_t>(v)];
+      const double best = brute_force_squared_distance(g, v, [&](long long w) {
+        return static_cast<bool>(inside[static_cast<size_t>(w)]) != here;
+      });
+      const double got = across[static_cast<size_t>(v)];
+      if (std::isinf(best))
+        ASSERT_TRUE(std::isinf(got)) << "trial " << trial;
+      else
+        ASSERT_NEAR(got, best, 1e-9) << "trial " << trial;
+    }
   }
 }
 
